@@ -1,0 +1,7 @@
+"""``python -m prp3mc`` runs the command line."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())

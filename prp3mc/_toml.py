@@ -1,0 +1,100 @@
+"""Reading and writing the small TOML documents prp3mc uses.
+
+Reading uses the standard library's :mod:`tomllib`; writing covers what
+prp3mc writes (tables, arrays of tables, numbers, strings, booleans and flat
+arrays of those), so no extra dependency is needed.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from .errors import InputFileError
+
+__all__ = ["load_toml", "loads_toml", "dumps_toml", "write_text_atomic"]
+
+
+def loads_toml(text: str, source: str = "<string>") -> dict[str, Any]:
+    """Parse TOML text; a syntax error becomes one :class:`InputFileError` line."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputFileError(f"{source}: malformed TOML: {exc}") from None
+
+
+def load_toml(path: str | os.PathLike) -> dict[str, Any]:
+    """Read a TOML file, naming the file in any error."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputFileError(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputFileError(f"{path}: cannot read: {exc}") from None
+    return loads_toml(text, str(path))
+
+
+def _scalar(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if math.isnan(value):
+            return "nan"
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return repr(value)
+    if isinstance(value, str):
+        escaped = value.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
+        return f'"{escaped}"'
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_scalar(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{_key(k)} = {_scalar(v)}" for k, v in value.items()) + "}"
+    if hasattr(value, "item"):  # numpy scalar
+        return _scalar(value.item())
+    raise TypeError(f"cannot write {type(value).__name__} to TOML")
+
+
+def _key(key: str) -> str:
+    bare = key.replace("_", "").replace("-", "").isalnum()
+    return key if bare else _scalar(key)
+
+
+def _is_table_array(value: Any) -> bool:
+    return isinstance(value, list) and bool(value) and all(isinstance(v, dict) for v in value)
+
+
+def _emit(table: dict[str, Any], prefix: str, lines: list[str]) -> None:
+    for key, value in table.items():
+        if not isinstance(value, dict) and not _is_table_array(value):
+            lines.append(f"{_key(key)} = {_scalar(value)}")
+    for key, value in table.items():
+        name = f"{prefix}.{_key(key)}" if prefix else _key(key)
+        if isinstance(value, dict):
+            lines.extend(["", f"[{name}]"])
+            _emit(value, name, lines)
+        elif _is_table_array(value):
+            for item in value:
+                lines.extend(["", f"[[{name}]]"])
+                _emit(item, name, lines)
+
+
+def dumps_toml(document: dict[str, Any], header: str = "") -> str:
+    """Serialise a nested dict to TOML text (round-trips through ``loads_toml``)."""
+    lines = [f"# {line}" for line in header.splitlines()]
+    _emit(document, "", lines)
+    return "\n".join(lines).lstrip("\n") + "\n"
+
+
+def write_text_atomic(path: str | os.PathLike, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file and an atomic rename."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)

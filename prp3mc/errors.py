@@ -1,0 +1,56 @@
+"""Exception types raised by prp3mc.
+
+Every error a user can cause derives from :class:`Prp3mcError`; the command
+line turns these into a one-line message and a non-zero exit status.
+"""
+
+__all__ = [
+    "Prp3mcError",
+    "GeometryError",
+    "UnknownPresetError",
+    "InputFileError",
+    "InfeasiblePoseError",
+    "ConvergenceError",
+    "BudgetError",
+    "StudyError",
+    "CampaignError",
+]
+
+
+class Prp3mcError(Exception):
+    """Base class of every error prp3mc raises on bad input."""
+
+
+class GeometryError(Prp3mcError, ValueError):
+    """A manipulator geometry is malformed (non-finite, unordered stroke...)."""
+
+
+class UnknownPresetError(Prp3mcError, KeyError):
+    """A preset name (geometry, budget, study) is not known."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else ""
+
+
+class InputFileError(Prp3mcError, ValueError):
+    """A TOML or CSV file is missing, unreadable or malformed."""
+
+
+class InfeasiblePoseError(Prp3mcError, ValueError):
+    """A pose leaves a stroke, has d_i <= 0, is near a singularity or is NaN."""
+
+
+class ConvergenceError(Prp3mcError, RuntimeError):
+    """A nonlinear solve (forward kinematics, perturbed chain) did not converge."""
+
+
+class BudgetError(Prp3mcError, ValueError):
+    """An error budget names an unknown input or an impossible law."""
+
+
+class StudyError(Prp3mcError, ValueError):
+    """A study file is malformed; the message names the line and the reason."""
+
+
+class CampaignError(Prp3mcError, ValueError):
+    """A measurement campaign is malformed; the message names row and column."""

@@ -1,0 +1,66 @@
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from prp3mc import Geometry, sensitivity
+from prp3mc.cli import main
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_sensitivity_json(capsys):
+    code, out, err = run(capsys, "sensitivity", "--geometry", "u-shape", "--pose", "10", "100", "0", "--json")
+    assert code == 0 and err == ""
+    doc = json.loads(out)
+    s = sensitivity(Geometry.from_preset("u-shape"), [10.0, 100.0, 0.0])
+    np.testing.assert_array_equal(doc["A"], s.A)
+    assert set(doc["J"]) == {"a", "alpha", "b", "beta", "rho", "c", "gamma", "theta", "e", "psi"}
+    np.testing.assert_array_equal(doc["J"]["theta"], s.J["theta"])
+
+
+def test_sensitivity_table(capsys):
+    code, out, _ = run(capsys, "sensitivity", "--geometry", "delta-shape", "--pose", "0", "160", "0")
+    assert code == 0
+    assert "J_theta" in out and "leg 3" in out
+
+
+def test_geometry_file(capsys, tmp_path):
+    path = tmp_path / "g.toml"
+    Geometry.from_preset("delta-shape").to_toml(path)
+    code, out, _ = run(capsys, "sensitivity", "--geometry", str(path), "--pose", "0", "160", "0", "--json")
+    assert code == 0 and "J" in json.loads(out)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--geometry", "u-shape", "--pose", "10", "300", "0"], "leaves leg 1's stroke"),
+    (["--geometry", "w-shape", "--pose", "10", "100", "0"], "unknown geometry preset"),
+    (["--geometry", "u-shape", "--pose", "nan", "100", "0"], "NaN"),
+    (["--geometry", "missing.toml", "--pose", "0", "100", "0"], "no such file"),
+])
+def test_bad_input_one_line(capsys, argv, message):
+    code, out, err = run(capsys, "sensitivity", *argv)
+    assert code == 1 and out == ""
+    assert message in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+@pytest.mark.parametrize("text", ["[[leg]\n", "name = 'g'\n[[leg]]\na_mm = 1\n"])
+def test_bad_geometry_file(capsys, tmp_path, text):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    code, _, err = run(capsys, "sensitivity", "--geometry", str(path), "--pose", "0", "100", "0")
+    assert code == 1 and err.count("\n") == 1 and str(path) in err
+
+
+def test_console_script_exit_status():
+    proc = subprocess.run([sys.executable, "-m", "prp3mc", "sensitivity", "--geometry", "nope",
+                           "--pose", "0", "100", "0"], capture_output=True, text=True)
+    assert proc.returncode == 1
+    assert proc.stderr.strip().splitlines() == ["prp3mc sensitivity: error: unknown geometry preset 'nope' "
+                                                "(known: u-shape, delta-shape)"]
