@@ -20,8 +20,12 @@ from .kinematics import (
     Limits, check_poses, feasible, forward_kinematics, inverse_kinematics, jacobian, jacobians,
 )
 from .sensitivity import FAMILIES, Sensitivity, sensitivity
-
-__version__ = "0.1.0"
+from ._version import __version__
+from .budget import Budget, Catalogue
+from .laws import Discrete, Disc, Normal, Triangular, TruncNormal, Uniform
+from .model import LinearModel, linear_model
+from .montecarlo import MonteCarloResult, closed_form_moments, monte_carlo
+from .worstcase import WorstCase, worst_case
 
 __all__ = [
     "__version__",
@@ -29,6 +33,9 @@ __all__ = [
     "inverse_kinematics", "forward_kinematics", "jacobians", "jacobian", "check_poses", "feasible",
     "FAMILIES", "Sensitivity", "sensitivity",
     "exact_pose_error", "linear_pose_error", "linearization_error_um",
+    "Budget", "Catalogue", "Uniform", "Normal", "TruncNormal", "Triangular", "Disc", "Discrete",
+    "LinearModel", "linear_model", "MonteCarloResult", "monte_carlo", "closed_form_moments",
+    "WorstCase", "worst_case",
     "Prp3mcError", "GeometryError", "UnknownPresetError", "InputFileError", "InfeasiblePoseError",
     "ConvergenceError", "BudgetError", "StudyError", "CampaignError",
 ]

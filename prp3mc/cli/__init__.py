@@ -1,7 +1,8 @@
 """Command-line interface: ``prp3mc <command> ...`` (SPEC §6).
 
-A thin wrapper over the Python API. Bad input ends with a one-line message
-on stderr and exit status 1 (2 for usage errors), never a traceback.
+A thin wrapper over the Python API, one module per command in this package;
+each registers itself with :func:`command`. Bad input ends with a one-line
+message on stderr and exit status 1 (2 for usage errors), never a traceback.
 """
 
 from __future__ import annotations
@@ -11,10 +12,8 @@ import json
 import sys
 import numpy as np
 
-from . import __version__
-from .errors import Prp3mcError
-from .geometry import Geometry
-from .sensitivity import FAMILIES, sensitivity
+from .._version import __version__
+from ..errors import Prp3mcError
 
 __all__ = ["main"]
 
@@ -39,6 +38,44 @@ def add_pose(p: argparse.ArgumentParser) -> None:
                    help="pose: x mm, y mm, phi deg")
 
 
+def add_budget(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--budget", required=True, metavar="B", help="preset name (paper) or budget TOML file")
+
+
+def add_sampling(p: argparse.ArgumentParser, default_samples: int) -> None:
+    p.add_argument("--samples", type=positive_int, default=default_samples, metavar="N",
+                   help=f"number of samples (default {default_samples})")
+    p.add_argument("--seed", type=int, default=None, metavar="S",
+                   help="random seed (default: fresh, recorded in the output)")
+
+
+def add_progress(p: argparse.ArgumentParser) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--progress", dest="progress", action="store_true", default=None,
+                   help="show progress on stderr (default: when stderr is a terminal)")
+    g.add_argument("--no-progress", dest="progress", action="store_false")
+
+
+def positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    return value
+
+
+def finite_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
 def add_json(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON object to stdout")
 
@@ -51,7 +88,7 @@ def emit_json(obj: dict) -> None:
 LEGS = ("leg 1", "leg 2", "leg 3")
 
 
-def _matrix_table(M: np.ndarray, rows=("dx", "dy", "dphi"), cols=LEGS) -> str:
+def matrix_table(M: np.ndarray, rows=("dx", "dy", "dphi"), cols=LEGS) -> str:
     """Fixed-width table of a 3x3 matrix; round-off below 1e-12 of its scale shows as 0."""
     M = np.where(np.abs(M) < 1e-12 * max(np.abs(M).max(), 1e-300), 0.0, M)
     lines = [" " * 6 + "".join(f"{c:>14}" for c in cols)]
@@ -60,42 +97,17 @@ def _matrix_table(M: np.ndarray, rows=("dx", "dy", "dphi"), cols=LEGS) -> str:
     return "\n".join(lines)
 
 
-@command("sensitivity", "A, B and every sensitivity matrix J_q at one pose")
-class Sensitivity:
-    @staticmethod
-    def add_arguments(p):
-        add_geometry(p)
-        add_pose(p)
-        add_json(p)
-
-    @staticmethod
-    def run(args) -> None:
-        geometry = Geometry.load(args.geometry)
-        s = sensitivity(geometry, args.pose)
-        if args.json:
-            emit_json({
-                "A": s.A.tolist(), "B": s.B.tolist(),
-                "J": {q: s.J[q].tolist() for q in FAMILIES},
-                "pose": {"x_mm": args.pose[0], "y_mm": args.pose[1], "phi_deg": args.pose[2]},
-                "prp3mc_version": __version__,
-            })
-            return
-        x, y, phi = args.pose
-        out = [f"prp3mc {__version__}  geometry {geometry.name}  pose x={x:g} mm  y={y:g} mm  phi={phi:g} deg",
-               "Rows dx, dy in mm and dphi in rad, per mm (a, b, rho, c, e) or per rad (angles) of the parameter.",
-               "", "A (forward Jacobian)", _matrix_table(s.A, rows=LEGS, cols=("x", "y", "phi")),
-               "", "B (inverse Jacobian)", _matrix_table(s.B, rows=LEGS)]
-        for q in FAMILIES:
-            out += ["", f"J_{q}", _matrix_table(s.J[q])]
-        print("\n".join(out))
-
-
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line, exit 2
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
+def _load_commands() -> None:
+    from . import montecarlo, sensitivity, worstcase  # noqa: F401  (register themselves)
+
+
 def build_parser() -> argparse.ArgumentParser:
+    _load_commands()
     parser = _Parser(prog="prp3mc", description="Error analysis of planar 3-PRP parallel manipulators.")
     parser.add_argument("--version", action="version", version=f"prp3mc {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)

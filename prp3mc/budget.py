@@ -1,0 +1,341 @@
+"""Error budgets: named error inputs, each with a law, plus Sobol groups.
+
+Inputs are named ``<family>_<leg>`` with the families of SPEC §1
+(``a, alpha, b, beta, rho, c, gamma, theta, e, psi``) and ``zeta_<leg>``, the
+contact angle of clearance ``rho_<leg>``. Lengths are in mm and angles in
+degrees. The preset ``paper`` is SPEC §3.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._toml import dumps_toml, load_toml, loads_toml, write_text_atomic
+from .errors import BudgetError, UnknownPresetError
+from .laws import Law, law_from_dict
+from .sensitivity import LENGTH_FAMILIES
+
+__all__ = ["Budget", "Catalogue", "input_unit", "parse_input", "BUDGET_PRESETS"]
+
+_NAME = re.compile(r"^(a|alpha|b|beta|rho|c|gamma|theta|e|psi|zeta)_([123])$")
+_BLOCK = 1 << 16  # samples drawn per block: results do not depend on chunking
+
+
+def parse_input(name: str) -> tuple[str, int]:
+    """Family and 0-based leg of an input name such as ``theta_2``."""
+    match = _NAME.match(name)
+    if not match:
+        raise BudgetError(f"unknown input {name!r}: inputs are <family>_<leg> with family in "
+                          "a, alpha, b, beta, rho, c, gamma, theta, e, psi, zeta and leg 1-3")
+    return match.group(1), int(match.group(2)) - 1
+
+
+def input_unit(name: str) -> str:
+    """Boundary unit of an input: ``mm`` or ``deg``."""
+    family, _ = parse_input(name)
+    return "mm" if family in LENGTH_FAMILIES else "deg"
+
+
+class Catalogue:
+    """Named laws with their sources, read from catalogue TOML files.
+
+    The bundled catalogue holds bearing clearance classes, guide angular
+    play and encoder least counts; entries are addressed by dotted keys such
+    as ``bearing_radial_clearance.bore_10_18.CN``.
+    """
+
+    def __init__(self, entries: dict[str, dict[str, Any]]):
+        self.entries = dict(entries)
+
+    @classmethod
+    def bundled(cls) -> "Catalogue":
+        text = resources.files("prp3mc").joinpath("data/catalogue.toml").read_text(encoding="utf-8")
+        return cls(_flatten(loads_toml(text, "bundled catalogue")))
+
+    def extended(self, path: str | os.PathLike) -> "Catalogue":
+        """A catalogue with the entries of the file at ``path`` added (or overriding)."""
+        return Catalogue({**self.entries, **_flatten(load_toml(path))})
+
+    def law(self, key: str, where: str) -> tuple[Law, dict[str, Any]]:
+        if key not in self.entries:
+            raise BudgetError(f"{where}: no catalogue entry {key!r}")
+        entry = dict(self.entries[key])
+        meta = {k: entry.pop(k) for k in ("applies_to", "unit", "source") if k in entry}
+        if "source" not in meta:
+            raise BudgetError(f"catalogue entry {key!r} states no source")
+        return law_from_dict(entry, f"catalogue entry {key!r}"), meta
+
+    def to_frame(self):
+        """The entries as a DataFrame: key, law, parameters, applies_to, unit, source."""
+        import pandas as pd
+        rows = [{"key": k, **v} for k, v in self.entries.items()]
+        return pd.DataFrame(rows)
+
+
+def _flatten(doc: dict[str, Any], prefix: str = "") -> dict[str, dict[str, Any]]:
+    out = {}
+    for key, value in doc.items():
+        name = f"{prefix}.{key}" if prefix else key
+        if isinstance(value, dict) and "law" in value:
+            out[name] = value
+        elif isinstance(value, dict):
+            out.update(_flatten(value, name))
+    return out
+
+
+@dataclass(frozen=True, slots=True)
+class Budget:
+    """An error budget: independent inputs, each with a law, and Sobol groups.
+
+    Parameters
+    ----------
+    inputs : dict of str to Law
+        Input name (``rho_1``, ``theta_2``, ``b_3``, ...) to its law, in the
+        input's unit (mm or deg). A clearance ``rho_i`` needs its contact
+        angle ``zeta_i``.
+    groups : dict of str to tuple of str
+        Named groups of inputs for grouped Sobol indices. ``clearance_i`` =
+        (rho_i, zeta_i) is always present when rho_i is.
+    sources : dict of str to str
+        Where an input's law comes from (catalogue entries record theirs).
+    name : str
+    """
+
+    inputs: dict
+    groups: dict = field(default_factory=dict)
+    sources: dict = field(default_factory=dict)
+    name: str = "custom"
+
+    def __post_init__(self):
+        if not self.inputs:
+            raise BudgetError("a budget needs at least one input")
+        inputs = {}
+        for key, law in self.inputs.items():
+            family, leg = parse_input(key)
+            if not isinstance(law, Law):
+                raise BudgetError(f"input {key!r}: expected a law, got {law!r}")
+            if family == "rho" and law.support[0] < 0:
+                raise BudgetError(f"input {key!r}: a clearance cannot be negative (law support {law.support})")
+            inputs[key] = law
+        for key in inputs:
+            family, leg = parse_input(key)
+            partner = {"rho": "zeta", "zeta": "rho"}.get(family)
+            if partner and f"{partner}_{leg + 1}" not in inputs:
+                raise BudgetError(f"input {key!r} needs {partner}_{leg + 1}: a clearance has a size rho "
+                                  "and a contact angle zeta")
+        groups = {f"clearance_{leg + 1}": (f"rho_{leg + 1}", f"zeta_{leg + 1}")
+                  for key in inputs for family, leg in [parse_input(key)] if family == "rho"}
+        for gname, members in dict(self.groups).items():
+            members = tuple(members)
+            unknown = [m for m in members if m not in inputs]
+            if unknown or not members:
+                raise BudgetError(f"group {gname!r}: unknown input(s) {', '.join(unknown) or '(empty group)'}")
+            if gname in inputs:
+                raise BudgetError(f"group {gname!r} has the name of an input")
+            groups[gname] = members
+        object.__setattr__(self, "inputs", inputs)
+        object.__setattr__(self, "groups", groups)
+        object.__setattr__(self, "sources", dict(self.sources))
+
+    # ------------------------------------------------------------ access
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Input names in budget order."""
+        return tuple(self.inputs)
+
+    def __len__(self) -> int:
+        return len(self.inputs)
+
+    def replace(self, name: str | None = None, **laws: Law) -> "Budget":
+        """A copy with some inputs' laws replaced or added (``theta_1=Uniform(...)``)."""
+        return Budget({**self.inputs, **laws}, groups={k: v for k, v in self.groups.items()
+                                                     if not k.startswith("clearance_")},
+                      sources={k: v for k, v in self.sources.items() if k not in laws},
+                      name=name or self.name)
+
+    def scaled(self, factor: float, family: str | None = None) -> "Budget":
+        """A copy with the laws of ``family`` (all but zeta if None) scaled about 0 by ``factor``."""
+        new = {}
+        for key, law in self.inputs.items():
+            fam, _ = parse_input(key)
+            if fam != "zeta" and (family is None or fam == family):
+                new[key] = _scaled_law(law, factor)
+        return self.replace(name=f"{self.name} x{factor:g}" if family is None else
+                            f"{self.name} {family} x{factor:g}", **new)
+
+    # ------------------------------------------------------------ sampling
+    def ppf(self, u: np.ndarray) -> np.ndarray:
+        """Map uniforms of shape (n, d) to input values (n, d) in mm / deg."""
+        u = np.asarray(u, dtype=float)
+        if u.ndim != 2 or u.shape[1] != len(self):
+            raise BudgetError(f"expected uniforms of shape (n, {len(self)}), got {u.shape}")
+        return np.stack([law.ppf(u[:, k]) for k, law in enumerate(self.inputs.values())], axis=1)
+
+    def sample(self, n: int, rng: "None | int | np.random.Generator" = None) -> np.ndarray:
+        """``n`` independent draws of all inputs, shape (n, d), mm / deg.
+
+        Drawn in blocks of 65536 from one generator, so the same seed gives
+        the same samples whatever the caller's chunking.
+        """
+        rng = np.random.default_rng(rng)
+        if n < 1:
+            raise BudgetError(f"sample count must be positive, got {n}")
+        out = np.empty((n, len(self)))
+        for start in range(0, n, _BLOCK):
+            stop = min(n, start + _BLOCK)
+            out[start:stop] = self.ppf(rng.random((stop - start, len(self))))
+        return out
+
+    def means(self) -> np.ndarray:
+        return np.array([law.mean for law in self.inputs.values()])
+
+    def variances(self) -> np.ndarray:
+        return np.array([law.var for law in self.inputs.values()])
+
+    def bounds(self, k_sigma: float | None = None) -> np.ndarray:
+        """Worst-case interval of every input, shape (d, 2), mm / deg.
+
+        Unbounded laws need ``k_sigma`` (mean ± k·sd); otherwise BudgetError.
+        """
+        out = []
+        for key, law in self.inputs.items():
+            try:
+                out.append(law.bounds(k_sigma))
+            except BudgetError as exc:
+                raise BudgetError(f"input {key!r}: {exc}") from None
+        return np.array(out, dtype=float)
+
+    # ------------------------------------------------------------ I/O
+    @classmethod
+    def from_preset(cls, name: str) -> "Budget":
+        """A bundled budget: ``paper`` (SPEC §3)."""
+        if name not in BUDGET_PRESETS:
+            raise UnknownPresetError(f"unknown budget preset {name!r} (known: {', '.join(BUDGET_PRESETS)})")
+        return cls.from_dict(BUDGET_PRESETS[name], source=f"preset {name}")
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any], source: str = "budget",
+                  catalogue: Catalogue | None = None, base: Path | None = None) -> "Budget":
+        """Build from the TOML layout.
+
+        ``name``; optional ``catalogues = [paths]`` (relative to the file);
+        ``[inputs]`` mapping each input to ``{law = ..., params}`` or
+        ``{catalogue = "dotted.key"}``; optional ``[groups]`` name = [inputs].
+        """
+        unknown = sorted(set(doc) - {"name", "inputs", "groups", "catalogues"})
+        if unknown:
+            raise BudgetError(f"{source}: unknown key(s) {', '.join(unknown)} (expected name, inputs, groups, catalogues)")
+        catalogue = catalogue or Catalogue.bundled()
+        for extra in doc.get("catalogues", []):
+            catalogue = catalogue.extended((base or Path(".")) / extra)
+        raw = doc.get("inputs")
+        if not isinstance(raw, dict) or not raw:
+            raise BudgetError(f"{source}: needs an [inputs] table with at least one input")
+        inputs, sources = {}, {}
+        for key, spec in raw.items():
+            where = f"{source}: input {key!r}"
+            family, _ = _parse_where(key, source)
+            if not isinstance(spec, dict):
+                raise BudgetError(f"{where}: expected a table such as {{ law = \"uniform\", lo = 0, hi = 1 }}")
+            if "catalogue" in spec:
+                if set(spec) != {"catalogue"}:
+                    raise BudgetError(f"{where}: a catalogue reference takes no other keys")
+                law, meta = catalogue.law(spec["catalogue"], where)
+                if meta.get("applies_to") not in (None, family):
+                    raise BudgetError(f"{where}: catalogue entry {spec['catalogue']!r} applies to "
+                                      f"{meta['applies_to']}, not {family}")
+                sources[key] = f"{spec['catalogue']}: {meta['source']}"
+            else:
+                law = law_from_dict(spec, where)
+                if "source" in spec:
+                    sources[key] = spec["source"]
+            inputs[key] = law
+        groups = doc.get("groups", {})
+        if not isinstance(groups, dict):
+            raise BudgetError(f"{source}: [groups] must map names to lists of inputs")
+        try:
+            return cls(inputs, groups=groups, sources=sources, name=str(doc.get("name", "custom")))
+        except BudgetError as exc:
+            raise BudgetError(f"{source}: {exc}") from None
+
+    @classmethod
+    def from_toml(cls, path: str | os.PathLike) -> "Budget":
+        path = Path(path)
+        return cls.from_dict(load_toml(path), source=str(path), base=path.parent)
+
+    @classmethod
+    def load(cls, spec: "str | os.PathLike | Budget") -> "Budget":
+        """A preset name, a TOML path or a Budget, as the CLI's ``--budget`` takes."""
+        if isinstance(spec, Budget):
+            return spec
+        if str(spec) in BUDGET_PRESETS:
+            return cls.from_preset(str(spec))
+        if str(spec).endswith(".toml") or Path(spec).exists():
+            return cls.from_toml(spec)
+        return cls.from_preset(str(spec))
+
+    def to_dict(self) -> dict[str, Any]:
+        inputs = {}
+        for key, law in self.inputs.items():
+            spec = law.to_dict()
+            if key in self.sources:
+                spec["source"] = self.sources[key]
+            inputs[key] = spec
+        groups = {k: list(v) for k, v in self.groups.items() if not k.startswith("clearance_")}
+        doc: dict[str, Any] = {"name": self.name, "inputs": inputs}
+        if groups:
+            doc["groups"] = groups
+        return doc
+
+    def to_toml(self, path: str | os.PathLike) -> None:
+        write_text_atomic(path, dumps_toml(self.to_dict(), header="prp3mc error budget: mm and degrees"))
+
+    def to_frame(self):
+        """One row per input: name, family, leg, unit, law, mean, sd, lo, hi, source."""
+        import pandas as pd
+        rows = []
+        for key, law in self.inputs.items():
+            family, leg = parse_input(key)
+            lo, hi = law.support
+            rows.append({"input": key, "family": family, "leg": leg + 1, "unit": input_unit(key),
+                         "law": law.kind, "mean": law.mean, "sd": float(np.sqrt(law.var)),
+                         "lo": lo, "hi": hi, "source": self.sources.get(key, "")})
+        return pd.DataFrame(rows)
+
+
+def _parse_where(key: str, source: str) -> tuple[str, int]:
+    try:
+        return parse_input(key)
+    except BudgetError as exc:
+        raise BudgetError(f"{source}: {exc}") from None
+
+
+def _scaled_law(law: Law, factor: float) -> Law:
+    spec = law.to_dict()
+    kind = spec.pop("law")
+    scale_keys = {"uniform": ("lo", "hi"), "normal": ("mu", "sd"), "truncnormal": ("center", "tol"),
+                  "triangular": ("lo", "mode", "hi"), "disc": ("radius",), "discrete": ("values",)}[kind]
+    for k in scale_keys:
+        spec[k] = [v * factor for v in spec[k]] if isinstance(spec[k], list) else spec[k] * factor
+    return law_from_dict({"law": kind, **spec}, "scaled law")
+
+
+def _paper_budget() -> dict[str, Any]:
+    inputs: dict[str, Any] = {}
+    for i in (1, 2, 3):
+        inputs[f"rho_{i}"] = {"catalogue": "bearing_radial_clearance.paper"}
+        inputs[f"zeta_{i}"] = {"law": "uniform", "lo": 0.0, "hi": 360.0}
+        inputs[f"theta_{i}"] = {"catalogue": "guide_angular_play.paper"}
+        inputs[f"b_{i}"] = {"catalogue": "encoder_least_count.paper"}
+    return {"name": "paper", "inputs": inputs}
+
+
+#: Bundled budgets; ``paper`` is the non-compensable budget of SPEC §3.
+BUDGET_PRESETS: dict[str, dict[str, Any]] = {"paper": _paper_budget()}

@@ -1,0 +1,254 @@
+"""Catalogue-style probability laws of single error inputs.
+
+Every law maps uniform numbers to values through its inverse CDF
+(:meth:`Law.ppf`), so Monte Carlo, quasi-Monte Carlo and SALib's Sobol
+sequences all sample through one path, and common random numbers are free.
+Values are in the input's boundary unit (mm or degrees).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+from typing import Any, ClassVar
+
+import numpy as np
+from scipy import special, stats
+
+from .errors import BudgetError
+
+__all__ = ["Law", "Uniform", "Normal", "TruncNormal", "Triangular", "Disc", "Discrete", "law_from_dict", "LAWS"]
+
+
+def _finite(law: str, **values: float) -> None:
+    for key, value in values.items():
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
+            raise BudgetError(f"{law} law: {key} must be a finite number, got {value!r}")
+
+
+class Law:
+    """Base of the laws; subclasses are frozen dataclasses."""
+
+    kind: ClassVar[str]
+
+    def ppf(self, u: np.ndarray) -> np.ndarray:
+        """Inverse CDF at ``u`` in [0, 1), any shape."""
+        raise NotImplementedError
+
+    @property
+    def mean(self) -> float:
+        raise NotImplementedError
+
+    @property
+    def var(self) -> float:
+        raise NotImplementedError
+
+    @property
+    def support(self) -> tuple[float, float]:
+        """Smallest interval holding all the probability (may be infinite)."""
+        raise NotImplementedError
+
+    @property
+    def bounded(self) -> bool:
+        lo, hi = self.support
+        return math.isfinite(lo) and math.isfinite(hi)
+
+    def bounds(self, k_sigma: float | None = None) -> tuple[float, float]:
+        """Interval for the worst case: the support, or mean ± k_sigma·sd if unbounded."""
+        if self.bounded:
+            return self.support
+        if k_sigma is None:
+            raise BudgetError(f"{self.kind} law is unbounded: give k_sigma to bound it as mean ± k·sd")
+        sd = math.sqrt(self.var)
+        return self.mean - k_sigma * sd, self.mean + k_sigma * sd
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"law": self.kind, **asdict(self)}
+
+
+@dataclass(frozen=True, slots=True)
+class Uniform(Law):
+    """Uniform on [lo, hi]."""
+
+    lo: float
+    hi: float
+    kind: ClassVar[str] = "uniform"
+
+    def __post_init__(self):
+        _finite("uniform", lo=self.lo, hi=self.hi)
+        if not self.lo <= self.hi:
+            raise BudgetError(f"uniform law: lo = {self.lo} must not exceed hi = {self.hi}")
+
+    def ppf(self, u):
+        return self.lo + (self.hi - self.lo) * np.asarray(u)
+
+    mean = property(lambda self: 0.5 * (self.lo + self.hi))
+    var = property(lambda self: (self.hi - self.lo) ** 2 / 12.0)
+    support = property(lambda self: (self.lo, self.hi))
+
+
+@dataclass(frozen=True, slots=True)
+class Normal(Law):
+    """Normal with ``mean`` and standard deviation ``sd`` (unbounded)."""
+
+    mu: float
+    sd: float
+    kind: ClassVar[str] = "normal"
+
+    def __post_init__(self):
+        _finite("normal", mu=self.mu, sd=self.sd)
+        if not self.sd >= 0:
+            raise BudgetError(f"normal law: sd = {self.sd} must be >= 0")
+
+    def ppf(self, u):
+        return self.mu + self.sd * special.ndtri(np.asarray(u))
+
+    mean = property(lambda self: self.mu)
+    var = property(lambda self: self.sd**2)
+    support = property(lambda self: (-math.inf, math.inf) if self.sd > 0 else (self.mu, self.mu))
+
+
+@dataclass(frozen=True, slots=True)
+class TruncNormal(Law):
+    """Normal truncated to a tolerance ``center ± tol`` with capability ``cpk``.
+
+    A centred process with Cpk has sd = tol / (3 Cpk); parts outside the
+    tolerance are rejected, so the law is truncated there.
+    """
+
+    center: float
+    tol: float
+    cpk: float
+    kind: ClassVar[str] = "truncnormal"
+
+    def __post_init__(self):
+        _finite("truncnormal", center=self.center, tol=self.tol, cpk=self.cpk)
+        if not self.tol > 0 or not self.cpk > 0:
+            raise BudgetError(f"truncnormal law: tol and cpk must be > 0, got tol={self.tol}, cpk={self.cpk}")
+
+    @property
+    def sd_parent(self) -> float:
+        return self.tol / (3.0 * self.cpk)
+
+    def _dist(self):
+        z = 3.0 * self.cpk
+        return stats.truncnorm(-z, z, loc=self.center, scale=self.sd_parent)
+
+    def ppf(self, u):
+        z = 3.0 * self.cpk
+        lo = special.ndtr(-z)
+        return self.center + self.sd_parent * special.ndtri(lo + (1.0 - 2.0 * lo) * np.asarray(u))
+
+    mean = property(lambda self: self.center)
+    var = property(lambda self: float(self._dist().var()))
+    support = property(lambda self: (self.center - self.tol, self.center + self.tol))
+
+
+@dataclass(frozen=True, slots=True)
+class Triangular(Law):
+    """Triangular on [lo, hi] with peak at ``mode``."""
+
+    lo: float
+    mode: float
+    hi: float
+    kind: ClassVar[str] = "triangular"
+
+    def __post_init__(self):
+        _finite("triangular", lo=self.lo, mode=self.mode, hi=self.hi)
+        if not (self.lo <= self.mode <= self.hi and self.lo < self.hi):
+            raise BudgetError(f"triangular law: need lo <= mode <= hi and lo < hi, got "
+                              f"{self.lo}, {self.mode}, {self.hi}")
+
+    def ppf(self, u):
+        u = np.asarray(u)
+        lo, m, hi = self.lo, self.mode, self.hi
+        fc = (m - lo) / (hi - lo)
+        return np.where(u < fc, lo + np.sqrt(u * (hi - lo) * (m - lo)),
+                        hi - np.sqrt((1.0 - u) * (hi - lo) * (hi - m)))
+
+    mean = property(lambda self: (self.lo + self.mode + self.hi) / 3.0)
+    var = property(lambda self: (self.lo**2 + self.mode**2 + self.hi**2 - self.lo * self.mode
+                                 - self.lo * self.hi - self.mode * self.hi) / 18.0)
+    support = property(lambda self: (self.lo, self.hi))
+
+
+@dataclass(frozen=True, slots=True)
+class Disc(Law):
+    """Radius of a point uniform over a disc of ``radius``: rho = radius·sqrt(U).
+
+    For a clearance input ``rho_i``: with a uniform contact angle ``zeta_i``
+    the clearance displacement is uniform over the disc.
+    """
+
+    radius: float
+    kind: ClassVar[str] = "disc"
+
+    def __post_init__(self):
+        _finite("disc", radius=self.radius)
+        if not self.radius >= 0:
+            raise BudgetError(f"disc law: radius = {self.radius} must be >= 0")
+
+    def ppf(self, u):
+        return self.radius * np.sqrt(np.asarray(u))
+
+    mean = property(lambda self: 2.0 * self.radius / 3.0)
+    var = property(lambda self: self.radius**2 / 18.0)
+    support = property(lambda self: (0.0, self.radius))
+
+
+@dataclass(frozen=True, slots=True)
+class Discrete(Law):
+    """Discrete catalogue classes: ``values`` with probabilities ``weights``."""
+
+    values: tuple[float, ...]
+    weights: tuple[float, ...]
+    kind: ClassVar[str] = "discrete"
+
+    def __post_init__(self):
+        values = tuple(float(v) for v in self.values)
+        weights = tuple(float(w) for w in self.weights)
+        if not values or len(values) != len(weights):
+            raise BudgetError("discrete law: values and weights must be non-empty and of equal length")
+        if not all(math.isfinite(v) for v in values + weights) or min(weights) < 0 or sum(weights) <= 0:
+            raise BudgetError("discrete law: values must be finite and weights >= 0 with a positive sum")
+        order = np.argsort(values)
+        object.__setattr__(self, "values", tuple(values[i] for i in order))
+        object.__setattr__(self, "weights", tuple(weights[i] / sum(weights) for i in order))
+
+    def ppf(self, u):
+        cdf = np.cumsum(self.weights)
+        cdf[-1] = 1.0
+        idx = np.searchsorted(cdf, np.asarray(u), side="right")
+        return np.asarray(self.values)[np.minimum(idx, len(self.values) - 1)]
+
+    mean = property(lambda self: float(np.dot(self.values, self.weights)))
+    var = property(lambda self: float(np.dot(np.square(np.subtract(self.values, self.mean)), self.weights)))
+    support = property(lambda self: (self.values[0], self.values[-1]))
+
+    def to_dict(self):
+        return {"law": self.kind, "values": list(self.values), "weights": list(self.weights)}
+
+
+LAWS: dict[str, type[Law]] = {cls.kind: cls for cls in (Uniform, Normal, TruncNormal, Triangular, Disc, Discrete)}
+
+
+def law_from_dict(spec: dict[str, Any], where: str) -> Law:
+    """Build a law from ``{"law": kind, **parameters}``; errors name ``where``."""
+    spec = dict(spec)
+    kind = spec.pop("law", None)
+    if kind not in LAWS:
+        raise BudgetError(f"{where}: unknown law {kind!r} (known: {', '.join(LAWS)})")
+    cls = LAWS[kind]
+    names = [f.name for f in fields(cls)]
+    missing = [n for n in names if n not in spec]
+    extra = sorted(set(spec) - set(names))
+    if missing or extra:
+        expect = ", ".join(names)
+        raise BudgetError(f"{where}: {kind} law takes {expect}" + (f"; missing {', '.join(missing)}" if missing else "")
+                          + (f"; unknown {', '.join(extra)}" if extra else ""))
+    try:
+        return cls(**spec)
+    except BudgetError as exc:
+        raise BudgetError(f"{where}: {exc}") from None
+    except TypeError as exc:
+        raise BudgetError(f"{where}: {exc}") from None

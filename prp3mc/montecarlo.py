@@ -1,0 +1,422 @@
+"""Monte Carlo propagation of an error budget through the linear model.
+
+One sample matrix is shared by all poses (common random numbers). Means and
+covariances of the pose error are linear images of the sample moments of the
+model's features (:class:`prp3mc.model.LinearModel`), so they are computed
+once for all poses; their standard errors come from 64 batch means. The
+position-error norm and |dphi| are evaluated per pose and sample in float32,
+streamed in pose chunks of bounded memory, and summarised by exact order
+statistics with distribution-free confidence intervals.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from ._version import __version__
+from .budget import Budget
+from .errors import BudgetError
+from .exact import exact_pose_error
+from .geometry import Geometry
+from .model import LinearModel, linear_model
+from .progress import Progress
+
+__all__ = ["MonteCarloResult", "monte_carlo", "closed_form_moments", "PERCENTILES"]
+
+#: Percentiles reported by default (p99.73 is the 3-sigma level of a normal law).
+PERCENTILES = (50.0, 95.0, 99.0, 99.73)
+_N_BATCHES = 64
+_BLOCK = 1 << 15  # samples per block of the pose-error evaluation (fits in cache)
+_Z95 = stats.norm.ppf(0.975)
+_RAD2DEG = 180.0 / math.pi
+
+
+@dataclass(frozen=True, slots=True)
+class MonteCarloResult:
+    """Summaries of the pose error per pose, each with its uncertainty.
+
+    Shapes: ``...`` is the batch shape of ``poses``. Position quantities are
+    in mm and orientation quantities in degrees.
+
+    Attributes
+    ----------
+    poses : ndarray (..., 3)
+    n_samples, seed : int
+    mean, mean_se : ndarray (..., 3)
+        Mean of (dx mm, dy mm, dphi deg) and its standard error.
+    std, std_se : ndarray (..., 3)
+    cov, cov_se : ndarray (..., 3, 3)
+        Covariance of (dx mm, dy mm, dphi deg) and its standard error.
+    percentiles : tuple of float
+    position_pct, phi_pct : ndarray (..., Q)
+        Percentiles of the position-error norm (mm) and of |dphi| (deg).
+    position_pct_ci, phi_pct_ci : ndarray (..., Q, 2)
+        Distribution-free 95 % confidence intervals (order statistics).
+    position_max, phi_max : ndarray (...)
+        Largest sampled values.
+    position_mean, position_mean_se : ndarray (...)
+        Mean position-error norm (mm) and its standard error.
+    tolerance_mm : float or None
+    exceed_prob, exceed_ci : ndarray (...), (..., 2)
+        P(position error > tolerance) with a Wilson 95 % interval.
+    linearization : DataFrame or None
+        Exact-vs-linear comparison at a subset of poses, if asked for.
+    version : str
+    wall_time_s : float
+    """
+
+    poses: np.ndarray
+    n_samples: int
+    seed: int
+    mean: np.ndarray
+    mean_se: np.ndarray
+    std: np.ndarray
+    std_se: np.ndarray
+    cov: np.ndarray
+    cov_se: np.ndarray
+    percentiles: tuple
+    position_pct: np.ndarray
+    position_pct_ci: np.ndarray
+    phi_pct: np.ndarray
+    phi_pct_ci: np.ndarray
+    position_max: np.ndarray
+    phi_max: np.ndarray
+    position_mean: np.ndarray
+    position_mean_se: np.ndarray
+    tolerance_mm: float | None = None
+    exceed_prob: np.ndarray | None = None
+    exceed_ci: np.ndarray | None = None
+    linearization: pd.DataFrame | None = None
+    version: str = __version__
+    wall_time_s: float = field(default=float("nan"), compare=False)
+
+    def conf_int(self, statistic: str) -> np.ndarray:
+        """95 % interval of ``mean``, ``std``, ``position_pct``, ``phi_pct`` or ``exceed_prob``; (..., [Q,] 2)."""
+        if statistic in ("mean", "std"):
+            est, se = getattr(self, statistic), getattr(self, f"{statistic}_se")
+            return np.stack([est - _Z95 * se, est + _Z95 * se], axis=-1)
+        if statistic in ("position_pct", "phi_pct"):
+            return getattr(self, f"{statistic}_ci")
+        if statistic == "exceed_prob" and self.exceed_ci is not None:
+            return self.exceed_ci
+        raise KeyError(f"no confidence interval for {statistic!r}")
+
+    def to_frame(self) -> pd.DataFrame:
+        """Tidy table: x_mm, y_mm, phi_deg, statistic, output, value, se, ci_lo, ci_hi, unit."""
+        flat = self.poses.reshape(-1, 3)
+        n = flat.shape[0]
+        rows = []
+
+        def add(stat, output, unit, value, se=None, ci=None):
+            value = np.asarray(value).reshape(n)
+            se = np.full(n, np.nan) if se is None else np.asarray(se).reshape(n)
+            if ci is None:
+                ci = np.stack([value - _Z95 * se, value + _Z95 * se], -1)
+            ci = np.asarray(ci).reshape(n, 2)
+            rows.append(pd.DataFrame({"x_mm": flat[:, 0], "y_mm": flat[:, 1], "phi_deg": flat[:, 2],
+                                      "statistic": stat, "output": output, "value": value, "se": se,
+                                      "ci_lo": ci[:, 0], "ci_hi": ci[:, 1], "unit": unit}))
+
+        units = ("mm", "mm", "deg")
+        for o, name in enumerate(("x", "y", "phi")):
+            add("mean", name, units[o], self.mean[..., o], self.mean_se[..., o])
+            add("std", name, units[o], self.std[..., o], self.std_se[..., o])
+        add("mean", "position", "mm", self.position_mean, self.position_mean_se)
+        for q, p in enumerate(self.percentiles):
+            add(f"p{p:g}", "position", "mm", self.position_pct[..., q], ci=self.position_pct_ci[..., q, :])
+            add(f"p{p:g}", "phi_abs", "deg", self.phi_pct[..., q], ci=self.phi_pct_ci[..., q, :])
+        add("max", "position", "mm", self.position_max, ci=np.stack([self.position_max] * 2, -1))
+        add("max", "phi_abs", "deg", self.phi_max, ci=np.stack([self.phi_max] * 2, -1))
+        if self.exceed_prob is not None:
+            add(f"P(position>{self.tolerance_mm:g}mm)", "position", "1", self.exceed_prob, ci=self.exceed_ci)
+        return pd.concat(rows, ignore_index=True)
+
+    def metadata(self) -> dict:
+        return {"prp3mc_version": self.version, "seed": self.seed, "n_samples": self.n_samples,
+                "wall_time_s": self.wall_time_s}
+
+
+def _order_ranks(n: int, percentiles) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Ranks (0-based) for linear-interpolated percentiles and their 95 % intervals."""
+    q = np.asarray(percentiles) / 100.0
+    h = q * (n - 1)
+    lo_rank = np.floor(h).astype(int)
+    hi_rank = np.minimum(lo_rank + 1, n - 1)
+    half = _Z95 * np.sqrt(n * q * (1 - q))
+    ci_lo = np.clip(np.floor(n * q - half).astype(int) - 1, 0, n - 1)
+    ci_hi = np.clip(np.ceil(n * q + half).astype(int) - 1, 0, n - 1)
+    return h, lo_rank, hi_rank, np.stack([ci_lo, ci_hi], -1)
+
+
+def _order_statistics(rows: np.ndarray, ranks: np.ndarray) -> np.ndarray:
+    """Exact order statistics of each row at sorted 0-based ``ranks``; rows are reordered in place.
+
+    ``np.partition`` with many kth re-partitions large ranges for each; here
+    ranks are taken in clusters in ascending order, each cluster by one
+    partition of the remaining part of the row and one of the (shrinking)
+    rest, then a sort of the few values in between: about half the work.
+    One loop iteration handles a whole row of samples.
+    """
+    ranks = np.asarray(ranks)
+    n = rows.shape[-1]
+    gaps = np.flatnonzero(np.diff(ranks) > max(64, n // 1000)) + 1
+    clusters = np.split(ranks, gaps)
+    out = np.empty((rows.shape[0], len(ranks)), rows.dtype)
+    for i, row in enumerate(rows):
+        start, j = 0, 0
+        for cl in clusters:
+            r0, r1 = int(cl[0]), int(cl[-1])
+            seg = row[start:]
+            seg.partition(r0 - start)
+            if r1 > r0:
+                rest = row[r0 + 1:]
+                rest.partition(r1 - r0 - 1)
+                row[r0 + 1:r1 + 1].sort()
+            out[i, j:j + len(cl)] = row[cl]
+            j += len(cl)
+            start = r1 + 1
+    return out
+
+
+def _wilson(k: np.ndarray, n: int) -> np.ndarray:
+    p = k / n
+    denom = 1 + _Z95**2 / n
+    centre = (p + _Z95**2 / (2 * n)) / denom
+    half = _Z95 * np.sqrt(p * (1 - p) / n + _Z95**2 / (4 * n * n)) / denom
+    return np.stack([centre - half, centre + half], -1)
+
+
+def _feature_moments(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Mean and covariance of the features overall and per batch (float64)."""
+    n = F.shape[0]
+    edges = np.linspace(0, n, _N_BATCHES + 1).astype(int)
+    means, covs = [], []
+    for a, b in zip(edges[:-1], edges[1:]):  # 64 batches: a loop over batches, not samples
+        Fb = F[a:b]
+        means.append(Fb.mean(axis=0))
+        covs.append(np.cov(Fb, rowvar=False, ddof=1).reshape(F.shape[1], F.shape[1]))
+    mean = F.mean(axis=0)
+    cov = np.cov(F, rowvar=False, ddof=1).reshape(F.shape[1], F.shape[1])
+    return mean, cov, np.array(means), np.array(covs)
+
+
+def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *, seed: int | None = None,
+                percentiles=PERCENTILES, tolerance_mm: float | None = None,
+                exact_check_poses: int = 0, exact_check_samples: int = 2000,
+                progress: bool | None = None, max_chunk_bytes: int = 256 << 20,
+                workers: int | None = None) -> MonteCarloResult:
+    """Propagate ``budget`` through the linear model at ``poses`` by Monte Carlo.
+
+    Parameters
+    ----------
+    geometry : Geometry
+    budget : Budget
+    poses : array_like, shape (..., 3)
+        ``[x_mm, y_mm, phi_deg]``.
+    n_samples : int
+        Samples of the budget, shared by all poses.
+    seed : int, optional
+        Seed of the sample generator; a fresh one is drawn and recorded if None.
+    percentiles : sequence of float
+        Percentiles of the position-error norm and of |dphi|.
+    tolerance_mm : float, optional
+        Report P(position error > tolerance_mm).
+    exact_check_poses : int
+        Push the first ``exact_check_samples`` samples through the exact
+        nonlinear model at this many poses (spread over the batch) and report
+        the largest and RMS difference from the linear model.
+    progress : bool, optional
+        Progress bar on stderr (default: when stderr is a terminal).
+    max_chunk_bytes : int
+        Memory for one chunk of poses x samples (the run streams over chunks).
+    workers : int, optional
+        Threads for the per-pose order statistics (default: CPU count).
+
+    Returns
+    -------
+    MonteCarloResult
+    """
+    t0 = time.perf_counter()
+    n_samples = int(n_samples)
+    if n_samples < 2:
+        raise BudgetError(f"Monte Carlo needs at least 2 samples, got {n_samples}")
+    if tolerance_mm is not None and not (math.isfinite(tolerance_mm) and tolerance_mm >= 0):
+        raise BudgetError(f"tolerance must be a finite length >= 0 mm, got {tolerance_mm}")
+    pct = tuple(float(p) for p in percentiles)
+    if not all(0.0 <= p <= 100.0 for p in pct):
+        raise BudgetError(f"percentiles must lie in [0, 100], got {pct}")
+    if seed is None:
+        seed = int(np.random.SeedSequence().entropy % (2**63))
+    model = linear_model(geometry, budget, poses)
+    batch_shape = model.poses.shape[:-1]
+    X = budget.sample(n_samples, seed)
+    F = model.features(X)
+    del X
+    fmean, fcov, bmeans, bcovs = _feature_moments(F)
+    C = model.coef.reshape((-1, 3, F.shape[1]))
+    deg = np.array([1.0, 1.0, _RAD2DEG])
+    mean = np.einsum("pof,f->po", C, fmean) * deg
+    cov = np.einsum("pof,fg,pqg->poq", C, fcov, C) * np.outer(deg, deg)
+    bm = np.einsum("pof,bf->pbo", C, bmeans) * deg
+    bc = np.einsum("pof,bfg,pqg->pboq", C, bcovs, C) * np.outer(deg, deg)
+    mean_se = bm.std(axis=1, ddof=1) / math.sqrt(_N_BATCHES)
+    cov_se = bc.std(axis=1, ddof=1) / math.sqrt(_N_BATCHES)
+    std = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
+    var_se = np.diagonal(cov_se, axis1=-2, axis2=-1)
+    std_se = np.divide(var_se, 2 * std, out=np.zeros_like(std), where=std > 0)
+
+    # per-pose order statistics, streamed over pose chunks
+    FT = np.ascontiguousarray(F.T, dtype=np.float32)
+    del F
+    n_poses = C.shape[0]
+    h, r_lo, r_hi, r_ci = _order_ranks(n_samples, pct)
+    kth = np.unique(np.concatenate([r_lo, r_hi, r_ci.ravel(), [n_samples - 1]]))
+    Q = len(pct)
+    out = {"pos_pct": np.empty((n_poses, Q)), "pos_ci": np.empty((n_poses, Q, 2)),
+           "phi_pct": np.empty((n_poses, Q)), "phi_ci": np.empty((n_poses, Q, 2)),
+           "pos_max": np.empty(n_poses), "phi_max": np.empty(n_poses),
+           "pos_mean": np.empty(n_poses), "pos_mean_se": np.empty(n_poses),
+           "exceed": np.zeros(n_poses)}
+    chunk = max(1, min(n_poses, int(max_chunk_bytes // (3 * 4 * n_samples))))
+    C32 = C.astype(np.float32)
+    frac = h - np.floor(h)
+    batch_edges = np.linspace(0, n_samples, _N_BATCHES + 1).astype(int)
+
+    i_lo, i_hi = np.searchsorted(kth, r_lo), np.searchsorted(kth, r_hi)
+    i_ci, i_max = np.searchsorted(kth, r_ci), np.searchsorted(kth, n_samples - 1)
+
+    def summarise(values: np.ndarray, pct_key: str, ci_key: str, max_key: str, sl: slice, scale: float):
+        part = _order_statistics(values, kth).astype(float)  # (p, len(kth))
+        lo, hi = part[:, i_lo], part[:, i_hi]
+        out[pct_key][sl] = scale * (lo + frac * (hi - lo))
+        out[ci_key][sl] = scale * part[:, i_ci]
+        out[max_key][sl] = scale * part[:, i_max]
+
+    def work(start: int) -> int:
+        sl = slice(start, min(n_poses, start + chunk))
+        p = sl.stop - sl.start
+        Cp = C32[sl].reshape(p * 3, -1)
+        pos = np.empty((p, n_samples), np.float32)
+        phi = np.empty((p, n_samples), np.float32)
+        for b0 in range(0, n_samples, _BLOCK):  # cache-sized sample blocks
+            b1 = min(n_samples, b0 + _BLOCK)
+            D = (Cp @ FT[:, b0:b1]).reshape(p, 3, b1 - b0)
+            np.square(D, out=D)
+            np.add(D[:, 0], D[:, 1], out=pos[:, b0:b1])
+            np.sqrt(pos[:, b0:b1], out=pos[:, b0:b1])
+            np.sqrt(D[:, 2], out=phi[:, b0:b1])
+        bsum = np.add.reduceat(pos, batch_edges[:-1], axis=-1).astype(np.float64)
+        out["pos_mean"][sl] = bsum.sum(axis=-1) / n_samples
+        out["pos_mean_se"][sl] = (bsum / np.diff(batch_edges)).std(axis=-1, ddof=1) / math.sqrt(_N_BATCHES)
+        if tolerance_mm is not None:
+            out["exceed"][sl] = np.count_nonzero(pos > tolerance_mm, axis=-1)
+        summarise(pos, "pos_pct", "pos_ci", "pos_max", sl, 1.0)
+        summarise(phi, "phi_pct", "phi_ci", "phi_max", sl, _RAD2DEG)
+        return p
+
+    starts = range(0, n_poses, chunk)
+    with Progress(n_poses, "montecarlo", progress) as bar, \
+            ThreadPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
+        for done in pool.map(work, starts):
+            bar.update(done)
+
+    shape = batch_shape
+    exceed = exceed_ci = None
+    if tolerance_mm is not None:
+        exceed = (out["exceed"] / n_samples).reshape(shape)
+        exceed_ci = _wilson(out["exceed"], n_samples).reshape(shape + (2,))
+    lin = _linearization(model, budget, seed, exact_check_poses, exact_check_samples) if exact_check_poses else None
+    return MonteCarloResult(
+        poses=model.poses, n_samples=n_samples, seed=seed,
+        mean=mean.reshape(shape + (3,)), mean_se=mean_se.reshape(shape + (3,)),
+        std=std.reshape(shape + (3,)), std_se=std_se.reshape(shape + (3,)),
+        cov=cov.reshape(shape + (3, 3)), cov_se=cov_se.reshape(shape + (3, 3)),
+        percentiles=pct,
+        position_pct=out["pos_pct"].reshape(shape + (Q,)), position_pct_ci=out["pos_ci"].reshape(shape + (Q, 2)),
+        phi_pct=out["phi_pct"].reshape(shape + (Q,)), phi_pct_ci=out["phi_ci"].reshape(shape + (Q, 2)),
+        position_max=out["pos_max"].reshape(shape), phi_max=out["phi_max"].reshape(shape),
+        position_mean=out["pos_mean"].reshape(shape), position_mean_se=out["pos_mean_se"].reshape(shape),
+        tolerance_mm=tolerance_mm, exceed_prob=exceed, exceed_ci=exceed_ci, linearization=lin,
+        wall_time_s=time.perf_counter() - t0,
+    )
+
+
+def sample_errors(budget: Budget, X: np.ndarray) -> dict[str, np.ndarray]:
+    """Input samples (n, d) as per-family error arrays (n, 3) for :func:`exact_pose_error`."""
+    from .budget import parse_input
+    errors: dict[str, np.ndarray] = {}
+    for k, name in enumerate(budget.names):
+        family, leg = parse_input(name)
+        errors.setdefault(family, np.zeros((X.shape[0], 3)))[:, leg] = X[:, k]
+    return errors
+
+
+def _linearization(model: LinearModel, budget: Budget, seed: int, n_poses: int, n_samples: int) -> pd.DataFrame:
+    """Exact minus linear pose error for the first samples at spread-out poses."""
+    flat = model.poses.reshape(-1, 3)
+    idx = np.unique(np.linspace(0, flat.shape[0] - 1, min(n_poses, flat.shape[0])).round().astype(int))
+    X = budget.sample(n_samples, seed)
+    errors = sample_errors(budget, X)
+    poses = np.broadcast_to(flat[idx, None, :], (len(idx), X.shape[0], 3))
+    exact = exact_pose_error(model.geometry, poses, errors, check=False)
+    sub = linear_model(model.geometry, budget, flat[idx], check=False)
+    lin = sub.evaluate(X)
+    lin[..., 2] *= _RAD2DEG
+    diff = exact - lin
+    dpos_um = 1e3 * np.hypot(diff[..., 0], diff[..., 1])
+    dphi_arcsec = 3600.0 * np.abs(diff[..., 2])
+    return pd.DataFrame({
+        "x_mm": flat[idx, 0], "y_mm": flat[idx, 1], "phi_deg": flat[idx, 2], "n_samples": X.shape[0],
+        "position_max_um": dpos_um.max(-1), "position_rms_um": np.sqrt((dpos_um**2).mean(-1)),
+        "phi_max_arcsec": dphi_arcsec.max(-1), "phi_rms_arcsec": np.sqrt((dphi_arcsec**2).mean(-1)),
+        "position_p99_linear_um": 1e3 * np.percentile(np.hypot(lin[..., 0], lin[..., 1]), 99, axis=-1),
+    })
+
+
+def closed_form_moments(model: LinearModel) -> tuple[np.ndarray, np.ndarray]:
+    """Exact mean (..., 3) and covariance (..., 3, 3) of (dx mm, dy mm, dphi deg).
+
+    From the laws' moments: non-clearance features are independent inputs;
+    a clearance's features (rho cos zeta, rho sin zeta) have moments
+    E[rho^k] times trigonometric moments of zeta (by quadrature of its ppf).
+    """
+    from scipy import integrate
+    budget = model.budget
+    laws = list(budget.inputs.values())
+    fmean, fcov_blocks = [], []
+    for kind, idx in model._plan:
+        if kind == "value":
+            fmean.append(laws[idx].mean)
+            fcov_blocks.append(np.array([[laws[idx].var]]))
+        else:
+            rho, zeta = laws[idx[0]], laws[idx[1]]
+
+            def ez(fn):
+                return integrate.quad(lambda u: fn(np.deg2rad(zeta.ppf(u))), 0.0, 1.0, limit=200)[0]
+
+            ec, es = ez(np.cos), ez(np.sin)
+            ecc, ess, ecs = ez(lambda z: np.cos(z) ** 2), ez(lambda z: np.sin(z) ** 2), ez(lambda z: np.sin(z) * np.cos(z))
+            r1, r2 = rho.mean, rho.var + rho.mean**2
+            m = np.array([r1 * ec, r1 * es])
+            second = r2 * np.array([[ecc, ecs], [ecs, ess]])
+            fmean.extend(m)
+            fcov_blocks.append(second - np.outer(m, m))
+    nf = len(fmean)
+    fcov = np.zeros((nf, nf))
+    pos = 0
+    for block in fcov_blocks:
+        k = block.shape[0]
+        fcov[pos:pos + k, pos:pos + k] = block
+        pos += k
+    deg = np.array([1.0, 1.0, _RAD2DEG])
+    mean = np.einsum("...of,f->...o", model.coef, np.array(fmean)) * deg
+    cov = np.einsum("...of,fg,...qg->...oq", model.coef, fcov, model.coef) * np.outer(deg, deg)
+    return mean, cov
