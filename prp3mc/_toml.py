@@ -15,7 +15,7 @@ from typing import Any
 
 from .errors import InputFileError
 
-__all__ = ["load_toml", "loads_toml", "dumps_toml", "write_text_atomic"]
+__all__ = ["load_toml", "loads_toml", "dumps_toml"]
 
 
 def loads_toml(text: str, source: str = "<string>") -> dict[str, Any]:
@@ -90,11 +90,3 @@ def dumps_toml(document: dict[str, Any], header: str = "") -> str:
     lines = [f"# {line}" for line in header.splitlines()]
     _emit(document, "", lines)
     return "\n".join(lines).lstrip("\n") + "\n"
-
-
-def write_text_atomic(path: str | os.PathLike, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and an atomic rename."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)

@@ -17,7 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from ._toml import dumps_toml, load_toml, loads_toml, write_text_atomic
+from ._toml import dumps_toml, load_toml, loads_toml
+from .output import write_text
 from .errors import BudgetError, UnknownPresetError
 from .laws import Law, law_from_dict
 from .sensitivity import LENGTH_FAMILIES
@@ -295,7 +296,7 @@ class Budget:
         return doc
 
     def to_toml(self, path: str | os.PathLike) -> None:
-        write_text_atomic(path, dumps_toml(self.to_dict(), header="prp3mc error budget: mm and degrees"))
+        write_text(path, dumps_toml(self.to_dict(), header="prp3mc error budget: mm and degrees"))
 
     def to_frame(self):
         """One row per input: name, family, leg, unit, law, mean, sd, lo, hi, source."""

@@ -19,7 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from ._toml import dumps_toml, load_toml, write_text_atomic
+from ._toml import dumps_toml, load_toml
+from .output import write_text
 from .errors import GeometryError, UnknownPresetError
 
 __all__ = ["Geometry", "Region", "LENGTHS", "ANGLES", "GEOMETRY_PRESETS", "REGION_PRESETS"]
@@ -201,7 +202,7 @@ class Geometry:
     def to_toml(self, path: str | os.PathLike) -> None:
         """Write the geometry as TOML (atomically)."""
         header = "prp3mc geometry: lengths in mm, angles in degrees"
-        write_text_atomic(path, dumps_toml(self.to_dict(), header=header))
+        write_text(path, dumps_toml(self.to_dict(), header=header))
 
 
 @dataclass(frozen=True, slots=True)

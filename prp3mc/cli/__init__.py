@@ -8,6 +8,8 @@ message on stderr and exit status 1 (2 for usage errors), never a traceback.
 from __future__ import annotations
 
 import argparse
+import importlib
+import pkgutil
 import json
 import sys
 import numpy as np
@@ -103,7 +105,9 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _load_commands() -> None:
-    from . import montecarlo, sensitivity, worstcase  # noqa: F401  (register themselves)
+    """Import every command module of this package; each registers itself."""
+    for info in pkgutil.iter_modules(__path__):
+        importlib.import_module(f"{__name__}.{info.name}")
 
 
 def build_parser() -> argparse.ArgumentParser:
