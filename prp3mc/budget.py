@@ -254,9 +254,10 @@ class Budget:
                                       f"{meta['applies_to']}, not {family}")
                 sources[key] = f"{spec['catalogue']}: {meta['source']}"
             else:
-                law = law_from_dict(spec, where)
+                spec = dict(spec)
                 if "source" in spec:
-                    sources[key] = spec["source"]
+                    sources[key] = str(spec.pop("source"))
+                law = law_from_dict(spec, where)
             inputs[key] = law
         groups = doc.get("groups", {})
         if not isinstance(groups, dict):

@@ -11,8 +11,8 @@ import numpy as np
 
 from .errors import BudgetError
 from .geometry import Geometry
-from .kinematics import _ik_rad, _perp, as_poses, chain, check_poses, solve_closure
-from .sensitivity import FAMILIES, LENGTH_FAMILIES, clearance_angle_rad, sensitivity
+from .kinematics import as_poses, frame, solve_closure, validated_frame
+from .sensitivity import FAMILIES, LENGTH_FAMILIES, h_entries
 
 __all__ = ["exact_pose_error", "linear_pose_error", "linearization_error_um"]
 
@@ -53,20 +53,16 @@ def exact_pose_error(geometry: Geometry, poses, errors: dict, *, check: bool = T
         ``[dx_mm, dy_mm, dphi_deg]``: reached pose minus commanded pose.
     """
     poses = as_poses(poses)
-    if check:
-        check_poses(geometry, poses)
-    shape = poses.shape[:-1]
-    deltas, zeta = _to_internal(errors, shape)
+    fr = validated_frame(geometry, poses) if check else frame(geometry, poses)
+    deltas, zeta = _to_internal(errors, poses.shape[:-1])
     prad = poses.copy()
     prad[..., 2] = np.deg2rad(poses[..., 2])
-    ch = chain(geometry, prad[..., 2])
-    b_cmd, _ = _ik_rad(geometry, prad[..., :2], prad[..., 2], ch)
     contact = None
     if "rho" in deltas:
-        n = _perp(ch.l) if zeta is None else np.stack([np.cos(zeta), np.sin(zeta)], axis=-1)
-        contact = deltas["rho"][..., None] * n
+        nx, ny = (-fr.tr.sl, fr.tr.cl) if zeta is None else (np.cos(zeta), np.sin(zeta))
+        contact = (deltas["rho"] * nx, deltas["rho"] * ny)
     offsets = {q: v for q, v in deltas.items() if q not in ("b", "rho")}
-    reached = solve_closure(geometry, b_cmd + deltas.get("b", 0.0), prad, offsets, contact)
+    reached = solve_closure(geometry, fr.b + deltas.get("b", 0.0), prad, offsets, contact)
     err = reached - prad
     err[..., 2] = np.rad2deg(err[..., 2])
     return err
@@ -75,15 +71,13 @@ def exact_pose_error(geometry: Geometry, poses, errors: dict, *, check: bool = T
 def linear_pose_error(geometry: Geometry, poses, errors: dict, *, check: bool = True) -> np.ndarray:
     """Pose error of the linear model, sum over q of J_q dq; same units as :func:`exact_pose_error`."""
     poses = as_poses(poses)
-    s = sensitivity(geometry, poses, check=check)
+    fr = validated_frame(geometry, poses) if check else frame(geometry, poses)
     deltas, zeta = _to_internal(errors, poses.shape[:-1])
     total = np.zeros(poses.shape)
     for q, dq in deltas.items():
-        if q == "rho" and zeta is not None:
-            prad = np.deg2rad(poses[..., 2])
-            omega = clearance_angle_rad(chain(geometry, prad))
-            dq = dq * np.cos(zeta - omega)
-        total += np.einsum("...ij,...j->...i", s.J[q], dq)
+        if q == "rho" and zeta is not None:  # cos(zeta - omega), omega the direction of E l
+            dq = dq * (np.cos(zeta) * -fr.tr.sl + np.sin(zeta) * fr.tr.cl)
+        total += np.einsum("...ij,...j->...i", fr.Ainv, h_entries(geometry, fr, q) * dq)
     total[..., 2] = np.rad2deg(total[..., 2])
     return total
 

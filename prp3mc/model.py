@@ -16,8 +16,8 @@ import numpy as np
 
 from .budget import Budget, parse_input
 from .geometry import Geometry
-from .kinematics import as_poses, chain, check_poses
-from .sensitivity import LENGTH_FAMILIES, clearance_angle_rad, sensitivity
+from .kinematics import as_poses, frame, validated_frame
+from .sensitivity import LENGTH_FAMILIES, h_entries
 
 __all__ = ["LinearModel", "linear_model"]
 
@@ -35,23 +35,52 @@ class LinearModel:
     terms : tuple of str
         One term per input except the zeta_i: its name (``rho_i`` stands for
         the clearance term rho_i cos(zeta_i - omega_i)).
-    columns : ndarray, shape (..., 3, T)
-        Pose error (dx mm, dy mm, dphi rad) per unit of each term, the term
-        in its boundary unit (mm or deg).
-    omega : ndarray, shape (..., 3)
-        Worst contact direction of each leg's clearance, rad.
-    coef : ndarray, shape (..., 3, F)
-        Coefficients of the sample features (see :meth:`features`).
+    legs : tuple of int
+        The (0-based) leg of every term.
+    Ainv : ndarray, shape (..., 3, 3)
+        A^-1 at the poses.
+    scale : ndarray, shape (..., T)
+        Every term's entry h_q,i of H_q, per unit (mm or deg) of the term.
+        Since every H_q is diagonal, the pose error is ``A^-1 u`` with
+        ``u_i = sum over the terms t of leg i of scale_t * term_t``.
+    cos_omega, sin_omega : ndarray, shape (..., 3)
+        Worst contact direction omega_i of each leg's clearance (that of E l_i).
     """
 
     geometry: Geometry
     budget: Budget
     poses: np.ndarray
     terms: tuple
-    columns: np.ndarray
-    omega: np.ndarray
-    coef: np.ndarray
+    legs: tuple
+    Ainv: np.ndarray
+    scale: np.ndarray
+    cos_omega: np.ndarray
+    sin_omega: np.ndarray
     _plan: tuple
+
+    @property
+    def columns(self) -> np.ndarray:
+        """Pose error (dx mm, dy mm, dphi rad) per unit of each term, shape (..., 3, T)."""
+        return self.Ainv[..., :, list(self.legs)] * self.scale[..., None, :]
+
+    @property
+    def omega(self) -> np.ndarray:
+        """Worst contact direction of each leg's clearance, rad, shape (..., 3)."""
+        return np.arctan2(self.sin_omega, self.cos_omega)
+
+    @property
+    def coef(self) -> np.ndarray:
+        """Coefficients of the sample features (see :meth:`features`), shape (..., 3, F)."""
+        cols = []
+        columns = self.columns
+        for t, (kind, _) in enumerate(self._plan):
+            col = columns[..., t]
+            if kind == "value":
+                cols.append(col)
+            else:
+                _, leg = parse_input(self.terms[t])
+                cols += [col * self.cos_omega[..., leg, None], col * self.sin_omega[..., leg, None]]
+        return np.stack(cols, axis=-1)
 
     def features(self, X: np.ndarray) -> np.ndarray:
         """Sample features, shape (n, F), from input samples X (n, d) in mm / deg.
@@ -83,35 +112,33 @@ class LinearModel:
                 out[..., t] = X[:, idx]
             else:
                 _, leg = parse_input(self.terms[t])
-                omega = self.omega[..., leg, None]
-                out[..., t] = X[:, idx[0]] * np.cos(np.deg2rad(X[:, idx[1]]) - omega)
+                zeta = np.deg2rad(X[:, idx[1]])
+                out[..., t] = X[:, idx[0]] * (np.cos(zeta) * self.cos_omega[..., leg, None]
+                                              + np.sin(zeta) * self.sin_omega[..., leg, None])
         return out
 
 
 def linear_model(geometry: Geometry, budget: Budget, poses, *, check: bool = True) -> LinearModel:
-    """Build the :class:`LinearModel` of ``budget`` at ``poses`` (..., 3)."""
+    """Build the :class:`LinearModel` of ``budget`` at ``poses`` (..., 3).
+
+    Poses out of stroke, with d_i <= 0 or near a singularity are refused
+    (:class:`~prp3mc.errors.InfeasiblePoseError`) unless ``check=False``.
+    """
     poses = as_poses(poses)
-    if check:
-        check_poses(geometry, poses)
-    s = sensitivity(geometry, poses, check=False)
-    omega = clearance_angle_rad(chain(geometry, np.deg2rad(poses[..., 2])))
+    fr = validated_frame(geometry, poses) if check else frame(geometry, poses)
     names = budget.names
-    terms, columns, coefs, plan = [], [], [], []
+    terms, legs, scales, plan = [], [], [], []
+    h = {}
     for k, name in enumerate(names):
         family, leg = parse_input(name)
         if family == "zeta":
             continue
-        col = s.J[family][..., :, leg]
-        if family not in LENGTH_FAMILIES:
-            col = col * (np.pi / 180.0)  # per degree
+        if family not in h:
+            h[family] = h_entries(geometry, fr, family)
         terms.append(name)
-        columns.append(col)
-        if family == "rho":
-            plan.append(("clearance", (k, names.index(f"zeta_{leg + 1}"))))
-            coefs += [col * np.cos(omega[..., leg, None]), col * np.sin(omega[..., leg, None])]
-        else:
-            plan.append(("value", k))
-            coefs.append(col)
-    return LinearModel(geometry=geometry, budget=budget, poses=poses, terms=tuple(terms),
-                       columns=np.stack(columns, axis=-1), omega=omega,
-                       coef=np.stack(coefs, axis=-1), _plan=tuple(plan))
+        legs.append(leg)
+        scales.append(h[family][..., leg] * (1.0 if family in LENGTH_FAMILIES else np.pi / 180.0))
+        plan.append(("clearance", (k, names.index(f"zeta_{leg + 1}"))) if family == "rho" else ("value", k))
+    return LinearModel(geometry=geometry, budget=budget, poses=poses, terms=tuple(terms), legs=tuple(legs),
+                       Ainv=fr.Ainv, scale=np.stack(scales, axis=-1), cos_omega=-fr.tr.sl,
+                       sin_omega=fr.tr.cl, _plan=tuple(plan))

@@ -30,9 +30,9 @@ import numpy as np
 import pandas as pd
 
 from .geometry import Geometry
-from .kinematics import DEFAULT_LIMITS, Limits, _ab, _ik_rad, _perp, as_poses, chain, check_poses
+from .kinematics import DEFAULT_LIMITS, Frame, Limits, _diag, as_poses, frame, validated_frame
 
-__all__ = ["FAMILIES", "LENGTH_FAMILIES", "Sensitivity", "sensitivity", "h_entries", "clearance_angle_rad"]
+__all__ = ["FAMILIES", "LENGTH_FAMILIES", "Sensitivity", "sensitivity", "h_entries"]
 
 #: The ten error families of SPEC §1, in the paper's order.
 FAMILIES = ("a", "alpha", "b", "beta", "rho", "c", "gamma", "theta", "e", "psi")
@@ -41,52 +41,31 @@ LENGTH_FAMILIES = frozenset({"a", "b", "rho", "c", "e"})
 _OUTPUTS = ("x", "y", "phi")
 
 
-def h_entries(geometry: Geometry, poses_rad: np.ndarray, families=FAMILIES):
-    """Diagonals of H_q and the matrix A at poses ``[x_mm, y_mm, phi_rad]`` (..., 3).
-
-    Returns
-    -------
-    h : dict of str to ndarray, shape (..., 3)
-    A : ndarray, shape (..., 3, 3)
-    ch : Chain
-        The unit vectors at the poses.
-    d : ndarray, shape (..., 3)
-        Passive guide lengths, mm.
-    """
-    ch = chain(geometry, poses_rad[..., 2])
-    b, d = _ik_rad(geometry, poses_rad[..., :2], poses_rad[..., 2], ch)
-    A, _ = _ab(geometry, ch, d)
+def h_entries(geometry: Geometry, fr: Frame, family: str) -> np.ndarray:
+    """Diagonal of H_q for ``family`` at the poses of a :class:`Frame`, shape (..., 3)."""
+    tr, b, d = fr.tr, fr.b, fr.d
     a, c, e = geometry.rad("a"), geometry.rad("c"), geometry.rad("e")
-    El = _perp(ch.l)
-
-    def dot(u, v):
-        return np.sum(u * v, axis=-1)
-
-    lk, lm = dot(ch.l, ch.k), dot(ch.l, ch.m)
-    lj, li = dot(ch.l, ch.j), dot(ch.l, ch.i)
-    formulas = {
-        "a": lambda: dot(El, ch.i),
-        "alpha": lambda: a * li + b * lj + c * lk + d,
-        "b": lambda: dot(El, ch.j),
-        "beta": lambda: b * lj + c * lk + d,
-        "rho": lambda: np.ones_like(d),
-        "c": lambda: dot(El, ch.k),
-        "gamma": lambda: c * lk + d,
-        "theta": lambda: d.copy(),
-        "e": lambda: dot(El, ch.m),
-        "psi": lambda: e * lm,
-    }
-    return {q: formulas[q]() for q in families}, A, ch, d
-
-
-def clearance_angle_rad(ch) -> np.ndarray:
-    """Direction omega_i of E l_i (rad), shape (..., 3): the worst contact angle.
-
-    A clearance rho_i at contact angle zeta_i enters H_rho as
-    ``rho_i cos(zeta_i - omega_i)``.
-    """
-    El = _perp(ch.l)
-    return np.arctan2(El[..., 1], El[..., 0])
+    if family == "a":
+        return tr.perp_dot("l", "i")
+    if family == "alpha":
+        return a * tr.dot("l", "i") + b * tr.dot("l", "j") + c * tr.dot("l", "k") + d
+    if family == "b":
+        return fr.transmission
+    if family == "beta":
+        return b * tr.dot("l", "j") + c * tr.dot("l", "k") + d
+    if family == "rho":
+        return np.ones_like(d)
+    if family == "c":
+        return tr.perp_dot("l", "k")
+    if family == "gamma":
+        return c * tr.dot("l", "k") + d
+    if family == "theta":
+        return d
+    if family == "e":
+        return tr.perp_dot("l", "m")
+    if family == "psi":
+        return e * tr.dot("l", "m")
+    raise KeyError(f"unknown error family {family!r}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -114,17 +93,16 @@ class Sensitivity:
         """Tidy table: x_mm, y_mm, phi_deg, output, family, leg, value, unit."""
         flat = self.poses.reshape(-1, 3)
         n = flat.shape[0]
+        pose_idx, out_idx, leg_idx = (g.ravel() for g in np.meshgrid(np.arange(n), np.arange(3), np.arange(3),
+                                                                      indexing="ij"))
         frames = []
         for q in FAMILIES:
-            Jq = self.J[q].reshape(n, 3, 3)
-            pose_idx, out_idx, leg_idx = np.meshgrid(np.arange(n), np.arange(3), np.arange(3), indexing="ij")
             per = "mm" if q in LENGTH_FAMILIES else "rad"
             units = np.array([f"mm/{per}", f"mm/{per}", f"rad/{per}"])
             frames.append(pd.DataFrame({
-                "x_mm": flat[pose_idx.ravel(), 0], "y_mm": flat[pose_idx.ravel(), 1],
-                "phi_deg": flat[pose_idx.ravel(), 2],
-                "output": np.array(_OUTPUTS)[out_idx.ravel()], "family": q,
-                "leg": leg_idx.ravel() + 1, "value": Jq.ravel(), "unit": units[out_idx.ravel()],
+                "x_mm": flat[pose_idx, 0], "y_mm": flat[pose_idx, 1], "phi_deg": flat[pose_idx, 2],
+                "output": np.array(_OUTPUTS)[out_idx], "family": q, "leg": leg_idx + 1,
+                "value": self.J[q].reshape(n, 3, 3).ravel(), "unit": units[out_idx],
             }))
         return pd.concat(frames, ignore_index=True)
 
@@ -153,18 +131,8 @@ def sensitivity(geometry: Geometry, poses, *, check: bool = True,
     (3, 3)
     """
     poses = as_poses(poses)
-    if check:
-        check_poses(geometry, poses, limits)
-    prad = poses.copy()
-    prad[..., 2] = np.deg2rad(prad[..., 2])
-    h, A, ch, d = h_entries(geometry, prad)
-    Ainv = np.linalg.inv(A)
+    fr = validated_frame(geometry, poses, limits) if check else frame(geometry, poses)
+    h = {q: h_entries(geometry, fr, q) for q in FAMILIES}
     H = {q: _diag(v) for q, v in h.items()}
-    J = {q: Ainv * v[..., None, :] for q, v in h.items()}
-    return Sensitivity(poses=poses, A=A, B=H["b"], H=H, J=J)
-
-
-def _diag(v: np.ndarray) -> np.ndarray:
-    out = np.zeros(v.shape + (3,))
-    out[..., [0, 1, 2], [0, 1, 2]] = v
-    return out
+    J = {q: fr.Ainv * v[..., None, :] for q, v in h.items()}
+    return Sensitivity(poses=poses, A=fr.A, B=H["b"], H=H, J=J)

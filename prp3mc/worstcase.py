@@ -1,13 +1,16 @@
 """Exact worst case of the linear error model over a budget's bounded support.
 
-Every term t_k of the model (one per input; a clearance rho_i, zeta_i is the
-single term rho_i cos(zeta_i - omega_i)) ranges over an interval
-[lo_k, hi_k], so the position error ``c + sum_k g_k s_k`` with
-``s_k in [-1, 1]`` fills a 2-D zonotope: a Minkowski sum of segments. A convex
-function (the norm) peaks at a vertex, and a planar zonotope with T
-generators has at most 2T vertices, found exactly by sorting the generators
-by angle (no search). For a scalar output (dx, dy, dphi) the maximum of
-``|c + sum g_k s_k|`` is ``|c| + sum |g_k|``.
+Every H_q of eq. (8) is diagonal, so all errors of leg i act through one
+scalar: the pose error is ``A^-1 u`` with ``u_i = sum_q h_q,i dq_i``. Each model
+term (one per input; a clearance rho_i, zeta_i is the single term
+``rho_i cos(zeta_i - omega_i)``) ranges over an interval, so u ranges over a
+3-D box and the pose error over its image under A^-1. The position error
+therefore fills a planar zonotope with just three generators (the first two
+rows of the columns of A^-1, scaled by the half-widths of u), whose vertices
+are among the images of the box's 8 corners: a convex function such as the
+norm peaks at one of them, so the maximum is exact after 8 evaluations per
+pose, with no search. For a scalar output (dx, dy, dphi) the maximum of
+``|c + sum_i g_i s_i|`` is ``|c| + sum_i |g_i|``.
 
 A clearance only enters the linear model through the component of its
 displacement along E l_i (the component along l_i is taken up by the passive
@@ -17,6 +20,8 @@ joint), which is why it adds a segment, not a disc.
 from __future__ import annotations
 
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,6 +30,7 @@ import pandas as pd
 from ._version import __version__
 from .budget import Budget, parse_input
 from .geometry import Geometry
+from .kinematics import as_poses
 from .model import LinearModel, linear_model
 
 __all__ = ["WorstCase", "worst_case", "QUANTITIES"]
@@ -50,16 +56,20 @@ class WorstCase:
         pose-dependent when its contact angle is restricted).
     position_mm, phi_deg, x_mm, y_mm : ndarray (...)
         Largest position-error norm, |dphi|, |dx| and |dy|.
-    term_at : dict of str to ndarray (..., T)
-        Term values at the maximiser of each quantity.
-    inputs_at : dict of str to ndarray (..., d)
-        Input values (mm, deg) at the maximiser; for a clearance, rho_i and
-        the contact angle zeta_i that realise it.
-    contribution : dict of str to ndarray (..., T)
-        Each term's part of the maximum (mm or deg), summing to it: for the
-        norm, the projection of the term's error on the maximal error vector.
+    leg_signs : dict of str to ndarray (..., 3)
+        For each quantity, the sign of each leg's u_i (-1 lower end, +1
+        upper end of its interval) at the maximiser.
+    legs, Ainv, scale :
+        The linear model's term legs, A^-1 (..., 3, 3) and term scales (..., T)
+        (see :class:`~prp3mc.model.LinearModel`).
+    input_bounds : ndarray (d, 2)
+        The interval of every input used, mm or deg.
+    cos_omega, sin_omega : ndarray (..., 3)
+        Worst contact direction of each leg's clearance.
     k_sigma : float or None
         How unbounded laws were bounded (mean ± k·sd), if any.
+    term_at, inputs_at, contribution : dict of str to ndarray
+        Computed on access from :attr:`signs` (see the properties).
     """
 
     poses: np.ndarray
@@ -70,11 +80,82 @@ class WorstCase:
     phi_deg: np.ndarray
     x_mm: np.ndarray
     y_mm: np.ndarray
-    term_at: dict
-    inputs_at: dict
-    contribution: dict
+    leg_signs: dict
+    legs: tuple
+    Ainv: np.ndarray
+    scale: np.ndarray
+    input_bounds: np.ndarray
+    cos_omega: np.ndarray
+    sin_omega: np.ndarray
     k_sigma: float | None = None
     version: str = __version__
+
+    @property
+    def signs(self) -> dict:
+        """For each quantity, which end of every term's interval (-1, +1) realises the maximum."""
+        term_sign = np.where(self.scale >= 0, 1.0, -1.0)
+        return {q: ls[..., list(self.legs)] * term_sign for q, ls in self.leg_signs.items()}
+
+    @property
+    def columns(self) -> np.ndarray:
+        """Pose error (dx mm, dy mm, dphi rad) per unit of each term, (..., 3, T)."""
+        return self.Ainv[..., :, list(self.legs)] * self.scale[..., None, :]
+
+    @property
+    def term_at(self) -> dict:
+        """Term values (..., T) at the maximiser of each quantity, mm or deg."""
+        mid = self.term_bounds.mean(axis=-1)
+        half = 0.5 * (self.term_bounds[..., 1] - self.term_bounds[..., 0])
+        return {q: mid + s * half for q, s in self.signs.items()}
+
+    @property
+    def contribution(self) -> dict:
+        """Each term's part (..., T) of the maximum of each quantity, mm or deg; sums to it.
+
+        For the norm, the projection of the term's error on the maximal error
+        vector; for |dx|, |dy|, |dphi|, the term's signed share.
+        """
+        out = {}
+        columns = self.columns
+        for q, t_val in self.term_at.items():
+            err = columns * t_val[..., None, :]                 # (..., 3, T)
+            if q == "position":
+                total = err[..., :2, :].sum(-1)
+                norm = self.position_mm[..., None]
+                unit = np.divide(total, norm, out=np.zeros_like(total), where=norm > 0)
+                out[q] = np.einsum("...ot,...o->...t", err[..., :2, :], unit)
+            else:
+                o = {"phi": 2, "x": 0, "y": 1}[q]
+                sign = np.where(err[..., o, :].sum(-1) >= 0, 1.0, -1.0)
+                out[q] = sign[..., None] * err[..., o, :] * (_RAD2DEG if q == "phi" else 1.0)
+        return out
+
+    @property
+    def inputs_at(self) -> dict:
+        """Input values (..., d) at the maximiser of each quantity, mm or deg.
+
+        A clearance's rho_i and contact angle zeta_i are those realising its
+        term's chosen end.
+        """
+        out = {}
+        omega = np.arctan2(self.sin_omega, self.cos_omega)
+        signs = self.signs
+        for q, t_val in self.term_at.items():
+            x = np.empty(self.poses.shape[:-1] + (len(self.inputs),))
+            for t, term in enumerate(self.terms):
+                k = self.inputs.index(term)
+                family, leg = parse_input(term)
+                if family == "rho":
+                    kz = self.inputs.index(f"zeta_{leg + 1}")
+                    _, (rho_lo, z_lo), (rho_hi, z_hi) = _clearance_interval(
+                        self.input_bounds[k], self.input_bounds[kz], omega[..., leg])
+                    upper = signs[q][..., t] > 0
+                    x[..., k] = np.where(upper, rho_hi, rho_lo)
+                    x[..., kz] = np.where(upper, z_hi, z_lo)
+                else:
+                    x[..., k] = t_val[..., t]
+            out[q] = x
+        return out
 
     def value(self, quantity: str) -> np.ndarray:
         """The maximum of ``quantity`` (one of :data:`QUANTITIES`)."""
@@ -122,75 +203,80 @@ def _cos_range(lo: np.ndarray, hi: np.ndarray):
     return np.cos(arg_min), arg_min, np.cos(arg_max), arg_max
 
 
-def _term_bounds(model: LinearModel, bounds: np.ndarray):
-    """Term intervals (..., T, 2) and, per clearance term, (rho, zeta_deg) at each end."""
-    shape = model.poses.shape[:-1]
+def _clearance_interval(rho_bounds, zeta_bounds_deg, omega: np.ndarray):
+    """Interval of rho cos(zeta - omega) over the box, and (rho, zeta_deg) at each end.
+
+    Returns ``((lo, hi), (rho_at_lo, zeta_at_lo), (rho_at_hi, zeta_at_hi))``,
+    each array shaped like ``omega``.
+    """
+    rlo, rhi = rho_bounds
+    zlo, zhi = zeta_bounds_deg
+    if zhi - zlo >= 360.0:  # full circle: the contact can point along -E l_i or +E l_i
+        cmin, amin = np.full(np.shape(omega), -1.0), np.full(np.shape(omega), math.pi)
+        cmax, amax = np.full(np.shape(omega), 1.0), np.zeros(np.shape(omega))
+    else:
+        cmin, amin, cmax, amax = _cos_range(np.deg2rad(zlo) - omega, np.deg2rad(zhi) - omega)
+    rho_hi_end = np.where(cmax >= 0, rhi, rlo)
+    rho_lo_end = np.where(cmin <= 0, rhi, rlo)
+    to_deg = lambda a: np.mod(np.rad2deg(a + omega), 360.0)  # noqa: E731
+    return ((rho_lo_end * cmin, rho_hi_end * cmax), (rho_lo_end, to_deg(amin)), (rho_hi_end, to_deg(amax)))
+
+
+def _term_bounds(model: LinearModel, bounds: np.ndarray) -> np.ndarray:
+    """Interval of every model term, shape (..., T, 2), mm or deg."""
     names = model.budget.names
-    T = len(model.terms)
-    tb = np.empty(shape + (T, 2))
-    ends = {}
+    tb = np.empty(model.poses.shape[:-1] + (len(model.terms), 2))
     for t, term in enumerate(model.terms):
         family, leg = parse_input(term)
         k = names.index(term)
         if family != "rho":
             tb[..., t, :] = bounds[k]
             continue
-        rlo, rhi = bounds[k]
-        zlo, zhi = bounds[names.index(f"zeta_{leg + 1}")]
-        omega = model.omega[..., leg]
-        if zhi - zlo >= 360.0:
-            cmin, amin = np.full(shape, -1.0), np.full(shape, math.pi)
-            cmax, amax = np.full(shape, 1.0), np.zeros(shape)
+        zeta = bounds[names.index(f"zeta_{leg + 1}")]
+        if zeta[1] - zeta[0] >= 360.0:  # no need for omega itself
+            tb[..., t, 0], tb[..., t, 1] = -bounds[k][1], bounds[k][1]
         else:
-            cmin, amin, cmax, amax = _cos_range(np.deg2rad(zlo) - omega, np.deg2rad(zhi) - omega)
-        rho_hi_end = np.where(cmax >= 0, rhi, rlo)
-        rho_lo_end = np.where(cmin <= 0, rhi, rlo)
-        tb[..., t, 0] = rho_lo_end * cmin
-        tb[..., t, 1] = rho_hi_end * cmax
-        to_deg = lambda a: np.mod(np.rad2deg(a + omega), 360.0)  # noqa: E731
-        ends[t] = ((rho_lo_end, to_deg(amin)), (rho_hi_end, to_deg(amax)))
-    return tb, ends
+            (lo, hi), _, _ = _clearance_interval(bounds[k], zeta, model.omega[..., leg])
+            tb[..., t, 0], tb[..., t, 1] = lo, hi
+    return tb
 
 
-def _zonotope_max_norm(center: np.ndarray, gens: np.ndarray):
-    """Max of |c + sum_k s_k g_k| over s in [-1, 1]^T, exactly, batched.
+_CORNERS = np.array([[sx, sy, sz] for sx in (-1.0, 1.0) for sy in (-1.0, 1.0) for sz in (-1.0, 1.0)])
 
-    Parameters
-    ----------
-    center : (..., 2)
-    gens : (..., T, 2)
 
-    Returns
-    -------
-    value : (...)
-    signs : (..., T) of ±1 attaining it
+def _maxima(model: LinearModel, tb: np.ndarray):
+    """Maxima and the sign (-1, +1) of each leg's u_i realising them, for flat poses (N,).
+
+    Returns ``values`` (position mm, |dphi| rad, |dx| mm, |dy| mm), each (N,),
+    and ``leg_signs``, each (N, 3). Written on per-component arrays of shape
+    (N,): the 3x3 and 8-corner algebra is spelled out, which is several
+    times faster than einsum over small trailing axes.
     """
-    flip = (gens[..., 1] < 0) | ((gens[..., 1] == 0) & (gens[..., 0] < 0))
-    g = np.where(flip[..., None], -gens, gens)                     # upper half-plane
-    order = np.argsort(np.arctan2(g[..., 1], g[..., 0]), axis=-1)
-    gs = np.take_along_axis(g, order[..., None], axis=-2)
-    T = gs.shape[-2]
-    # vertex j (j = 0..T): the first j sorted generators at +1, the rest at -1; and mirror images
-    cum = np.concatenate([np.zeros(gs.shape[:-2] + (1, 2)), np.cumsum(gs, axis=-2)], axis=-2)
-    base = center[..., None, :] - gs.sum(axis=-2)[..., None, :]
-    verts = base + 2 * cum                                         # (..., T+1, 2)
-    mirror = 2 * center[..., None, :] - verts
-    allv = np.concatenate([verts, mirror], axis=-2)
-    norms = np.hypot(allv[..., 0], allv[..., 1])
-    best = np.argmax(norms, axis=-1)
-    value = np.take_along_axis(norms, best[..., None], -1)[..., 0]
-    j = best % (T + 1)
-    mirrored = best > T
-    rank = np.empty_like(order)
-    np.put_along_axis(rank, order, np.arange(T) * np.ones_like(order), axis=-1)
-    s_sorted = np.where(rank < j[..., None], 1.0, -1.0)
-    s_sorted = np.where(mirrored[..., None], -s_sorted, s_sorted)
-    signs = np.where(flip, -s_sorted, s_sorted)
-    return value, signs
+    mid = 0.5 * (tb[..., 0] + tb[..., 1])                            # (N, T)
+    half = 0.5 * (tb[..., 1] - tb[..., 0])
+    onehot = (np.array(model.legs)[:, None] == np.arange(3)).astype(float)   # (T, 3)
+    u_mid = (model.scale * mid) @ onehot                             # (N, 3)
+    u_half = (np.abs(model.scale) * half) @ onehot
+    Ai = model.Ainv
+    center = [sum(Ai[:, r, i] * u_mid[:, i] for i in range(3)) for r in range(3)]
+    g = [[Ai[:, r, i] * u_half[:, i] for i in range(3)] for r in range(3)]  # g[row][leg]
+    norms2 = np.empty((8,) + center[0].shape)
+    for c, (s0, s1, s2) in enumerate(_CORNERS):
+        vx = center[0] + s0 * g[0][0] + s1 * g[0][1] + s2 * g[0][2]
+        vy = center[1] + s0 * g[1][0] + s1 * g[1][1] + s2 * g[1][2]
+        norms2[c] = vx * vx + vy * vy
+    best = np.argmax(norms2, axis=0)
+    values = {"position": np.sqrt(np.take_along_axis(norms2, best[None], 0)[0])}
+    leg_signs = {"position": _CORNERS[best]}
+    for r, q in ((2, "phi"), (0, "x"), (1, "y")):
+        sc = np.where(center[r] >= 0, 1.0, -1.0)
+        leg_signs[q] = np.stack([sc * np.where(g[r][i] >= 0, 1.0, -1.0) for i in range(3)], axis=-1)
+        values[q] = np.abs(center[r]) + np.abs(g[r][0]) + np.abs(g[r][1]) + np.abs(g[r][2])
+    return values, leg_signs
 
 
 def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | None = None,
-               check: bool = True) -> WorstCase:
+               check: bool = True, workers: int | None = None, chunk: int = 4096) -> WorstCase:
     """Exact maxima of the linear pose error over the budget's box, batched.
 
     Parameters
@@ -202,6 +288,9 @@ def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | No
     k_sigma : float, optional
         Bound unbounded laws (normal) as mean ± k_sigma·sd; without it such
         a budget is refused.
+    workers, chunk : int
+        Large batches are split into chunks of ``chunk`` poses evaluated on
+        ``workers`` threads (default: CPU count); numpy releases the GIL.
 
     Returns
     -------
@@ -215,48 +304,34 @@ def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | No
     140
     """
     bounds = budget.bounds(k_sigma)
-    model = linear_model(geometry, budget, poses, check=check)
-    tb, ends = _term_bounds(model, bounds)
-    mid = 0.5 * (tb[..., 0] + tb[..., 1])                            # (..., T)
-    half = 0.5 * (tb[..., 1] - tb[..., 0])
-    cols = model.columns                                             # (..., 3, T)
-    center = np.einsum("...ot,...t->...o", cols, mid)
-    gens = cols * half[..., None, :]                                 # (..., 3, T)
+    poses = as_poses(poses)
+    flat = poses.reshape(-1, 3) if poses.ndim > 1 else poses[None]
 
-    pos, s_pos = _zonotope_max_norm(center[..., :2], np.swapaxes(gens[..., :2, :], -1, -2))
-    signs = {"position": s_pos}
-    values = {"position": pos}
-    for o, q in ((2, "phi"), (0, "x"), (1, "y")):
-        sc = np.where(center[..., o] >= 0, 1.0, -1.0)
-        signs[q] = sc[..., None] * np.where(gens[..., o, :] >= 0, 1.0, -1.0)
-        values[q] = np.abs(center[..., o]) + np.abs(gens[..., o, :]).sum(-1)
+    def run(sl: slice):
+        model = linear_model(geometry, budget, flat[sl], check=check)
+        tb = _term_bounds(model, bounds)
+        values, signs = _maxima(model, tb)
+        return model, tb, values, signs
 
-    term_at, contribution, inputs_at = {}, {}, {}
-    names = budget.names
-    for q, s in signs.items():
-        t_val = mid + s * half
-        term_at[q] = t_val
-        err = cols * t_val[..., None, :]                             # (..., 3, T)
-        if q == "position":
-            total = err[..., :2, :].sum(-1)
-            unit = np.divide(total, pos[..., None], out=np.zeros_like(total), where=pos[..., None] > 0)
-            contribution[q] = np.einsum("...ot,...o->...t", err[..., :2, :], unit)
-        else:
-            o = {"phi": 2, "x": 0, "y": 1}[q]
-            sign = np.where(err[..., o, :].sum(-1) >= 0, 1.0, -1.0)
-            contribution[q] = sign[..., None] * err[..., o, :] * (_RAD2DEG if q == "phi" else 1.0)
-        x = np.empty(model.poses.shape[:-1] + (len(names),))
-        for t, term in enumerate(model.terms):
-            k = names.index(term)
-            if t in ends:
-                (rho_lo, z_lo), (rho_hi, z_hi) = ends[t]
-                upper = s[..., t] > 0
-                x[..., k] = np.where(upper, rho_hi, rho_lo)
-                x[..., names.index(f"zeta_{parse_input(term)[1] + 1}")] = np.where(upper, z_hi, z_lo)
-            else:
-                x[..., k] = t_val[..., t]
-        inputs_at[q] = x
-    return WorstCase(poses=model.poses, terms=model.terms, inputs=names, term_bounds=tb,
-                     position_mm=pos, phi_deg=values["phi"] * _RAD2DEG, x_mm=values["x"],
-                     y_mm=values["y"], term_at=term_at, inputs_at=inputs_at,
-                     contribution=contribution, k_sigma=k_sigma)
+    n = flat.shape[0]
+    slices = [slice(a, min(n, a + chunk)) for a in range(0, n, chunk)]
+    if len(slices) == 1:
+        parts = [run(slices[0])]
+    else:
+        with ThreadPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
+            parts = list(pool.map(run, slices))
+    shape = poses.shape[:-1]
+
+    def join(get, tail=()):
+        arrs = [get(p) for p in parts]
+        return (arrs[0] if len(arrs) == 1 else np.concatenate(arrs)).reshape(shape + tail)
+
+    T = len(parts[0][0].terms)
+    return WorstCase(
+        poses=poses, terms=parts[0][0].terms, inputs=budget.names, term_bounds=join(lambda p: p[1], (T, 2)),
+        position_mm=join(lambda p: p[2]["position"]), phi_deg=join(lambda p: p[2]["phi"]) * _RAD2DEG,
+        x_mm=join(lambda p: p[2]["x"]), y_mm=join(lambda p: p[2]["y"]),
+        leg_signs={q: join(lambda p, q=q: p[3][q], (3,)) for q in QUANTITIES}, legs=parts[0][0].legs,
+        Ainv=join(lambda p: p[0].Ainv, (3, 3)), scale=join(lambda p: p[0].scale, (T,)), input_bounds=bounds,
+        cos_omega=join(lambda p: p[0].cos_omega, (3,)), sin_omega=join(lambda p: p[0].sin_omega, (3,)),
+        k_sigma=k_sigma)

@@ -124,7 +124,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``prp3mc`` console script; returns the exit status."""
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:  # usage errors (exit 2, one line), --help and --version (exit 0)
+        return int(exc.code or 0)
     try:
         args.run(args)
     except Prp3mcError as exc:
