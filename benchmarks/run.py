@@ -15,7 +15,9 @@ import time
 import numpy as np
 
 import prp3mc
-from prp3mc import Geometry, Region, sensitivity
+from prp3mc import Budget, Geometry, Region, monte_carlo, sensitivity, worst_case
+from prp3mc.crosscheck import optimizer_worst_case
+from prp3mc.sensitivity import h_entries
 
 
 def best_of(fn, repeat: int) -> float:
@@ -43,7 +45,71 @@ def bench_sensitivity(quick: bool) -> dict:
     }
 
 
-BENCHES = [bench_sensitivity]
+def bench_worstcase(quick: bool) -> dict:
+    """Exact envelope on the U-shape 201x201 grid, against differential evolution per pose."""
+    g, budget = Geometry.from_preset("u-shape"), Budget.from_preset("paper")
+    grid = Region.from_preset("u-shape").grid(201)
+    worst_case(g, budget, grid)  # warm-up
+    t = best_of(lambda: worst_case(g, budget, grid), 3 if quick else 10)
+    rate = grid[..., 0].size / t
+    region = Region.from_preset("u-shape")
+    poses = region.grid(2 if quick else 3).reshape(-1, 3)[: 2 if quick else 5]
+    runs = [optimizer_worst_case(g, budget, p, seed=k, maxiter=100 if quick else 300) for k, p in enumerate(poses)]
+    exact = worst_case(g, budget, poses).position_mm
+    found = np.array([r.position_mm for r in runs])
+    de_s = float(np.mean([r.seconds for r in runs]))
+    return {
+        "worstcase_grid_201_seconds": t,
+        "worstcase_poses_per_s": rate,
+        "de_poses": len(poses),
+        "de_seconds_per_pose": de_s,
+        "de_evaluations_per_pose": float(np.mean([r.n_evaluations for r in runs])),
+        "de_shortfall_max_rel": float(np.max((exact - found) / exact)),
+        "de_shortfall_min_rel": float(np.min((exact - found) / exact)),
+        "worstcase_speedup_vs_de": de_s * rate,
+    }
+
+
+def naive_monte_carlo(g, budget, poses, n):
+    """The obvious implementation: a Python loop over samples, J_q products per sample, np.percentile."""
+    from prp3mc.kinematics import frame
+    fr = frame(g, poses)
+    J = {q: fr.Ainv * h_entries(g, fr, q)[..., None, :] for q in ("rho", "theta", "b")}
+    X = budget.sample(n, 0)
+    names = budget.names
+    idx = {f: [names.index(f"{f}_{i}") for i in (1, 2, 3)] for f in ("rho", "zeta", "theta", "b")}
+    omega = np.arctan2(fr.tr.cl, -fr.tr.sl)
+    out = np.empty((n,) + poses.shape[:-1] + (3,))
+    for k in range(n):
+        x = X[k]
+        rho = x[idx["rho"]] * np.cos(np.deg2rad(x[idx["zeta"]]) - omega)
+        out[k] = (np.einsum("...ij,...j->...i", J["rho"], rho)
+                  + np.einsum("...ij,j->...i", J["theta"], np.deg2rad(x[idx["theta"]]))
+                  + np.einsum("...ij,j->...i", J["b"], x[idx["b"]]))
+    pos = np.hypot(out[..., 0], out[..., 1])
+    phi = np.abs(out[..., 2])
+    q = [50, 95, 99, 99.73]
+    return out.mean(0), out.std(0), np.percentile(pos, q, axis=0), np.percentile(phi, q, axis=0)
+
+
+def bench_montecarlo(quick: bool) -> dict:
+    """Paper budget, U-shape 21x21 grid, full summaries, against the per-sample loop."""
+    g, budget = Geometry.from_preset("u-shape"), Budget.from_preset("paper")
+    grid = Region.from_preset("u-shape").grid(21)
+    n = 200_000 if quick else 1_000_000
+    monte_carlo(g, budget, grid, 20_000, seed=0)  # warm-up
+    t = best_of(lambda: monte_carlo(g, budget, grid, n, seed=1), 1 if quick else 3)
+    n_naive = 500 if quick else 2000
+    t_naive = best_of(lambda: naive_monte_carlo(g, budget, grid, n_naive), 1)
+    rate, naive = grid[..., 0].size * n / t, grid[..., 0].size * n_naive / t_naive
+    return {
+        "mc_poses": int(grid[..., 0].size), "mc_samples": n, "mc_seconds": t,
+        "mc_pose_samples_per_s": rate, "mc_naive_pose_samples_per_s": naive,
+        "mc_speedup_vs_naive": rate / naive,
+    }
+
+
+BENCHES = [bench_sensitivity, bench_worstcase, bench_montecarlo]
 
 
 def main(argv=None) -> int:

@@ -15,7 +15,7 @@ from typing import Any
 
 from .errors import InputFileError
 
-__all__ = ["load_toml", "loads_toml", "dumps_toml"]
+__all__ = ["load_toml", "loads_toml", "dumps_toml", "load_spec"]
 
 
 def loads_toml(text: str, source: str = "<string>") -> dict[str, Any]:
@@ -90,3 +90,17 @@ def dumps_toml(document: dict[str, Any], header: str = "") -> str:
     lines = [f"# {line}" for line in header.splitlines()]
     _emit(document, "", lines)
     return "\n".join(lines).lstrip("\n") + "\n"
+
+
+def load_spec(cls, spec, presets: dict):
+    """``spec`` as an instance of ``cls``: itself, a preset name, or a TOML file path.
+
+    ``cls`` provides ``from_preset`` and ``from_toml``; an unknown name that
+    is not a file is reported by ``from_preset`` with the known presets.
+    """
+    if isinstance(spec, cls):
+        return spec
+    text = str(spec)
+    if text not in presets and (text.endswith(".toml") or Path(text).exists()):
+        return cls.from_toml(spec)
+    return cls.from_preset(text)

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from ._toml import dumps_toml, load_toml, loads_toml
+from ._toml import dumps_toml, load_spec, load_toml, loads_toml
 from .output import write_text
 from .errors import BudgetError, UnknownPresetError
 from .laws import Law, law_from_dict
@@ -275,10 +275,7 @@ class Budget:
     @classmethod
     def load(cls, spec: "str | os.PathLike | Budget") -> "Budget":
         """A preset name, a TOML path or a Budget, as the CLI's ``--budget`` takes."""
-        if isinstance(spec, Budget):
-            return spec
-        if str(spec) in BUDGET_PRESETS:
-            return cls.from_preset(str(spec))
+        return load_spec(cls, spec, BUDGET_PRESETS)
         if str(spec).endswith(".toml") or Path(spec).exists():
             return cls.from_toml(spec)
         return cls.from_preset(str(spec))

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from ._toml import dumps_toml, load_toml
+from ._toml import dumps_toml, load_spec, load_toml
 from .output import write_text
 from .errors import GeometryError, UnknownPresetError
 
@@ -180,10 +180,7 @@ class Geometry:
     @classmethod
     def load(cls, spec: "str | os.PathLike | Geometry") -> "Geometry":
         """A preset name, a TOML path or a Geometry, as the CLI's ``--geometry`` takes."""
-        if isinstance(spec, Geometry):
-            return spec
-        if str(spec) in GEOMETRY_PRESETS:
-            return cls.from_preset(str(spec))
+        return load_spec(cls, spec, GEOMETRY_PRESETS)
         if str(spec).endswith(".toml") or Path(spec).exists():
             return cls.from_toml(spec)
         return cls.from_preset(str(spec))

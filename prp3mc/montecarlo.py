@@ -19,10 +19,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
-from scipy import stats
+from scipy import integrate, stats
 
 from ._version import __version__
-from .budget import Budget
+from .budget import Budget, parse_input
 from .errors import BudgetError
 from .exact import exact_pose_error
 from .geometry import Geometry
@@ -351,7 +351,6 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *, se
 
 def sample_errors(budget: Budget, X: np.ndarray) -> dict[str, np.ndarray]:
     """Input samples (n, d) as per-family error arrays (n, 3) for :func:`exact_pose_error`."""
-    from .budget import parse_input
     errors: dict[str, np.ndarray] = {}
     for k, name in enumerate(budget.names):
         family, leg = parse_input(name)
@@ -388,7 +387,6 @@ def closed_form_moments(model: LinearModel) -> tuple[np.ndarray, np.ndarray]:
     a clearance's features (rho cos zeta, rho sin zeta) have moments
     E[rho^k] times trigonometric moments of zeta (by quadrature of its ppf).
     """
-    from scipy import integrate
     budget = model.budget
     laws = list(budget.inputs.values())
     fmean, fcov_blocks = [], []
