@@ -276,9 +276,6 @@ class Budget:
     def load(cls, spec: "str | os.PathLike | Budget") -> "Budget":
         """A preset name, a TOML path or a Budget, as the CLI's ``--budget`` takes."""
         return load_spec(cls, spec, BUDGET_PRESETS)
-        if str(spec).endswith(".toml") or Path(spec).exists():
-            return cls.from_toml(spec)
-        return cls.from_preset(str(spec))
 
     def to_dict(self) -> dict[str, Any]:
         inputs = {}

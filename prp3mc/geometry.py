@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -181,9 +180,6 @@ class Geometry:
     def load(cls, spec: "str | os.PathLike | Geometry") -> "Geometry":
         """A preset name, a TOML path or a Geometry, as the CLI's ``--geometry`` takes."""
         return load_spec(cls, spec, GEOMETRY_PRESETS)
-        if str(spec).endswith(".toml") or Path(spec).exists():
-            return cls.from_toml(spec)
-        return cls.from_preset(str(spec))
 
     def to_dict(self) -> dict[str, Any]:
         """The TOML layout of :meth:`from_dict`."""
