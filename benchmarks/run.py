@@ -13,6 +13,7 @@ import sys
 import time
 
 import numpy as np
+from bench_sobol import bench_sobol
 
 import prp3mc
 from prp3mc import Budget, Geometry, Region, monte_carlo, sensitivity, worst_case
@@ -109,7 +110,7 @@ def bench_montecarlo(quick: bool) -> dict:
     }
 
 
-BENCHES = [bench_sensitivity, bench_worstcase, bench_montecarlo]
+BENCHES = [bench_sensitivity, bench_worstcase, bench_montecarlo, bench_sobol]
 
 
 def main(argv=None) -> int:

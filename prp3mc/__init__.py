@@ -26,6 +26,10 @@ from .laws import Discrete, Disc, Normal, Triangular, TruncNormal, Uniform
 from .model import LinearModel, linear_model
 from .montecarlo import MonteCarloResult, closed_form_moments, monte_carlo
 from .worstcase import WorstCase, worst_case
+from .sobol import SobolResult, analytic_indices, ranking as sobol_ranking, sobol_converge, sobol_indices
+from .study import Study, StudyResult, run_study
+from .report import write_study
+from .summary import build_summary
 
 __all__ = [
     "__version__",
@@ -36,6 +40,8 @@ __all__ = [
     "Budget", "Catalogue", "Uniform", "Normal", "TruncNormal", "Triangular", "Disc", "Discrete",
     "LinearModel", "linear_model", "MonteCarloResult", "monte_carlo", "closed_form_moments",
     "WorstCase", "worst_case",
+    "SobolResult", "sobol_indices", "analytic_indices", "sobol_ranking", "sobol_converge",
+    "Study", "StudyResult", "run_study", "write_study", "build_summary",
     "Prp3mcError", "GeometryError", "UnknownPresetError", "InputFileError", "InfeasiblePoseError",
     "ConvergenceError", "BudgetError", "StudyError", "CampaignError",
 ]

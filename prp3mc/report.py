@@ -1,0 +1,218 @@
+"""The study report: one self-contained HTML file plus figures, tables and summary.json.
+
+:func:`write_study` writes, into a fresh folder (atomically, see
+:func:`prp3mc.output.output_folder`)::
+
+    report.html            self-contained (figures embedded as PNG data URIs)
+    summary.json           summary statistics with standard errors (prp3mc.summary)
+    figures/*.png, *.svg   every figure of the report
+    tables/*.csv           summary, worst-case and Monte Carlo grids, Sobol indices and rankings,
+                           worst-case contributions, the budget
+
+The report is built from a :class:`~prp3mc.study.StudyResult` only; it is
+readable without prp3mc installed.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import platform
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .output import check_output, figure_data_uri, output_folder, save_figure, write_json, write_text
+from .study import StudyResult
+from .summary import build_summary
+
+__all__ = ["write_study", "render_report", "comparison"]
+
+_MC_PERCENTILE = 99.73
+
+
+def comparison(result: StudyResult, summary: dict | None = None) -> dict:
+    """Which configuration is more accurate, by several criteria, and against published ranges.
+
+    Returns
+    -------
+    dict
+        ``criteria``: list of {criterion, values {config: (value, se)}, best, margin, significant,
+        agrees_with_reference}; ``reference_best``: the configuration the
+        references rank best (lowest upper bound) or None; ``ranges``: per
+        configuration our worst-case range, the reference range (µm) and
+        their ratio; ``max_ratio``: for two configurations, the worse one's
+        maximum over the better one's, ours and the reference's.
+    """
+    summary = summary or build_summary(result)
+    configs = summary["configurations"]
+    crit: list[tuple[str, dict]] = []
+    for stat in ("max", "mean", "min"):
+        crit.append((f"exact worst-case position error, {stat} over the region (µm)",
+                     {n: (c["worst_case_position_um"][stat], 0.0) for n, c in configs.items()}))
+    key = f"p{_MC_PERCENTILE:g}"
+    if all(key in c.get("montecarlo", {}).get("position_um", {}) for c in configs.values()):
+        for stat in ("max", "mean"):
+            crit.append((f"Monte Carlo {key} of the position error, {stat} over the region (µm)",
+                         {n: (c["montecarlo"]["position_um"][key][stat]["value"],
+                              c["montecarlo"]["position_um"][key][stat]["se"]) for n, c in configs.items()}))
+        crit.append(("Monte Carlo mean position error, mean over the region (µm)",
+                     {n: (c["montecarlo"]["position_um"]["mean"]["mean"]["value"],
+                          c["montecarlo"]["position_um"]["mean"]["mean"]["se"]) for n, c in configs.items()}))
+    refs = {c.name: c.configuration.reference_position_um for c in result.configurations
+            if c.configuration.reference_position_um is not None}
+    reference_best = min(refs, key=lambda n: refs[n][1]) if len(refs) == len(configs) > 1 else None
+    rows = []
+    for name, values in crit:
+        order = sorted(values, key=lambda n: values[n][0])
+        best = order[0]
+        margin = values[order[1]][0] - values[best][0] if len(order) > 1 else float("nan")
+        se = float(np.hypot(values[best][1], values[order[1]][1])) if len(order) > 1 else 0.0
+        rows.append({"criterion": name, "values": values, "best": best, "margin": margin,
+                     "significant": bool(margin > 3 * se), "exact": se == 0.0,
+                     "agrees_with_reference": None if reference_best is None else best == reference_best})
+    ranges = {n: {"ours": (c["worst_case_position_um"]["min"], c["worst_case_position_um"]["max"]),
+                  "reference": refs.get(n)} for n, c in configs.items()}
+    for r in ranges.values():
+        r["ratio"] = None if r["reference"] is None else tuple(o / p for o, p in zip(r["ours"], r["reference"]))
+    max_ratio = None
+    if reference_best is not None and len(configs) == 2:
+        other = next(n for n in configs if n != reference_best)
+        max_ratio = {"ours": ranges[other]["ours"][1] / ranges[reference_best]["ours"][1],
+                     "reference": refs[other][1] / refs[reference_best][1], "worse": other}
+    return {"criteria": rows, "reference_best": reference_best, "ranges": ranges, "max_ratio": max_ratio}
+
+
+def _family_shares(result: StudyResult) -> pd.DataFrame:
+    """Share of each error family in the worst case at each configuration's worst pose (%)."""
+    rows = []
+    for c in result.configurations:
+        wc = c.worst_case
+        k = np.unravel_index(np.argmax(wc.position_mm), wc.position_mm.shape)
+        contrib = wc.contribution["position"][k]
+        fam = pd.Series(contrib, index=[t.rsplit("_", 1)[0] for t in wc.terms]).groupby(level=0).sum()
+        for f, v in fam.items():
+            rows.append({"configuration": c.name, "family": f, "contribution_um": 1e3 * v,
+                         "share_pct": 100 * v / float(wc.position_mm[k])})
+    return pd.DataFrame(rows)
+
+
+def _contributions(c) -> pd.DataFrame:
+    """Worst-case contributions at the configuration's worst pose."""
+    wc = c.worst_case
+    k = np.unravel_index(np.argmax(wc.position_mm), wc.position_mm.shape)
+    frame = wc.contributions_frame("position")
+    flat = int(np.ravel_multi_index(k, wc.position_mm.shape))
+    T = len(wc.terms)
+    return frame.iloc[flat * T:(flat + 1) * T].reset_index(drop=True)
+
+
+def _grid_frame(c) -> pd.DataFrame:
+    wc = c.worst_case
+    flat = wc.poses.reshape(-1, 3)
+    return pd.DataFrame({"x_mm": flat[:, 0], "y_mm": flat[:, 1], "phi_deg": flat[:, 2],
+                         "position_um": 1e3 * wc.position_mm.ravel(), "phi_arcsec": 3600 * wc.phi_deg.ravel(),
+                         "x_um": 1e3 * wc.x_mm.ravel(), "y_um": 1e3 * wc.y_mm.ravel()})
+
+
+def _html_table(df: pd.DataFrame, digits: int = 4) -> str:
+    return df.to_html(index=False, border=0, classes="table", float_format=lambda v: f"{v:.{digits}g}",
+                      na_rep="")
+
+
+def _figures(result: StudyResult) -> list[tuple[str, str, object]]:
+    """(file name, caption, figure) of every figure of the report, in order."""
+    from . import plots
+    res = list(result.configurations)
+    figs = [("worstcase_position", "Exact worst-case position error (µm) over each test region, one colour "
+             "scale (the paper's Figs. 4-5, computed exactly). ✕ marks the maximum, ○ the minimum.",
+             plots.compare_maps_figure(res, "worstcase", "position")),
+            ("worstcase_phi", "Exact worst-case orientation error |δφ| (arcsec), one colour scale.",
+             plots.compare_maps_figure(res, "worstcase", "phi"))]
+    if all(r.montecarlo is not None for r in res):
+        pct = _MC_PERCENTILE if _MC_PERCENTILE in res[0].montecarlo.percentiles else res[0].montecarlo.percentiles[-1]
+        figs += [("montecarlo_position", f"Monte Carlo p{pct:g} of the position error (µm), one colour scale.",
+                  plots.compare_maps_figure(res, "montecarlo", "position", pct)),
+                 ("montecarlo_phi", f"Monte Carlo p{pct:g} of |δφ| (arcsec), one colour scale.",
+                  plots.compare_maps_figure(res, "montecarlo", "phi", pct)),
+                 ("histograms_position", "Distribution of the position error at chosen poses; dashed: the exact "
+                  f"worst case at that pose, dotted: p{pct:g}.", plots.histograms_figure(res, "position", pct)),
+                 ("histograms_phi", "Distribution of |δφ| at the same poses, worst case dashed.",
+                  plots.histograms_figure(res, "phi", pct))]
+    for r in res:
+        for output, frame in r.ranking.items():
+            figs.append((f"sobol_{r.name}_{output}",
+                         f"{r.name}, output {output}: Sobol indices over the Sobol grid with 95 % bootstrap "
+                         "intervals (left) next to each input's share of the exact worst case (right).",
+                         plots.ranking_figure(frame, f"{r.name}: {output}")))
+    return figs
+
+
+def _tables(result: StudyResult) -> dict[str, pd.DataFrame]:
+    tables = {"summary": result.to_frame(), "worstcase_families": _family_shares(result),
+              "budget": result.study.budget.to_frame()}
+    for c in result.configurations:
+        tables[f"worstcase_{c.name}"] = _grid_frame(c)
+        tables[f"contributions_{c.name}"] = _contributions(c)
+        if c.montecarlo is not None:
+            tables[f"montecarlo_{c.name}"] = c.montecarlo.to_frame()
+        if c.sobol is not None:
+            tables[f"sobol_{c.name}"] = c.sobol.to_frame()
+            for output, frame in c.ranking.items():
+                tables[f"ranking_{c.name}_{output}"] = frame
+    return tables
+
+
+def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tables: dict[str, pd.DataFrame],
+                  summary: dict) -> str:
+    """The report as one HTML string; ``figures`` are (name, caption, data URI)."""
+    import jinja2
+    env = jinja2.Environment(loader=jinja2.PackageLoader("prp3mc", "templates"),
+                             autoescape=jinja2.select_autoescape(["html", "j2"]))
+    study = result.study
+    meta = result.metadata()
+    meta.update(python=platform.python_version(), numpy=np.__version__, platform=platform.platform(),
+                date=_dt.datetime.now().astimezone().isoformat(timespec="seconds"))
+    configs = [{"name": c.name, "geometry": c.configuration.geometry.name,
+                "region": f"x ∈ [{c.configuration.region.x_mm[0]:g}, {c.configuration.region.x_mm[1]:g}] mm, "
+                          f"y ∈ [{c.configuration.region.y_mm[0]:g}, {c.configuration.region.y_mm[1]:g}] mm, "
+                          f"φ = {c.configuration.region.phi_deg:g}°",
+                "reference": c.configuration.reference,
+                "contributions": _html_table(tables[f"contributions_{c.name}"].drop(columns=["quantity"]).assign(
+                    contribution_um=lambda d: 1e3 * d["contribution"], share_pct=lambda d: 100 * d["share"])
+                    .drop(columns=["contribution", "share"]))}
+               for c in result.configurations]
+    summary_table = tables["summary"].rename(columns={"se_max": "se of max"})
+    families = (tables["worstcase_families"].pivot(index="family", columns="configuration", values="share_pct")
+                .rename_axis(columns=None).reset_index())
+    return env.get_template("study_report.html.j2").render(
+        study=study, result=result, meta=meta, configs=configs, figures=figures,
+        summary_table=_html_table(summary_table), families=_html_table(families, 3),
+        budget_table=_html_table(tables["budget"]), cmp=comparison(result, summary),
+        summary=summary, mc_percentile=f"p{_MC_PERCENTILE:g}", tables=sorted(tables))
+
+
+def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = False) -> Path:
+    """Write the report, figures, tables and summary.json of ``result`` into the folder ``out``.
+
+    ``out`` must not exist unless ``force``; it is replaced atomically.
+    Returns the path of ``report.html``.
+    """
+    import matplotlib.pyplot as plt
+    check_output(out, force)
+    summary = build_summary(result)
+    with output_folder(out, force) as tmp:
+        (tmp / "figures").mkdir()
+        (tmp / "tables").mkdir()
+        embedded = []
+        for name, caption, fig in _figures(result):
+            save_figure(fig, tmp / "figures", name)
+            embedded.append((name, caption, figure_data_uri(fig)))
+            plt.close(fig)
+        tables = _tables(result)
+        for name, frame in tables.items():
+            frame.to_csv(tmp / "tables" / f"{name}.csv", index=False)
+        write_json(tmp / "summary.json", summary)
+        write_text(tmp / "report.html", render_report(result, embedded, tables, summary))
+    return Path(out) / "report.html"

@@ -1,0 +1,239 @@
+"""Studies: the file format and its errors, the report folder, the worst-case ranges, golden regression."""
+
+import dataclasses
+import importlib.util
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from prp3mc import Budget, Geometry, Region, sensitivity
+from prp3mc.cli import main
+from prp3mc.errors import StudyError, UnknownPresetError
+from prp3mc.study import STUDIES_DIR, Study, bundled_studies, run_study
+from prp3mc.testing import assert_summary_close, load_summary
+
+GOLDEN = Path(__file__).parent / "golden"
+_spec = importlib.util.spec_from_file_location("golden_regenerate", GOLDEN / "regenerate.py")
+regenerate = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(regenerate)
+
+SMALL = """\
+name = "small"
+seed = 3
+budget = "paper"
+
+[worstcase]
+grid = 9
+
+[montecarlo]
+samples = 4096
+grid = 3
+percentiles = [50, 99]
+tolerance_mm = 0.08
+
+[sobol]
+samples = 256
+grid = 2
+outputs = ["position"]
+
+[[configuration]]
+geometry = "u-shape"
+reference_position_um = [110, 150]
+
+[[configuration]]
+name = "delta"
+geometry = "delta-shape"
+region = { x_mm = [-20, 20], y_mm = [140, 180] }
+reference_position_um = [70, 95]
+"""
+
+
+def study_file(tmp_path, text=SMALL, name="small.toml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+# ----------------------------------------------------------------- the file
+def test_bundled_studies():
+    assert {"paper_reproduction", "quick"} <= set(bundled_studies())
+    s = Study.load("paper_reproduction")
+    assert [c.name for c in s.configurations] == ["u-shape", "delta-shape"]
+    assert s.budget.names == Budget.from_preset("paper").names
+    for c in s.configurations:
+        assert c.geometry == Geometry.from_preset(c.name)
+        assert c.region == Region.from_preset(c.name) and c.region.phi_deg == 0.0
+    assert s.outputs == ("montecarlo", "sobol") and s.worstcase_grid == (201, 201)
+    assert Study.load(STUDIES_DIR / "quick.toml") == Study.load("quick")
+
+
+def test_small_study_parsed(tmp_path):
+    s = Study.load(study_file(tmp_path))
+    assert s.name == "small" and s.seed == 3 and s.mc_grid == (3, 3) and s.percentiles == (50.0, 99.0)
+    assert [c.name for c in s.configurations] == ["u-shape", "delta"]
+    assert s.configurations[1].region.x_mm == (-20.0, 20.0)
+    r = s.reduced()
+    assert r.mc_samples == 4096 and r.worstcase_grid == (9, 9)
+    assert Study.load("paper_reproduction").reduced().mc_samples == 1 << 14
+
+
+def _replace(old, new):
+    assert old in SMALL
+    return SMALL.replace(old, new, 1)
+
+
+BAD = [
+    (_replace("seed = 3", "seed = "), 2, "malformed TOML"),
+    (_replace('budget = "paper"', 'budget = "paper"\nsamples = 10'), 4, "unknown key 'samples' in the study"),
+    (_replace("grid = 3", "grid = 3\nsample = 5"), 11, "unknown key 'sample' in [montecarlo]"),
+    (_replace("samples = 4096", 'samples = "many"'), 9, "montecarlo.samples must be an integer"),
+    (_replace("samples = 256", "samples = 300"), 15, "must be a power of two"),
+    (_replace("grid = 9", "grid = 1"), 6, "worstcase.grid must be an integer n >= 2"),
+    (_replace("percentiles = [50, 99]", "percentiles = [99, 50]"), 11, "percentiles must be increasing"),
+    (_replace('outputs = ["position"]', 'outputs = ["pos"]'), 17, "sobol outputs must be"),
+    (_replace('geometry = "delta-shape"', 'geometry = "w-shape"'), 25, "unknown geometry preset 'w-shape'"),
+    (_replace('budget = "paper"', 'budget = "missing.toml"'), 3, "budget 'missing.toml'"),
+    (_replace("region = { x_mm = [-20, 20], y_mm = [140, 180] }", 'region = "square"'), 26,
+     "unknown region preset 'square'"),
+    (_replace('geometry = "delta-shape"', 'geometry = "delta-shape"\nphi_deg = -30.0'), 26,
+     "the test region leaves the workspace"),
+    (_replace('geometry = "u-shape"', 'geometry = "u-shape"\nposes = [[0, 300, 0]]'), 21, "leaves leg"),
+    (_replace('geometry = "u-shape"', 'geometry = "u-shape"\nposes = [[0, 100]]'), 21, "poses must be"),
+    (_replace('name = "delta"', 'name = "u-shape"'), 24, "used twice"),
+    (_replace("reference_position_um = [70, 95]", "reference_position_um = [95, 70]"), 27,
+     "reference_position_um must be [lo, hi]"),
+    (_replace('name = "delta"', 'nme = "delta"'), 24, "unknown key 'nme' in configuration 2"),
+    (SMALL.split("[[configuration]]")[0], 1, "at least one [[configuration]]"),
+]
+
+
+@pytest.mark.parametrize("text, line, reason", BAD)
+def test_mistakes_name_line_and_reason(tmp_path, text, line, reason):
+    path = study_file(tmp_path, text)
+    with pytest.raises(StudyError) as err:
+        Study.load(path)
+    message = str(err.value)
+    assert message.startswith(f"{path}:{line}: "), message
+    assert reason in message and "\n" not in message
+
+
+def test_unknown_study_name():
+    with pytest.raises(UnknownPresetError, match="bundled: .*paper_reproduction"):
+        Study.load("no_such_study")
+
+
+# ----------------------------------------------------------------- running and the report folder
+def test_cli_writes_report_folder(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["study", str(study_file(tmp_path)), "--out", str(out), "--no-progress"]) == 0
+    note = capsys.readouterr().out
+    assert re.search(r"wrote .*report\.html in [\d.]+ s .*u-shape [\d.]+-[\d.]+ um, delta [\d.]+-[\d.]+ um", note)
+    summary = json.loads((out / "summary.json").read_text())
+    assert set(summary["configurations"]) == {"u-shape", "delta"}
+    u = summary["configurations"]["u-shape"]
+    assert set(u["worst_case_position_um"]) == {"min", "max", "mean"}
+    assert set(u["montecarlo"]["position_um"]["p99"]["max"]) == {"value", "se"}
+    assert u["montecarlo"]["exceed"]["tolerance_mm"] == 0.08
+    assert set(u["sobol"]["position"]["clearance_1"]) == {"kind", "S1", "ST", "worst_case_share"}
+    meta = summary["metadata"]
+    assert meta["seed"] == 3 and meta["montecarlo_samples"] == 4096 and meta["wall_time_s"] > 0
+    html = (out / "report.html").read_text()
+    images = re.findall(r'<img src="([^"]+)"', html)
+    pngs = sorted(p.stem for p in (out / "figures").glob("*.png"))
+    assert sorted(p.stem for p in (out / "figures").glob("*.svg")) == pngs
+    assert len(images) == len(pngs) >= 8 and all(src.startswith("data:image/png;base64,") for src in images)
+    assert "href=" not in html and "<script" not in html  # self-contained
+    assert "holds by" in html or "does not hold" in html
+    for table in ("summary", "budget", "worstcase_u-shape", "montecarlo_delta", "sobol_delta",
+                  "ranking_u-shape_position", "contributions_delta"):
+        assert (out / "tables" / f"{table}.csv").is_file()
+
+
+def test_cli_refuses_existing_folder_without_force(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "keep.txt").write_text("mine")
+    path = study_file(tmp_path, _replace("seed = 3", "seed = 3\noutputs = []"))  # worst case only
+    assert main(["study", str(path), "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "exists" in err and "--force" in err
+    assert (out / "keep.txt").read_text() == "mine"
+    assert main(["study", str(path), "--out", str(out), "--force", "--no-progress"]) == 0
+    assert not (out / "keep.txt").exists() and (out / "report.html").is_file()
+
+
+def test_cli_bad_study_one_line(tmp_path, capsys):
+    path = study_file(tmp_path, BAD[3][0])
+    assert main(["study", str(path), "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{path}:9:" in err and not (tmp_path / "o").exists()
+
+
+def test_seed_recorded_and_reproducible(tmp_path):
+    study = Study.load(study_file(tmp_path, _replace("seed = 3\n", "")))
+    a, b = run_study(study, progress=False), run_study(study, progress=False)
+    assert a.seed != b.seed
+    again = run_study(study, seed=a.seed, progress=False)
+    np.testing.assert_array_equal(again["delta"].montecarlo.position_pct, a["delta"].montecarlo.position_pct)
+
+
+# ----------------------------------------------------------------- worst-case ranges, independently
+def _brute_force_position(geometry, budget, poses):
+    """Max position error over every vertex of the budget box, from the Jacobians of `sensitivity`.
+
+    Terms: theta_i (deg), b_i (mm) and the clearance rho_i cos(zeta_i - omega_i) in [-rho_max, rho_max]
+    acting along the worst direction, J_rho = A^-1 (SPEC §1). 2^9 vertices.
+    """
+    s = sensitivity(geometry, poses)
+    hi = dict(zip(budget.names, budget.bounds()))
+    cols, ranges = [], []
+    for fam, scale in (("theta", np.pi / 180), ("b", 1.0), ("rho", 1.0)):
+        for i in range(3):
+            cols.append(s.J[fam][..., :2, i] * scale)
+            lo_, hi_ = hi[f"{fam}_{i + 1}"]
+            ranges.append((-hi_, hi_) if fam == "rho" else (lo_, hi_))
+    G = np.stack(cols, axis=-1)                                         # (..., 2, 9)
+    signs = np.array(np.meshgrid(*[[0, 1]] * 9, indexing="ij")).reshape(9, -1).T   # (512, 9)
+    R = np.array(ranges)
+    V = np.where(signs == 1, R[:, 1], R[:, 0])                          # (512, 9)
+    rows = [np.einsum("xot,vt->xvo", G_row, V) for G_row in G]         # a row of poses at a time (memory)
+    return np.stack([np.hypot(e[..., 0], e[..., 1]).max(-1) for e in rows])
+
+
+def test_paper_worst_case_ranges_match_brute_force():
+    study = Study.load("paper_reproduction")
+    result = run_study(dataclasses.replace(study, outputs=()), progress=False)  # the full 201 x 201 grid
+    for c in result.configurations:
+        poses = c.configuration.region.grid(study.worstcase_grid)
+        brute = _brute_force_position(c.configuration.geometry, study.budget, poses)
+        wc = c.worst_case.position_mm
+        np.testing.assert_allclose([wc.min(), wc.max()], [brute.min(), brute.max()], rtol=1e-9)
+    ranges = {c.name: (1e3 * c.worst_case.position_mm.min(), 1e3 * c.worst_case.position_mm.max())
+              for c in result.configurations}
+    # the documented figures (README, report): U about 117-195 um, Delta about 114-136 um
+    np.testing.assert_allclose(ranges["u-shape"], (116.87, 194.64), atol=0.01)
+    np.testing.assert_allclose(ranges["delta-shape"], (114.12, 136.06), atol=0.01)
+
+
+# ----------------------------------------------------------------- golden regression
+@pytest.mark.parametrize("name", ["paper_reproduction", "quick"])
+@pytest.mark.parametrize("seed", [1, 2024])
+def test_golden_summary_any_seed(name, seed):
+    golden = load_summary(GOLDEN / f"{name}.json")
+    assert golden["metadata"]["seed"] == regenerate.GOLDEN_SEED != seed
+    assert_summary_close(regenerate.golden_summary(name, seed=seed), golden)
+
+
+@pytest.mark.parametrize("name", ["paper_reproduction", "quick"])
+def test_golden_summary_catches_guide_play_10_percent(name):
+    golden = load_summary(GOLDEN / f"{name}.json")
+    perturbed = Study.load(name).budget.scaled(1.1, "theta")
+    with pytest.raises(AssertionError) as err:
+        assert_summary_close(regenerate.golden_summary(name, seed=7, budget=perturbed), golden)
+    failing = str(err.value).splitlines()[1:]
+    assert any(".worst_case_position_um.max" in f for f in failing)
+    # not only the exact worst case: the Monte Carlo statistics see it beyond their standard errors too
+    assert sum(".montecarlo.position_um." in f for f in failing) >= 10
