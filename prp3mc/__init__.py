@@ -30,6 +30,10 @@ from .sobol import SobolResult, analytic_indices, ranking as sobol_ranking, sobo
 from .study import Study, StudyResult, run_study
 from .report import write_study
 from .summary import build_summary
+from .campaign import Campaign, read_campaign, simulate_campaign
+from .effects import EFFECT_NAMES, Effect, effect
+from .discrepancy import DiscrepancyResult, detectable_effect, discrepancy, predict
+from .discrepancy_report import write_report as write_discrepancy_report
 
 __all__ = [
     "__version__",
@@ -42,6 +46,8 @@ __all__ = [
     "WorstCase", "worst_case",
     "SobolResult", "sobol_indices", "analytic_indices", "sobol_ranking", "sobol_converge",
     "Study", "StudyResult", "run_study", "write_study", "build_summary",
+    "Campaign", "read_campaign", "simulate_campaign", "EFFECT_NAMES", "Effect", "effect",
+    "DiscrepancyResult", "discrepancy", "predict", "detectable_effect", "write_discrepancy_report",
     "Prp3mcError", "GeometryError", "UnknownPresetError", "InputFileError", "InfeasiblePoseError",
     "ConvergenceError", "BudgetError", "StudyError", "CampaignError",
 ]

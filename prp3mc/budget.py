@@ -167,7 +167,7 @@ class Budget:
         for key, law in self.inputs.items():
             fam, _ = parse_input(key)
             if fam != "zeta" and (family is None or fam == family):
-                new[key] = _scaled_law(law, factor)
+                new[key] = law.scaled(factor)
         return self.replace(name=f"{self.name} x{factor:g}" if family is None else
                             f"{self.name} {family} x{factor:g}", **new)
 
@@ -311,16 +311,6 @@ def _parse_where(key: str, source: str) -> tuple[str, int]:
         return parse_input(key)
     except BudgetError as exc:
         raise BudgetError(f"{source}: {exc}") from None
-
-
-def _scaled_law(law: Law, factor: float) -> Law:
-    spec = law.to_dict()
-    kind = spec.pop("law")
-    scale_keys = {"uniform": ("lo", "hi"), "normal": ("mu", "sd"), "truncnormal": ("center", "tol"),
-                  "triangular": ("lo", "mode", "hi"), "disc": ("radius",), "discrete": ("values",)}[kind]
-    for k in scale_keys:
-        spec[k] = [v * factor for v in spec[k]] if isinstance(spec[k], list) else spec[k] * factor
-    return law_from_dict({"law": kind, **spec}, "scaled law")
 
 
 def _paper_budget() -> dict[str, Any]:

@@ -30,6 +30,18 @@ class Law:
     """Base of the laws; subclasses are frozen dataclasses."""
 
     kind: ClassVar[str]
+    #: Parameters that scale with the variable (see :meth:`scaled`).
+    scale_params: ClassVar[tuple[str, ...]] = ()
+
+    def scaled(self, factor: float) -> "Law":
+        """The law of ``factor * X`` for a factor >= 0 (a wider or narrower spread)."""
+        if not (math.isfinite(factor) and factor >= 0):
+            raise BudgetError(f"a law can only be scaled by a finite factor >= 0, got {factor}")
+        spec = self.to_dict()
+        spec.pop("law")
+        for key in self.scale_params:
+            spec[key] = [v * factor for v in spec[key]] if isinstance(spec[key], list) else spec[key] * factor
+        return type(self)(**spec)
 
     def ppf(self, u: np.ndarray) -> np.ndarray:
         """Inverse CDF at ``u`` in [0, 1), any shape."""
@@ -73,6 +85,7 @@ class Uniform(Law):
     lo: float
     hi: float
     kind: ClassVar[str] = "uniform"
+    scale_params: ClassVar[tuple[str, ...]] = ("lo", "hi")
 
     def __post_init__(self):
         _finite("uniform", lo=self.lo, hi=self.hi)
@@ -94,6 +107,7 @@ class Normal(Law):
     mu: float
     sd: float
     kind: ClassVar[str] = "normal"
+    scale_params: ClassVar[tuple[str, ...]] = ("mu", "sd")
 
     def __post_init__(self):
         _finite("normal", mu=self.mu, sd=self.sd)
@@ -120,6 +134,7 @@ class TruncNormal(Law):
     tol: float
     cpk: float
     kind: ClassVar[str] = "truncnormal"
+    scale_params: ClassVar[tuple[str, ...]] = ("center", "tol")
 
     def __post_init__(self):
         _finite("truncnormal", center=self.center, tol=self.tol, cpk=self.cpk)
@@ -152,6 +167,7 @@ class Triangular(Law):
     mode: float
     hi: float
     kind: ClassVar[str] = "triangular"
+    scale_params: ClassVar[tuple[str, ...]] = ("lo", "mode", "hi")
 
     def __post_init__(self):
         _finite("triangular", lo=self.lo, mode=self.mode, hi=self.hi)
@@ -182,6 +198,7 @@ class Disc(Law):
 
     radius: float
     kind: ClassVar[str] = "disc"
+    scale_params: ClassVar[tuple[str, ...]] = ("radius",)
 
     def __post_init__(self):
         _finite("disc", radius=self.radius)
@@ -203,6 +220,7 @@ class Discrete(Law):
     values: tuple[float, ...]
     weights: tuple[float, ...]
     kind: ClassVar[str] = "discrete"
+    scale_params: ClassVar[tuple[str, ...]] = ("values",)
 
     def __post_init__(self):
         values = tuple(float(v) for v in self.values)

@@ -132,3 +132,10 @@ def test_scaled():
     assert b.inputs["theta_2"].support == pytest.approx((-0.044, 0.044), rel=1e-12)
     assert b.inputs["b_2"] == Uniform(0.0, 0.025)
     assert law_from_dict({"law": "disc", "radius": 1.0}, "x") == Disc(1.0)
+
+
+def test_law_scaled():
+    assert Triangular(-1.0, 0.0, 2.0).scaled(0.5) == Triangular(-0.5, 0.0, 1.0)
+    assert Discrete((0.0, 2.0), (1.0, 3.0)).scaled(2.0) == Discrete((0.0, 4.0), (0.25, 0.75))
+    with pytest.raises(BudgetError, match="factor >= 0"):
+        Uniform(0.0, 1.0).scaled(-1.0)

@@ -1,0 +1,199 @@
+"""Figures and the self-contained HTML report of a discrepancy analysis.
+
+Every plotting function takes a :class:`~prp3mc.discrepancy.DiscrepancyResult`
+and returns a matplotlib Figure (Agg backend); :func:`write_report` writes
+``discrepancy.json`` (SPEC §6), ``report.html`` with the figures embedded,
+the figures as PNG and SVG, and per-pose / per-measurement tables as CSV.
+"""
+
+from __future__ import annotations
+
+import os
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from .discrepancy import Diagnosis, DiscrepancyResult
+from .output import figure_data_uri, output_folder, save_figure, write_json, write_text
+
+__all__ = ["plot_workspace", "plot_actuators", "plot_temperature", "plot_gap", "plot_candidates",
+           "write_report", "render_html"]
+
+
+def _plt():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _quiver(ax, d: Diagnosis, title: str, scale: float) -> None:
+    p = d.poses
+    q = -np.log10(np.clip(p["sys_q"].to_numpy(), 1e-12, 1.0))
+    sc = ax.scatter(p["x_mm"], p["y_mm"], c=q, cmap="magma_r", vmin=0, vmax=6, s=40, edgecolor="k", lw=0.3)
+    ax.quiver(p["x_mm"], p["y_mm"], p["dx_um"], p["dy_um"], angles="xy", scale_units="xy", scale=scale,
+              width=0.004, color="tab:blue")
+    ax.set(title=title, xlabel="x (mm)", ylabel="y (mm)", aspect="equal")
+    return sc
+
+
+def plot_workspace(result: DiscrepancyResult):
+    """Mean residual per pose (arrows) and its significance, and the repeat-scatter ratio, before and after."""
+    plt = _plt()
+    fig, axes = plt.subplots(2, 2, figsize=(11, 9.5), constrained_layout=True)
+    span = np.ptp(result.campaign.poses[:, :2], axis=0).max() or 1.0
+    biggest = max(np.hypot(result.before.poses["dx_um"], result.before.poses["dy_um"]).max(), 1e-9)
+    scale = biggest / (0.12 * span)                   # the largest arrow spans 12 % of the region
+    for col, (d, label) in enumerate(((result.before, "before"), (result.after, "after"))):
+        sc = _quiver(axes[0, col], d, f"Mean residual {label} (arrow: {biggest:.1f} um = longest before)", scale)
+        p = d.poses
+        ratio = np.log2(p["disp_ratio"].to_numpy(dtype=float))
+        im = axes[1, col].scatter(p["x_mm"], p["y_mm"], c=ratio, cmap="coolwarm", vmin=-1.5, vmax=1.5, s=60,
+                                  edgecolor=np.where(p["disp_q"] < 0.05, "k", "none"), lw=1.2)
+        axes[1, col].set(title=f"Repeat scatter / predicted {label} (black ring: BH q < 0.05)",
+                         xlabel="x (mm)", ylabel="y (mm)", aspect="equal")
+    fig.colorbar(sc, ax=axes[0, :], label="-log10 q (systematic, BH)")
+    cb = fig.colorbar(im, ax=axes[1, :], label="log2 scatter ratio (0: as predicted)")
+    cb.set_ticks([-1, 0, 1])
+    return fig
+
+
+def plot_actuators(result: DiscrepancyResult):
+    """Residual as an equivalent slider error J_b^-1 r against each slider position, by approach direction."""
+    plt = _plt()
+    fig, axes = plt.subplots(2, 3, figsize=(13, 7), sharey="row", constrained_layout=True)
+    for row, (d, label) in enumerate(((result.before, "before"), (result.after, "after"))):
+        m = d.measurements
+        for i in range(3):
+            ax = axes[row, i]
+            keys = ["pose"] + ([] if m[f"dir_{i + 1}"].isna().all() else [f"dir_{i + 1}"])
+            g = m.groupby(keys, as_index=False)[[f"b_{i + 1}", f"db_eq_{i + 1}_um"]].mean()
+            if len(keys) == 1:
+                ax.scatter(g[f"b_{i + 1}"], g[f"db_eq_{i + 1}_um"], s=12, color="gray", label="pose mean")
+            else:
+                for sign, color in ((1, "tab:red"), (-1, "tab:blue")):
+                    sel = g[f"dir_{i + 1}"] == sign
+                    ax.scatter(g.loc[sel, f"b_{i + 1}"], g.loc[sel, f"db_eq_{i + 1}_um"], s=12, alpha=0.8,
+                               color=color, label=f"pose mean, dir_{i + 1} = {sign:+d}")
+            ax.legend(loc="upper left", fontsize=7, markerscale=1.5)
+            ax.axhline(0.0, color="k", lw=0.6)
+            ax.set(title=f"leg {i + 1} {label}", xlabel=f"b_{i + 1} (mm)",
+                   ylabel="equivalent slider error (um)" if i == 0 else None)
+    return fig
+
+
+def plot_temperature(result: DiscrepancyResult):
+    """Equivalent slider errors against temperature (None if the campaign has no temp_C)."""
+    if result.campaign.temp_C is None:
+        return None
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), sharey=True, constrained_layout=True)
+    for ax, (d, label) in zip(axes, ((result.before, "before"), (result.after, "after"))):
+        m = d.measurements
+        for i in range(3):
+            ax.scatter(m["temp_C"], m[f"db_eq_{i + 1}_um"], s=5, alpha=0.4, label=f"leg {i + 1}")
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set(title=f"Equivalent slider error vs temperature, {label}", xlabel="temp (degC)",
+               ylabel="um")
+        ax.legend(fontsize=7, markerscale=2)
+    return fig
+
+
+def plot_gap(result: DiscrepancyResult):
+    """The gap metric and its two channels before and after, with the null band (± 2 sd)."""
+    plt = _plt()
+    g = result.gap
+    fig, ax = plt.subplots(figsize=(6.5, 3.8), constrained_layout=True)
+    labels = ["gap (all)", "systematic", "dispersion"]
+    before = [g["before"], g["systematic"]["before"], g["dispersion"]["before"]]
+    after = [g["after"], g["systematic"]["after"], g["dispersion"]["after"]]
+    x = np.arange(3)
+    ax.bar(x - 0.18, before, 0.36, label="before", color="tab:orange")
+    ax.bar(x + 0.18, after, 0.36, label="after", color="tab:green")
+    ax.axhspan(1 - 2 * g["null_sd"], 1 + 2 * g["null_sd"], color="gray", alpha=0.3,
+               label="null level ± 2 sd (all)")
+    ax.axhline(1.0, color="k", lw=0.8)
+    ax.set_xticks(x, labels)
+    ax.set(ylabel="chi2 / dof (1 when the model is right)",
+           title="Gap " + ("closed" if g["closed"] else "NOT closed"))
+    ax.legend(fontsize=8)
+    return fig
+
+
+def plot_candidates(result: DiscrepancyResult, top: int = 15):
+    """Likelihood ratio of the strongest candidates at each selection step, with the Bonferroni threshold."""
+    plt = _plt()
+    steps = result.steps
+    n = max(int(steps["step"].max()) if len(steps) else 1, 1)
+    fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 4.2), squeeze=False, constrained_layout=True)
+    for k in range(n):
+        ax = axes[0, k]
+        s = steps[steps["step"] == k + 1].nlargest(top, "lr")
+        if s.empty:
+            continue
+        colors = np.where(s["accepted"], "tab:green", "tab:gray")
+        ax.barh(s["candidate"][::-1], np.maximum(s["lr"][::-1], 1e-2), color=colors[::-1])
+        ax.axvline(s["threshold"].iloc[0], color="tab:red", ls="--", label="Bonferroni threshold")
+        ax.set(xscale="log", xlabel="likelihood ratio", title=f"step {k + 1}")
+        ax.legend(fontsize=7)
+    return fig
+
+
+_FIGURES = {"workspace": plot_workspace, "actuators": plot_actuators, "temperature": plot_temperature,
+            "gap": plot_gap, "candidates": plot_candidates}
+
+_CAPTIONS = {
+    "workspace": "Top: mean residual (measured minus predicted) per commanded pose, arrows in um; colour is "
+                 "the significance of the pose's systematic disagreement (-log10 of the Benjamini-Hochberg "
+                 "q-value). Bottom: repeat scatter relative to the predicted scatter (red: larger, blue: smaller).",
+    "actuators": "Residuals mapped to an equivalent slider error J_b^-1 r, averaged per pose "
+                 "and approach direction, against the slider position: a zero offset shows as a shift, a lead error as "
+                 "a slope, backlash as a split between red and blue.",
+    "temperature": "Equivalent slider errors against temperature: a thermal expansion shows as a trend.",
+    "gap": "The gap metric (chi2 per degree of freedom of all measurements) and its systematic (pose means) "
+           "and dispersion (repeat scatter) channels, before and after the named effects.",
+    "candidates": "Evidence for each candidate effect at each step; green was accepted. Bars beyond the red "
+                  "line pass the likelihood-ratio test corrected for the number of candidates.",
+}
+
+
+def render_html(result: DiscrepancyResult, figures: dict) -> str:
+    """The HTML report; ``figures`` maps figure names to data URIs."""
+    import jinja2
+    text = resources.files("prp3mc").joinpath("templates/discrepancy.html.j2").read_text(encoding="utf-8")
+    env = jinja2.Environment(autoescape=True, undefined=jinja2.StrictUndefined)
+    top = result.before.poses.nlargest(8, "sys_stat")[
+        ["pose_id", "x_mm", "y_mm", "phi_deg", "n", "dx_um", "dy_um", "dphi_arcsec", "sys_q", "disp_ratio"]]
+    return env.from_string(text).render(
+        r=result, doc=result.to_dict(), figures=figures, captions=_CAPTIONS,
+        effects=result.to_frame(), top_poses=top.to_html(index=False, float_format=lambda v: f"{v:.3g}",
+                                                         classes="table", border=0),
+        before=result.before.summary, after=result.after.summary)
+
+
+def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bool = False) -> Path:
+    """Write ``discrepancy.json``, ``report.html``, figures and tables into ``folder`` (atomically).
+
+    Returns
+    -------
+    Path
+        The folder.
+    """
+    plt = _plt()
+    with output_folder(folder, force) as tmp:
+        write_json(tmp / "discrepancy.json", result.to_dict())
+        uris = {}
+        for name, fn in _FIGURES.items():
+            fig = fn(result)
+            if fig is None:
+                continue
+            save_figure(fig, tmp, name)
+            uris[name] = figure_data_uri(fig)
+            plt.close(fig)
+        write_text(tmp / "report.html", render_html(result, uris))
+        for label, d in (("before", result.before), ("after", result.after)):
+            d.poses.to_csv(tmp / f"poses_{label}.csv", index=False)
+            d.measurements.to_csv(tmp / f"measurements_{label}.csv", index=False)
+        result.steps.to_csv(tmp / "selection_steps.csv", index=False)
+    return Path(folder)

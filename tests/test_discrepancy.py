@@ -1,0 +1,166 @@
+"""The discrepancy workflow on simulated campaigns with hidden effects (issue 6)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from prp3mc import Budget, Geometry, Region
+from prp3mc.campaign import simulate_campaign
+from prp3mc.cli import main
+from prp3mc.discrepancy import detectable_effect, discrepancy
+from prp3mc.discrepancy_report import write_report
+
+SIGMA = {"instrument_sigma_mm": 0.002, "instrument_sigma_deg": 0.0005}
+BUDGET = Budget.from_preset("paper")
+#: theta_i != 0 makes c_i and e_i visible (they are invisible in the reference geometries).
+TILTED = Geometry.from_preset("delta-shape").replace(theta=(30.0, -30.0, 30.0), name="tilted delta")
+
+
+def campaign_poses(preset: str, vary_phi: bool) -> np.ndarray:
+    poses = Region.from_preset(preset).grid(7).reshape(-1, 3)
+    if vary_phi:
+        poses[:, 2] = np.tile([-4.0, 0.0, 4.0], 17)[:49]
+    return poses
+
+
+def run(geometry, preset, vary_phi, seed, **kwargs):
+    """49 poses x 8 repeats, both approach directions, 20 -> 28 degC, instrument noise 2 um / 0.0005 deg."""
+    c = simulate_campaign(geometry, BUDGET, campaign_poses(preset, vary_phi), 8, seed=seed, **SIGMA, **kwargs)
+    return discrepancy(geometry, BUDGET, c, seed=seed, **SIGMA)
+
+
+def fit_of(result, name):
+    """Value and interval of ``name`` if it was named or is in a named effect's alias set, else None."""
+    for e in result.named_effects:
+        if e.name == name:
+            return e.value, e.ci95
+        if name in e.aliases:
+            f = e.evidence["alias_fits"][name]
+            return f["value"], f["ci95"]
+    return None
+
+
+# every effect family of SPEC §5 at a realistic magnitude, on a campaign that can see it
+CASES = [
+    ("a_2", 0.04, "delta", False), ("alpha_1", 0.03, "u-shape", True), ("beta_2", 0.03, "u-shape", True),
+    ("gamma_3", 0.03, "delta", False), ("theta_1", 0.03, "delta", False), ("c_1", 0.04, "tilted", True),
+    ("e_2", 0.04, "tilted", True), ("psi_3", 0.04, "u-shape", True), ("b_1", 0.03, "u-shape", True),
+    ("scale_2", 2e-4, "delta", False), ("backlash_3", 0.03, "u-shape", True), ("thermal", 1.2e-5, "delta", False),
+    ("spread_rho_1", 0.048, "tilted", True), ("spread_theta_2", 0.1, "u-shape", True),
+    ("spread_b_3", 0.0625, "delta", False),
+]
+
+
+@pytest.mark.parametrize("name, value, where, vary_phi", CASES, ids=[c[0] for c in CASES])
+def test_hidden_effect_is_named_and_gap_closes(name, value, where, vary_phi):
+    geometry, preset = {"delta": (Geometry.from_preset("delta-shape"), "delta-shape"),
+                        "u-shape": (Geometry.from_preset("u-shape"), "u-shape"),
+                        "tilted": (TILTED, "delta-shape")}[where]
+    r = run(geometry, preset, vary_phi, seed=7, effects={name: value})
+    assert len(r.named_effects) == 1, r.to_frame()
+    fit = fit_of(r, name)
+    assert fit is not None, r.to_frame()
+    lo, hi = fit[1]
+    assert lo <= value <= hi
+    e = r.named_effects[0]
+    assert e.evidence["identified"] == (not e.aliases)
+    assert not r.unexplained
+    g = r.gap
+    assert g["after"] < g["before"]
+    assert abs(g["after"] - g["null_level"]) <= 4 * g["null_sd"] and g["closed"]
+
+
+def test_invisible_effects_are_reported_never_named():
+    r = run(Geometry.from_preset("u-shape"), "u-shape", False, seed=3, effects={"c_2": 0.05})
+    assert {"c_1", "c_2", "c_3", "e_1", "e_2", "e_3"} <= set(r.invisible)
+    assert not r.named_effects and not r.unexplained
+
+
+def test_two_effects_at_once():
+    r = run(Geometry.from_preset("u-shape"), "u-shape", True, seed=4,
+            effects={"backlash_1": 0.03, "spread_theta_3": 0.1})
+    for name, value in (("backlash_1", 0.03), ("spread_theta_3", 0.1)):
+        lo, hi = fit_of(r, name)[1]
+        assert lo <= value <= hi
+    assert r.gap["closed"]
+
+
+def test_nothing_hidden_names_nothing_fast():
+    for preset, seed in (("u-shape", 1), ("delta-shape", 2)):
+        r = run(Geometry.from_preset(preset), preset, preset == "u-shape", seed=seed)
+        assert not r.named_effects and r.to_frame().empty
+        assert abs(r.gap["after"] - 1.0) <= 4 * r.gap["null_sd"]
+
+
+@pytest.mark.slow
+def test_nothing_hidden_names_nothing_in_95_percent_of_seeds():
+    """Binomial slack: with a false naming rate of 5 %, 40 seeds give <= 2 namings with probability 0.68;
+    the workflow's rate is about 1 % (Bonferroni at alpha = 0.01), which gives <= 2 with probability 0.99."""
+    geometry = Geometry.from_preset("delta-shape")
+    named = sum(bool(run(geometry, "delta-shape", True, seed=100 + s).named_effects) for s in range(40))
+    assert named <= 2
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_effect_outside_library_is_never_a_wrong_name_with_gap_closed(seed):
+    reg = Region.from_preset("u-shape")
+    x0, y0 = np.mean(reg.x_mm) + 20, np.mean(reg.y_mm) + 20
+
+    def bump(cmd, b, direction, temp):              # a local 40 um distortion of the workspace
+        out = np.zeros_like(cmd)
+        out[:, 0] = 0.04 * np.exp(-((cmd[:, 0] - x0) ** 2 + (cmd[:, 1] - y0) ** 2) / (2 * 15.0**2))
+        return out
+
+    r = run(Geometry.from_preset("u-shape"), "u-shape", False, seed=seed, pose_error_fn=bump)
+    assert r.unexplained and not r.gap["closed"]
+
+
+def test_runs_under_a_minute_on_400_measurements():
+    r = run(Geometry.from_preset("delta-shape"), "delta-shape", True, seed=5, effects={"scale_1": 2e-4})
+    assert r.campaign.n_measurements == 392 and r.wall_time_s < 60.0
+
+
+def test_detectable_effect_planning():
+    g = Geometry.from_preset("u-shape")
+    c = simulate_campaign(g, BUDGET, campaign_poses("u-shape", True), 8, seed=1, **SIGMA)
+    small = detectable_effect(g, BUDGET, c, "backlash_2", power=0.5, **SIGMA)
+    large = detectable_effect(g, BUDGET, c, "backlash_2", power=0.99, **SIGMA)
+    assert 0 < small < large < 0.03
+    assert detectable_effect(g, BUDGET, c, "c_1", **SIGMA) == np.inf
+
+
+def test_cli_and_report(tmp_path, capsys):
+    g = Geometry.from_preset("u-shape")
+    c = simulate_campaign(g, BUDGET, campaign_poses("u-shape", True), 4, effects={"backlash_2": 0.04}, seed=8, **SIGMA)
+    data = tmp_path / "c.csv"
+    c.to_csv(data)
+    out = tmp_path / "rep"
+    args = ["discrepancy", "--geometry", "u-shape", "--budget", "paper", "--data", str(data), "--out", str(out),
+            "--instrument-sigma-mm", "0.002", "--instrument-sigma-deg", "0.0005", "--seed", "3"]
+    assert main(args) == 0
+    doc = json.loads((out / "discrepancy.json").read_text())
+    assert set(doc) >= {"named_effects", "unexplained", "gap"}
+    assert set(doc["gap"]) >= {"metric", "before", "after", "null_level"}
+    assert doc["named_effects"][0]["name"] == "backlash_2" and doc["seed"] == 3
+    assert set(doc["named_effects"][0]) >= {"name", "value", "unit", "ci95", "aliases", "evidence"}
+    html = (out / "report.html").read_text()
+    assert "data:image/png;base64," in html and "backlash_2" in html
+    assert (out / "workspace.svg").exists()
+    assert main(args) == 1 and "exists" in capsys.readouterr().err
+    assert main(args + ["--force"]) == 0
+    bad = tmp_path / "bad.csv"
+    c.to_frame().drop(columns=["phi_meas"]).to_csv(bad, index=False)
+    assert main(args[:-8] + ["--data", str(bad), "--out", str(tmp_path / "x")]) == 1
+    assert "phi_meas" in capsys.readouterr().err
+
+
+def test_report_without_optional_columns(tmp_path):
+    g = Geometry.from_preset("delta-shape")
+    c = simulate_campaign(g, BUDGET, campaign_poses("delta-shape", False), 3, temp_drift_C=None, seed=2, **SIGMA)
+    frame = c.to_frame().drop(columns=["dir_1", "dir_2", "dir_3"])
+    r = discrepancy(g, BUDGET, frame, seed=1, **SIGMA)
+    assert "thermal" in r.not_testable and "backlash_1" in r.not_testable
+    write_report(r, tmp_path / "rep")
+    assert not (tmp_path / "rep" / "temperature.png").exists()
+    assert (tmp_path / "rep" / "report.html").exists()
