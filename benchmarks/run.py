@@ -16,9 +16,8 @@ import numpy as np
 from bench_sobol import bench_sobol
 
 import prp3mc
-from prp3mc import Budget, Geometry, Region, monte_carlo, sensitivity, worst_case
+from prp3mc import Budget, Geometry, Region, linear_model, monte_carlo, sensitivity, worst_case
 from prp3mc.crosscheck import optimizer_worst_case
-from prp3mc.sensitivity import h_entries
 
 
 def best_of(fn, repeat: int) -> float:
@@ -73,13 +72,11 @@ def bench_worstcase(quick: bool) -> dict:
 
 def naive_monte_carlo(g, budget, poses, n):
     """The obvious implementation: a Python loop over samples, J_q products per sample, np.percentile."""
-    from prp3mc.kinematics import frame
-    fr = frame(g, poses)
-    J = {q: fr.Ainv * h_entries(g, fr, q)[..., None, :] for q in ("rho", "theta", "b")}
+    J = sensitivity(g, poses).J
     X = budget.sample(n, 0)
     names = budget.names
     idx = {f: [names.index(f"{f}_{i}") for i in (1, 2, 3)] for f in ("rho", "zeta", "theta", "b")}
-    omega = np.arctan2(fr.tr.cl, -fr.tr.sl)
+    omega = linear_model(g, budget, poses).omega
     out = np.empty((n,) + poses.shape[:-1] + (3,))
     for k in range(n):
         x = X[k]

@@ -11,7 +11,7 @@ import numpy as np
 
 from .errors import BudgetError
 from .geometry import Geometry
-from .kinematics import as_poses, frame, solve_closure, validated_frame
+from .kinematics import as_poses, batch_last, frame, solve_closure, validated_frame
 from .sensitivity import FAMILIES, LENGTH_FAMILIES, h_entries
 
 __all__ = ["exact_pose_error", "linear_pose_error", "linearization_error_um"]
@@ -59,10 +59,10 @@ def exact_pose_error(geometry: Geometry, poses, errors: dict, *, check: bool = T
     prad[..., 2] = np.deg2rad(poses[..., 2])
     contact = None
     if "rho" in deltas:
-        nx, ny = (-fr.tr.sl, fr.tr.cl) if zeta is None else (np.cos(zeta), np.sin(zeta))
+        nx, ny = (batch_last(-fr.tr.sl), batch_last(fr.tr.cl)) if zeta is None else (np.cos(zeta), np.sin(zeta))
         contact = (deltas["rho"] * nx, deltas["rho"] * ny)
     offsets = {q: v for q, v in deltas.items() if q not in ("b", "rho")}
-    reached = solve_closure(geometry, fr.b + deltas.get("b", 0.0), prad, offsets, contact)
+    reached = solve_closure(geometry, batch_last(fr.b) + deltas.get("b", 0.0), prad, offsets, contact)
     err = reached - prad
     err[..., 2] = np.rad2deg(err[..., 2])
     return err
@@ -74,10 +74,11 @@ def linear_pose_error(geometry: Geometry, poses, errors: dict, *, check: bool = 
     fr = validated_frame(geometry, poses) if check else frame(geometry, poses)
     deltas, zeta = _to_internal(errors, poses.shape[:-1])
     total = np.zeros(poses.shape)
+    Ainv = batch_last(fr.Ainv, 2)
     for q, dq in deltas.items():
         if q == "rho" and zeta is not None:  # cos(zeta - omega), omega the direction of E l
-            dq = dq * (np.cos(zeta) * -fr.tr.sl + np.sin(zeta) * fr.tr.cl)
-        total += np.einsum("...ij,...j->...i", fr.Ainv, h_entries(geometry, fr, q) * dq)
+            dq = dq * (np.cos(zeta) * batch_last(-fr.tr.sl) + np.sin(zeta) * batch_last(fr.tr.cl))
+        total += np.einsum("...ij,...j->...i", Ainv, batch_last(h_entries(geometry, fr, q)) * dq)
     total[..., 2] = np.rad2deg(total[..., 2])
     return total
 

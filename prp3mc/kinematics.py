@@ -4,10 +4,12 @@ Poses at the boundary are ``[x_mm, y_mm, phi_deg]``; every function here
 converts phi to radians once and works in radians inside. Jacobians are
 returned in mm and rad (SPEC §1).
 
-Inside, every leg quantity is an array of shape (..., 3) (legs last) and a
+Inside, every leg quantity is an array of shape (3, ...) (legs first, the
+batch last, so per-leg constants broadcast along long contiguous rows) and a
 unit vector u(t) is carried as its cosine and sine, so dot and cross products
-of the chain's unit vectors are plain elementwise arithmetic on contiguous
-arrays: ``u.v = cu cv + su sv`` and ``(E u).v = cu sv - su cv``.
+of the chain's unit vectors are plain elementwise arithmetic:
+``u.v = cu cv + su sv`` and ``(E u).v = cu sv - su cv``. Public functions
+return the usual (..., 3) and (..., 3, 3) shapes.
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ DEFAULT_LIMITS = Limits()
 
 
 class Trig(NamedTuple):
-    """Cosine and sine of the angles of i, j, k, l, m (eq. 1), each (..., 3)."""
+    """Cosine and sine of the angles of i, j, k, l, m (eq. 1), each (3, ...), legs first."""
 
     ci: np.ndarray
     si: np.ndarray
@@ -76,32 +78,40 @@ class Trig(NamedTuple):
         return getattr(self, "c" + u) * getattr(self, "s" + v) - getattr(self, "s" + u) * getattr(self, "c" + v)
 
 
+def legs_first(v, ndim: int) -> np.ndarray:
+    """A per-leg value (3,) or (..., 3) as (3, ...) broadcastable against ``ndim`` batch axes."""
+    v = np.asarray(v, dtype=float)
+    if v.ndim == 0:
+        return v
+    v = np.moveaxis(v, -1, 0)
+    return v.reshape(v.shape[:1] + (1,) * (ndim + 1 - v.ndim) + v.shape[1:])
+
+
 def trig(geometry: Geometry, phi_rad, offsets: dict | None = None) -> Trig:
-    """:class:`Trig` of the chain at orientations ``phi_rad`` (...,).
+    """:class:`Trig` of the chain at orientations ``phi_rad`` (...), each array (3, ...).
 
     ``offsets`` optionally adds angle perturbations (rad, broadcastable to
-    (..., 3)) to alpha, beta, gamma, theta, psi: each turns exactly the
-    vectors it appears in, as eq. (5)-(6) require.
+    (..., 3), legs last) to alpha, beta, gamma, theta, psi: each turns exactly
+    the vectors it appears in, as eq. (5)-(6) require.
     """
     off = offsets or {}
-    phi = np.asarray(phi_rad, dtype=float)[..., None]
-    shape = np.broadcast_shapes(phi.shape[:-1] + (3,), *(np.shape(v) for v in off.values()))
-    ang = {k: geometry.rad(k) + off.get(k, 0.0) for k in _ANGLE_KEYS}
-    t_i = ang["alpha"]
-    t_j = t_i + ang["beta"]
+    phi = np.asarray(phi_rad, dtype=float)
+    nd = phi.ndim
+    ang = {k: legs_first(geometry.rad(k), nd) + legs_first(off.get(k, 0.0), nd) for k in _ANGLE_KEYS}
+    shape = np.broadcast_shapes((3,) + phi.shape, *(a.shape for a in ang.values()))
     cp, sp = np.cos(phi), np.sin(phi)
+
+    def fixed(t):
+        return np.broadcast_to(np.cos(t), shape), np.broadcast_to(np.sin(t), shape)
 
     def turned(t0):  # cos and sin of t0 + phi by the addition formulas: trig only on t0
         c0, s0 = np.cos(t0), np.sin(t0)
         return np.broadcast_to(c0 * cp - s0 * sp, shape), np.broadcast_to(s0 * cp + c0 * sp, shape)
 
+    t_j = ang["alpha"] + ang["beta"]
     t_k = t_j + ang["gamma"]
-    ck, sk = turned(t_k)
-    cl, sl = turned(t_k + ang["theta"])
-    cm, sm = turned(ang["psi"])
-    return Trig(np.broadcast_to(np.cos(t_i), shape), np.broadcast_to(np.sin(t_i), shape),
-                np.broadcast_to(np.cos(t_j), shape), np.broadcast_to(np.sin(t_j), shape),
-                ck, sk, cl, sl, cm, sm)
+    return Trig(*fixed(ang["alpha"]), *fixed(t_j), *turned(t_k), *turned(t_k + ang["theta"]),
+                *turned(ang["psi"]))
 
 
 def as_poses(poses: "np.typing.ArrayLike") -> np.ndarray:
@@ -121,47 +131,49 @@ def _where(idx: tuple) -> str:
 
 
 def _offset_vector(geometry: Geometry, tr: Trig, off: dict | None = None):
-    """Components of a_i i_i + c_i k_i + e_i m_i, each (..., 3), mm."""
+    """Components of a_i i_i + c_i k_i + e_i m_i, each (3, ...), mm."""
     off = off or {}
-    a = geometry.rad("a") + off.get("a", 0.0)
-    c = geometry.rad("c") + off.get("c", 0.0)
-    e = geometry.rad("e") + off.get("e", 0.0)
+    nd = tr.cl.ndim - 1
+    a, c, e = (legs_first(geometry.rad(k), nd) + legs_first(off.get(k, 0.0), nd) for k in ("a", "c", "e"))
     return a * tr.ci + c * tr.ck + e * tr.cm, a * tr.si + c * tr.sk + e * tr.sm
 
 
 def ik_trig(geometry: Geometry, x: np.ndarray, y: np.ndarray, tr: Trig) -> tuple[np.ndarray, np.ndarray]:
-    """Eq. (2): slider positions b and guide lengths d (..., 3) at positions x, y (...,) in mm."""
+    """Eq. (2): slider positions b and guide lengths d (3, ...) at positions x, y (...) in mm."""
     ox, oy = _offset_vector(geometry, tr)
-    rx, ry = x[..., None] - ox, y[..., None] - oy
+    rx, ry = x - ox, y - oy
     b = (rx * tr.sl - ry * tr.cl) / (tr.cj * tr.sl - tr.sj * tr.cl)
     d = (rx * tr.sj - ry * tr.cj) / (tr.cl * tr.sj - tr.sl * tr.cj)
     return b, d
 
 
 class Frame(NamedTuple):
-    """Everything the linear model needs at a batch of poses (see :func:`frame`)."""
+    """Everything the linear model needs at a batch of poses (see :func:`frame`).
+
+    Leg quantities are legs first: ``b``, ``d``, ``transmission`` (3, ...);
+    ``A`` and ``Ainv`` are (3, 3, ...) with the batch last.
+    """
 
     tr: Trig
-    b: np.ndarray          # (..., 3) mm
-    d: np.ndarray          # (..., 3) mm
-    A: np.ndarray          # (..., 3, 3)
-    Ainv: np.ndarray       # (..., 3, 3)
-    transmission: np.ndarray  # (..., 3) B_ii = (E l_i) . j_i
-    condition: np.ndarray  # (...)  Frobenius condition of column-scaled A
+    b: np.ndarray             # mm
+    d: np.ndarray             # mm
+    A: np.ndarray             # row = leg, column = (x, y, phi)
+    Ainv: np.ndarray
+    transmission: np.ndarray  # B_ii = (E l_i) . j_i
+    condition: np.ndarray     # (...) Frobenius condition of column-scaled A
 
 
 def _inv3(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Inverse and determinant of 3x3 matrices (..., 3, 3) by cofactors."""
-    a, b, c = A[..., 0, 0], A[..., 0, 1], A[..., 0, 2]
-    d, e, f = A[..., 1, 0], A[..., 1, 1], A[..., 1, 2]
-    g, h, i = A[..., 2, 0], A[..., 2, 1], A[..., 2, 2]
-    c00, c01, c02 = e * i - f * h, f * g - d * i, d * h - e * g
-    det = a * c00 + b * c01 + c * c02
-    adj = np.stack([c00, c * h - b * i, b * f - c * e,
-                    c01, a * i - c * g, c * d - a * f,
-                    c02, b * g - a * h, a * e - b * d], axis=-1).reshape(A.shape)
+    """Inverse and determinant of 3x3 matrices stored as (3, 3, ...), by cofactors."""
+    (a, b, c), (d, e, f), (g, h, i) = A
+    inv = np.empty_like(A)
+    inv[0, 0], inv[1, 0], inv[2, 0] = e * i - f * h, f * g - d * i, d * h - e * g
+    inv[0, 1], inv[1, 1], inv[2, 1] = c * h - b * i, a * i - c * g, b * g - a * h
+    inv[0, 2], inv[1, 2], inv[2, 2] = b * f - c * e, c * d - a * f, a * e - b * d
+    det = a * inv[0, 0] + b * inv[1, 0] + c * inv[2, 0]
     with np.errstate(divide="ignore", invalid="ignore"):
-        return adj / det[..., None, None], det
+        inv /= det
+    return inv, det
 
 
 def frame(geometry: Geometry, poses: np.ndarray) -> Frame:
@@ -169,19 +181,29 @@ def frame(geometry: Geometry, poses: np.ndarray) -> Frame:
     phi = np.deg2rad(poses[..., 2])
     tr = trig(geometry, phi)
     b, d = ik_trig(geometry, poses[..., 0], poses[..., 1], tr)
-    w = -(d + geometry.rad("c") * tr.dot("l", "k") + geometry.rad("e") * tr.dot("l", "m"))
-    A = np.stack([-tr.sl, tr.cl, w], axis=-1)
+    nd = phi.ndim
+    w = -(d + legs_first(geometry.rad("c"), nd) * tr.dot("l", "k")
+          + legs_first(geometry.rad("e"), nd) * tr.dot("l", "m"))
+    A = np.stack([-tr.sl, tr.cl, w], axis=1)                        # (3 legs, 3 columns, ...)
     Ainv, _ = _inv3(A)
     # condition of A D^-1 (unit columns): ||A D^-1||_F ||D A^-1||_F = sqrt(3) ||D A^-1||_F
-    col = np.sqrt(np.sum(A * A, axis=-2))
-    condition = np.sqrt(3.0 * np.sum((col[..., :, None] * Ainv) ** 2, axis=(-2, -1)))
+    col = np.sqrt(np.sum(A * A, axis=0))                             # (3 columns, ...)
+    condition = np.sqrt(3.0 * np.sum((col[:, None] * Ainv) ** 2, axis=(0, 1)))
     condition = np.where(np.isfinite(condition), condition, np.inf)
     return Frame(tr, b, d, A, Ainv, tr.perp_dot("l", "j"), condition)
 
 
+def batch_last(M: np.ndarray, lead: int = 1) -> np.ndarray:
+    """An internal array with ``lead`` leading axes, (3, ...) or (3, 3, ...), in the public
+    layout (..., 3) or (..., 3, 3), contiguous."""
+    return np.ascontiguousarray(np.moveaxis(M, tuple(range(lead)), tuple(range(-lead, 0))))
+
+
 def _diag(v: np.ndarray) -> np.ndarray:
-    out = np.zeros(v.shape + (3,))
-    out[..., [0, 1, 2], [0, 1, 2]] = v
+    """Diagonal matrices (..., 3, 3) from legs-first values (3, ...)."""
+    out = np.zeros(v.shape[1:] + (3, 3))
+    for i in range(3):
+        out[..., i, i] = v[i]
     return out
 
 
@@ -205,8 +227,10 @@ def inverse_kinematics(geometry: Geometry, poses, *, check: bool = True,
     poses = as_poses(poses)
     if check:
         fr = validated_frame(geometry, poses, limits)
-        return fr.b, fr.d
-    return ik_trig(geometry, poses[..., 0], poses[..., 1], trig(geometry, np.deg2rad(poses[..., 2])))
+        b, d = fr.b, fr.d
+    else:
+        b, d = ik_trig(geometry, poses[..., 0], poses[..., 1], trig(geometry, np.deg2rad(poses[..., 2])))
+    return batch_last(b), batch_last(d)
 
 
 def jacobians(geometry: Geometry, poses, *, check: bool = True,
@@ -217,27 +241,29 @@ def jacobians(geometry: Geometry, poses, *, check: bool = True,
     """
     poses = as_poses(poses)
     fr = validated_frame(geometry, poses, limits) if check else frame(geometry, poses)
-    return fr.A, _diag(fr.transmission)
+    return batch_last(fr.A, 2), _diag(fr.transmission)
 
 
 def jacobian(geometry: Geometry, poses, *, check: bool = True, limits: Limits = DEFAULT_LIMITS) -> np.ndarray:
     """Kinematic Jacobian J = A^-1 B of eq. (4), shape (..., 3, 3), mm or rad per mm."""
     poses = as_poses(poses)
     fr = validated_frame(geometry, poses, limits) if check else frame(geometry, poses)
-    return fr.Ainv * fr.transmission[..., None, :]
+    return batch_last(fr.Ainv * fr.transmission, 2)
 
 
 def _reasons(geometry: Geometry, fr: Frame, limits: Limits) -> dict[str, np.ndarray]:
-    """Boolean masks (..., 3) of each refusal reason."""
-    lo, hi = geometry.stroke_mm[:, 0], geometry.stroke_mm[:, 1]
+    """Boolean masks (..., 3) of each refusal reason (legs last, for reporting)."""
+    nd = fr.b.ndim - 1
+    lo, hi = legs_first(geometry.stroke_mm[:, 0], nd), legs_first(geometry.stroke_mm[:, 1], nd)
     tol = limits.stroke_tol_mm
-    return {
+    masks = {
         "below": fr.b < lo - tol,
         "above": fr.b > hi + tol,
         "d": ~(fr.d > 0),
         "transmission": ~(np.abs(fr.transmission) >= limits.min_transmission),
-        "condition": np.broadcast_to(~(fr.condition <= limits.max_condition)[..., None], fr.b.shape),
+        "condition": np.broadcast_to(~(fr.condition <= limits.max_condition), fr.b.shape),
     }
+    return {k: np.moveaxis(v, 0, -1) for k, v in masks.items()}
 
 
 def feasible(geometry: Geometry, poses, limits: Limits = DEFAULT_LIMITS) -> np.ndarray:
@@ -246,7 +272,7 @@ def feasible(geometry: Geometry, poses, limits: Limits = DEFAULT_LIMITS) -> np.n
     finite = np.all(np.isfinite(poses), axis=-1)
     with np.errstate(all="ignore"):
         fr = frame(geometry, np.where(finite[..., None], poses, 0.0))
-    bad = np.zeros(fr.b.shape, dtype=bool)
+    bad = np.zeros(finite.shape + (3,), dtype=bool)
     for mask in _reasons(geometry, fr, limits).values():
         bad |= mask
     return finite & ~np.any(bad, axis=-1)
@@ -264,15 +290,16 @@ def validated_frame(geometry: Geometry, poses: np.ndarray, limits: Limits = DEFA
             continue
         idx = tuple(int(v) for v in np.argwhere(mask)[0])
         pidx, leg = idx[:-1], idx[-1]
+        at_leg = (leg,) + pidx
         x, y, phi = poses[pidx]
         at = f"pose ({x:g} mm, {y:g} mm, {phi:g} deg) {_where(pidx)}"
         lo, hi = geometry.stroke_mm[leg]
         msg = {
-            "below": f"leaves leg {leg + 1}'s stroke: b_{leg + 1} = {fr.b[idx]:.6g} mm < {lo:g} mm",
-            "above": f"leaves leg {leg + 1}'s stroke: b_{leg + 1} = {fr.b[idx]:.6g} mm > {hi:g} mm",
-            "d": f"has d_{leg + 1} = {fr.d[idx]:.6g} mm <= 0 on leg {leg + 1}",
+            "below": f"leaves leg {leg + 1}'s stroke: b_{leg + 1} = {fr.b[at_leg]:.6g} mm < {lo:g} mm",
+            "above": f"leaves leg {leg + 1}'s stroke: b_{leg + 1} = {fr.b[at_leg]:.6g} mm > {hi:g} mm",
+            "d": f"has d_{leg + 1} = {fr.d[at_leg]:.6g} mm <= 0 on leg {leg + 1}",
             "transmission": (f"is near a serial singularity of leg {leg + 1}: |B_{leg + 1}{leg + 1}| = "
-                             f"{abs(fr.transmission[idx]):.3g} < {limits.min_transmission:g}"),
+                             f"{abs(fr.transmission[at_leg]):.3g} < {limits.min_transmission:g}"),
             "condition": (f"is near a parallel singularity: cond(A) = {fr.condition[pidx]:.3g} > "
                           f"{limits.max_condition:g}"),
         }[reason]
@@ -313,24 +340,25 @@ def solve_closure(geometry: Geometry, b: np.ndarray, pose0_rad: np.ndarray,
         ``[x_mm, y_mm, phi_rad]``.
     """
     off = offsets or {}
-    c = geometry.rad("c") + off.get("c", 0.0)
-    e = geometry.rad("e") + off.get("e", 0.0)
-    angle_off = {k: v for k, v in off.items() if k in _ANGLE_KEYS}
-    shape = np.broadcast_shapes(np.shape(b)[:-1], np.shape(pose0_rad)[:-1])
+    shape = np.broadcast_shapes(np.shape(b)[:-1], np.shape(pose0_rad)[:-1],
+                                *(np.shape(v)[:-1] for v in off.values() if np.ndim(v)))
+    nd = len(shape)
     pose = np.array(np.broadcast_to(pose0_rad, shape + (3,)), dtype=float)
-    b = np.broadcast_to(b, shape + (3,))
+    b = legs_first(b, nd)
+    c = legs_first(geometry.rad("c"), nd) + legs_first(off.get("c", 0.0), nd)
+    e = legs_first(geometry.rad("e"), nd) + legs_first(off.get("e", 0.0), nd)
+    angle_off = {k: v for k, v in off.items() if k in _ANGLE_KEYS}
+    cx, cy = (legs_first(contact[0], nd), legs_first(contact[1], nd)) if contact is not None else (0.0, 0.0)
 
     def newton_step():
         tr = trig(geometry, pose[..., 2], angle_off)
         ox, oy = _offset_vector(geometry, tr, off)
-        wx = pose[..., 0, None] - ox - b * tr.cj
-        wy = pose[..., 1, None] - oy - b * tr.sj
-        if contact is not None:
-            wx, wy = wx - contact[0], wy - contact[1]
+        wx = pose[..., 0] - ox - b * tr.cj - cx
+        wy = pose[..., 1] - oy - b * tr.sj - cy
         res = tr.cl * wy - tr.sl * wx
         dphi = -(tr.cl * wx + tr.sl * wy) - c * tr.dot("l", "k") - e * tr.dot("l", "m")
-        jac = np.stack([-tr.sl, tr.cl, dphi], axis=-1)
-        return np.linalg.solve(jac, -res[..., None])[..., 0]
+        jac = np.moveaxis(np.stack([-tr.sl, tr.cl, dphi], axis=1), (0, 1), (-2, -1))   # (..., 3, 3)
+        return np.linalg.solve(jac, -np.moveaxis(res, 0, -1)[..., None])[..., 0]
 
     for _ in range(max_iter):
         step = newton_step()
@@ -372,30 +400,35 @@ def forward_kinematics(geometry: Geometry, b, *, phi_hint_deg: float = 0.0) -> n
     if b.ndim == 0 or b.shape[-1] != 3 or not np.all(np.isfinite(b)):
         raise InfeasiblePoseError("slider positions b must be finite with shape (..., 3)")
     grid = np.deg2rad(np.arange(-180.0, 180.0, 0.5))
-    tr = trig(geometry, grid)                                         # each (K, 3)
+    shape = b.shape[:-1]
+    bf = b.reshape(-1, 3).T[:, :, None]                              # (3, M, 1)
+    tr = Trig(*(v[:, None, :] for v in trig(geometry, grid)))        # each (3, 1, K)
     ox, oy = _offset_vector(geometry, tr)
-    # rows (E l_i)^T T = s_i: linear in T = (x, y) for fixed phi
-    s = (tr.cl * oy - tr.sl * ox) + b[..., None, :] * tr.perp_dot("l", "j")   # (..., K, 3)
-    M = np.broadcast_to(np.stack([-tr.sl, tr.cl], axis=-1), s.shape + (2,))
-    g = np.linalg.det(np.concatenate([M, s[..., None]], axis=-1))
-    # least-squares T at each grid angle, to check d_i > 0 near each root
-    MtM = np.einsum("...kia,...kib->...kab", M, M)
-    Txy = np.linalg.solve(MtM, np.einsum("...kia,...ki->...ka", M, s)[..., None])[..., 0]
+    # rows (E l_i)^T T = s_i, linear in T = (x, y) for fixed phi
+    nx, ny = -tr.sl, tr.cl
+    s = (tr.cl * oy - tr.sl * ox) + bf * tr.perp_dot("l", "j")      # (3, M, K)
+    nx, ny = np.broadcast_to(nx, s.shape), np.broadcast_to(ny, s.shape)
+    g = (nx[0] * (ny[1] * s[2] - s[1] * ny[2]) - ny[0] * (nx[1] * s[2] - s[1] * nx[2])
+         + s[0] * (nx[1] * ny[2] - ny[1] * nx[2]))                   # det[E l_i | s_i], (M, K)
+    # least-squares T at each grid angle (2x2 normal equations), to check d_i > 0 near each root
+    sxx, sxy, syy = (nx * nx).sum(0), (nx * ny).sum(0), (ny * ny).sum(0)
+    bx, by = (nx * s).sum(0), (ny * s).sum(0)
+    det = sxx * syy - sxy * sxy
+    Tx, Ty = (syy * bx - sxy * by) / det, (sxx * by - sxy * bx) / det
     with np.errstate(divide="ignore", invalid="ignore"):              # l || j at a singular phi
-        _, d = ik_trig(geometry, Txy[..., 0], Txy[..., 1], tr)
-    pos = np.all(d > 0, axis=-1)
+        _, d = ik_trig(geometry, Tx, Ty, tr)
+    pos = np.all(d > 0, axis=0)
     change = (np.sign(g) != np.sign(np.roll(g, -1, axis=-1))) & pos & np.roll(pos, -1, axis=-1)
     change[..., -1] = False
     dist = np.where(change, np.abs(grid - np.deg2rad(phi_hint_deg)), np.inf)
-    kbest = np.argmin(dist, axis=-1)
-    found = np.isfinite(np.take_along_axis(dist, kbest[..., None], -1)[..., 0])
-    if not np.all(found):
+    k = np.argmin(dist, axis=-1)
+    rows = np.arange(len(k))
+    if not np.all(np.isfinite(dist[rows, k])):
         raise ConvergenceError(f"forward kinematics: no assembly mode with d_i > 0 for "
-                               f"{int((~found).sum())} slider position(s)")
-    g0 = np.take_along_axis(g, kbest[..., None], -1)[..., 0]
-    g1 = np.take_along_axis(g, (kbest + 1)[..., None], -1)[..., 0]
-    phi0 = grid[kbest] + g0 / (g0 - g1) * (grid[1] - grid[0])
-    T0 = np.take_along_axis(Txy, kbest[..., None, None], -2)[..., 0, :]
-    pose = solve_closure(geometry, b, np.concatenate([T0, phi0[..., None]], axis=-1))
+                               f"{int((~np.isfinite(dist[rows, k])).sum())} slider position(s)")
+    g0, g1 = g[rows, k], g[rows, k + 1]
+    phi0 = grid[k] + g0 / (g0 - g1) * (grid[1] - grid[0])
+    start = np.stack([Tx[rows, k], Ty[rows, k], phi0], axis=-1)
+    pose = solve_closure(geometry, b.reshape(-1, 3), start)
     pose[..., 2] = np.rad2deg(pose[..., 2])
-    return pose
+    return pose.reshape(shape + (3,))

@@ -137,8 +137,9 @@ def linear_model(geometry: Geometry, budget: Budget, poses, *, check: bool = Tru
             h[family] = h_entries(geometry, fr, family)
         terms.append(name)
         legs.append(leg)
-        scales.append(h[family][..., leg] * (1.0 if family in LENGTH_FAMILIES else np.pi / 180.0))
+        scales.append(h[family][leg] * (1.0 if family in LENGTH_FAMILIES else np.pi / 180.0))
         plan.append(("clearance", (k, names.index(f"zeta_{leg + 1}"))) if family == "rho" else ("value", k))
     return LinearModel(geometry=geometry, budget=budget, poses=poses, terms=tuple(terms), legs=tuple(legs),
-                       Ainv=fr.Ainv, scale=np.stack(scales, axis=-1), cos_omega=-fr.tr.sl,
-                       sin_omega=fr.tr.cl, _plan=tuple(plan))
+                       Ainv=np.moveaxis(fr.Ainv, (0, 1), (-2, -1)), scale=np.stack(scales, axis=-1),
+                       cos_omega=np.moveaxis(-fr.tr.sl, 0, -1), sin_omega=np.moveaxis(fr.tr.cl, 0, -1),
+                       _plan=tuple(plan))

@@ -30,7 +30,9 @@ import numpy as np
 import pandas as pd
 
 from .geometry import Geometry
-from .kinematics import DEFAULT_LIMITS, Frame, Limits, _diag, as_poses, frame, validated_frame
+from .kinematics import (
+    DEFAULT_LIMITS, Frame, Limits, _diag, as_poses, batch_last, frame, legs_first, validated_frame,
+)
 
 __all__ = ["FAMILIES", "LENGTH_FAMILIES", "Sensitivity", "sensitivity", "h_entries"]
 
@@ -42,9 +44,9 @@ _OUTPUTS = ("x", "y", "phi")
 
 
 def h_entries(geometry: Geometry, fr: Frame, family: str) -> np.ndarray:
-    """Diagonal of H_q for ``family`` at the poses of a :class:`Frame`, shape (..., 3)."""
+    """Diagonal of H_q for ``family`` at the poses of a :class:`Frame`, legs first: (3, ...)."""
     tr, b, d = fr.tr, fr.b, fr.d
-    a, c, e = geometry.rad("a"), geometry.rad("c"), geometry.rad("e")
+    a, c, e = (legs_first(geometry.rad(k), d.ndim - 1) for k in ("a", "c", "e"))
     if family == "a":
         return tr.perp_dot("l", "i")
     if family == "alpha":
@@ -134,5 +136,5 @@ def sensitivity(geometry: Geometry, poses, *, check: bool = True,
     fr = validated_frame(geometry, poses, limits) if check else frame(geometry, poses)
     h = {q: h_entries(geometry, fr, q) for q in FAMILIES}
     H = {q: _diag(v) for q, v in h.items()}
-    J = {q: fr.Ainv * v[..., None, :] for q, v in h.items()}
-    return Sensitivity(poses=poses, A=fr.A, B=H["b"], H=H, J=J)
+    J = {q: batch_last(fr.Ainv * v, 2) for q, v in h.items()}
+    return Sensitivity(poses=poses, A=batch_last(fr.A, 2), B=H["b"], H=H, J=J)

@@ -257,14 +257,18 @@ def _maxima(model: LinearModel, tb: np.ndarray):
     onehot = (np.array(model.legs)[:, None] == np.arange(3)).astype(float)   # (T, 3)
     u_mid = (model.scale * mid) @ onehot                             # (N, 3)
     u_half = (np.abs(model.scale) * half) @ onehot
-    Ai = model.Ainv
-    center = [sum(Ai[:, r, i] * u_mid[:, i] for i in range(3)) for r in range(3)]
-    g = [[Ai[:, r, i] * u_half[:, i] for i in range(3)] for r in range(3)]  # g[row][leg]
-    norms2 = np.empty((8,) + center[0].shape)
-    for c, (s0, s1, s2) in enumerate(_CORNERS):
-        vx = center[0] + s0 * g[0][0] + s1 * g[0][1] + s2 * g[0][2]
-        vy = center[1] + s0 * g[1][0] + s1 * g[1][1] + s2 * g[1][2]
-        norms2[c] = vx * vx + vy * vy
+    Ai = np.ascontiguousarray(np.moveaxis(model.Ainv, (-2, -1), (0, 1)))  # (3, 3, N): a view, no copy
+    uT_mid, uT_half = np.ascontiguousarray(u_mid.T), np.ascontiguousarray(u_half.T)
+    center = [Ai[r, 0] * uT_mid[0] + Ai[r, 1] * uT_mid[1] + Ai[r, 2] * uT_mid[2] for r in range(3)]
+    g = [[Ai[r, i] * uT_half[i] for i in range(3)] for r in range(3)]  # g[row][leg]
+
+    def corners(r):  # c_r + s0 g_r0 + s1 g_r1 + s2 g_r2 for the 8 sign patterns of _CORNERS
+        level = [center[r]]
+        for i in range(3):
+            level = [w for v in level for w in (v - g[r][i], v + g[r][i])]
+        return level
+
+    norms2 = np.stack([vx * vx + vy * vy for vx, vy in zip(corners(0), corners(1))])
     best = np.argmax(norms2, axis=0)
     values = {"position": np.sqrt(np.take_along_axis(norms2, best[None], 0)[0])}
     leg_signs = {"position": _CORNERS[best]}
@@ -276,7 +280,7 @@ def _maxima(model: LinearModel, tb: np.ndarray):
 
 
 def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | None = None,
-               check: bool = True, workers: int | None = None, chunk: int = 4096) -> WorstCase:
+               check: bool = True, workers: int | None = None, chunk: int = 16384) -> WorstCase:
     """Exact maxima of the linear pose error over the budget's box, batched.
 
     Parameters
