@@ -35,13 +35,18 @@ are controlled by Benjamini-Hochberg (maps) and Holm (decisions).
 
 Gap metric
 ----------
-``gap = (sum_p B_p + S_p) / (3 M - k)``: the mean squared whitened residual
-per degree of freedom over all M measurements (k fitted values). It is 1
-(``null_level``) when the model is right, above 1 when the model misses a
-systematic effect or underestimates the scatter, below 1 when it
-overestimates the scatter. Its null standard deviation is reported; the gap
-is *closed* when it lies within 4 null standard deviations of 1 and nothing
-unexplained remains.
+``gap = 1 + (G_sys - 1) + (G_disp - 1)``, ``null_level`` 1. ``G_sys`` is the
+energy of the whitened residuals in the span of the whitened signatures of
+every visible systematic candidate not yet in the model, per degree of
+freedom (the span's rank): the residuals have covariance I when the model is
+right, so its mean is then exactly 1 whatever the error laws, and a missing
+systematic effect of the library adds its likelihood ratio / df.
+``G_disp = sum_p S_p / E[sum_p S_p]`` is the repeat scatter over its null
+mean. The null standard deviation combines sqrt(2/df) and the bootstrap
+variance of the scatter. The gap is *closed* when it, and the plain
+mean squared whitened residual of all measurements (``gap.residual``, which
+also sees disagreement outside the library), lie within 4 null standard
+deviations of 1 and nothing unexplained remains.
 
 Naming
 ------
@@ -414,6 +419,29 @@ class Diagnosis:
     summary: dict
 
 
+def _systematic_gap(engine: _Engine, fit: _Fit) -> tuple[float, float, int]:
+    """Whitened residual energy in the span of the library's systematic signatures, per dof.
+
+    The residual ``z`` of ``fit`` is projected on the span of every visible
+    systematic candidate not in the model (orthogonalised to those in it):
+    when the model is right ``z`` has covariance I, so the squared norm of
+    the projection has mean exactly ``df`` (its rank) whatever the error law.
+    Returns (value, null sd ~ sqrt(2/df), df).
+    """
+    A = fit.Gw.reshape(-1, len(engine.systematic))
+    scale = np.linalg.norm(A, 2) if A.size else 0.0
+    if fit.sys:
+        Q, _ = np.linalg.qr(A[:, list(fit.sys)])
+        A = A - Q @ (Q.T @ A)
+    U, sv, _ = np.linalg.svd(A, full_matrices=False)
+    Ur = U[:, sv > 1e-8 * scale]
+    df = Ur.shape[1]
+    if df == 0:
+        return 1.0, 0.0, 0
+    proj = Ur.T @ fit.z.ravel()
+    return float(proj @ proj / df), float(np.sqrt(2.0 / df)), int(df)
+
+
 def _scaled_chi2_sf(t, mean, var, upper=True):
     c = var / (2.0 * mean)
     nu = 2.0 * mean**2 / var
@@ -488,6 +516,7 @@ def _diagnose(engine: _Engine, fit: _Fit, n_boot: int, rng) -> Diagnosis:
         "sys_stat": float(B.sum()), "sys_mean": float(gB_mean),
         "sys_p": float(_scaled_chi2_sf(B.sum(), gB_mean, gB_var)),
         "disp_stat": float(S.sum()), "disp_mean": float(gS_mean),
+        "disp_null_sd": float(np.sqrt(gS_var) / max(gS_mean, 1.0)),
         "disp_p": 1.0, "disp_direction": "as predicted",
         "gap": float((B.sum() + S.sum()) / dof), "gap_null_sd": float(np.sqrt(vT.sum()) / dof),
         "sys_holm_min": _holm_min(sys_p), "disp_holm_min": _holm_min(disp_p[has_rep]) if has_rep.any() else 1.0,
@@ -785,12 +814,29 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     s = after.summary
     tests = ("sys_p", "disp_p", "sys_holm_min", "disp_holm_min", "spatial_p", "lack_of_fit_p")
     unexplained = bool(min(s[t] for t in tests) < alpha / len(tests))
-    closed = bool(not unexplained and abs(s["gap"] - 1.0) <= 4.0 * s["gap_null_sd"])
+    channels = {}
+    for state, diag, state_fit in (("before", before, base), ("after", after, fit)):
+        g_sys, sd_sys, df_sys = _systematic_gap(engine, state_fit)
+        summ = diag.summary
+        g_disp = summ["disp_stat"] / max(summ["disp_mean"], 1.0)
+        sd_disp = summ["disp_null_sd"]
+        channels[state] = (g_sys + g_disp - 1.0, float(np.hypot(sd_sys, sd_disp)), g_sys, sd_sys, df_sys,
+                           g_disp, sd_disp)
+    residual_closed = abs(s["gap"] - 1.0) <= 4.0 * s["gap_null_sd"]
+    g_after, sd_after = channels["after"][:2]
+    closed = bool(not unexplained and residual_closed and abs(g_after - 1.0) <= 4.0 * sd_after)
     gap = {
-        "metric": "mean squared whitened residual per degree of freedom (chi2/dof of all measurements "
-                  "under the model's predicted mean and covariance)",
-        "before": before.summary["gap"], "after": s["gap"], "null_level": 1.0,
-        "null_sd_before": before.summary["gap_null_sd"], "null_sd": s["gap_null_sd"], "closed": closed,
+        "metric": "1 + (G_sys - 1) + (G_disp - 1): G_sys is the whitened residual energy in the span of the "
+                  "library's systematic signatures per degree of freedom (exactly 1 on average when the model "
+                  "is right), G_disp the repeat scatter over its predicted null mean (1 when right)",
+        "before": channels["before"][0], "after": g_after, "null_level": 1.0,
+        "null_sd_before": channels["before"][1], "null_sd": sd_after, "closed": closed,
+        "channels": {state: {"systematic": v[2], "systematic_null_sd": v[3], "systematic_df": v[4],
+                             "dispersion": v[5], "dispersion_null_sd": v[6]} for state, v in channels.items()},
+        "residual": {"metric": "mean squared whitened residual per degree of freedom (chi2/dof of all "
+                               "measurements under the model's predicted mean and covariance)",
+                     "before": before.summary["gap"], "after": s["gap"], "null_level": 1.0,
+                     "null_sd_before": before.summary["gap_null_sd"], "null_sd": s["gap_null_sd"]},
         "systematic": {"before": before.summary["sys_stat"] / (3.0 * engine.P),
                        "after": s["sys_stat"] / s["sys_mean"], "null_level": 1.0},
         "dispersion": {"before": before.summary["disp_stat"] / max(before.summary["disp_mean"], 1.0),
