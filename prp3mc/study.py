@@ -78,8 +78,14 @@ from .worstcase import WorstCase, worst_case
 __all__ = ["Study", "StudyConfiguration", "StudyResult", "ConfigurationResult", "PoseSamples",
            "run_study", "bundled_studies", "STUDIES_DIR", "ANALYSES"]
 
-#: Folder of the bundled studies (``studies/`` beside the package source).
-STUDIES_DIR = Path(__file__).resolve().parent.parent / "studies"
+def _studies_dir() -> Path:
+    """The bundled studies: ``studies/`` of the source tree, installed as ``prp3mc/studies``."""
+    installed = Path(__file__).resolve().parent / "studies"
+    return installed if installed.is_dir() else Path(__file__).resolve().parent.parent / "studies"
+
+
+#: Folder of the bundled studies.
+STUDIES_DIR = _studies_dir()
 #: Analyses a study can ask for besides the exact worst case (which always runs).
 ANALYSES = ("montecarlo", "sobol")
 _SOBOL_OUTPUTS = ("x", "y", "phi", "position")

@@ -30,6 +30,23 @@ def run(geometry, preset, vary_phi, seed, **kwargs):
     return discrepancy(geometry, BUDGET, c, seed=seed, **SIGMA)
 
 
+def fresh_seed() -> int:
+    seed = int(np.random.SeedSequence().entropy % 2**32)
+    print("seed", seed)  # shown by pytest on failure
+    return seed
+
+
+def covers(ci, value, widen=2.0):
+    """``value`` within the 95 % interval widened ``widen`` times about its centre.
+
+    Twice the 95 % half-width is about 3.9 standard errors: a calibrated
+    interval misses with probability ~1e-4, so the test passes for any seed.
+    """
+    lo, hi = ci
+    centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    return centre - widen * half <= value <= centre + widen * half
+
+
 def fit_of(result, name):
     """Value and interval of ``name`` if it was named or is in a named effect's alias set, else None."""
     for e in result.named_effects:
@@ -57,12 +74,11 @@ def test_hidden_effect_is_named_and_gap_closes(name, value, where, vary_phi):
     geometry, preset = {"delta": (Geometry.from_preset("delta-shape"), "delta-shape"),
                         "u-shape": (Geometry.from_preset("u-shape"), "u-shape"),
                         "tilted": (TILTED, "delta-shape")}[where]
-    r = run(geometry, preset, vary_phi, seed=7, effects={name: value})
+    r = run(geometry, preset, vary_phi, seed=fresh_seed(), effects={name: value})
     assert len(r.named_effects) == 1, r.to_frame()
     fit = fit_of(r, name)
     assert fit is not None, r.to_frame()
-    lo, hi = fit[1]
-    assert lo <= value <= hi
+    assert covers(fit[1], value), fit
     e = r.named_effects[0]
     assert e.evidence["identified"] == (not e.aliases)
     assert not r.unexplained
@@ -78,11 +94,10 @@ def test_invisible_effects_are_reported_never_named():
 
 
 def test_two_effects_at_once():
-    r = run(Geometry.from_preset("u-shape"), "u-shape", True, seed=4,
+    r = run(Geometry.from_preset("u-shape"), "u-shape", True, seed=fresh_seed(),
             effects={"backlash_1": 0.03, "spread_theta_3": 0.1})
     for name, value in (("backlash_1", 0.03), ("spread_theta_3", 0.1)):
-        lo, hi = fit_of(r, name)[1]
-        assert lo <= value <= hi
+        assert covers(fit_of(r, name)[1], value)
     assert r.gap["closed"]
 
 
@@ -102,8 +117,8 @@ def test_nothing_hidden_names_nothing_in_95_percent_of_seeds():
     assert named <= 2
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_effect_outside_library_is_never_a_wrong_name_with_gap_closed(seed):
+@pytest.mark.parametrize("repeat", range(3))
+def test_effect_outside_library_is_never_a_wrong_name_with_gap_closed(repeat):
     reg = Region.from_preset("u-shape")
     x0, y0 = np.mean(reg.x_mm) + 20, np.mean(reg.y_mm) + 20
 
@@ -112,7 +127,7 @@ def test_effect_outside_library_is_never_a_wrong_name_with_gap_closed(seed):
         out[:, 0] = 0.04 * np.exp(-((cmd[:, 0] - x0) ** 2 + (cmd[:, 1] - y0) ** 2) / (2 * 15.0**2))
         return out
 
-    r = run(Geometry.from_preset("u-shape"), "u-shape", False, seed=seed, pose_error_fn=bump)
+    r = run(Geometry.from_preset("u-shape"), "u-shape", False, seed=fresh_seed(), pose_error_fn=bump)
     assert r.unexplained and not r.gap["closed"]
 
 
