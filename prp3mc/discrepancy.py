@@ -35,18 +35,19 @@ are controlled by Benjamini-Hochberg (maps) and Holm (decisions).
 
 Gap metric
 ----------
-``gap = 1 + (G_sys - 1) + (G_disp - 1)``, ``null_level`` 1. ``G_sys`` is the
-energy of the whitened residuals in the span of the whitened signatures of
-every visible systematic candidate not yet in the model, per degree of
-freedom (the span's rank): the residuals have covariance I when the model is
-right, so its mean is then exactly 1 whatever the error laws, and a missing
-systematic effect of the library adds its likelihood ratio / df.
+Two channels, each 1 when the model is right. ``G_sys`` is the energy of the
+whitened residuals in the span of the whitened signatures of every visible
+systematic candidate not yet in the model, per degree of freedom (the span's
+rank): the residuals have covariance I when the model is right, so its mean
+is then exactly 1 whatever the error laws, with sd about sqrt(2/df).
 ``G_disp = sum_p S_p / E[sum_p S_p]`` is the repeat scatter over its null
-mean. The null standard deviation combines sqrt(2/df) and the bootstrap
-variance of the scatter. The gap is *closed* when it, and the plain
-mean squared whitened residual of all measurements (``gap.residual``, which
-also sees disagreement outside the library), lie within 4 null standard
-deviations of 1 and nothing unexplained remains.
+mean, with the bootstrap null sd. With each standardised, ``z = (G - 1) / sd``,
+``gap = (z_sys^2 + z_disp^2) / 2``: about chi2(2)/2 when the model is right
+(``null_level`` 1, null sd 1), so both kinds of disagreement weigh alike. The
+gap is *closed* when it is at most 5 (0.7 % of null values lie above), the
+plain mean squared whitened residual of all measurements (``gap.residual``,
+which also sees disagreement outside the library) is within 4 null standard
+deviations of 1, and nothing unexplained remains.
 
 Naming
 ------
@@ -61,8 +62,9 @@ are refitted jointly and any accepted effect that is no longer significant
 (LR of removal below the chi2(1) quantile at ``alpha``) is dropped. Effects
 whose signature vanishes over the campaign (e.g. ``c_i`` and ``e_i`` when
 theta_i = 0) are reported as invisible and never named. When no candidate
-passes, remaining disagreement (global or per-pose tests at level
-``alpha``) sets ``unexplained``.
+passes, remaining disagreement (six global, per-pose, spatial and
+lack-of-fit tests at family-wise level ``alpha_unexplained``) sets
+``unexplained``.
 """
 
 from __future__ import annotations
@@ -625,6 +627,7 @@ class DiscrepancyResult:
         Effects the campaign cannot test, with the reason.
     seed, n_bootstrap : int
     alpha : float
+    alpha_unexplained : float
     instrument_sigma_mm, instrument_sigma_deg : float
     version : str
     wall_time_s : float
@@ -648,6 +651,7 @@ class DiscrepancyResult:
     seed: int
     n_bootstrap: int
     alpha: float
+    alpha_unexplained: float
     instrument_sigma_mm: float
     instrument_sigma_deg: float
     version: str = __version__
@@ -676,7 +680,7 @@ class DiscrepancyResult:
                          "n_poses": self.campaign.n_poses},
             "geometry": self.geometry.name, "budget": self.budget.name,
             "instrument_sigma_mm": self.instrument_sigma_mm, "instrument_sigma_deg": self.instrument_sigma_deg,
-            "alpha": self.alpha, "seed": self.seed, "n_bootstrap": self.n_bootstrap,
+            "alpha": self.alpha, "alpha_unexplained": self.alpha_unexplained, "seed": self.seed, "n_bootstrap": self.n_bootstrap,
             "version": self.version, "wall_time_s": self.wall_time_s,
         }
 
@@ -719,7 +723,8 @@ def _scan(engine: _Engine, fit: _Fit, excluded: set) -> pd.DataFrame:
 
 
 def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigma_mm: float = 0.0,
-                instrument_sigma_deg: float = 0.0, alpha: float = 0.01, max_effects: int = 6,
+                instrument_sigma_deg: float = 0.0, alpha: float = 0.01, alpha_unexplained: float = 0.05,
+                max_effects: int = 6,
                 n_bootstrap: int = 400, seed: "None | int" = None) -> DiscrepancyResult:
     """Find where model and campaign disagree, name the missing effects, close the gap.
 
@@ -733,8 +738,14 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     instrument_sigma_mm, instrument_sigma_deg : float
         Standard deviation of the measurement noise per coordinate.
     alpha : float
-        Family-wise level of the naming steps (Bonferroni over candidates)
-        and of the final test for unexplained disagreement.
+        Family-wise level of the naming steps (Bonferroni over candidates).
+    alpha_unexplained : float
+        Family-wise level (Bonferroni over its six tests) of the final test
+        for disagreement that the named effects leave unexplained. It is
+        looser than ``alpha`` because declaring a gap closed when structure
+        remains is the costlier error: on simulated campaigns (30 seeds each)
+        it flagged every local distortion outside the library, 1 of 30
+        correct models and none of 30 correctly named hidden effects.
     max_effects : int
         Most effects named.
     n_bootstrap : int
@@ -749,8 +760,8 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     t0 = time.perf_counter()
     seed = int(np.random.SeedSequence().entropy % (2**32)) if seed is None else int(seed)
     rng = np.random.default_rng(seed)
-    if not 0 < alpha < 1:
-        raise BudgetError(f"alpha must lie in (0, 1), got {alpha}")
+    if not (0 < alpha < 1 and 0 < alpha_unexplained < 1):
+        raise BudgetError(f"alpha and alpha_unexplained must lie in (0, 1), got {alpha}, {alpha_unexplained}")
     campaign = read_campaign(campaign, geometry)
     noise = _noise_cov(instrument_sigma_mm, instrument_sigma_deg)
     engine = _Engine(geometry, budget, campaign, noise)
@@ -813,26 +824,29 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     after = _diagnose(engine, fit, n_bootstrap, rng)
     s = after.summary
     tests = ("sys_p", "disp_p", "sys_holm_min", "disp_holm_min", "spatial_p", "lack_of_fit_p")
-    unexplained = bool(min(s[t] for t in tests) < alpha / len(tests))
+    unexplained = bool(min(s[t] for t in tests) < alpha_unexplained / len(tests))
     channels = {}
     for state, diag, state_fit in (("before", before, base), ("after", after, fit)):
         g_sys, sd_sys, df_sys = _systematic_gap(engine, state_fit)
         summ = diag.summary
         g_disp = summ["disp_stat"] / max(summ["disp_mean"], 1.0)
         sd_disp = summ["disp_null_sd"]
-        channels[state] = (g_sys + g_disp - 1.0, float(np.hypot(sd_sys, sd_disp)), g_sys, sd_sys, df_sys,
-                           g_disp, sd_disp)
+        z_sys = (g_sys - 1.0) / sd_sys if sd_sys > 0 else 0.0
+        z_disp = (g_disp - 1.0) / sd_disp if sd_disp > 0 else 0.0
+        channels[state] = {"value": 0.5 * (z_sys**2 + z_disp**2), "systematic": g_sys,
+                           "systematic_null_sd": sd_sys, "systematic_df": df_sys, "systematic_z": z_sys,
+                           "dispersion": g_disp, "dispersion_null_sd": sd_disp, "dispersion_z": z_disp}
     residual_closed = abs(s["gap"] - 1.0) <= 4.0 * s["gap_null_sd"]
-    g_after, sd_after = channels["after"][:2]
-    closed = bool(not unexplained and residual_closed and abs(g_after - 1.0) <= 4.0 * sd_after)
+    g_after = channels["after"]["value"]
+    closed = bool(not unexplained and residual_closed and g_after <= 5.0)
     gap = {
-        "metric": "1 + (G_sys - 1) + (G_disp - 1): G_sys is the whitened residual energy in the span of the "
-                  "library's systematic signatures per degree of freedom (exactly 1 on average when the model "
-                  "is right), G_disp the repeat scatter over its predicted null mean (1 when right)",
-        "before": channels["before"][0], "after": g_after, "null_level": 1.0,
-        "null_sd_before": channels["before"][1], "null_sd": sd_after, "closed": closed,
-        "channels": {state: {"systematic": v[2], "systematic_null_sd": v[3], "systematic_df": v[4],
-                             "dispersion": v[5], "dispersion_null_sd": v[6]} for state, v in channels.items()},
+        "metric": "(z_sys^2 + z_disp^2) / 2, the mean squared standardised deviation of the two channels from "
+                  "their null level: z_sys for G_sys, the whitened residual energy in the span of the library's "
+                  "systematic signatures per degree of freedom, z_disp for G_disp, the repeat scatter over its "
+                  "predicted mean (both G are 1 when the model is right); about chi2(2)/2 then, so null level 1, "
+                  "null sd 1; closed at <= 5 (null probability 0.7 % above)",
+        "before": channels["before"]["value"], "after": g_after, "null_level": 1.0, "null_sd": 1.0,
+        "closed": closed, "channels": channels,
         "residual": {"metric": "mean squared whitened residual per degree of freedom (chi2/dof of all "
                                "measurements under the model's predicted mean and covariance)",
                      "before": before.summary["gap"], "after": s["gap"], "null_level": 1.0,
@@ -851,7 +865,8 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
         prediction_after=prediction, budget_after=prediction.budget, systematic=systematic,
         invisible=engine.invisible, structural_aliases=tuple(tuple(g) for g in engine.structural_aliases()),
         not_testable=engine.not_testable, campaign=campaign, geometry=geometry, budget=budget, seed=seed,
-        n_bootstrap=n_bootstrap, alpha=alpha, instrument_sigma_mm=instrument_sigma_mm,
+        n_bootstrap=n_bootstrap, alpha=alpha, alpha_unexplained=alpha_unexplained,
+        instrument_sigma_mm=instrument_sigma_mm,
         instrument_sigma_deg=instrument_sigma_deg, wall_time_s=time.perf_counter() - t0)
 
 

@@ -101,26 +101,32 @@ def plot_temperature(result: DiscrepancyResult):
 
 
 def plot_gap(result: DiscrepancyResult):
-    """The gap and its two channels before and after, each with its null band (± 2 sd)."""
+    """The gap's two channels before and after, each with its null band (± 2 sd), and the gap itself."""
     plt = _plt()
     g = result.gap
     ch = g["channels"]
-    fig, ax = plt.subplots(figsize=(6.5, 3.8), constrained_layout=True)
-    labels = ["gap", "systematic\n(library span)", "dispersion\n(repeat scatter)"]
-    before = [g["before"], ch["before"]["systematic"], ch["before"]["dispersion"]]
-    after = [g["after"], ch["after"]["systematic"], ch["after"]["dispersion"]]
-    sds = [g["null_sd"], ch["after"]["systematic_null_sd"], ch["after"]["dispersion_null_sd"]]
-    x = np.arange(3)
-    ax.bar(x - 0.18, before, 0.36, label="before", color="tab:orange")
-    ax.bar(x + 0.18, after, 0.36, label="after", color="tab:green")
-    for xi, sd in zip(x, sds):
+    fig, axes = plt.subplots(1, 2, figsize=(9.0, 3.8), constrained_layout=True,
+                             gridspec_kw={"width_ratios": [2, 1]})
+    ax = axes[0]
+    labels = ["systematic G_sys\n(library span)", "dispersion G_disp\n(repeat scatter)"]
+    keys = ("systematic", "dispersion")
+    x = np.arange(2)
+    ax.bar(x - 0.18, [ch["before"][k] for k in keys], 0.36, label="before", color="tab:orange")
+    ax.bar(x + 0.18, [ch["after"][k] for k in keys], 0.36, label="after", color="tab:green")
+    for xi, k in zip(x, keys):
+        sd = ch["after"][f"{k}_null_sd"]
         ax.fill_between([xi - 0.45, xi + 0.45], 1 - 2 * sd, 1 + 2 * sd, color="gray", alpha=0.3,
                         label="null level ± 2 sd" if xi == 0 else None)
     ax.axhline(1.0, color="k", lw=0.8)
     ax.set_xticks(x, labels)
-    ax.set(ylabel="1 when the model is right", title="Gap " + ("closed" if g["closed"] else "NOT closed"))
-    if max(before) > 10:
-        ax.set_yscale("log")
+    ax.set(ylabel="1 when the model is right", title="channels")
+    ax.legend(fontsize=8)
+    ax = axes[1]
+    ax.bar([0, 1], [max(g["before"], 1e-3), max(g["after"], 1e-3)], color=["tab:orange", "tab:green"])
+    ax.axhline(1.0, color="k", lw=0.8)
+    ax.axhline(5.0, color="tab:red", ls="--", lw=0.8, label="closed below 5")
+    ax.set_xticks([0, 1], ["before", "after"])
+    ax.set(yscale="log", title="gap " + ("closed" if g["closed"] else "NOT closed") + " (null level 1)")
     ax.legend(fontsize=8)
     return fig
 
@@ -155,10 +161,10 @@ _CAPTIONS = {
                  "and approach direction, against the slider position: a zero offset shows as a shift, a lead error as "
                  "a slope, backlash as a split between red and blue.",
     "temperature": "Equivalent slider errors against temperature: a thermal expansion shows as a trend.",
-    "gap": "The gap, 1 + (G_sys - 1) + (G_disp - 1), and its channels before and after the named effects: "
-           "G_sys is the whitened residual energy in the span of the library's systematic signatures per "
-           "degree of freedom, G_disp the repeat scatter over its predicted null mean; both are 1 when the "
-           "model is right. Grey: the null level ± 2 standard deviations.",
+    "gap": "Left: the two channels before and after the named effects, G_sys (whitened residual energy in the "
+           "span of the library's systematic signatures per degree of freedom) and G_disp (repeat scatter over "
+           "its predicted mean), both 1 when the model is right; grey: null level ± 2 sd. Right: the gap, "
+           "(z_sys^2 + z_disp^2)/2 of the standardised channels, 1 when the model is right.",
     "candidates": "Evidence for each candidate effect at each step; green was accepted. Bars beyond the red "
                   "line pass the likelihood-ratio test corrected for the number of candidates.",
 }

@@ -21,7 +21,9 @@ class DiscrepancyCommand:
         p.add_argument("--instrument-sigma-deg", type=finite_float, default=0.0, metavar="S",
                        help="instrument noise sd of phi, deg (default 0)")
         p.add_argument("--alpha", type=finite_float, default=0.01, metavar="A",
-                       help="family-wise level of the naming and final tests (default 0.01)")
+                       help="family-wise level of the naming tests (default 0.01)")
+        p.add_argument("--alpha-unexplained", type=finite_float, default=0.05, metavar="A",
+                       help="family-wise level of the final test for unexplained disagreement (default 0.05)")
         p.add_argument("--seed", type=int, default=None, metavar="S",
                        help="seed of the bootstrap (default: fresh, recorded in the output)")
         add_json(p)
@@ -30,7 +32,8 @@ class DiscrepancyCommand:
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         result = discrepancy(geometry, budget, args.data, instrument_sigma_mm=args.instrument_sigma_mm,
-                             instrument_sigma_deg=args.instrument_sigma_deg, alpha=args.alpha, seed=args.seed)
+                             instrument_sigma_deg=args.instrument_sigma_deg, alpha=args.alpha,
+                             alpha_unexplained=args.alpha_unexplained, seed=args.seed)
         folder = write_report(result, args.out, force=args.force)
         if args.json:
             emit_json(result.to_dict())
@@ -43,7 +46,7 @@ class DiscrepancyCommand:
             lines.append(f"named {e.name} = {e.value:.4g} {e.unit}  95% CI [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]{alias}")
         if not result.named_effects:
             lines.append("named nothing: the model misses nothing this campaign can see")
-        lines.append(f"gap {g['before']:.3f} -> {g['after']:.3f} (null level 1, sd {g['null_sd']:.3f}); "
+        lines.append(f"gap {g['before']:.4g} -> {g['after']:.4g} (null level 1, closed below 5); "
                      f"{'closed' if g['closed'] else 'not closed'}"
                      + ("; UNEXPLAINED disagreement remains" if result.unexplained else ""))
         lines.append(f"report: {folder / 'report.html'}")
