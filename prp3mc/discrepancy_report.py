@@ -122,7 +122,7 @@ def plot_gap(result: DiscrepancyResult):
     ax.set(ylabel="1 when the model is right", title="channels")
     ax.legend(fontsize=8)
     ax = axes[1]
-    ax.bar([0, 1], [max(g["before"], 1e-3), max(g["after"], 1e-3)], color=["tab:orange", "tab:green"])
+    ax.bar([0, 1], [max(g["before"], 0.05), max(g["after"], 0.05)], color=["tab:orange", "tab:green"])
     ax.axhline(1.0, color="k", lw=0.8)
     ax.axhline(5.0, color="tab:red", ls="--", lw=0.8, label="closed below 5")
     ax.set_xticks([0, 1], ["before", "after"])
