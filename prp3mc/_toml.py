@@ -15,7 +15,7 @@ from typing import Any
 
 from .errors import InputFileError
 
-__all__ = ["load_toml", "loads_toml", "dumps_toml", "load_spec"]
+__all__ = ["load_toml", "loads_toml", "dumps_toml", "load_spec", "read_text_file"]
 
 
 def loads_toml(text: str, source: str = "<string>") -> dict[str, Any]:
@@ -26,16 +26,20 @@ def loads_toml(text: str, source: str = "<string>") -> dict[str, Any]:
         raise InputFileError(f"{source}: malformed TOML: {exc}") from None
 
 
-def load_toml(path: str | os.PathLike) -> dict[str, Any]:
-    """Read a TOML file, naming the file in any error."""
+def read_text_file(path: str | os.PathLike, error: type[Exception] = InputFileError, what: str = "file") -> str:
+    """The UTF-8 text of ``path``; a missing or unreadable file raises ``error`` naming it."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        return path.read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise InputFileError(f"{path}: no such file") from None
+        raise error(f"{path}: no such {what}") from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"{path}: cannot read: {exc}") from None
-    return loads_toml(text, str(path))
+        raise error(f"{path}: cannot read: {exc}") from None
+
+
+def load_toml(path: str | os.PathLike) -> dict[str, Any]:
+    """Read a TOML file, naming the file in any error."""
+    return loads_toml(read_text_file(path), str(path))
 
 
 def _scalar(value: Any) -> str:

@@ -66,6 +66,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from ._toml import read_text_file
 from ._version import __version__
 from .budget import Budget
 from .errors import Prp3mcError, StudyError, UnknownPresetError
@@ -170,12 +171,7 @@ class Study:
     def from_toml(cls, path: str | os.PathLike) -> "Study":
         """Read and validate a study file; mistakes raise StudyError naming the line."""
         path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise StudyError(f"{path}: no such study file") from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise StudyError(f"{path}: cannot read: {exc}") from None
+        text = read_text_file(path, StudyError, "study file")
         return cls.from_text(text, source=str(path), base=path.parent, default_name=path.stem)
 
     @classmethod
