@@ -224,7 +224,9 @@ class _Engine:
         onehot[self.idx, np.arange(self.M)] = 1.0
         self.pose_mean_op = onehot / self.n[:, None]                      # (P, M)
         self.edges = _neighbour_edges(campaign.poses)
-        self.probes = _probe_basis(geometry, campaign)
+        self.b_pose, _ = inverse_kinematics(geometry, campaign.poses, check=False)   # (P, 3) mm
+        self.Jb = sensitivity(geometry, campaign.poses, check=False).J["b"] * _DEG[:, None]  # (P, 3, 3)
+        self.probes = _probe_basis(campaign, self.b_pose, self.Jb)
 
     # -- model moments
     def moments(self, factors: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -365,7 +367,7 @@ def _neighbour_edges(poses: np.ndarray, k: int = 4) -> np.ndarray:
     return np.unique(np.sort(pairs, axis=1), axis=0)
 
 
-def _probe_basis(geometry: Geometry, campaign: Campaign) -> np.ndarray:
+def _probe_basis(campaign: Campaign, b_pose: np.ndarray, Jb: np.ndarray) -> np.ndarray:
     """Smooth lack-of-fit directions (M, 3, Q), [mm, mm, deg] per unit.
 
     Quadratic polynomials of the commanded pose for each output, cubic
@@ -382,9 +384,7 @@ def _probe_basis(geometry: Geometry, campaign: Campaign) -> np.ndarray:
     if c.temp_C is not None:
         t = c.temp_C - c.temp_C.mean()
         cols += [np.einsum("m,o->mo", t, np.eye(3)[o]) for o in range(3)]
-    b, _ = inverse_kinematics(geometry, c.poses, check=False)
-    Jb = sensitivity(geometry, c.poses, check=False).J["b"] * _DEG[:, None]
-    bm = b[c.pose_index]
+    bm = b_pose[c.pose_index]
     bspan = np.ptp(bm, axis=0)
     v = np.where(bspan > 0, 2.0 * (bm - bm.min(0)) / np.where(bspan > 0, bspan, 1.0) - 1.0, 0.0)
     for i in range(3):
@@ -547,8 +547,7 @@ def _diagnose(engine: _Engine, fit: _Fit, n_boot: int, rng) -> Diagnosis:
         "disp_ratio": ratio, "disp_p": disp_p, "disp_q": disp_q,
         "disp_direction": np.where(~has_rep, "n/a", np.where(S > mS, "larger", "smaller")),
     })
-    b, _ = inverse_kinematics(engine.geometry, c.poses, check=False)
-    Jb = sensitivity(engine.geometry, c.poses, check=False).J["b"] * _DEG[:, None]
+    b, Jb = engine.b_pose, engine.Jb
     db = np.linalg.solve(Jb[engine.idx], fit.resid[..., None])[..., 0]
     meas = pd.DataFrame({"pose_id": c.pose_id, "pose": engine.idx})
     for k, name in enumerate(("dx_um", "dy_um", "dphi_arcsec")):
@@ -686,10 +685,6 @@ class DiscrepancyResult:
 
 
 # --------------------------------------------------------------------------- workflow
-def _candidate_names(engine: _Engine) -> list[str]:
-    return [e.name for e in engine.systematic] + [e.name for e in engine.spreads]
-
-
 def _with(engine: _Engine, fit: _Fit, name: str) -> _Fit:
     """Refit ``fit``'s model with effect ``name`` added."""
     if effect(name).systematic:

@@ -74,6 +74,7 @@ from .geometry import REGION_PRESETS, Geometry, Region
 from .kinematics import check_poses
 from .model import linear_model
 from .montecarlo import PERCENTILES, MonteCarloResult, monte_carlo
+from .sobol import ranking, sobol_indices
 from .worstcase import WorstCase, worst_case
 
 __all__ = ["Study", "StudyConfiguration", "StudyResult", "ConfigurationResult", "PoseSamples",
@@ -684,7 +685,6 @@ def run_study(study: "Study | str | os.PathLike", *, seed: int | None = None, pr
             kw["samples"] = _pose_samples(config, b, wc, study.mc_samples, mc_seed, study.k_sigma)
             timings["montecarlo"] += time.perf_counter() - t
         if "sobol" in study.outputs:
-            from .sobol import ranking, sobol_indices
             nx, ny = study.sobol_grid
             stage(config, f"Sobol indices, N = {study.sobol_samples} on {nx} x {ny} poses")
             t = time.perf_counter()
