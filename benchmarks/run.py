@@ -17,7 +17,7 @@ from bench_sobol import bench_sobol
 
 import prp3mc
 from prp3mc import Budget, Geometry, Region, linear_model, monte_carlo, sensitivity, worst_case
-from prp3mc.crosscheck import optimizer_worst_case
+from prp3mc.uncertainty.crosscheck import optimizer_worst_case
 
 
 def best_of(fn, repeat: int) -> float:

@@ -14,26 +14,26 @@ from .errors import (
     BudgetError, CampaignError, ConvergenceError, GeometryError, InfeasiblePoseError,
     InputFileError, Prp3mcError, StudyError, UnknownPresetError,
 )
-from .exact import exact_pose_error, linear_pose_error, linearization_error_um
-from .geometry import Geometry, Region
-from .kinematics import (
+from .kinematics.exact import exact_pose_error, linear_pose_error, linearization_error_um
+from .kinematics.geometry import Geometry, Region
+from .kinematics.chain import (
     Limits, check_poses, feasible, forward_kinematics, inverse_kinematics, jacobian, jacobians,
 )
-from .sensitivity import FAMILIES, Sensitivity, sensitivity
+from .kinematics.sensitivity import FAMILIES, Sensitivity, sensitivity
 from ._version import __version__
-from .budget import Budget, Catalogue
-from .laws import Discrete, Disc, Normal, Triangular, TruncNormal, Uniform
-from .model import LinearModel, linear_model
-from .montecarlo import MonteCarloResult, closed_form_moments, monte_carlo
-from .worstcase import WorstCase, worst_case
-from .sobol import SobolResult, analytic_indices, ranking as sobol_ranking, sobol_converge, sobol_indices
-from .study import Study, StudyResult, run_study
-from .report import write_study
-from .summary import build_summary
-from .campaign import Campaign, read_campaign, simulate_campaign
-from .effects import EFFECT_NAMES, Effect, effect
-from .discrepancy import DiscrepancyResult, detectable_effect, discrepancy, predict
-from .discrepancy_report import write_report as write_discrepancy_report
+from .uncertainty.budget import Budget, Catalogue
+from .uncertainty.laws import Discrete, Disc, Normal, Triangular, TruncNormal, Uniform
+from .uncertainty.model import LinearModel, linear_model
+from .uncertainty.montecarlo import MonteCarloResult, closed_form_moments, monte_carlo
+from .uncertainty.worstcase import WorstCase, worst_case
+from .uncertainty.sobol import SobolResult, analytic_indices, ranking as sobol_ranking, sobol_converge, sobol_indices
+from .study.runner import Study, StudyResult, run_study
+from .reports.study_report import write_study
+from .study.summary import build_summary
+from .measurement.campaign import Campaign, read_campaign, simulate_campaign
+from .measurement.effects import EFFECT_NAMES, Effect, effect
+from .measurement.discrepancy import DiscrepancyResult, detectable_effect, discrepancy, predict
+from .reports.discrepancy_report import write_report as write_discrepancy_report
 
 __all__ = [
     "__version__",

@@ -6,7 +6,7 @@ from prp3mc import (
     Geometry, InfeasiblePoseError, Limits, Region, check_poses, feasible, forward_kinematics,
     inverse_kinematics, jacobian, jacobians, sensitivity,
 )
-from prp3mc.sensitivity import FAMILIES
+from prp3mc.kinematics.sensitivity import FAMILIES
 
 from .conftest import PRESETS
 

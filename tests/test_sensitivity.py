@@ -6,7 +6,7 @@ import pytest
 from prp3mc import (
     BudgetError, exact_pose_error, linear_pose_error, linearization_error_um, sensitivity,
 )
-from prp3mc.sensitivity import FAMILIES, LENGTH_FAMILIES
+from prp3mc.kinematics.sensitivity import FAMILIES, LENGTH_FAMILIES
 
 from .conftest import random_poses
 

@@ -10,7 +10,7 @@ from SALib.sample import sobol as sobol_sample
 from prp3mc import (Budget, BudgetError, Disc, Geometry, InfeasiblePoseError, Normal, Region, Triangular,
                     Uniform, closed_form_moments, linear_model, worst_case)
 from prp3mc.cli import main
-from prp3mc.sobol import (_design, _factors, analytic_indices, ranking, sobol_converge, sobol_indices)
+from prp3mc.uncertainty.sobol import (_design, _factors, analytic_indices, ranking, sobol_converge, sobol_indices)
 
 from .conftest import random_poses
 

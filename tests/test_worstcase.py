@@ -11,8 +11,8 @@ from prp3mc import (
     linear_model, linear_pose_error, worst_case,
 )
 from prp3mc.cli import main
-from prp3mc.crosscheck import optimizer_worst_case
-from prp3mc.montecarlo import sample_errors
+from prp3mc.uncertainty.crosscheck import optimizer_worst_case
+from prp3mc.uncertainty.montecarlo import sample_errors
 
 from .conftest import random_poses
 

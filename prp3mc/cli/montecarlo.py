@@ -1,9 +1,9 @@
 """``prp3mc montecarlo``: Monte Carlo statistics of the pose error at one pose (SPEC §6)."""
 
 from .._version import __version__
-from ..budget import Budget
-from ..geometry import Geometry
-from ..montecarlo import monte_carlo
+from ..uncertainty.budget import Budget
+from ..kinematics.geometry import Geometry
+from ..uncertainty.montecarlo import monte_carlo
 from . import (add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
                emit_json, finite_float)
 

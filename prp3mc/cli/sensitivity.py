@@ -1,8 +1,8 @@
 """``prp3mc sensitivity``: A, B and every J_q at one pose (SPEC §6)."""
 
 from .._version import __version__
-from ..geometry import Geometry
-from ..sensitivity import FAMILIES, sensitivity
+from ..kinematics.geometry import Geometry
+from ..kinematics.sensitivity import FAMILIES, sensitivity
 from . import LEGS, matrix_table, add_geometry, add_json, add_pose, command, emit_json
 
 

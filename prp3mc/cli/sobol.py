@@ -3,11 +3,11 @@
 import math
 
 from .._version import __version__
-from ..budget import Budget
+from ..uncertainty.budget import Budget
 from ..errors import BudgetError
-from ..geometry import Geometry
-from ..sobol import OUTPUTS, ranking, sobol_indices
-from ..worstcase import worst_case
+from ..kinematics.geometry import Geometry
+from ..uncertainty.sobol import OUTPUTS, ranking, sobol_indices
+from ..uncertainty.worstcase import worst_case
 from . import (add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
                emit_json, finite_float, positive_int)
 

@@ -4,8 +4,8 @@ import sys
 import time
 
 from ..output import check_output
-from ..report import write_study
-from ..study import Study, bundled_studies, run_study
+from ..reports.study_report import write_study
+from ..study.runner import Study, bundled_studies, run_study
 from . import add_progress, command
 
 

@@ -1,9 +1,9 @@
 """``prp3mc worstcase``: exact maximum of the linear model over the budget's box (SPEC §6)."""
 
 from .._version import __version__
-from ..budget import Budget
-from ..geometry import Geometry
-from ..worstcase import worst_case
+from ..uncertainty.budget import Budget
+from ..kinematics.geometry import Geometry
+from ..uncertainty.worstcase import worst_case
 from . import add_budget, add_geometry, add_json, add_pose, command, emit_json, finite_float
 
 

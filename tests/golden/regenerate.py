@@ -13,8 +13,8 @@ by more than its standard errors allow fails them.
 from pathlib import Path
 
 from prp3mc.output import write_json
-from prp3mc.study import Study, bundled_studies, run_study
-from prp3mc.summary import build_summary
+from prp3mc.study.runner import Study, bundled_studies, run_study
+from prp3mc.study.summary import build_summary
 
 GOLDEN_DIR = Path(__file__).resolve().parent
 GOLDEN_SEED = 12345

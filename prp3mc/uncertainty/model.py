@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .budget import Budget, parse_input
-from .geometry import Geometry
-from .kinematics import as_poses, frame, validated_frame
-from .sensitivity import LENGTH_FAMILIES, h_entries
+from ..kinematics.geometry import Geometry
+from ..kinematics.chain import as_poses, frame, validated_frame
+from ..kinematics.sensitivity import LENGTH_FAMILIES, h_entries
 
 __all__ = ["LinearModel", "linear_model"]
 

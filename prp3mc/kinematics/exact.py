@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import BudgetError
+from ..errors import BudgetError
 from .geometry import Geometry
-from .kinematics import as_poses, batch_last, frame, solve_closure, validated_frame
+from .chain import as_poses, batch_last, frame, solve_closure, validated_frame
 from .sensitivity import FAMILIES, LENGTH_FAMILIES, h_entries
 
 __all__ = ["exact_pose_error", "linear_pose_error", "linearization_error_um"]

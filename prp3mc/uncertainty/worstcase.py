@@ -27,10 +27,10 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from ._version import __version__
+from .._version import __version__
 from .budget import Budget, parse_input
-from .geometry import Geometry
-from .kinematics import as_poses
+from ..kinematics.geometry import Geometry
+from ..kinematics.chain import as_poses
 from .model import LinearModel, linear_model
 
 __all__ = ["WorstCase", "worst_case", "QUANTITIES"]

@@ -15,7 +15,7 @@ from typing import Any, ClassVar
 import numpy as np
 from scipy import special, stats
 
-from .errors import BudgetError
+from ..errors import BudgetError
 
 __all__ = ["Law", "Uniform", "Normal", "TruncNormal", "Triangular", "Disc", "Discrete", "law_from_dict", "LAWS"]
 

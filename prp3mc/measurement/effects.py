@@ -35,11 +35,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .budget import Budget
-from .errors import BudgetError
-from .geometry import Geometry
-from .kinematics import inverse_kinematics
-from .sensitivity import LENGTH_FAMILIES, sensitivity
+from ..uncertainty.budget import Budget
+from ..errors import BudgetError
+from ..kinematics.geometry import Geometry
+from ..kinematics.chain import inverse_kinematics
+from ..kinematics.sensitivity import LENGTH_FAMILIES, sensitivity
 
 __all__ = ["Effect", "EFFECT_NAMES", "OFFSET_FAMILIES", "SPREAD_FAMILIES", "effect", "library",
            "signatures", "slider_error", "offset_errors", "spread_reference", "spread_budget",

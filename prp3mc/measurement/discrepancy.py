@@ -76,16 +76,16 @@ import numpy as np
 import pandas as pd
 from scipy import optimize, stats
 
-from ._version import __version__
-from .budget import Budget
+from .._version import __version__
+from ..uncertainty.budget import Budget
 from .campaign import Campaign, read_campaign
 from .effects import EFFECT_NAMES, effect, library, signatures, spread_budget, spread_reference
-from .errors import BudgetError
-from .geometry import Geometry
-from .kinematics import inverse_kinematics
-from .model import linear_model
-from .montecarlo import closed_form_moments
-from .sensitivity import sensitivity
+from ..errors import BudgetError
+from ..kinematics.geometry import Geometry
+from ..kinematics.chain import inverse_kinematics
+from ..uncertainty.model import linear_model
+from ..uncertainty.montecarlo import closed_form_moments
+from ..kinematics.sensitivity import sensitivity
 
 __all__ = ["Prediction", "predict", "NamedEffect", "Diagnosis", "DiscrepancyResult", "discrepancy",
            "detectable_effect"]

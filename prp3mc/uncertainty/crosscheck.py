@@ -16,9 +16,9 @@ import numpy as np
 from scipy.optimize import differential_evolution
 
 from .budget import Budget
-from .exact import exact_pose_error
-from .geometry import Geometry
-from .kinematics import as_poses, check_poses
+from ..kinematics.exact import exact_pose_error
+from ..kinematics.geometry import Geometry
+from ..kinematics.chain import as_poses, check_poses
 from .montecarlo import sample_errors
 
 __all__ = ["OptimizerResult", "optimizer_worst_case"]

@@ -53,12 +53,12 @@ import numpy as np
 import pandas as pd
 from scipy import integrate, stats
 
-from ._version import __version__
+from .._version import __version__
 from .budget import Budget, parse_input
-from .errors import BudgetError
-from .geometry import Geometry
+from ..errors import BudgetError
+from ..kinematics.geometry import Geometry
 from .model import LinearModel, linear_model
-from .progress import Progress
+from ..progress import Progress
 from .worstcase import WorstCase
 
 __all__ = ["SobolResult", "sobol_indices", "analytic_indices", "ranking", "sobol_converge", "OUTPUTS"]

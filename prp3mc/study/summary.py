@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .study import ConfigurationResult, StudyResult, pct_se
+from .runner import ConfigurationResult, StudyResult, pct_se
 
 __all__ = ["build_summary"]
 

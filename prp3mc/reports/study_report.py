@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .output import check_output, figure_data_uri, output_folder, save_figure, write_json, write_text
-from .study import StudyResult
-from .summary import build_summary
+from ..output import check_output, figure_data_uri, output_folder, save_figure, write_json, write_text
+from ..study.runner import StudyResult
+from ..study.summary import build_summary
 
 __all__ = ["write_study", "render_report", "comparison"]
 
@@ -168,7 +168,7 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
                   summary: dict) -> str:
     """The report as one HTML string; ``figures`` are (name, caption, data URI)."""
     import jinja2
-    env = jinja2.Environment(loader=jinja2.PackageLoader("prp3mc", "templates"),
+    env = jinja2.Environment(loader=jinja2.PackageLoader("prp3mc.reports", "templates"),
                              autoescape=jinja2.select_autoescape(["html", "j2"]))
     study = result.study
     meta = result.metadata()

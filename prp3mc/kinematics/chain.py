@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .errors import ConvergenceError, InfeasiblePoseError
+from ..errors import ConvergenceError, InfeasiblePoseError
 from .geometry import Geometry
 
 __all__ = [

@@ -66,24 +66,25 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ._toml import read_text_file
-from ._version import __version__
-from .budget import Budget
-from .errors import Prp3mcError, StudyError, UnknownPresetError
-from .geometry import REGION_PRESETS, Geometry, Region
-from .kinematics import check_poses
-from .model import linear_model
-from .montecarlo import PERCENTILES, MonteCarloResult, monte_carlo
-from .sobol import ranking, sobol_indices
-from .worstcase import WorstCase, worst_case
+from .._toml import read_text_file
+from .._version import __version__
+from ..uncertainty.budget import Budget
+from ..errors import Prp3mcError, StudyError, UnknownPresetError
+from ..kinematics.geometry import REGION_PRESETS, Geometry, Region
+from ..kinematics.chain import check_poses
+from ..uncertainty.model import linear_model
+from ..uncertainty.montecarlo import PERCENTILES, MonteCarloResult, monte_carlo
+from ..uncertainty.sobol import ranking, sobol_indices
+from ..uncertainty.worstcase import WorstCase, worst_case
 
 __all__ = ["Study", "StudyConfiguration", "StudyResult", "ConfigurationResult", "PoseSamples",
            "run_study", "bundled_studies", "STUDIES_DIR", "ANALYSES"]
 
 def _studies_dir() -> Path:
     """The bundled studies: ``studies/`` of the source tree, installed as ``prp3mc/studies``."""
-    installed = Path(__file__).resolve().parent / "studies"
-    return installed if installed.is_dir() else Path(__file__).resolve().parent.parent / "studies"
+    package = Path(__file__).resolve().parent.parent          # prp3mc/
+    installed = package / "studies"
+    return installed if installed.is_dir() else package.parent / "studies"
 
 
 #: Folder of the bundled studies.

@@ -18,9 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from ._toml import dumps_toml, load_spec, load_toml
-from .output import write_text
-from .errors import GeometryError, UnknownPresetError
+from .._toml import dumps_toml, load_spec, load_toml
+from ..output import write_text
+from ..errors import GeometryError, UnknownPresetError
 
 __all__ = ["Geometry", "Region", "LENGTHS", "ANGLES", "GEOMETRY_PRESETS", "REGION_PRESETS"]
 

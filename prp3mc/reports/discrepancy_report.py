@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .discrepancy import Diagnosis, DiscrepancyResult
-from .output import figure_data_uri, output_folder, save_figure, write_json, write_text
+from ..measurement.discrepancy import Diagnosis, DiscrepancyResult
+from ..output import figure_data_uri, output_folder, save_figure, write_json, write_text
 
 __all__ = ["plot_workspace", "plot_actuators", "plot_temperature", "plot_gap", "plot_candidates",
            "write_report", "render_html"]
@@ -173,7 +173,7 @@ _CAPTIONS = {
 def render_html(result: DiscrepancyResult, figures: dict) -> str:
     """The HTML report; ``figures`` maps figure names to data URIs."""
     import jinja2
-    text = resources.files("prp3mc").joinpath("templates/discrepancy.html.j2").read_text(encoding="utf-8")
+    text = resources.files("prp3mc.reports").joinpath("templates/discrepancy.html.j2").read_text(encoding="utf-8")
     env = jinja2.Environment(autoescape=True, undefined=jinja2.StrictUndefined)
     top = result.before.poses.nlargest(8, "sys_stat")[
         ["pose_id", "x_mm", "y_mm", "phi_deg", "n", "dx_um", "dy_um", "dphi_arcsec", "sys_q", "disp_ratio"]]

@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 
 from .geometry import Geometry
-from .kinematics import (
+from .chain import (
     DEFAULT_LIMITS, Frame, Limits, _diag, as_poses, batch_last, frame, legs_first, validated_frame,
 )
 

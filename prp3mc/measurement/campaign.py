@@ -27,14 +27,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ._version import __version__
-from .budget import Budget
+from .._version import __version__
+from ..uncertainty.budget import Budget
 from .effects import effect, offset_errors, slider_error, spread_budget
-from .errors import CampaignError, InputFileError
-from .exact import exact_pose_error
-from .geometry import Geometry
-from .kinematics import as_poses, check_poses, feasible, inverse_kinematics
-from .montecarlo import sample_errors
+from ..errors import CampaignError, InputFileError
+from ..kinematics.exact import exact_pose_error
+from ..kinematics.geometry import Geometry
+from ..kinematics.chain import as_poses, check_poses, feasible, inverse_kinematics
+from ..uncertainty.montecarlo import sample_errors
 
 __all__ = ["Campaign", "read_campaign", "simulate_campaign", "REQUIRED_COLUMNS", "MAX_ERROR"]
 

@@ -17,11 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from ._toml import dumps_toml, load_spec, load_toml, loads_toml
-from .output import write_text
-from .errors import BudgetError, UnknownPresetError
+from .._toml import dumps_toml, load_spec, load_toml, loads_toml
+from ..output import write_text
+from ..errors import BudgetError, UnknownPresetError
 from .laws import Law, law_from_dict
-from .sensitivity import LENGTH_FAMILIES
+from ..kinematics.sensitivity import LENGTH_FAMILIES
 
 __all__ = ["Budget", "Catalogue", "input_unit", "parse_input", "BUDGET_PRESETS"]
 

@@ -21,13 +21,13 @@ import numpy as np
 import pandas as pd
 from scipy import integrate, stats
 
-from ._version import __version__
+from .._version import __version__
 from .budget import Budget, parse_input
-from .errors import BudgetError
-from .exact import exact_pose_error
-from .geometry import Geometry
+from ..errors import BudgetError
+from ..kinematics.exact import exact_pose_error
+from ..kinematics.geometry import Geometry
 from .model import LinearModel, linear_model
-from .progress import Progress
+from ..progress import Progress
 
 __all__ = ["MonteCarloResult", "monte_carlo", "closed_form_moments", "PERCENTILES"]
 

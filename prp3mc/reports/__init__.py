@@ -1,0 +1,8 @@
+"""Reports: figures and self-contained HTML reports built from result objects.
+
+- :mod:`~prp3mc.reports.plots` — figures of results; every function takes ``ax=`` and returns the Figure.
+- :mod:`~prp3mc.reports.study_report` — a study's report folder.
+- :mod:`~prp3mc.reports.discrepancy_report` — a discrepancy analysis's report folder.
+
+The only wing that imports matplotlib (lazily, and never switches the backend).
+"""
