@@ -1,0 +1,39 @@
+"""One home for unit conversions, confidence levels and the names of outputs.
+
+Units are mm and degrees at every boundary, radians inside; reports show
+µm and arcsec, spelled so.
+"""
+
+from __future__ import annotations
+
+import math
+
+from scipy import stats
+
+__all__ = ["RAD2DEG", "DEG2RAD", "MM2UM", "DEG2ARCSEC", "POSE_OUTPUTS", "OUTPUTS", "OUTPUT_UNITS",
+           "DISPLAY", "z_value", "Z95"]
+
+RAD2DEG = 180.0 / math.pi
+DEG2RAD = math.pi / 180.0
+MM2UM = 1e3
+DEG2ARCSEC = 3600.0
+
+#: Components of the pose error, in order: rows of every J_q.
+POSE_OUTPUTS = ("x", "y", "phi")
+#: Every scalar output an analysis reports: the components and the position-error norm.
+OUTPUTS = ("x", "y", "phi", "position")
+#: Unit of each output at the boundary.
+OUTPUT_UNITS = {"x": "mm", "y": "mm", "phi": "deg", "position": "mm"}
+#: Display scale and unit of each output in reports: (factor from the boundary unit, unit).
+DISPLAY = {"x": (MM2UM, "µm"), "y": (MM2UM, "µm"), "phi": (DEG2ARCSEC, "arcsec"), "position": (MM2UM, "µm")}
+
+
+def z_value(level: float = 0.95) -> float:
+    """Two-sided standard-normal quantile for a confidence ``level`` in (0, 1)."""
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"confidence level must lie in (0, 1), got {level}")
+    return float(stats.norm.ppf(0.5 + level / 2))
+
+
+#: The 95 % two-sided normal quantile, 1.959964...
+Z95 = z_value(0.95)
