@@ -30,7 +30,7 @@ def _pipeline(n_samples: int) -> tuple[float, float]:
     t0 = time.perf_counter()
     for preset in PRESETS:
         geometry, grid = Geometry.from_preset(preset), Region.from_preset(preset).grid(21)
-        result = sobol_indices(geometry, budget, grid, n_samples, seed=1, method="vectorised")
+        result = sobol_indices(geometry, budget, grid, n_samples, rng=1, method="vectorised")
         wc = worst_case(geometry, budget, grid)
         for output in result.outputs:
             ranking(result, wc, output)
@@ -48,7 +48,7 @@ def bench_sobol(quick: bool) -> dict:
     timed = {}
     for method in ("salib", "vectorised"):
         t0 = time.perf_counter()
-        sobol_indices(geometry, budget, poses, n_samples, seed=1, method=method)
+        sobol_indices(geometry, budget, poses, n_samples, rng=1, method=method)
         timed[method] = time.perf_counter() - t0
     n_grid = len(PRESETS) * 21 * 21
     salib = (timed["salib"] - timed["vectorised"]) / len(poses) * n_grid

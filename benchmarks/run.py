@@ -54,7 +54,7 @@ def bench_worstcase(quick: bool) -> dict:
     rate = grid[..., 0].size / t
     region = Region.from_preset("u-shape")
     poses = region.grid(2 if quick else 3).reshape(-1, 3)[: 2 if quick else 5]
-    runs = [optimizer_worst_case(g, budget, p, seed=k, maxiter=100 if quick else 300) for k, p in enumerate(poses)]
+    runs = [optimizer_worst_case(g, budget, p, rng=k, maxiter=100 if quick else 300) for k, p in enumerate(poses)]
     exact = worst_case(g, budget, poses).position_mm
     found = np.array([r.position_mm for r in runs])
     de_s = float(np.mean([r.seconds for r in runs]))
@@ -95,8 +95,8 @@ def bench_montecarlo(quick: bool) -> dict:
     g, budget = Geometry.from_preset("u-shape"), Budget.from_preset("paper")
     grid = Region.from_preset("u-shape").grid(21)
     n = 200_000 if quick else 1_000_000
-    monte_carlo(g, budget, grid, 20_000, seed=0)  # warm-up
-    t = best_of(lambda: monte_carlo(g, budget, grid, n, seed=1), 1 if quick else 3)
+    monte_carlo(g, budget, grid, 20_000, rng=0)  # warm-up
+    t = best_of(lambda: monte_carlo(g, budget, grid, n, rng=1), 1 if quick else 3)
     n_naive = 500 if quick else 2000
     t_naive = best_of(lambda: naive_monte_carlo(g, budget, grid, n_naive), 1)
     rate, naive = grid[..., 0].size * n / t, grid[..., 0].size * n_naive / t_naive

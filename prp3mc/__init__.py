@@ -24,7 +24,7 @@ from ._version import __version__
 from .uncertainty.budget import Budget, Catalogue
 from .uncertainty.laws import Discrete, Disc, Normal, Triangular, TruncNormal, Uniform
 from .uncertainty.model import LinearModel, linear_model
-from .uncertainty.montecarlo import MonteCarloResult, closed_form_moments, monte_carlo
+from .uncertainty.montecarlo import MonteCarloResult, monte_carlo
 from .uncertainty.worstcase import WorstCase, worst_case
 from .uncertainty.sobol import SobolResult, analytic_indices, ranking as sobol_ranking, sobol_converge, sobol_indices
 from .study.runner import Study, StudyResult, run_study
@@ -42,7 +42,7 @@ __all__ = [
     "FAMILIES", "Sensitivity", "sensitivity",
     "exact_pose_error", "linear_pose_error", "linearization_error_um",
     "Budget", "Catalogue", "Uniform", "Normal", "TruncNormal", "Triangular", "Disc", "Discrete",
-    "LinearModel", "linear_model", "MonteCarloResult", "monte_carlo", "closed_form_moments",
+    "LinearModel", "linear_model", "MonteCarloResult", "monte_carlo",
     "WorstCase", "worst_case",
     "SobolResult", "sobol_indices", "analytic_indices", "sobol_ranking", "sobol_converge",
     "Study", "StudyResult", "run_study", "write_study", "build_summary",

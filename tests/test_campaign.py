@@ -21,12 +21,12 @@ def setup():
 @pytest.fixture
 def frame(setup):
     g, b, poses = setup
-    return simulate_campaign(g, b, poses, 2, seed=5).to_frame()
+    return simulate_campaign(g, b, poses, 2, rng=5).to_frame()
 
 
 def test_round_trip_csv(setup, tmp_path):
     g, b, poses = setup
-    c = simulate_campaign(g, b, poses, 3, seed=1)
+    c = simulate_campaign(g, b, poses, 3, rng=1)
     path = tmp_path / "c.csv"
     c.to_csv(path)
     back = read_campaign(path, g)
@@ -103,8 +103,8 @@ def test_effect_names_and_units():
 
 def test_simulator_is_reproducible_and_records(setup):
     g, b, poses = setup
-    a = simulate_campaign(g, b, poses, 2, effects={"b_1": 0.02}, seed=9)
-    c = simulate_campaign(g, b, poses, 2, effects={"b_1": 0.02}, seed=9)
+    a = simulate_campaign(g, b, poses, 2, effects={"b_1": 0.02}, rng=9)
+    c = simulate_campaign(g, b, poses, 2, effects={"b_1": 0.02}, rng=9)
     np.testing.assert_array_equal(a.measured, c.measured)
     assert a.metadata["seed"] == 9 and a.metadata["effects"] == {"b_1": 0.02}
     assert isinstance(simulate_campaign(g, b, poses, 1).metadata["seed"], int)
@@ -122,7 +122,7 @@ def test_simulator_matches_prediction(setup, effects):
     pose = np.array([[10.0, 110.0, 2.0]])
     n = 4000
     c = simulate_campaign(g, b, pose, n, effects=effects, approach="positive", temp_drift_C=(24.0, 24.0),
-                          instrument_sigma_mm=0.002, instrument_sigma_deg=0.0005, seed=11)
+                          instrument_sigma_mm=0.002, instrument_sigma_deg=0.0005, rng=11)
     pred = predict(g, b, c, effects=effects, instrument_sigma_mm=0.002, instrument_sigma_deg=0.0005)
     err = c.error
     sd = np.sqrt(np.diag(pred.cov[0]))
@@ -134,7 +134,7 @@ def test_simulator_matches_prediction(setup, effects):
 
 def test_sequence_and_one_sided_approach(setup):
     g, b, poses = setup
-    c = simulate_campaign(g, b, poses, 3, approach="sequence", seed=2)
+    c = simulate_campaign(g, b, poses, 3, approach="sequence", rng=2)
     assert set(np.unique(c.direction)) <= {-1.0, 1.0}
-    assert np.all(simulate_campaign(g, b, poses, 1, approach="negative", seed=2).direction == -1)
+    assert np.all(simulate_campaign(g, b, poses, 1, approach="negative", rng=2).direction == -1)
     assert isinstance(c, Campaign) and isinstance(c.to_frame(), pd.DataFrame)

@@ -24,10 +24,10 @@ def campaign_poses(preset: str, vary_phi: bool) -> np.ndarray:
     return poses
 
 
-def run(geometry, preset, vary_phi, seed, **kwargs):
+def run(geometry, preset, vary_phi, rng, **kwargs):
     """49 poses x 8 repeats, both approach directions, 20 -> 28 degC, instrument noise 2 um / 0.0005 deg."""
-    c = simulate_campaign(geometry, BUDGET, campaign_poses(preset, vary_phi), 8, seed=seed, **SIGMA, **kwargs)
-    return discrepancy(geometry, BUDGET, c, seed=seed, **SIGMA)
+    c = simulate_campaign(geometry, BUDGET, campaign_poses(preset, vary_phi), 8, rng=rng, **SIGMA, **kwargs)
+    return discrepancy(geometry, BUDGET, c, rng=rng, **SIGMA)
 
 
 def fresh_seed() -> int:
@@ -74,7 +74,7 @@ def test_hidden_effect_is_named_and_gap_closes(name, value, where, vary_phi):
     geometry, preset = {"delta": (Geometry.from_preset("delta-shape"), "delta-shape"),
                         "u-shape": (Geometry.from_preset("u-shape"), "u-shape"),
                         "tilted": (TILTED, "delta-shape")}[where]
-    r = run(geometry, preset, vary_phi, seed=7, effects={name: value})
+    r = run(geometry, preset, vary_phi, rng=7, effects={name: value})
     assert len(r.named_effects) == 1, r.to_frame()
     fit = fit_of(r, name)
     assert fit is not None, r.to_frame()
@@ -89,13 +89,13 @@ def test_hidden_effect_is_named_and_gap_closes(name, value, where, vary_phi):
 
 
 def test_invisible_effects_are_reported_never_named():
-    r = run(Geometry.from_preset("u-shape"), "u-shape", False, seed=3, effects={"c_2": 0.05})
+    r = run(Geometry.from_preset("u-shape"), "u-shape", False, rng=3, effects={"c_2": 0.05})
     assert {"c_1", "c_2", "c_3", "e_1", "e_2", "e_3"} <= set(r.invisible)
     assert not r.named_effects and not r.unexplained
 
 
 def test_two_effects_at_once():
-    r = run(Geometry.from_preset("u-shape"), "u-shape", True, seed=4,
+    r = run(Geometry.from_preset("u-shape"), "u-shape", True, rng=4,
             effects={"backlash_1": 0.03, "spread_theta_3": 0.1})
     for name, value in (("backlash_1", 0.03), ("spread_theta_3", 0.1)):
         assert covers(fit_of(r, name)[1], value)
@@ -104,7 +104,7 @@ def test_two_effects_at_once():
 
 def test_nothing_hidden_names_nothing_fast():
     for preset, seed in (("u-shape", 1), ("delta-shape", 2)):
-        r = run(Geometry.from_preset(preset), preset, preset == "u-shape", seed=seed)
+        r = run(Geometry.from_preset(preset), preset, preset == "u-shape", rng=seed)
         assert not r.named_effects and r.to_frame().empty
         assert r.gap["after"] <= 5
 
@@ -114,7 +114,7 @@ def test_nothing_hidden_names_nothing_in_95_percent_of_seeds():
     """Binomial slack: with a false naming rate of 5 %, 40 seeds give <= 2 namings with probability 0.68;
     the workflow's rate is about 1 % (Bonferroni at alpha = 0.01), which gives <= 2 with probability 0.99."""
     geometry = Geometry.from_preset("delta-shape")
-    named = sum(bool(run(geometry, "delta-shape", True, seed=100 + s).named_effects) for s in range(40))
+    named = sum(bool(run(geometry, "delta-shape", True, rng=100 + s).named_effects) for s in range(40))
     assert named <= 2
 
 
@@ -128,19 +128,19 @@ def test_effect_outside_library_is_never_a_wrong_name_with_gap_closed(seed):
         out[:, 0] = 0.04 * np.exp(-((cmd[:, 0] - x0) ** 2 + (cmd[:, 1] - y0) ** 2) / (2 * 15.0**2))
         return out
 
-    r = run(Geometry.from_preset("u-shape"), "u-shape", False, seed=seed, pose_error_fn=bump)
+    r = run(Geometry.from_preset("u-shape"), "u-shape", False, rng=seed, pose_error_fn=bump)
     assert not (r.named_effects and r.gap["closed"])     # never a (necessarily wrong) name with the gap closed
     assert r.unexplained
 
 
 def test_runs_under_a_minute_on_400_measurements():
-    r = run(Geometry.from_preset("delta-shape"), "delta-shape", True, seed=5, effects={"scale_1": 2e-4})
+    r = run(Geometry.from_preset("delta-shape"), "delta-shape", True, rng=5, effects={"scale_1": 2e-4})
     assert r.campaign.n_measurements == 392 and r.wall_time_s < 60.0
 
 
 def test_detectable_effect_planning():
     g = Geometry.from_preset("u-shape")
-    c = simulate_campaign(g, BUDGET, campaign_poses("u-shape", True), 8, seed=1, **SIGMA)
+    c = simulate_campaign(g, BUDGET, campaign_poses("u-shape", True), 8, rng=1, **SIGMA)
     small = detectable_effect(g, BUDGET, c, "backlash_2", power=0.5, **SIGMA)
     large = detectable_effect(g, BUDGET, c, "backlash_2", power=0.99, **SIGMA)
     assert 0 < small < large < 0.03
@@ -149,7 +149,7 @@ def test_detectable_effect_planning():
 
 def test_cli_and_report(tmp_path, capsys):
     g = Geometry.from_preset("u-shape")
-    c = simulate_campaign(g, BUDGET, campaign_poses("u-shape", True), 4, effects={"backlash_2": 0.04}, seed=8, **SIGMA)
+    c = simulate_campaign(g, BUDGET, campaign_poses("u-shape", True), 4, effects={"backlash_2": 0.04}, rng=8, **SIGMA)
     data = tmp_path / "c.csv"
     c.to_csv(data)
     out = tmp_path / "rep"
@@ -174,9 +174,9 @@ def test_cli_and_report(tmp_path, capsys):
 
 def test_report_without_optional_columns(tmp_path):
     g = Geometry.from_preset("delta-shape")
-    c = simulate_campaign(g, BUDGET, campaign_poses("delta-shape", False), 3, temp_drift_C=None, seed=2, **SIGMA)
+    c = simulate_campaign(g, BUDGET, campaign_poses("delta-shape", False), 3, temp_drift_C=None, rng=2, **SIGMA)
     frame = c.to_frame().drop(columns=["dir_1", "dir_2", "dir_3"])
-    r = discrepancy(g, BUDGET, frame, seed=1, **SIGMA)
+    r = discrepancy(g, BUDGET, frame, rng=1, **SIGMA)
     assert "thermal" in r.not_testable and "backlash_1" in r.not_testable
     write_report(r, tmp_path / "rep")
     assert not (tmp_path / "rep" / "temperature.png").exists()

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from prp3mc import Budget, BudgetError, Geometry, Uniform, closed_form_moments, linear_model, monte_carlo
+from prp3mc import Budget, BudgetError, Geometry, Uniform, linear_model, monte_carlo
 from prp3mc.cli import main
 
 from .conftest import random_poses
@@ -22,8 +22,8 @@ def fresh_seed() -> int:
 
 def test_moments_agree_with_closed_forms(geometry, region):
     poses = random_poses(region, 8, np.random.default_rng())
-    r = monte_carlo(geometry, PAPER, poses, 200_000, seed=fresh_seed())
-    mean, cov = closed_form_moments(linear_model(geometry, PAPER, poses))
+    r = monte_carlo(geometry, PAPER, poses, 200_000, rng=fresh_seed())
+    mean, cov = linear_model(geometry, PAPER, poses).moments()
     assert np.all(np.abs(r.mean - mean) < N_SE * r.mean_se)
     std = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
     assert np.all(np.abs(r.std - std) < N_SE * r.std_se)
@@ -38,8 +38,8 @@ def test_other_laws_closed_forms(geometry):
                            b_3=Discrete((0.0, 0.01, 0.02), (0.6, 0.3, 0.1)), theta_3=TruncNormal(0.0, 0.04, 1.0),
                            zeta_2=Uniform(0.0, 90.0))
     pose = np.array([0.0, 100.0, 1.0]) if geometry.name == "u-shape" else np.array([0.0, 160.0, 1.0])
-    r = monte_carlo(geometry, budget, pose, 200_000, seed=fresh_seed())
-    mean, cov = closed_form_moments(linear_model(geometry, budget, pose))
+    r = monte_carlo(geometry, budget, pose, 200_000, rng=fresh_seed())
+    mean, cov = linear_model(geometry, budget, pose).moments()
     assert np.all(np.abs(r.mean - mean) < N_SE * r.mean_se)
     assert np.all(np.abs(r.std - np.sqrt(np.diag(cov))) < N_SE * r.std_se)
 
@@ -48,7 +48,7 @@ def test_percentiles_equal_brute_force_on_same_samples(geometry, region):
     """Streaming order statistics equal numpy's percentiles of the same samples."""
     poses = region.grid(3)
     seed = fresh_seed()
-    r = monte_carlo(geometry, PAPER, poses, 30_001, seed=seed, tolerance_mm=0.08, max_chunk_bytes=1 << 18)
+    r = monte_carlo(geometry, PAPER, poses, 30_001, rng=seed, tolerance_mm=0.08, max_chunk_bytes=1 << 18)
     E = linear_model(geometry, PAPER, poses).evaluate(PAPER.sample(30_001, seed))
     pos = np.hypot(E[..., 0], E[..., 1])
     phi = np.rad2deg(np.abs(E[..., 2]))
@@ -77,7 +77,7 @@ def test_confidence_intervals_cover_the_truth():
     reps, hits = 300, np.zeros(3)
     rng = np.random.default_rng()
     for _ in range(reps):
-        r = monte_carlo(g, budget, pose, 2000, seed=int(rng.integers(2**32)), tolerance_mm=tol)
+        r = monte_carlo(g, budget, pose, 2000, rng=int(rng.integers(2**32)), tolerance_mm=tol)
         lo, hi = r.position_pct_ci[1]
         hits += [lo <= true_p95 <= hi,
                  abs(r.position_mean - true_mean) <= 1.96 * r.position_mean_se,
@@ -88,12 +88,12 @@ def test_confidence_intervals_cover_the_truth():
 
 def test_reproducible_and_recorded(geometry, region):
     poses = region.grid(2)
-    a = monte_carlo(geometry, PAPER, poses, 5000, seed=11)
-    b = monte_carlo(geometry, PAPER, poses, 5000, seed=11, max_chunk_bytes=1 << 16, workers=1)
+    a = monte_carlo(geometry, PAPER, poses, 5000, rng=11)
+    b = monte_carlo(geometry, PAPER, poses, 5000, rng=11, max_chunk_bytes=1 << 16, workers=1)
     np.testing.assert_array_equal(a.position_pct, b.position_pct)
     np.testing.assert_array_equal(a.mean, b.mean)
     c = monte_carlo(geometry, PAPER, poses, 5000)
-    d = monte_carlo(geometry, PAPER, poses, 5000, seed=c.seed)
+    d = monte_carlo(geometry, PAPER, poses, 5000, rng=c.seed)
     np.testing.assert_array_equal(c.position_pct, d.position_pct)
     assert a.metadata()["seed"] == 11 and a.metadata()["n_samples"] == 5000
     assert a.metadata()["prp3mc_version"] == __import__("prp3mc").__version__
@@ -103,7 +103,7 @@ def test_reproducible_and_recorded(geometry, region):
 
 
 def test_linearization_check(geometry, region):
-    r = monte_carlo(geometry, PAPER, region.grid(3), 2000, seed=1, exact_check_poses=3, exact_check_samples=500)
+    r = monte_carlo(geometry, PAPER, region.grid(3), 2000, rng=1, exact_check_poses=3, exact_check_samples=500)
     lin = r.linearization
     assert len(lin) == 3
     assert (lin["position_max_um"] < 1.0).all()        # < 1 µm at the paper's magnitudes
@@ -112,7 +112,7 @@ def test_linearization_check(geometry, region):
 
 def test_zero_budget_gives_zero_error(geometry):
     budget = Budget({"theta_1": Uniform(0.0, 0.0)})
-    r = monte_carlo(geometry, budget, [0.0, 130.0, 0.0], 1000, seed=1)
+    r = monte_carlo(geometry, budget, [0.0, 130.0, 0.0], 1000, rng=1)
     assert float(r.position_max) == 0.0 and np.all(r.std == 0.0)
 
 
@@ -134,7 +134,7 @@ def test_cli_montecarlo_json(capsys):
     doc = json.loads(capsys.readouterr().out)
     assert set(doc["mean"]) == {"x_mm", "y_mm", "phi_deg"} and set(doc["std"]) == {"x_mm", "y_mm", "phi_deg"}
     assert {"p50", "p95", "p99", "max"} <= set(doc["position_mm"])
-    r = monte_carlo(Geometry.from_preset("u-shape"), PAPER, [10.0, 100.0, 0.0], 20000, seed=3)
+    r = monte_carlo(Geometry.from_preset("u-shape"), PAPER, [10.0, 100.0, 0.0], 20000, rng=3)
     assert doc["position_mm"]["p95"] == float(r.position_pct[1]) and doc["seed"] == 3
     assert main(argv) == 0 and json.loads(capsys.readouterr().out) == doc  # same seed, same numbers
 

@@ -24,5 +24,5 @@ def test_python_examples_run(block, tmp_path, monkeypatch):
 
         import prp3mc
         study = prp3mc.Study.load("quick").reduced()
-        (tmp_path / "golden.json").write_text(json.dumps(prp3mc.build_summary(prp3mc.run_study(study, seed=7))))
+        (tmp_path / "golden.json").write_text(json.dumps(prp3mc.build_summary(prp3mc.run_study(study, rng=7))))
     exec(compile(block, "README.md", "exec"), {})

@@ -8,7 +8,7 @@ import pytest
 from SALib.sample import sobol as sobol_sample
 
 from prp3mc import (Budget, BudgetError, Disc, Geometry, InfeasiblePoseError, Normal, Region, Triangular,
-                    Uniform, closed_form_moments, linear_model, worst_case)
+                    Uniform, linear_model, worst_case)
 from prp3mc.cli import main
 from prp3mc.uncertainty.sobol import (_design, _factors, analytic_indices, ranking, sobol_converge, sobol_indices)
 
@@ -57,7 +57,7 @@ def test_vectorised_equals_salib(geometry, region, budget):
     """Same samples, same bootstrap resamples: the vectorised estimators reproduce SALib's numbers."""
     poses = random_poses(region, 2, np.random.default_rng(3))
     groups = {**LEG_GROUPS, "rho_and_theta_1": ["rho_1", "theta_1"]}
-    kw = dict(seed=11, groups=groups, num_resamples=40, conf_level=0.9)
+    kw = dict(rng=11, groups=groups, num_resamples=40, conf_level=0.9)
     salib = sobol_indices(geometry, budget, poses, 256, method="salib", **kw)
     vect = sobol_indices(geometry, budget, poses, 256, method="vectorised", workers=2, max_chunk_bytes=1, **kw)
     assert (salib.method, vect.method) == ("salib", "vectorised")
@@ -69,7 +69,7 @@ def test_constant_output_gives_zero_indices():
     zero = Budget({name: Uniform(0.0, 0.0) for name in PAPER.names})
     g = Geometry.from_preset("u-shape")
     for method in ("salib", "vectorised"):
-        r = sobol_indices(g, zero, [0, 100, 0], 64, seed=1, method=method)
+        r = sobol_indices(g, zero, [0, 100, 0], 64, rng=1, method=method)
         assert np.all(r.S1 == 0) and np.all(r.ST_conf == 0)
 
 
@@ -82,7 +82,7 @@ def test_salib_matches_closed_forms(geometry, region, budget):
     at a fraction of the cost; the CLI test runs SALib itself.
     """
     poses = random_poses(region, 3, np.random.default_rng(12))
-    r = sobol_indices(geometry, budget, poses, 8192, seed=2024, groups=LEG_GROUPS, outputs=("x", "y", "phi"),
+    r = sobol_indices(geometry, budget, poses, 8192, rng=2024, groups=LEG_GROUPS, outputs=("x", "y", "phi"),
                       method="vectorised")
     df = with_exact(r, analytic_indices(geometry, budget, poses, groups=LEG_GROUPS))
     assert len(df) == 3 * 3 * (len(budget) + len(r.groups))
@@ -103,7 +103,7 @@ def test_interval_coverage_over_seeds(geometry, region):
     exact = analytic_indices(geometry, PAPER, poses)
     per_seed = []
     for seed in range(24):
-        df = with_exact(sobol_indices(geometry, PAPER, poses, 512, seed=seed, outputs=("x", "y", "phi"),
+        df = with_exact(sobol_indices(geometry, PAPER, poses, 512, rng=seed, outputs=("x", "y", "phi"),
                                       method="vectorised"), exact)
         df = df[df["ST_exact"] > 1e-3]
         covered = [(df[k] - df[f"{k}_exact"]).abs() <= df[f"{k}_conf"] for k in ("S1", "ST")]
@@ -114,13 +114,13 @@ def test_interval_coverage_over_seeds(geometry, region):
 
 
 def test_clearance_group_is_rho_and_zeta_together(geometry, region):
-    """clearance_i = c^2 E[rho^2] / 2 / V for a uniform contact angle; V from closed_form_moments."""
+    """clearance_i = c^2 E[rho^2] / 2 / V for a uniform contact angle; V from LinearModel.moments."""
     poses = random_poses(region, 3, np.random.default_rng(4))
     model = linear_model(geometry, PAPER, poses)
-    var = np.diagonal(closed_form_moments(model)[1], axis1=-2, axis2=-1).copy()   # (P, 3), dphi deg^2
+    var = np.diagonal(model.moments()[1], axis1=-2, axis2=-1).copy()   # (P, 3), dphi deg^2
     var[:, 2] *= (np.pi / 180) ** 2                                                 # rad^2, as the columns
     exact = analytic_indices(geometry, PAPER, poses)
-    r = sobol_indices(geometry, PAPER, poses, 8192, seed=5, method="vectorised")
+    r = sobol_indices(geometry, PAPER, poses, 8192, rng=5, method="vectorised")
     df = with_exact(r, exact).set_index(["x_mm", "y_mm", "output", "name"])
     rho = PAPER.inputs["rho_1"]
     for i in (1, 2, 3):
@@ -141,7 +141,7 @@ def test_general_clearance_closed_form_by_monte_carlo():
     g, budget = Geometry.from_preset("delta-shape"), general_budget()
     pose = [5.0, 150.0, 1.0]
     model = linear_model(g, budget, pose)
-    var = np.diagonal(closed_form_moments(model)[1]).copy()
+    var = np.diagonal(model.moments()[1]).copy()
     var[2] *= (np.pi / 180) ** 2
     frame = analytic_indices(g, budget, pose)
     exact = frame.set_index(["output", "name"])
@@ -167,7 +167,7 @@ def test_result_frame_and_seed():
     assert r.names[:12] == PAPER.names and r.kinds[12:] == ("group",) * 3
     df = r.to_frame()
     assert list(df.columns) == KEYS + ["S1", "S1_conf", "ST", "ST_conf"] and len(df) == 6 * 2 * 15
-    again = sobol_indices(g, PAPER, grid, 128, seed=r.seed, outputs=("position", "x"))
+    again = sobol_indices(g, PAPER, grid, 128, rng=r.seed, outputs=("position", "x"))
     np.testing.assert_array_equal(again.ST, r.ST)
 
 
@@ -180,14 +180,14 @@ def test_result_frame_and_seed():
     (dict(conf_level=1.0), "conf_level"),
 ])
 def test_bad_arguments(kwargs, message):
-    args = dict(n_samples=64, seed=1) | kwargs
+    args = dict(n_samples=64, rng=1) | kwargs
     with pytest.raises(BudgetError, match=message):
         sobol_indices(Geometry.from_preset("u-shape"), PAPER, [0, 100, 0], args.pop("n_samples"), **args)
 
 
 def test_ranking_per_pose_and_region(geometry, region):
     grid = region.grid(3)
-    r = sobol_indices(geometry, PAPER, grid, 512, seed=3, groups=LEG_GROUPS)
+    r = sobol_indices(geometry, PAPER, grid, 512, rng=3, groups=LEG_GROUPS)
     wc = worst_case(geometry, PAPER, grid)
     for output in ("position", "phi"):
         df = ranking(r, wc, output, index=(1, 2))
@@ -211,14 +211,14 @@ def test_ranking_per_pose_and_region(geometry, region):
 
 def test_converge_doubles_until_target():
     g = Geometry.from_preset("u-shape")
-    result, history = sobol_converge(g, PAPER, [0, 100, 0], target_width=0.03, n_start=256, seed=1,
+    result, history = sobol_converge(g, PAPER, [0, 100, 0], target_width=0.03, n_start=256, rng=1,
                                      outputs=("x", "position"), method="vectorised")
     assert history["converged"].iloc[-1] and not history["converged"].iloc[:-1].any()
     assert list(history["n_samples"]) == [256 * 2**k for k in range(len(history))]
     assert result.n_samples == history["n_samples"].iloc[-1]
     matters = result.ST > 0.05
     assert 2 * result.ST_conf[matters].max() < 0.03
-    _, short = sobol_converge(g, PAPER, [0, 100, 0], target_width=1e-4, n_start=64, n_max=128, seed=1,
+    _, short = sobol_converge(g, PAPER, [0, 100, 0], target_width=1e-4, n_start=64, n_max=128, rng=1,
                               method="vectorised")
     assert list(short["n_samples"]) == [64, 128] and not short["converged"].any()
 
@@ -285,4 +285,4 @@ def test_cli_bad_input_one_line(capsys, argv, message):
 
 def test_bad_pose_refused():
     with pytest.raises(InfeasiblePoseError):
-        sobol_indices(Geometry.from_preset("u-shape"), PAPER, [0, 400, 0], 64, seed=1)
+        sobol_indices(Geometry.from_preset("u-shape"), PAPER, [0, 400, 0], 64, rng=1)

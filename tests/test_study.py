@@ -176,7 +176,7 @@ def test_seed_recorded_and_reproducible(tmp_path):
     study = Study.load(study_file(tmp_path, _replace("seed = 3\n", "")))
     a, b = run_study(study, progress=False), run_study(study, progress=False)
     assert a.seed != b.seed
-    again = run_study(study, seed=a.seed, progress=False)
+    again = run_study(study, rng=a.seed, progress=False)
     np.testing.assert_array_equal(again["delta"].montecarlo.position_pct, a["delta"].montecarlo.position_pct)
 
 

@@ -12,7 +12,6 @@ from prp3mc import (
 )
 from prp3mc.cli import main
 from prp3mc.uncertainty.crosscheck import optimizer_worst_case
-from prp3mc.uncertainty.montecarlo import sample_errors
 
 from .conftest import random_poses
 
@@ -86,7 +85,7 @@ def test_maximising_inputs_reproduce_the_maximum(geometry, region, quantity):
     wc = worst_case(geometry, PAPER, poses)
     X = wc.inputs_at[quantity]                                       # (10, d)
     for p in range(len(poses)):  # independent path: linear_pose_error, one pose at a time
-        errors = {k: v[0] for k, v in sample_errors(PAPER, X[p:p + 1]).items()}
+        errors = {k: v[0] for k, v in PAPER.errors(X[p:p + 1]).items()}
         errors["zeta"] = X[p, [PAPER.names.index(f"zeta_{i}") for i in (1, 2, 3)]]
         e = linear_pose_error(geometry, poses[p], errors)
         value = {"position": np.hypot(e[0], e[1]), "phi": abs(e[2]), "x": abs(e[0]), "y": abs(e[1])}[quantity]
@@ -144,14 +143,14 @@ def test_exact_model_at_the_maximiser_is_close(geometry, region):
     poses = random_poses(region, 5, np.random.default_rng(5))
     wc = worst_case(geometry, PAPER, poses)
     X = wc.inputs_at["position"]
-    e = exact_pose_error(geometry, poses, sample_errors(PAPER, X) | {
+    e = exact_pose_error(geometry, poses, PAPER.errors(X) | {
         "zeta": X[:, [PAPER.names.index(f"zeta_{i}") for i in (1, 2, 3)]]})
     np.testing.assert_allclose(np.hypot(e[:, 0], e[:, 1]), wc.position_mm, rtol=1e-3)
 
 
 def test_optimizer_does_not_beat_envelope_by_more_than_nonlinearity(geometry):
     pose = [5.0, 100.0, 0.0] if geometry.name == "u-shape" else [5.0, 160.0, 0.0]
-    r = optimizer_worst_case(geometry, PAPER, pose, seed=3, maxiter=60)
+    r = optimizer_worst_case(geometry, PAPER, pose, rng=3, maxiter=60)
     env = float(worst_case(geometry, PAPER, pose).position_mm)
     assert r.position_mm <= env * (1 + 1e-3)
     assert r.position_mm >= 0.95 * env

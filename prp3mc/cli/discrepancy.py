@@ -33,7 +33,7 @@ class DiscrepancyCommand:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         result = discrepancy(geometry, budget, args.data, instrument_sigma_mm=args.instrument_sigma_mm,
                              instrument_sigma_deg=args.instrument_sigma_deg, alpha=args.alpha,
-                             alpha_unexplained=args.alpha_unexplained, seed=args.seed)
+                             alpha_unexplained=args.alpha_unexplained, rng=args.seed)
         folder = write_report(result, args.out, force=args.force)
         if args.json:
             emit_json(result.to_dict())

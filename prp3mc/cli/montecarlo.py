@@ -30,7 +30,7 @@ class MonteCarloCommand:
     @staticmethod
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
-        r = monte_carlo(geometry, budget, args.pose, args.samples, seed=args.seed,
+        r = monte_carlo(geometry, budget, args.pose, args.samples, rng=args.seed,
                         tolerance_mm=args.tolerance_mm, exact_check_poses=1 if args.exact_check else 0,
                         progress=args.progress)
         keys = ("x_mm", "y_mm", "phi_deg")

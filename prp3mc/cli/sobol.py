@@ -54,7 +54,7 @@ class SobolCommand:
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         groups = dict(_group(text) for text in args.group)
-        r = sobol_indices(geometry, budget, args.pose, args.samples, seed=args.seed, groups=groups,
+        r = sobol_indices(geometry, budget, args.pose, args.samples, rng=args.seed, groups=groups,
                           num_resamples=args.resamples, conf_level=args.conf_level, method=args.method,
                           progress=args.progress)
         wc = worst_case(geometry, budget, args.pose, k_sigma=args.k_sigma)

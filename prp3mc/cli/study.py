@@ -29,7 +29,7 @@ class StudyCommand:
         if args.quick:
             study = study.reduced()
         check_output(args.out, args.force)
-        result = run_study(study, seed=args.seed, progress=args.progress)
+        result = run_study(study, rng=args.seed, progress=args.progress)
         report = write_study(result, args.out, force=args.force)
         summary = result.to_frame()
         worst = summary[summary["statistic"] == "worst-case position"]

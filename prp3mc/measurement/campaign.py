@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .._rng import resolve_rng
 from .._version import __version__
 from ..uncertainty.budget import Budget
 from .effects import effect, offset_errors, slider_error, spread_budget
@@ -34,7 +35,6 @@ from ..errors import CampaignError, InputFileError
 from ..kinematics.exact import exact_pose_error
 from ..kinematics.geometry import Geometry
 from ..kinematics.chain import as_poses, check_poses, feasible, inverse_kinematics
-from ..uncertainty.montecarlo import sample_errors
 
 __all__ = ["Campaign", "read_campaign", "simulate_campaign", "REQUIRED_COLUMNS", "MAX_ERROR"]
 
@@ -272,7 +272,7 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
                       temp_drift_C: tuple[float, float] | None = (20.0, 28.0),
                       instrument_sigma_mm: float = 0.002, instrument_sigma_deg: float = 0.0005,
                       slider_error_fn=None, pose_error_fn=None,
-                      seed: "None | int | np.random.Generator" = None) -> Campaign:
+                      rng: "None | int | np.random.Generator" = None) -> Campaign:
     """Simulate a measurement campaign with the exact nonlinear model.
 
     The campaign visits every pose once per round, in a fresh random order
@@ -306,19 +306,16 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         ``f(commanded (M, 3), b (M, 3), direction (M, 3), temp_C (M,) or None)``
         returning an extra slider error delta b (M, 3) mm, or an extra pose
         error (M, 3) ``[mm, mm, deg]`` added to the exact one.
-    seed : None, int or Generator
-        Random seed; a fresh one is drawn and recorded when None.
+    rng : None, int or numpy.random.Generator
+        Randomness (Scientific Python SPEC 7); the integer seed used is
+        recorded in ``metadata["seed"]``, also when a Generator is given.
 
     Returns
     -------
     Campaign
         ``metadata`` records the seed, the hidden effects and the settings.
     """
-    if isinstance(seed, np.random.Generator):
-        rng, seed_used = seed, None
-    else:
-        seed_used = int(np.random.SeedSequence().entropy % (2**32)) if seed is None else int(seed)
-        rng = np.random.default_rng(seed_used)
+    seed_used, rng = resolve_rng(rng)
     poses = as_poses(poses).reshape(-1, 3)
     check_poses(geometry, poses)
     n_repeats = int(n_repeats)
@@ -350,7 +347,7 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     temp = None if temp_drift_C is None else np.linspace(temp_drift_C[0], temp_drift_C[1], M)
     sim_budget = spread_budget(budget, effects)
     X = sim_budget.sample(M, rng)
-    errors = sample_errors(sim_budget, X)
+    errors = sim_budget.errors(X)
     for family, value in offset_errors(effects).items():
         errors[family] = errors.get(family, 0.0) + value
     db = slider_error(effects, b, direction, temp)

@@ -9,7 +9,7 @@ Measurement m of commanded pose p is ``measured = commanded + e_m + s_m + n_m``:
   new count error each time a pose is approached; repeats of a pose are
   therefore independent). Its mean ``mu_p`` is *not* zero (encoder errors
   are one-sided) and its covariance is ``Sigma_p``; both are exact moments of
-  the linear model (:func:`prp3mc.closed_form_moments`), which the exact
+  the linear model (:meth:`prp3mc.LinearModel.moments`), which the exact
   nonlinear chain matches to < 0.1 um at these magnitudes.
 - ``s_m = sum_k theta_k g_k(m)`` are systematic effects of the library, each
   linear in its value through its signature (:func:`prp3mc.effects.signatures`).
@@ -76,6 +76,7 @@ import numpy as np
 import pandas as pd
 from scipy import optimize, stats
 
+from .._rng import resolve_rng
 from .._version import __version__
 from ..uncertainty.budget import Budget
 from .campaign import Campaign, read_campaign
@@ -84,7 +85,6 @@ from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
 from ..kinematics.chain import inverse_kinematics
 from ..uncertainty.model import linear_model
-from ..uncertainty.montecarlo import closed_form_moments
 from ..kinematics.sensitivity import sensitivity
 
 __all__ = ["Prediction", "predict", "NamedEffect", "Diagnosis", "DiscrepancyResult", "discrepancy",
@@ -159,7 +159,7 @@ def predict(geometry: Geometry, budget: Budget, campaign: Campaign, *, effects: 
     """
     effects = dict(effects or {})
     model_budget = spread_budget(budget, effects)
-    mean, cov = closed_form_moments(linear_model(geometry, model_budget, campaign.poses, check=False))
+    mean, cov = linear_model(geometry, model_budget, campaign.poses, check=False).moments()
     cov = cov + _noise_cov(instrument_sigma_mm, instrument_sigma_deg)
     systematic = {k: v for k, v in effects.items() if effect(k).systematic}
     m = mean[campaign.pose_index]
@@ -201,7 +201,7 @@ class _Engine:
             laws = {name: budget.inputs[name]}
             if name.startswith("rho_"):
                 laws["zeta" + name[3:]] = budget.inputs["zeta" + name[3:]]
-            mu, cov = closed_form_moments(linear_model(geometry, Budget(laws), campaign.poses, check=False))
+            mu, cov = linear_model(geometry, Budget(laws), campaign.poses, check=False).moments()
             mus.append(mu)
             covs.append(cov)
         self.mu_k, self.cov_k = np.stack(mus), np.stack(covs)            # (I, P, 3), (I, P, 3, 3)
@@ -720,7 +720,8 @@ def _scan(engine: _Engine, fit: _Fit, excluded: set) -> pd.DataFrame:
 def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigma_mm: float = 0.0,
                 instrument_sigma_deg: float = 0.0, alpha: float = 0.01, alpha_unexplained: float = 0.05,
                 max_effects: int = 6,
-                n_bootstrap: int = 400, seed: "None | int" = None) -> DiscrepancyResult:
+                n_bootstrap: int = 400,
+                rng: "None | int | np.random.Generator" = None) -> DiscrepancyResult:
     """Find where model and campaign disagree, name the missing effects, close the gap.
 
     Parameters
@@ -745,16 +746,16 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
         Most effects named.
     n_bootstrap : int
         Parametric-bootstrap replicates for the null variances of the tests.
-    seed : int or None
-        Seed of the bootstrap; a fresh one is drawn and recorded when None.
+    rng : None, int or numpy.random.Generator
+        Randomness of the bootstrap (Scientific Python SPEC 7); the integer
+        seed used is recorded in the result.
 
     Returns
     -------
     DiscrepancyResult
     """
     t0 = time.perf_counter()
-    seed = int(np.random.SeedSequence().entropy % (2**32)) if seed is None else int(seed)
-    rng = np.random.default_rng(seed)
+    seed, rng = resolve_rng(rng)
     if not (0 < alpha < 1 and 0 < alpha_unexplained < 1):
         raise BudgetError(f"alpha and alpha_unexplained must lie in (0, 1), got {alpha}, {alpha_unexplained}")
     campaign = read_campaign(campaign, geometry)

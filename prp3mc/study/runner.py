@@ -67,6 +67,7 @@ import numpy as np
 import pandas as pd
 
 from .._toml import read_text_file
+from .._rng import child_seed, resolve_rng
 from .._version import __version__
 from ..uncertainty.budget import Budget
 from ..errors import Prp3mcError, StudyError, UnknownPresetError
@@ -601,10 +602,6 @@ def pct_se(ci: np.ndarray) -> np.ndarray:
     return (ci[..., 1] - ci[..., 0]) / (2 * 1.959963984540054)
 
 
-def _derived_seed(seed: int, stream: int) -> int:
-    return int(np.random.SeedSequence([seed, stream]).generate_state(1, np.uint64)[0] >> 1)
-
-
 def _histogram_poses(config: StudyConfiguration, wc: WorstCase) -> tuple[np.ndarray, tuple]:
     """Poses of the histograms: the configuration's, or centre, worst-case max and min."""
     if config.poses is not None:
@@ -628,16 +625,19 @@ def _pose_samples(config: StudyConfiguration, budget: Budget, wc: WorstCase, n: 
                        worst_phi_deg=at.phi_deg, seed=seed, n_samples=n)
 
 
-def run_study(study: "Study | str | os.PathLike", *, seed: int | None = None, progress: bool | None = None,
+def run_study(study: "Study | str | os.PathLike", *, rng: "None | int | np.random.Generator" = None,
+              progress: bool | None = None,
               budget: Budget | None = None) -> StudyResult:
     """Run every analysis of a study for every configuration.
 
     Parameters
     ----------
     study : Study, study file or bundled study name
-    seed : int, optional
-        Overrides the study's seed; if neither is given a fresh one is drawn
-        and recorded.
+    rng : None, int or numpy.random.Generator
+        Overrides the study's seed (Scientific Python SPEC 7: a seed, or a
+        Generator a seed is drawn from); with neither, a fresh seed. The
+        study seed used is recorded, and the Monte Carlo and Sobol seeds are
+        derived from it.
     progress : bool, optional
         Report each stage, and the progress of the long ones, on stderr
         (default: when stderr is a terminal).
@@ -652,10 +652,8 @@ def run_study(study: "Study | str | os.PathLike", *, seed: int | None = None, pr
     study = Study.load(study)
     if budget is not None:
         study = study.with_budget(budget)
-    seed = seed if seed is not None else study.seed
-    if seed is None:
-        seed = int(np.random.SeedSequence().entropy % (2**63))
-    mc_seed, sobol_seed = _derived_seed(seed, 1), _derived_seed(seed, 2)
+    seed, _ = resolve_rng(rng if rng is not None else study.seed)
+    mc_seed, sobol_seed = child_seed(seed, 1), child_seed(seed, 2)
     timings = dict.fromkeys(("worstcase",) + study.outputs, 0.0)
     show = sys.stderr.isatty() if progress is None else progress
     steps = len(study.configurations) * len(timings)
@@ -681,7 +679,7 @@ def run_study(study: "Study | str | os.PathLike", *, seed: int | None = None, pr
             stage(config, f"Monte Carlo, {study.mc_samples} samples on {nx} x {ny} poses")
             t = time.perf_counter()
             kw["montecarlo"] = monte_carlo(g, b, config.region.grid(study.mc_grid), study.mc_samples,
-                                           seed=mc_seed, percentiles=study.percentiles,
+                                           rng=mc_seed, percentiles=study.percentiles,
                                            tolerance_mm=study.tolerance_mm, progress=progress)
             kw["samples"] = _pose_samples(config, b, wc, study.mc_samples, mc_seed, study.k_sigma)
             timings["montecarlo"] += time.perf_counter() - t
@@ -690,7 +688,7 @@ def run_study(study: "Study | str | os.PathLike", *, seed: int | None = None, pr
             stage(config, f"Sobol indices, N = {study.sobol_samples} on {nx} x {ny} poses")
             t = time.perf_counter()
             poses = config.region.grid(study.sobol_grid)
-            s = sobol_indices(g, b, poses, study.sobol_samples, seed=sobol_seed,
+            s = sobol_indices(g, b, poses, study.sobol_samples, rng=sobol_seed,
                               groups=study.sobol_groups or None, outputs=study.sobol_outputs,
                               progress=progress)
             wc_s = worst_case(g, b, poses, k_sigma=study.k_sigma)

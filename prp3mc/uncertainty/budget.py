@@ -194,6 +194,19 @@ class Budget:
             out[start:stop] = self.ppf(rng.random((stop - start, len(self))))
         return out
 
+    def errors(self, X: np.ndarray) -> dict[str, np.ndarray]:
+        """Input samples ``X`` (n, d) as per-family errors ``{family: (n, 3)}``, mm / deg.
+
+        The form :func:`~prp3mc.kinematics.exact.exact_pose_error` takes; a
+        family the budget does not name is absent, a leg it does not name is 0.
+        """
+        X = np.asarray(X, dtype=float)
+        errors: dict[str, np.ndarray] = {}
+        for k, name in enumerate(self.names):
+            family, leg = parse_input(name)
+            errors.setdefault(family, np.zeros((X.shape[0], 3)))[:, leg] = X[:, k]
+        return errors
+
     def means(self) -> np.ndarray:
         return np.array([law.mean for law in self.inputs.values()])
 

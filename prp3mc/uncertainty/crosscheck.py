@@ -19,7 +19,7 @@ from .budget import Budget
 from ..kinematics.exact import exact_pose_error
 from ..kinematics.geometry import Geometry
 from ..kinematics.chain import as_poses, check_poses
-from .montecarlo import sample_errors
+from .._rng import resolve_rng
 
 __all__ = ["OptimizerResult", "optimizer_worst_case"]
 
@@ -50,7 +50,8 @@ class OptimizerResult:
     seed: int
 
 
-def optimizer_worst_case(geometry: Geometry, budget: Budget, pose, *, seed: int | None = None,
+def optimizer_worst_case(geometry: Geometry, budget: Budget, pose, *,
+                         rng: "None | int | np.random.Generator" = None,
                          k_sigma: float | None = None, maxiter: int = 300, popsize: int = 20,
                          tol: float = 1e-10) -> OptimizerResult:
     """Maximise the exact position error at ``pose`` with differential evolution.
@@ -63,8 +64,10 @@ def optimizer_worst_case(geometry: Geometry, budget: Budget, pose, *, seed: int 
     geometry, budget :
     pose : array_like, shape (3,)
         ``[x_mm, y_mm, phi_deg]``.
-    seed : int, optional
-        Seed of the optimiser (recorded; fresh if None).
+    rng : None, int or numpy.random.Generator
+        Randomness (Scientific Python SPEC 7): a seed, a Generator (a seed is
+        drawn from it) or None (a fresh seed); the integer seed used is
+        recorded in the result.
     k_sigma : float, optional
         Bound for unbounded laws, as in :func:`prp3mc.worst_case`.
     maxiter, popsize, tol :
@@ -74,8 +77,7 @@ def optimizer_worst_case(geometry: Geometry, budget: Budget, pose, *, seed: int 
     if pose.shape != (3,):
         raise ValueError("optimizer_worst_case works on one pose of shape (3,)")
     check_poses(geometry, pose)
-    if seed is None:
-        seed = int(np.random.SeedSequence().entropy % (2**63))
+    seed, _ = resolve_rng(rng)
     bounds = budget.bounds(k_sigma)
     evaluations = 0
 
@@ -84,7 +86,7 @@ def optimizer_worst_case(geometry: Geometry, budget: Budget, pose, *, seed: int 
         X2 = np.atleast_2d(np.asarray(X).T)                          # (S, d)
         evaluations += X2.shape[0]
         err = exact_pose_error(geometry, np.broadcast_to(pose, X2.shape[:1] + (3,)),
-                               sample_errors(budget, X2), check=False)
+                               budget.errors(X2), check=False)
         value = -np.hypot(err[:, 0], err[:, 1])
         return value if np.ndim(X) > 1 else value[0]
 

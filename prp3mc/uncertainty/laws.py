@@ -13,17 +13,33 @@ from dataclasses import asdict, dataclass, fields
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy import special, stats
+from scipy import integrate, special, stats
 
 from ..errors import BudgetError
 
-__all__ = ["Law", "Uniform", "Normal", "TruncNormal", "Triangular", "Disc", "Discrete", "law_from_dict", "LAWS"]
+__all__ = ["Law", "Uniform", "Normal", "TruncNormal", "Triangular", "Disc", "Discrete", "law_from_dict", "LAWS",
+           "angle_moments"]
 
 
 def _finite(law: str, **values: float) -> None:
     for key, value in values.items():
         if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
             raise BudgetError(f"{law} law: {key} must be a finite number, got {value!r}")
+
+
+def angle_moments(law: "Law") -> np.ndarray:
+    """Trigonometric moments of an angle law (degrees), by quadrature of its ppf.
+
+    Returns
+    -------
+    ndarray, shape (5,)
+        ``E[cos t], E[sin t], E[cos² t], E[sin² t], E[sin t cos t]``.
+    """
+    def expect(fn):
+        return integrate.quad(lambda u: fn(np.deg2rad(law.ppf(u))), 0.0, 1.0, limit=200)[0]
+
+    return np.array([expect(np.cos), expect(np.sin), expect(lambda t: np.cos(t) ** 2),
+                     expect(lambda t: np.sin(t) ** 2), expect(lambda t: np.sin(t) * np.cos(t))])
 
 
 class Law:

@@ -14,7 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..units import RAD2DEG
 from .budget import Budget, parse_input
+from .laws import angle_moments
 from ..kinematics.geometry import Geometry
 from ..kinematics.chain import as_poses, frame, validated_frame
 from ..kinematics.sensitivity import LENGTH_FAMILIES, h_entries
@@ -102,6 +104,43 @@ class LinearModel:
         """Pose errors for every pose and sample, shape (..., n, 3): dx mm, dy mm, dphi rad."""
         F = self.features(X).astype(dtype, copy=False)
         return np.einsum("...of,nf->...no", self.coef.astype(dtype, copy=False), F, optimize=True)
+
+    def feature_moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Exact mean (F,) and covariance (F, F) of the sample features (see :meth:`features`).
+
+        Non-clearance features are independent inputs; a clearance's features
+        (rho cos zeta, rho sin zeta) have moments E[rho^k] times the
+        trigonometric moments of zeta (:func:`~prp3mc.uncertainty.laws.angle_moments`).
+        """
+        laws = list(self.budget.inputs.values())
+        fmean, blocks = [], []
+        for kind, idx in self._plan:
+            if kind == "value":
+                fmean.append(laws[idx].mean)
+                blocks.append(np.array([[laws[idx].var]]))
+            else:
+                rho, zeta = laws[idx[0]], laws[idx[1]]
+                ec, es, ecc, ess, ecs = angle_moments(zeta)
+                r1, r2 = rho.mean, rho.var + rho.mean**2
+                m = np.array([r1 * ec, r1 * es])
+                fmean.extend(m)
+                blocks.append(r2 * np.array([[ecc, ecs], [ecs, ess]]) - np.outer(m, m))
+        nf = len(fmean)
+        fcov = np.zeros((nf, nf))
+        pos = 0
+        for block in blocks:
+            k = block.shape[0]
+            fcov[pos:pos + k, pos:pos + k] = block
+            pos += k
+        return np.array(fmean), fcov
+
+    def moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Exact mean (..., 3) and covariance (..., 3, 3) of the pose error (dx mm, dy mm, dphi deg)."""
+        fmean, fcov = self.feature_moments()
+        deg = np.array([1.0, 1.0, RAD2DEG])
+        mean = np.einsum("...of,f->...o", self.coef, fmean) * deg
+        cov = np.einsum("...of,fg,...qg->...oq", self.coef, fcov, self.coef) * np.outer(deg, deg)
+        return mean, cov
 
     def term_values(self, X: np.ndarray) -> np.ndarray:
         """Value of every term per pose and sample, shape (..., n, T), boundary units."""

@@ -19,10 +19,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
-from scipy import integrate, stats
 
+from .._rng import resolve_rng
+from ..units import RAD2DEG as _RAD2DEG, Z95 as _Z95
 from .._version import __version__
-from .budget import Budget, parse_input
+from .budget import Budget
 from ..errors import BudgetError
 from ..kinematics.exact import exact_pose_error
 from ..kinematics.geometry import Geometry
@@ -35,8 +36,6 @@ __all__ = ["MonteCarloResult", "monte_carlo", "closed_form_moments", "PERCENTILE
 PERCENTILES = (50.0, 95.0, 99.0, 99.73)
 _N_BATCHES = 64
 _BLOCK = 1 << 15  # samples per block of the pose-error evaluation (fits in cache)
-_Z95 = stats.norm.ppf(0.975)
-_RAD2DEG = 180.0 / math.pi
 
 
 @dataclass(frozen=True, slots=True)
@@ -208,7 +207,8 @@ def _feature_moments(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     return mean, cov, np.array(means), np.array(covs)
 
 
-def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *, seed: int | None = None,
+def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
+                rng: "None | int | np.random.Generator" = None,
                 percentiles=PERCENTILES, tolerance_mm: float | None = None,
                 exact_check_poses: int = 0, exact_check_samples: int = 2000,
                 progress: bool | None = None, max_chunk_bytes: int = 256 << 20,
@@ -223,8 +223,10 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *, se
         ``[x_mm, y_mm, phi_deg]``.
     n_samples : int
         Samples of the budget, shared by all poses.
-    seed : int, optional
-        Seed of the sample generator; a fresh one is drawn and recorded if None.
+    rng : None, int or numpy.random.Generator
+        Randomness (Scientific Python SPEC 7): a seed, a Generator (a seed is
+        drawn from it) or None (a fresh seed). The integer seed used is
+        recorded in the result as ``seed``.
     percentiles : sequence of float
         Percentiles of the position-error norm and of |dphi|.
     tolerance_mm : float, optional
@@ -253,8 +255,7 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *, se
     pct = tuple(float(p) for p in percentiles)
     if not all(0.0 <= p <= 100.0 for p in pct):
         raise BudgetError(f"percentiles must lie in [0, 100], got {pct}")
-    if seed is None:
-        seed = int(np.random.SeedSequence().entropy % (2**63))
+    seed, _ = resolve_rng(rng)
     model = linear_model(geometry, budget, poses)
     batch_shape = model.poses.shape[:-1]
     X = budget.sample(n_samples, seed)
@@ -349,21 +350,12 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *, se
     )
 
 
-def sample_errors(budget: Budget, X: np.ndarray) -> dict[str, np.ndarray]:
-    """Input samples (n, d) as per-family error arrays (n, 3) for :func:`exact_pose_error`."""
-    errors: dict[str, np.ndarray] = {}
-    for k, name in enumerate(budget.names):
-        family, leg = parse_input(name)
-        errors.setdefault(family, np.zeros((X.shape[0], 3)))[:, leg] = X[:, k]
-    return errors
-
-
 def _linearization(model: LinearModel, budget: Budget, seed: int, n_poses: int, n_samples: int) -> pd.DataFrame:
     """Exact minus linear pose error for the first samples at spread-out poses."""
     flat = model.poses.reshape(-1, 3)
     idx = np.unique(np.linspace(0, flat.shape[0] - 1, min(n_poses, flat.shape[0])).round().astype(int))
     X = budget.sample(n_samples, seed)
-    errors = sample_errors(budget, X)
+    errors = budget.errors(X)
     poses = np.broadcast_to(flat[idx, None, :], (len(idx), X.shape[0], 3))
     exact = exact_pose_error(model.geometry, poses, errors, check=False)
     sub = linear_model(model.geometry, budget, flat[idx], check=False)
@@ -378,43 +370,3 @@ def _linearization(model: LinearModel, budget: Budget, seed: int, n_poses: int, 
         "phi_max_arcsec": dphi_arcsec.max(-1), "phi_rms_arcsec": np.sqrt((dphi_arcsec**2).mean(-1)),
         "position_p99_linear_um": 1e3 * np.percentile(np.hypot(lin[..., 0], lin[..., 1]), 99, axis=-1),
     })
-
-
-def closed_form_moments(model: LinearModel) -> tuple[np.ndarray, np.ndarray]:
-    """Exact mean (..., 3) and covariance (..., 3, 3) of (dx mm, dy mm, dphi deg).
-
-    From the laws' moments: non-clearance features are independent inputs;
-    a clearance's features (rho cos zeta, rho sin zeta) have moments
-    E[rho^k] times trigonometric moments of zeta (by quadrature of its ppf).
-    """
-    budget = model.budget
-    laws = list(budget.inputs.values())
-    fmean, fcov_blocks = [], []
-    for kind, idx in model._plan:
-        if kind == "value":
-            fmean.append(laws[idx].mean)
-            fcov_blocks.append(np.array([[laws[idx].var]]))
-        else:
-            rho, zeta = laws[idx[0]], laws[idx[1]]
-
-            def ez(fn):
-                return integrate.quad(lambda u: fn(np.deg2rad(zeta.ppf(u))), 0.0, 1.0, limit=200)[0]
-
-            ec, es = ez(np.cos), ez(np.sin)
-            ecc, ess, ecs = ez(lambda z: np.cos(z) ** 2), ez(lambda z: np.sin(z) ** 2), ez(lambda z: np.sin(z) * np.cos(z))
-            r1, r2 = rho.mean, rho.var + rho.mean**2
-            m = np.array([r1 * ec, r1 * es])
-            second = r2 * np.array([[ecc, ecs], [ecs, ess]])
-            fmean.extend(m)
-            fcov_blocks.append(second - np.outer(m, m))
-    nf = len(fmean)
-    fcov = np.zeros((nf, nf))
-    pos = 0
-    for block in fcov_blocks:
-        k = block.shape[0]
-        fcov[pos:pos + k, pos:pos + k] = block
-        pos += k
-    deg = np.array([1.0, 1.0, _RAD2DEG])
-    mean = np.einsum("...of,f->...o", model.coef, np.array(fmean)) * deg
-    cov = np.einsum("...of,fg,...qg->...oq", model.coef, fcov, model.coef) * np.outer(deg, deg)
-    return mean, cov

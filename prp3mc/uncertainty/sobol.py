@@ -53,8 +53,10 @@ import numpy as np
 import pandas as pd
 from scipy import integrate, stats
 
+from .._rng import resolve_rng
 from .._version import __version__
 from .budget import Budget, parse_input
+from .laws import angle_moments
 from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
 from .model import LinearModel, linear_model
@@ -420,7 +422,8 @@ def _check_power_of_two(n: int, what: str) -> int:
     return n
 
 
-def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *, seed: int | None = None,
+def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
+                  rng: "None | int | np.random.Generator" = None,
                   groups: dict | None = None, outputs=OUTPUTS, num_resamples: int = 100,
                   conf_level: float = 0.95, method: str = "auto", progress: bool | None = None,
                   max_chunk_bytes: int = 256 << 20, workers: int | None = None) -> SobolResult:
@@ -435,9 +438,10 @@ def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *, 
     n_samples : int
         Base sample size N, a power of two; the model runs N (d + 2 + G)
         times per pose (d inputs, G groups).
-    seed : int, optional
-        Seed of SALib's scrambled Sobol' sampler (the bootstrap uses
-        ``seed + 1``); a fresh one is drawn and recorded if None.
+    rng : None, int or numpy.random.Generator
+        Randomness (Scientific Python SPEC 7). The integer seed used (drawn
+        from a Generator, fresh for None) seeds SALib's scrambled Sobol'
+        sampler; the bootstrap uses ``seed + 1``. Both are recorded.
     groups : dict of str to list of str, optional
         User groups (per leg, per error family...) in addition to the
         budget's groups (``clearance_i`` = rho_i, zeta_i always).
@@ -468,7 +472,7 @@ def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *, 
     --------
     >>> from prp3mc import Geometry, Budget
     >>> r = sobol_indices(Geometry.from_preset("u-shape"), Budget.from_preset("paper"), [0, 100, 0],
-    ...                   1024, seed=1)
+    ...                   1024, rng=1)
     >>> r.ST.shape, r.names[-1]
     ((4, 15), 'clearance_3')
     """
@@ -484,9 +488,9 @@ def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *, 
         raise BudgetError(f"the bootstrap needs at least 2 resamples, got {num_resamples}")
     if not 0.0 < conf_level < 1.0:
         raise BudgetError(f"conf_level must lie in (0, 1), got {conf_level}")
-    if seed is None:
-        seed = int(np.random.SeedSequence().entropy % (2**63 - 1))
-    seed, num_resamples, bootstrap_seed = int(seed), int(num_resamples), int(seed) + 1
+    seed, _ = resolve_rng(rng)
+    seed = seed % (2**63 - 1)          # leaves room for the bootstrap seed, seed + 1
+    num_resamples, bootstrap_seed = int(num_resamples), seed + 1
     factors = _factors(budget, groups)
     model = linear_model(geometry, budget, poses)                  # validates every pose
     shape = model.poses.shape[:-1]
@@ -538,12 +542,7 @@ def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *, 
 # ---------------------------------------------------------------- closed form
 def _cos_moments(zeta_law, omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """E[cos(zeta - omega)] and E[cos^2(zeta - omega)], zeta in degrees, by quadrature of its ppf."""
-    def expect(fn):
-        return integrate.quad(lambda u: fn(np.deg2rad(zeta_law.ppf(u))), 0.0, 1.0, limit=200)[0]
-
-    ec, es = expect(np.cos), expect(np.sin)
-    ecc, ess, ecs = expect(lambda t: np.cos(t)**2), expect(lambda t: np.sin(t)**2), \
-        expect(lambda t: np.sin(t) * np.cos(t))
+    ec, es, ecc, ess, ecs = angle_moments(zeta_law)
     co, so = np.cos(omega), np.sin(omega)
     return co * ec + so * es, co**2 * ecc + 2 * co * so * ecs + so**2 * ess
 
@@ -714,7 +713,8 @@ def ranking(sobol_result: SobolResult, worst_case_result: WorstCase, output: str
 
 # ---------------------------------------------------------------- convergence
 def sobol_converge(geometry: Geometry, budget: Budget, poses, *, target_width: float = 0.05,
-                   n_start: int = 1024, n_max: int = 2**16, seed: int | None = None, which: str = "ST",
+                   n_start: int = 1024, n_max: int = 2**16,
+                   rng: "None | int | np.random.Generator" = None, which: str = "ST",
                    min_index: float = 0.05, **kwargs) -> tuple[SobolResult, pd.DataFrame]:
     """Double N until the widest interval of the indices that matter is below ``target_width``.
 
@@ -730,7 +730,9 @@ def sobol_converge(geometry: Geometry, budget: Budget, poses, *, target_width: f
         Largest acceptable full interval width.
     n_start, n_max : int
         First and largest N, powers of two.
-    seed : int, optional
+    rng : None, int or numpy.random.Generator
+        As in :func:`sobol_indices`; one seed serves every run, so each run
+        extends the previous Sobol' points.
     which : {"ST", "S1", "both"}
         The intervals checked.
     min_index : float
@@ -753,11 +755,10 @@ def sobol_converge(geometry: Geometry, budget: Budget, poses, *, target_width: f
         raise BudgetError(f"which must be 'ST', 'S1' or 'both', got {which!r}")
     if not target_width > 0:
         raise BudgetError(f"target_width must be > 0, got {target_width}")
-    if seed is None:
-        seed = int(np.random.SeedSequence().entropy % (2**63 - 1))
+    seed, _ = resolve_rng(rng)
     rows = []
     while True:
-        result = sobol_indices(geometry, budget, poses, n, seed=seed, **kwargs)
+        result = sobol_indices(geometry, budget, poses, n, rng=seed, **kwargs)
         matters = result.ST > min_index
         conf = {"ST": result.ST_conf, "S1": result.S1_conf,
                 "both": np.maximum(result.ST_conf, result.S1_conf)}[which]

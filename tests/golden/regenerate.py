@@ -22,7 +22,7 @@ GOLDEN_SEED = 12345
 
 def golden_summary(name: str, seed: int = GOLDEN_SEED, budget=None) -> dict:
     """Summary of the reduced bundled study ``name`` (wall times dropped)."""
-    summary = build_summary(run_study(Study.load(name).reduced(), seed=seed, progress=False, budget=budget))
+    summary = build_summary(run_study(Study.load(name).reduced(), rng=seed, progress=False, budget=budget))
     for key in ("wall_time_s", "timings_s", "source"):
         summary["metadata"].pop(key)
     return summary
