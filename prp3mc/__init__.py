@@ -30,9 +30,12 @@ from .uncertainty.sobol import SobolResult, analytic_indices, ranking as sobol_r
 from .study.runner import Study, StudyResult, run_study
 from .reports.study_report import write_study
 from .study.summary import build_summary
-from .measurement.campaign import Campaign, read_campaign, simulate_campaign
+from .measurement.campaign import Campaign, read_campaign
+from .measurement.simulate import simulate_campaign
 from .measurement.effects import EFFECT_NAMES, Effect, effect
-from .measurement.discrepancy import DiscrepancyResult, detectable_effect, discrepancy, predict
+from .measurement.prediction import predict
+from .measurement.selection import DiscrepancyResult
+from .measurement.workflow import detectable_effect, discrepancy
 from .reports.discrepancy_report import write_report as write_discrepancy_report
 
 __all__ = [

@@ -5,8 +5,9 @@ import pandas as pd
 import pytest
 
 from prp3mc import Budget, CampaignError, Geometry, Region
-from prp3mc.measurement.campaign import Campaign, read_campaign, simulate_campaign
-from prp3mc.measurement.discrepancy import predict
+from prp3mc.measurement.campaign import Campaign, read_campaign
+from prp3mc.measurement.prediction import predict
+from prp3mc.measurement.simulate import simulate_campaign
 from prp3mc.measurement.effects import EFFECT_NAMES, effect, library
 from prp3mc.errors import BudgetError, InputFileError
 

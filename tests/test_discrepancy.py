@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from prp3mc import Budget, Geometry, Region
-from prp3mc.measurement.campaign import simulate_campaign
+from prp3mc.measurement.simulate import simulate_campaign
 from prp3mc.cli import main
-from prp3mc.measurement.discrepancy import detectable_effect, discrepancy
+from prp3mc.measurement.workflow import detectable_effect, discrepancy
 from prp3mc.reports.discrepancy_report import write_report
 
 SIGMA = {"instrument_sigma_mm": 0.002, "instrument_sigma_deg": 0.0005}

@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..measurement.discrepancy import Diagnosis, DiscrepancyResult
+from ..measurement.diagnostics import Diagnosis
+from ..measurement.selection import DiscrepancyResult
 from ..output import figure_data_uri, output_folder, save_figure, write_json, write_text
 
 __all__ = ["plot_workspace", "plot_actuators", "plot_temperature", "plot_gap", "plot_candidates",
