@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from .._result import freeze, interval_frame, short_repr
+from .._result import freeze, interval_frame
 from .._version import __version__
 from ..kinematics.geometry import Geometry
 from ..uncertainty.budget import Budget
