@@ -2,10 +2,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from prp3mc import (
-    Budget, BudgetError, Catalogue, Disc, Discrete, InputFileError, Normal, Triangular, TruncNormal,
-    UnknownPresetError, Uniform,
-)
+from prp3mc import Budget, Catalogue, Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
+from prp3mc.errors import BudgetError, InputFileError, UnknownPresetError
 from prp3mc.uncertainty.laws import law_from_dict
 
 LAWS = [Uniform(-1.0, 3.0), Normal(0.5, 0.2), TruncNormal(0.0, 0.01, 1.33), Triangular(0.0, 0.2, 1.0),

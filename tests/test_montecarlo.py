@@ -5,7 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from prp3mc import Budget, BudgetError, Geometry, Uniform, linear_model, monte_carlo
+from prp3mc import Budget, Geometry, Uniform, linear_model, monte_carlo
+from prp3mc.errors import BudgetError
 from prp3mc.cli import main
 
 from .conftest import random_poses
@@ -98,7 +99,7 @@ def test_reproducible_and_recorded(geometry, region):
     assert a.metadata()["seed"] == 11 and a.metadata()["n_samples"] == 5000
     assert a.metadata()["prp3mc_version"] == __import__("prp3mc").__version__
     frame = a.to_frame()
-    assert {"statistic", "output", "value", "se", "ci_lo", "ci_hi"} <= set(frame.columns)
+    assert {"statistic", "output", "value", "se", "ci_low", "ci_high", "level"} <= set(frame.columns)
     assert not frame["value"].isna().any()
 
 

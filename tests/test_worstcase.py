@@ -6,10 +6,9 @@ import json
 import numpy as np
 import pytest
 
-from prp3mc import (
-    Budget, BudgetError, Discrete, Normal, Triangular, TruncNormal, Uniform, exact_pose_error,
-    linear_model, linear_pose_error, worst_case,
-)
+from prp3mc import Budget, Discrete, Normal, Triangular, TruncNormal, Uniform, exact_pose_error, linear_model, worst_case
+from prp3mc.errors import BudgetError
+from prp3mc.kinematics.exact import linear_pose_error
 from prp3mc.cli import main
 from prp3mc.uncertainty.crosscheck import optimizer_worst_case
 
