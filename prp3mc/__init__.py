@@ -26,7 +26,9 @@ from .uncertainty.laws import Discrete, Disc, Normal, Triangular, TruncNormal, U
 from .uncertainty.model import LinearModel, linear_model
 from .uncertainty.montecarlo import MonteCarloResult, monte_carlo
 from .uncertainty.worstcase import WorstCase, worst_case
-from .uncertainty.sobol import SobolResult, analytic_indices, ranking as sobol_ranking, sobol_converge, sobol_indices
+from .uncertainty.sobol import SobolResult, sobol_converge, sobol_indices
+from .uncertainty.sobol_closed_form import analytic_indices
+from .uncertainty.ranking import ranking as sobol_ranking
 from .study.runner import Study, StudyResult, run_study
 from .reports.study_report import write_study
 from .study.summary import build_summary
