@@ -27,7 +27,9 @@ from .uncertainty.model import LinearModel, linear_model
 from .uncertainty.montecarlo import MonteCarloResult, monte_carlo
 from .uncertainty.worstcase import WorstCase, worst_case
 from .uncertainty.sobol import SobolResult, analytic_indices, ranking as sobol_ranking, sobol_converge, sobol_indices
-from .study.runner import Study, StudyResult, run_study
+from .study.reader import Study
+from .study.results import StudyResult
+from .study.runner import run_study
 from .reports.study_report import write_study
 from .study.summary import build_summary
 from .measurement.campaign import Campaign, read_campaign, simulate_campaign

@@ -12,7 +12,8 @@ import pytest
 from prp3mc import Budget, Geometry, Region, sensitivity
 from prp3mc.cli import main
 from prp3mc.errors import StudyError, UnknownPresetError
-from prp3mc.study.runner import STUDIES_DIR, Study, bundled_studies, run_study
+from prp3mc.study.reader import STUDIES_DIR, Study, bundled_studies
+from prp3mc.study.runner import run_study
 from prp3mc.testing import assert_summary_close, load_summary
 
 GOLDEN = Path(__file__).parent / "golden"
