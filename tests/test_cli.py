@@ -64,3 +64,28 @@ def test_console_script_exit_status():
     assert proc.returncode == 1
     assert proc.stderr.strip().splitlines() == ["prp3mc sensitivity: error: unknown geometry preset 'nope' "
                                                 "(known: u-shape, delta-shape)"]
+
+
+@pytest.mark.parametrize("argv", [
+    ["sensitivity", "--geometry", "GEOM", "--pose", "0", "100", "0"],
+    ["worstcase", "--geometry", "GEOM", "--budget", "paper", "--pose", "0", "100", "0"],
+    ["montecarlo", "--geometry", "GEOM", "--budget", "paper", "--pose", "0", "100", "0", "--samples", "500",
+     "--seed", "4"],
+    ["sobol", "--geometry", "GEOM", "--budget", "paper", "--pose", "0", "100", "0", "--samples", "64",
+     "--seed", "4"],
+], ids=lambda a: a[0])
+def test_json_outputs_describe_themselves(argv, tmp_path, capsys):
+    """Every --json output names its inputs (file hashes included) and the versions it ran on."""
+    import hashlib
+    geometry_file = tmp_path / "g.toml"
+    Geometry.from_preset("u-shape").to_toml(geometry_file)
+    argv = [str(geometry_file) if a == "GEOM" else a for a in argv] + ["--json"]
+    assert main(argv) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["inputs"]["geometry"]["sha256"] == hashlib.sha256(geometry_file.read_bytes()).hexdigest()
+    assert doc["inputs"]["pose"] == {"x_mm": 0.0, "y_mm": 100.0, "phi_deg": 0.0}
+    if "--budget" in argv:
+        assert doc["inputs"]["budget"] == {"name": "paper", "preset": "paper"}
+    if "--seed" in argv:
+        assert doc["inputs"]["seed"] == 4
+    assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib"}
