@@ -117,7 +117,7 @@ class ConfigurationResult:
     sobol : SobolResult or None
         On the Sobol grid.
     ranking : mapping of str to DataFrame
-        Per Sobol output, :func:`prp3mc.uncertainty.sobol.ranking` over the Sobol grid.
+        Per Sobol output, :func:`prp3mc.uncertainty.ranking.ranking` over the Sobol grid.
     """
 
     configuration: StudyConfiguration

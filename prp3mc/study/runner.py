@@ -24,7 +24,8 @@ from .._rng import child_seed, resolve_rng
 from ..uncertainty.budget import Budget
 from ..uncertainty.model import linear_model
 from ..uncertainty.montecarlo import monte_carlo
-from ..uncertainty.sobol import ranking, sobol_indices
+from ..uncertainty.ranking import ranking
+from ..uncertainty.sobol import sobol_indices
 from ..uncertainty.worstcase import WorstCase, worst_case
 from ..units import RAD2DEG
 from .reader import Study, StudyConfiguration
