@@ -40,12 +40,17 @@ optional; paths are relative to the study file)::
     reference_position_um = [110, 150]  # a published worst-case range to compare with
     reference = "paper, Fig. 4"         # where that range comes from
 
+    [sweep]                           # optional: expand every configuration over the cartesian
+    "leg.3.a_mm" = [200, 220, 240]    # product of geometry parameters (keys as in a geometry
+    "leg.*.e_mm" = [10, 20, 30]       # file, legs 1-3 or * for all; see prp3mc.study.sweep)
+
 A mistake (unknown key, wrong type, unknown preset, impossible value, a pose
 or region outside the workspace) raises :class:`~prp3mc.errors.StudyError`
 whose message reads ``FILE:LINE: reason``.
 
 Randomness: the study seed gives one Monte Carlo seed and one Sobol seed,
-shared by all configurations (common random numbers, so differences between
+shared by all configurations, swept ones included (common random numbers, so
+differences between configurations are not blurred by sampling noise).
 """
 
 from __future__ import annotations
@@ -67,6 +72,7 @@ from ..kinematics.geometry import REGION_PRESETS, Geometry, Region
 from ..uncertainty.budget import Budget
 from ..uncertainty.montecarlo import PERCENTILES
 from ..units import OUTPUTS
+from .sweep import parse_key
 
 __all__ = ["Study", "StudyConfiguration", "bundled_studies", "STUDIES_DIR", "ANALYSES"]
 
@@ -104,6 +110,9 @@ class StudyConfiguration:
     reference_position_um : (lo, hi) or None
         A published worst-case position-error range to compare with, µm.
     reference : str
+    parameters : tuple of (key, value)
+        Sweep parameters of an expanded configuration, keys as written in the
+        ``[sweep]`` table; empty for a configuration of the file.
     """
 
     name: str
@@ -112,6 +121,7 @@ class StudyConfiguration:
     poses: tuple | None = None
     reference_position_um: tuple[float, float] | None = None
     reference: str = ""
+    parameters: tuple = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -135,6 +145,8 @@ class Study:
         Base sample size N of Saltelli's scheme, a power of two.
     sobol_outputs : tuple of str
     sobol_groups : dict of str to tuple of str
+    sweep : tuple of (key, tuple of values)
+        The ``[sweep]`` table in file order; empty without one.
     source : str
         The file it was read from.
     """
@@ -156,6 +168,7 @@ class Study:
     sobol_grid: tuple = _DEFAULT["sobol_grid"]
     sobol_outputs: tuple = _DEFAULT["sobol_outputs"]
     sobol_groups: dict = field(default_factory=dict)
+    sweep: tuple = ()
     source: str = "<study>"
 
     @classmethod
@@ -224,7 +237,7 @@ class _Reader:
     """Validation of a parsed study document, pointing errors at their lines."""
 
     _TOP = {"name", "title", "description", "seed", "budget", "outputs", "worstcase", "montecarlo",
-            "sobol", "configuration"}
+            "sobol", "configuration", "sweep"}
     _TABLES = {"worstcase": {"grid", "k_sigma"},
                "montecarlo": {"samples", "grid", "percentiles", "tolerance_mm"},
                "sobol": {"samples", "grid", "outputs", "groups"}}
@@ -346,7 +359,10 @@ class _Reader:
         configs = doc.get("configuration")
         if not isinstance(configs, list) or not configs or not all(isinstance(c, dict) for c in configs):
             self.fail(("configuration",), "a study needs at least one [[configuration]] table")
-        parsed = tuple(self.configuration(c, k, kw["worstcase_grid"]) for k, c in enumerate(configs))
+        kw["sweep"] = self.sweep(self.get(doc, ("sweep",), "table", {}))
+        # a swept configuration is checked value by value when it runs (infeasible ones are reported)
+        check = None if kw["sweep"] else kw["worstcase_grid"]
+        parsed = tuple(self.configuration(c, k, check) for k, c in enumerate(configs))
         names = [c.name for c in parsed]
         for k, n in enumerate(names):
             if n in names[:k]:
@@ -363,7 +379,31 @@ class _Reader:
         except Prp3mcError as exc:
             self.fail(path, f"{what} {spec!r}: {exc}")
 
-    def configuration(self, c: dict, k: int, grid: tuple) -> StudyConfiguration:
+    def sweep(self, table: dict) -> tuple:
+        """The [sweep] table as ((key, values), ...); keys checked, values non-empty and distinct."""
+        out, legs = [], {}
+        for key, values in table.items():
+            p = ("sweep", key)
+            try:
+                which, attribute = parse_key(key)
+            except Prp3mcError as exc:
+                self.fail(p, str(exc))
+            pair = attribute == "stroke"
+            ok = (lambda v: isinstance(v, list) and len(v) == 2 and all(_finite(x) for x in v)) if pair else _finite
+            if not isinstance(values, list) or not values or not all(ok(v) for v in values):
+                self.fail(p, f"sweep {key!r} must be a non-empty array of "
+                          f"{'[lo, hi] pairs' if pair else 'finite numbers'}, got {values!r}")
+            if len({repr(v) for v in values}) != len(values):
+                self.fail(p, f"sweep {key!r} lists a value twice: {values!r}")
+            for i in which:
+                if (i, attribute) in legs:
+                    self.fail(p, f"sweep {key!r} sets leg {i + 1}'s {attribute} again (also set by "
+                              f"{legs[i, attribute]!r})")
+                legs[i, attribute] = key
+            out.append((key, tuple(tuple(v) if pair else v for v in values)))
+        return tuple(out)
+
+    def configuration(self, c: dict, k: int, grid: tuple | None) -> StudyConfiguration:
         p = ("configuration", k)
         self.unknown(c, self._CONFIG, p, f"configuration {k + 1}")
         if "geometry" not in c:
@@ -387,7 +427,8 @@ class _Reader:
         phi = self.get(c, p + ("phi_deg",), "number", region.phi_deg)
         region = Region(region.x_mm, region.y_mm, phi)
         try:
-            check_poses(geometry, region.grid(grid))
+            if grid is not None:
+                check_poses(geometry, region.grid(grid))
         except Prp3mcError as exc:
             self.fail(p + (("phi_deg",) if "phi_deg" in c else ("region",)),
                       f"configuration {name!r}: the test region leaves the workspace: {exc}")
@@ -401,7 +442,8 @@ class _Reader:
             if poses.ndim != 2 or poses.shape[1:] != (3,) or not len(poses) or not np.isfinite(poses).all():
                 self.fail(p + ("poses",), f"poses must be a non-empty array of [x_mm, y_mm, phi_deg], got {raw!r}")
             try:
-                check_poses(geometry, poses)
+                if grid is not None:
+                    check_poses(geometry, poses)
             except Prp3mcError as exc:
                 self.fail(p + ("poses",), f"configuration {name!r}: {exc}")
             poses = tuple(tuple(float(v) for v in pose) for pose in poses)
@@ -414,6 +456,10 @@ class _Reader:
             ref = (float(ref[0]), float(ref[1]))
         return StudyConfiguration(name=name, geometry=geometry, region=region, poses=poses,
                                   reference_position_um=ref, reference=self.get(c, p + ("reference",), "str", ""))
+
+
+def _finite(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
 _HEADER = re.compile(r"^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")
