@@ -26,6 +26,7 @@ from .uncertainty.laws import Discrete, Disc, Normal, Triangular, TruncNormal, U
 from .uncertainty.model import LinearModel, linear_model
 from .uncertainty.montecarlo import MonteCarloResult, monte_carlo
 from .uncertainty.worstcase import WorstCase, worst_case
+from .uncertainty.allocation import AllocationResult, allocate
 from .uncertainty.sobol import SobolResult, analytic_indices, ranking as sobol_ranking, sobol_converge, sobol_indices
 from .study.runner import Study, StudyResult, run_study
 from .reports.study_report import write_study
@@ -44,6 +45,7 @@ __all__ = [
     "Budget", "Catalogue", "Uniform", "Normal", "TruncNormal", "Triangular", "Disc", "Discrete",
     "LinearModel", "linear_model", "MonteCarloResult", "monte_carlo",
     "WorstCase", "worst_case",
+    "AllocationResult", "allocate",
     "SobolResult", "sobol_indices", "analytic_indices", "sobol_ranking", "sobol_converge",
     "Study", "StudyResult", "run_study", "write_study", "build_summary",
     "Campaign", "read_campaign", "simulate_campaign", "EFFECT_NAMES", "Effect", "effect",
