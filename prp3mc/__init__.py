@@ -8,48 +8,44 @@ builds error budgets, Monte Carlo statistics, exact worst-case envelopes and
 Sobol indices on top.
 
 Units: mm and degrees at every boundary, radians inside.
+
+The names below are the whole everyday API. Everything else lives in the
+wings, by concept: :mod:`prp3mc.kinematics`, :mod:`prp3mc.uncertainty`,
+:mod:`prp3mc.measurement`, :mod:`prp3mc.study`, :mod:`prp3mc.reports`
+(figures and report writers), :mod:`prp3mc.errors` (every exception type)
+and :mod:`prp3mc.testing` (helpers for users' CI).
 """
 
-from .errors import (
-    BudgetError, CampaignError, ConvergenceError, GeometryError, InfeasiblePoseError,
-    InputFileError, Prp3mcError, StudyError, UnknownPresetError,
-)
-from .kinematics.exact import exact_pose_error, linear_pose_error, linearization_error_um
-from .kinematics.geometry import Geometry, Region
-from .kinematics.chain import (
-    Limits, check_poses, feasible, forward_kinematics, inverse_kinematics, jacobian, jacobians,
-)
-from .kinematics.sensitivity import FAMILIES, Sensitivity, sensitivity
 from ._version import __version__
+from .errors import Prp3mcError
+from .kinematics.chain import feasible, forward_kinematics, inverse_kinematics
+from .kinematics.exact import exact_pose_error
+from .kinematics.geometry import Geometry, Region
+from .kinematics.sensitivity import Sensitivity, sensitivity
 from .uncertainty.budget import Budget, Catalogue
-from .uncertainty.laws import Discrete, Disc, Normal, Triangular, TruncNormal, Uniform
+from .uncertainty.laws import Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
 from .uncertainty.model import LinearModel, linear_model
 from .uncertainty.montecarlo import MonteCarloResult, monte_carlo
 from .uncertainty.worstcase import WorstCase, worst_case
 from .uncertainty.allocation import AllocationResult, allocate
-from .uncertainty.sobol import SobolResult, analytic_indices, ranking as sobol_ranking, sobol_converge, sobol_indices
+from .uncertainty.sobol import SobolResult, ranking as sobol_ranking, sobol_indices
 from .study.runner import Study, StudyResult, run_study
-from .reports.study_report import write_study
 from .study.summary import build_summary
 from .measurement.campaign import Campaign, read_campaign, simulate_campaign
-from .measurement.effects import EFFECT_NAMES, Effect, effect
-from .measurement.discrepancy import DiscrepancyResult, detectable_effect, discrepancy, predict
-from .reports.discrepancy_report import write_report as write_discrepancy_report
+from .measurement.discrepancy import DiscrepancyResult, detectable_effect, discrepancy
 
 __all__ = [
-    "__version__",
-    "Geometry", "Region", "Limits",
-    "inverse_kinematics", "forward_kinematics", "jacobians", "jacobian", "check_poses", "feasible",
-    "FAMILIES", "Sensitivity", "sensitivity",
-    "exact_pose_error", "linear_pose_error", "linearization_error_um",
+    "__version__", "Prp3mcError",
+    # geometry and kinematics
+    "Geometry", "Region", "inverse_kinematics", "forward_kinematics", "feasible",
+    "sensitivity", "Sensitivity", "exact_pose_error",
+    # budgets and their propagation
     "Budget", "Catalogue", "Uniform", "Normal", "TruncNormal", "Triangular", "Disc", "Discrete",
-    "LinearModel", "linear_model", "MonteCarloResult", "monte_carlo",
-    "WorstCase", "worst_case",
-    "AllocationResult", "allocate",
-    "SobolResult", "sobol_indices", "analytic_indices", "sobol_ranking", "sobol_converge",
-    "Study", "StudyResult", "run_study", "write_study", "build_summary",
-    "Campaign", "read_campaign", "simulate_campaign", "EFFECT_NAMES", "Effect", "effect",
-    "DiscrepancyResult", "discrepancy", "predict", "detectable_effect", "write_discrepancy_report",
-    "Prp3mcError", "GeometryError", "UnknownPresetError", "InputFileError", "InfeasiblePoseError",
-    "ConvergenceError", "BudgetError", "StudyError", "CampaignError",
+    "linear_model", "LinearModel", "monte_carlo", "MonteCarloResult", "worst_case", "WorstCase",
+    "allocate", "AllocationResult",
+    "sobol_indices", "SobolResult", "sobol_ranking",
+    # studies
+    "Study", "StudyResult", "run_study", "build_summary",
+    # measurements
+    "Campaign", "read_campaign", "simulate_campaign", "discrepancy", "DiscrepancyResult", "detectable_effect",
 ]

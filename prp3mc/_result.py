@@ -1,7 +1,7 @@
 """The protocol every result object follows.
 
 Results are frozen dataclasses whose arrays are read-only and whose mappings
-are read-only views, so a result cannot be changed after it is made.
+are read-only (:class:`FrozenDict`), so a result cannot be changed after it is made.
 ``to_frame()`` gives a tidy DataFrame in one vocabulary:
 
 - pose columns ``x_mm``, ``y_mm``, ``phi_deg`` (the commanded pose);
@@ -24,10 +24,26 @@ from types import MappingProxyType
 import numpy as np
 import pandas as pd
 
-__all__ = ["freeze", "short_repr", "pose_columns", "interval_frame", "POSE_COLUMNS", "CI_COLUMNS"]
+__all__ = ["FrozenDict", "freeze", "short_repr", "pose_columns", "interval_frame", "POSE_COLUMNS", "CI_COLUMNS"]
 
 POSE_COLUMNS = ("x_mm", "y_mm", "phi_deg")
 CI_COLUMNS = ("ci_low", "ci_high", "level")
+
+
+class FrozenDict(dict):
+    """A read-only dict: every mutating method raises TypeError. Pickles (unlike a mappingproxy)."""
+
+    def _readonly(self, *args, **kwargs):
+        raise TypeError(f"{type(self).__name__} is read-only")
+
+    __setitem__ = __delitem__ = __ior__ = _readonly
+    clear = pop = popitem = setdefault = update = _readonly
+
+    def __reduce__(self):
+        return (type(self), (dict(self),))
+
+    def __hash__(self):
+        return hash(tuple(self.items()))
 
 
 def _frozen(value):
@@ -36,20 +52,21 @@ def _frozen(value):
             value = value.view()
             value.flags.writeable = False
         return value
-    if isinstance(value, MappingProxyType):
+    if isinstance(value, (FrozenDict, MappingProxyType)):
         return value
     if isinstance(value, dict):
-        return MappingProxyType({k: _frozen(v) for k, v in value.items()})
+        return FrozenDict({k: _frozen(v) for k, v in value.items()})
     if isinstance(value, list):
         return tuple(_frozen(v) for v in value)
     return value
 
 
 def freeze(obj) -> None:
-    """Make every ndarray field of a frozen dataclass read-only and every dict a read-only view.
+    """Make every ndarray field of a frozen dataclass read-only and every dict a :class:`FrozenDict`.
 
     Call at the end of ``__post_init__``. Arrays are replaced by read-only
-    views (no copy); dicts by ``MappingProxyType`` of frozen values.
+    views (no copy); dicts by FrozenDicts of frozen values (they pickle, so
+    results travel to Dask workers and back).
     """
     for f in dataclasses.fields(obj):
         value = getattr(obj, f.name)

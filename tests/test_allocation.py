@@ -262,7 +262,7 @@ classes = [{ name = "1um", law = "uniform", lo = 0.0, hi = 0.001, cost = 5.0 }]
             "binding_poses", "inputs", "versions"} <= set(doc)
     assert doc["feasible"] and doc["worst_case_position_um"] <= 60 and set(doc["choice"]) == {
         f"{f}_{i}" for f in ("rho", "theta", "b") for i in (1, 2, 3)}
-    assert doc["inputs"]["sha256"][str(path)]
+    assert doc["inputs"]["classes"]["file"] == str(path.resolve())
     code = main(["allocate", "--geometry", "u-shape", "--region", "u-shape", "--classes", str(path),
                  "--spec-position-um", "1", "--grid", "5", "--json"])
     doc = json.loads(capsys.readouterr().out)
@@ -290,3 +290,13 @@ def test_result_protocol():
     assert json.dumps(r.to_dict(), allow_nan=False)
     assert isinstance(Region.from_preset("delta-shape"), Region) and isinstance(AllocationError("x"), Prp3mcError)
     assert Geometry.load("delta-shape").name == "delta-shape"
+
+
+def test_init_classes_template_runs(tmp_path, capsys):
+    path = tmp_path / "classes.toml"
+    assert main(["init", "classes", str(path)]) == 0
+    capsys.readouterr()
+    assert main(["allocate", "--geometry", "u-shape", "--region", "u-shape", "--classes", str(path),
+                 "--spec-position-um", "150", "--grid", "5", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["feasible"] and doc["inputs"]["classes"]["sha256"]

@@ -4,7 +4,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from prp3mc import Budget, CampaignError, Geometry, Region
+from prp3mc import Budget, Geometry, Region
+from prp3mc.errors import CampaignError
 from prp3mc.measurement.campaign import Campaign, read_campaign, simulate_campaign
 from prp3mc.measurement.discrepancy import predict
 from prp3mc.measurement.effects import EFFECT_NAMES, effect, library

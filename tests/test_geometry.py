@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from prp3mc import Geometry, GeometryError, InputFileError, Region, UnknownPresetError
+from prp3mc import Geometry, Region
+from prp3mc.errors import GeometryError, InputFileError, UnknownPresetError
 
 
 def test_presets_match_spec_table():

@@ -2,10 +2,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from prp3mc import (
-    Geometry, InfeasiblePoseError, Limits, Region, check_poses, feasible, forward_kinematics,
-    inverse_kinematics, jacobian, jacobians, sensitivity,
-)
+from prp3mc import Geometry, Region, feasible, forward_kinematics, inverse_kinematics, sensitivity
+from prp3mc.errors import InfeasiblePoseError
+from prp3mc.kinematics.chain import Limits, check_poses, jacobian, jacobians
 from prp3mc.kinematics.sensitivity import FAMILIES
 
 from .conftest import PRESETS

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from prp3mc import (
-    BudgetError, exact_pose_error, linear_pose_error, linearization_error_um, sensitivity,
-)
+from prp3mc import exact_pose_error, sensitivity
+from prp3mc.errors import BudgetError
+from prp3mc.kinematics.exact import linear_pose_error, linearization_error_um
 from prp3mc.kinematics.sensitivity import FAMILIES, LENGTH_FAMILIES
 
 from .conftest import random_poses

@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 from SALib.sample import sobol as sobol_sample
 
-from prp3mc import (Budget, BudgetError, Disc, Geometry, InfeasiblePoseError, Normal, Region, Triangular,
-                    Uniform, linear_model, worst_case)
+from prp3mc import Budget, Disc, Geometry, Normal, Region, Triangular, Uniform, linear_model, worst_case
+from prp3mc.errors import BudgetError, InfeasiblePoseError
 from prp3mc.cli import main
 from prp3mc.uncertainty.sobol import (_design, _factors, analytic_indices, ranking, sobol_converge, sobol_indices)
 

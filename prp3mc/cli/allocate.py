@@ -2,31 +2,12 @@
 
 from __future__ import annotations
 
-import hashlib
-import platform
-from importlib import metadata
-from pathlib import Path
-
 from .._version import __version__
 from ..kinematics.geometry import REGION_PRESETS
+from ..provenance import spec_record
 from ..uncertainty.allocation import allocate, allocation_front
 from ..units import DEG2ARCSEC, MM2UM
-from . import add_geometry, add_json, command, emit_json, finite_float, positive_int
-
-
-def _versions() -> dict:
-    out = {"prp3mc": __version__, "python": platform.python_version()}
-    for dist in ("numpy", "scipy", "pandas", "SALib"):
-        try:
-            out[dist] = metadata.version(dist)
-        except metadata.PackageNotFoundError:
-            out[dist] = None
-    return out
-
-
-def _sha256(spec: str) -> dict:
-    path = Path(spec)
-    return {spec: hashlib.sha256(path.read_bytes()).hexdigest()} if path.is_file() else {}
+from . import add_geometry, add_json, command, emit_json, finite_float, positive_int, provenance
 
 
 @command("allocate", "least-cost tolerance classes meeting an accuracy spec over a region")
@@ -75,12 +56,10 @@ class AllocateCommand:
                                  "worst_case_position_um": MM2UM * float(row["position"]),
                                  "worst_case_phi_arcsec": DEG2ARCSEC * float(row["phi"])}
                                 for k, row in wide.iterrows()]
-            doc["inputs"] = {"geometry": args.geometry, "classes": args.classes, "region": args.region,
-                             "grid": args.grid, "phi_deg": args.phi_deg, "n_poses": int(r.poses.shape[0]),
-                             "k_sigma": args.k_sigma, "seed": r.seed,
-                             "n_samples": args.samples if args.spec_percentile is not None else None,
-                             "sha256": {**_sha256(args.geometry), **_sha256(args.classes)}}
-            doc["versions"] = _versions()
+            doc.update(provenance(args, r.geometry, classes=spec_record(args.classes, r.menu), region=args.region,
+                                  grid=args.grid, phi_deg=args.phi_deg, n_poses=int(r.poses.shape[0]),
+                                  k_sigma=args.k_sigma, seed=r.seed,
+                                  n_samples=args.samples if args.spec_percentile is not None else None))
             emit_json(doc)
             return
         print(_text(r, args, front))

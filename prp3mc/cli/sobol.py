@@ -8,7 +8,7 @@ from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
 from ..uncertainty.sobol import OUTPUTS, ranking, sobol_indices
 from ..uncertainty.worstcase import worst_case
-from . import (add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
+from . import (provenance, add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
                emit_json, finite_float, positive_int)
 
 _KEYS = ("S1", "S1_conf", "ST", "ST_conf")
@@ -70,6 +70,7 @@ class SobolCommand:
                                "x_mm": float(wc.x_mm), "y_mm": float(wc.y_mm)},
                 "groups": {k: list(v) for k, v in r.groups.items()},
                 **r.metadata(), "k_sigma": args.k_sigma,
+                **provenance(args, geometry, budget, seed=r.seed, n_samples=r.n_samples),
             })
             return
         x, y, phi = args.pose

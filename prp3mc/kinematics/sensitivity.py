@@ -29,6 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from .._result import freeze, short_repr
+from ..units import POSE_OUTPUTS
 from .geometry import Geometry
 from .chain import (
     DEFAULT_LIMITS, Frame, Limits, _diag, as_poses, batch_last, frame, legs_first, validated_frame,
@@ -40,7 +42,7 @@ __all__ = ["FAMILIES", "LENGTH_FAMILIES", "Sensitivity", "sensitivity", "h_entri
 FAMILIES = ("a", "alpha", "b", "beta", "rho", "c", "gamma", "theta", "e", "psi")
 #: Families whose parameter is a length (mm); the others are angles (rad).
 LENGTH_FAMILIES = frozenset({"a", "b", "rho", "c", "e"})
-_OUTPUTS = ("x", "y", "phi")
+
 
 
 def h_entries(geometry: Geometry, fr: Frame, family: str) -> np.ndarray:
@@ -70,7 +72,7 @@ def h_entries(geometry: Geometry, fr: Frame, family: str) -> np.ndarray:
     raise KeyError(f"unknown error family {family!r}")
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, repr=False)
 class Sensitivity:
     """A, B and every sensitivity matrix at a batch of poses.
 
@@ -91,6 +93,12 @@ class Sensitivity:
     H: dict
     J: dict
 
+    def __post_init__(self):
+        freeze(self)
+
+    def __repr__(self) -> str:
+        return short_repr(self, "poses") + f" with J of {', '.join(self.J)}"
+
     def to_frame(self) -> pd.DataFrame:
         """Tidy table: x_mm, y_mm, phi_deg, output, family, leg, value, unit."""
         flat = self.poses.reshape(-1, 3)
@@ -103,7 +111,7 @@ class Sensitivity:
             units = np.array([f"mm/{per}", f"mm/{per}", f"rad/{per}"])
             frames.append(pd.DataFrame({
                 "x_mm": flat[pose_idx, 0], "y_mm": flat[pose_idx, 1], "phi_deg": flat[pose_idx, 2],
-                "output": np.array(_OUTPUTS)[out_idx], "family": q, "leg": leg_idx + 1,
+                "output": np.array(POSE_OUTPUTS)[out_idx], "family": q, "leg": leg_idx + 1,
                 "value": self.J[q].reshape(n, 3, 3).ravel(), "unit": units[out_idx],
             }))
         return pd.concat(frames, ignore_index=True)

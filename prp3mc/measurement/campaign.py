@@ -15,7 +15,7 @@ from the command that they must be a unit mistake.
 :func:`simulate_campaign` makes campaigns with the exact nonlinear model,
 fresh draws of the budget's random errors at every measurement, approach
 directions, a temperature drift, instrument noise and hidden effects of the
-library (:mod:`prp3mc.effects`).
+library (:mod:`prp3mc.measurement.effects`).
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ Measurement m of commanded pose p is ``measured = commanded + e_m + s_m + n_m``:
   the linear model (:meth:`prp3mc.LinearModel.moments`), which the exact
   nonlinear chain matches to < 0.1 um at these magnitudes.
 - ``s_m = sum_k theta_k g_k(m)`` are systematic effects of the library, each
-  linear in its value through its signature (:func:`prp3mc.effects.signatures`).
+  linear in its value through its signature (:func:`prp3mc.measurement.effects.signatures`).
 - ``n_m`` is instrument noise, N(0, diag(s_mm^2, s_mm^2, s_deg^2)).
 
 Inference uses the Gaussian likelihood of the residuals ``measured -

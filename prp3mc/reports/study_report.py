@@ -179,7 +179,7 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
                           f"y ∈ [{c.configuration.region.y_mm[0]:g}, {c.configuration.region.y_mm[1]:g}] mm, "
                           f"φ = {c.configuration.region.phi_deg:g}°",
                 "reference": c.configuration.reference,
-                "contributions": _html_table(tables[f"contributions_{c.name}"].drop(columns=["quantity"]).assign(
+                "contributions": _html_table(tables[f"contributions_{c.name}"].drop(columns=["output"]).assign(
                     contribution_um=lambda d: 1e3 * d["contribution"], share_pct=lambda d: 100 * d["share"])
                     .drop(columns=["contribution", "share"]))}
                for c in result.configurations]

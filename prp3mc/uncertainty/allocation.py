@@ -75,6 +75,7 @@ class AllocationResult:
     n_choices : int
         Size of the whole choice space (the product of the menus).
     menu : ClassMenu
+    geometry : Geometry
     seed : int or None
     """
 
@@ -91,6 +92,7 @@ class AllocationResult:
     nodes: int
     n_choices: int
     menu: ClassMenu
+    geometry: Geometry
     seed: int | None = None
     version: str = __version__
     wall_time_s: float = field(default=float("nan"), compare=False)
@@ -270,7 +272,7 @@ def allocate(geometry, classes, region, *, spec_position_um: float | None = None
               "percentile": spec_percentile},
         poses=poses, position_mm=wc.position_mm, phi_deg=wc.phi_deg, binding=binding,
         binding_poses=binding_poses, statistical=statistical, nodes=nodes,
-        n_choices=int(np.prod(problem.n_classes.astype(float))), menu=menu, seed=seed,
+        n_choices=int(np.prod(problem.n_classes.astype(float))), menu=menu, geometry=geometry, seed=seed,
         wall_time_s=time.perf_counter() - t0)
 
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from .._toml import dumps_toml, load_spec, load_toml, loads_toml
 from ..output import write_text
+from .._result import FrozenDict
 from ..errors import BudgetError, UnknownPresetError
 from .laws import Law, law_from_dict
 from ..kinematics.sensitivity import LENGTH_FAMILIES
@@ -141,9 +142,9 @@ class Budget:
             if gname in inputs:
                 raise BudgetError(f"group {gname!r} has the name of an input")
             groups[gname] = members
-        object.__setattr__(self, "inputs", inputs)
-        object.__setattr__(self, "groups", groups)
-        object.__setattr__(self, "sources", dict(self.sources))
+        object.__setattr__(self, "inputs", FrozenDict(inputs))
+        object.__setattr__(self, "groups", FrozenDict(groups))
+        object.__setattr__(self, "sources", FrozenDict(self.sources))
 
     # ------------------------------------------------------------ access
     @property

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._result import freeze, short_repr
 from ..units import RAD2DEG
 from .budget import Budget, parse_input
 from .laws import angle_moments
@@ -24,7 +25,7 @@ from ..kinematics.sensitivity import LENGTH_FAMILIES, h_entries
 __all__ = ["LinearModel", "linear_model"]
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, repr=False)
 class LinearModel:
     """Linear error model of ``budget`` at ``poses``.
 
@@ -59,6 +60,12 @@ class LinearModel:
     cos_omega: np.ndarray
     sin_omega: np.ndarray
     _plan: tuple
+
+    def __post_init__(self):
+        freeze(self)
+
+    def __repr__(self) -> str:
+        return short_repr(self, "geometry", "budget", "poses", "terms")
 
     @property
     def columns(self) -> np.ndarray:

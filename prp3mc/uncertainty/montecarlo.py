@@ -2,7 +2,7 @@
 
 One sample matrix is shared by all poses (common random numbers). Means and
 covariances of the pose error are linear images of the sample moments of the
-model's features (:class:`prp3mc.model.LinearModel`), so they are computed
+model's features (:class:`prp3mc.uncertainty.model.LinearModel`), so they are computed
 once for all poses; their standard errors come from 64 batch means. The
 position-error norm and |dphi| are evaluated per pose and sample in float32,
 streamed in pose chunks of bounded memory, and summarised by exact order
@@ -21,7 +21,8 @@ import numpy as np
 import pandas as pd
 
 from .._rng import resolve_rng
-from ..units import RAD2DEG as _RAD2DEG, Z95 as _Z95
+from .._result import freeze, pose_columns, short_repr
+from ..units import OUTPUT_UNITS, POSE_OUTPUTS, RAD2DEG, Z95, z_value
 from .._version import __version__
 from .budget import Budget
 from ..errors import BudgetError
@@ -30,7 +31,7 @@ from ..kinematics.geometry import Geometry
 from .model import LinearModel, linear_model
 from ..progress import Progress
 
-__all__ = ["MonteCarloResult", "monte_carlo", "closed_form_moments", "PERCENTILES"]
+__all__ = ["MonteCarloResult", "monte_carlo", "PERCENTILES"]
 
 #: Percentiles reported by default (p99.73 is the 3-sigma level of a normal law).
 PERCENTILES = (50.0, 95.0, 99.0, 99.73)
@@ -38,7 +39,7 @@ _N_BATCHES = 64
 _BLOCK = 1 << 15  # samples per block of the pose-error evaluation (fits in cache)
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, repr=False)
 class MonteCarloResult:
     """Summaries of the pose error per pose, each with its uncertainty.
 
@@ -97,46 +98,82 @@ class MonteCarloResult:
     version: str = __version__
     wall_time_s: float = field(default=float("nan"), compare=False)
 
-    def conf_int(self, statistic: str) -> np.ndarray:
-        """95 % interval of ``mean``, ``std``, ``position_pct``, ``phi_pct`` or ``exceed_prob``; (..., [Q,] 2)."""
-        if statistic in ("mean", "std"):
-            est, se = getattr(self, statistic), getattr(self, f"{statistic}_se")
-            return np.stack([est - _Z95 * se, est + _Z95 * se], axis=-1)
-        if statistic in ("position_pct", "phi_pct"):
-            return getattr(self, f"{statistic}_ci")
-        if statistic == "exceed_prob" and self.exceed_ci is not None:
-            return self.exceed_ci
-        raise KeyError(f"no confidence interval for {statistic!r}")
+    def __post_init__(self):
+        freeze(self)
+
+    def __repr__(self) -> str:
+        return short_repr(self, "poses", "n_samples", "seed", "percentiles", "tolerance_mm")
 
     def to_frame(self) -> pd.DataFrame:
-        """Tidy table: x_mm, y_mm, phi_deg, statistic, output, value, se, ci_lo, ci_hi, unit."""
-        flat = self.poses.reshape(-1, 3)
-        n = flat.shape[0]
+        """Tidy table of every statistic per pose, with its 95 % interval.
+
+        Columns: x_mm, y_mm, phi_deg, output, statistic, value, unit, se,
+        ci_low, ci_high, level, method. ``phi`` percentiles and maxima are
+        of |dphi|; ``method`` says how the interval was made ("normal" from
+        batch-means standard errors, "order statistics" distribution-free,
+        "wilson" for exceedance, "none" for the sample maximum).
+        """
+        return self.conf_int(0.95)
+
+    def conf_int(self, level: float = 0.95, statistic: str | None = None) -> pd.DataFrame:
+        """Confidence intervals at ``level`` as a tidy DataFrame (columns as :meth:`to_frame`).
+
+        Parameters
+        ----------
+        level : float
+            Confidence level in (0, 1).
+        statistic : str, optional
+            Keep only this statistic (``"mean"``, ``"std"``, ``"p95"``, ``"max"``,
+            ``"exceed"``...).
+
+        Notes
+        -----
+        Means and standard deviations: normal intervals from batch-means
+        standard errors at any level. Percentiles: the run's distribution-free
+        95 % order-statistic interval at ``level=0.95``; at other levels a
+        normal interval whose standard error is read off that interval
+        (``method`` says which). Exceedance: a Wilson interval at ``level``.
+        """
+        z = z_value(level)
+        cols = pose_columns(self.poses)
+        n = cols["x_mm"].size
         rows = []
 
-        def add(stat, output, unit, value, se=None, ci=None):
-            value = np.asarray(value).reshape(n)
-            se = np.full(n, np.nan) if se is None else np.asarray(se).reshape(n)
+        def add(stat, output, unit, value, se=None, ci=None, method="normal"):
+            value = np.asarray(value, dtype=float).reshape(n)
+            se = np.full(n, np.nan) if se is None else np.asarray(se, dtype=float).reshape(n)
             if ci is None:
-                ci = np.stack([value - _Z95 * se, value + _Z95 * se], -1)
-            ci = np.asarray(ci).reshape(n, 2)
-            rows.append(pd.DataFrame({"x_mm": flat[:, 0], "y_mm": flat[:, 1], "phi_deg": flat[:, 2],
-                                      "statistic": stat, "output": output, "value": value, "se": se,
-                                      "ci_lo": ci[:, 0], "ci_hi": ci[:, 1], "unit": unit}))
+                ci = np.stack([value - z * se, value + z * se], -1)
+            ci = np.asarray(ci, dtype=float).reshape(n, 2)
+            rows.append(pd.DataFrame({**cols, "output": output, "statistic": stat, "value": value, "unit": unit,
+                                      "se": se, "ci_low": ci[:, 0], "ci_high": ci[:, 1], "level": level,
+                                      "method": method}))
 
-        units = ("mm", "mm", "deg")
-        for o, name in enumerate(("x", "y", "phi")):
-            add("mean", name, units[o], self.mean[..., o], self.mean_se[..., o])
-            add("std", name, units[o], self.std[..., o], self.std_se[..., o])
+        for o, name in enumerate(POSE_OUTPUTS):
+            unit = OUTPUT_UNITS[name]
+            add("mean", name, unit, self.mean[..., o], self.mean_se[..., o])
+            add("std", name, unit, self.std[..., o], self.std_se[..., o])
         add("mean", "position", "mm", self.position_mean, self.position_mean_se)
         for q, p in enumerate(self.percentiles):
-            add(f"p{p:g}", "position", "mm", self.position_pct[..., q], ci=self.position_pct_ci[..., q, :])
-            add(f"p{p:g}", "phi_abs", "deg", self.phi_pct[..., q], ci=self.phi_pct_ci[..., q, :])
-        add("max", "position", "mm", self.position_max, ci=np.stack([self.position_max] * 2, -1))
-        add("max", "phi_abs", "deg", self.phi_max, ci=np.stack([self.phi_max] * 2, -1))
+            for output, est, ci, unit in (("position", self.position_pct, self.position_pct_ci, "mm"),
+                                          ("phi", self.phi_pct, self.phi_pct_ci, "deg")):
+                ci_q = ci[..., q, :]
+                if level == 0.95:
+                    add(f"p{p:g}", output, unit, est[..., q], (ci_q[..., 1] - ci_q[..., 0]) / (2 * Z95), ci=ci_q,
+                        method="order statistics")
+                else:
+                    add(f"p{p:g}", output, unit, est[..., q], (ci_q[..., 1] - ci_q[..., 0]) / (2 * Z95))
+        for output, mx, unit in (("position", self.position_max, "mm"), ("phi", self.phi_max, "deg")):
+            add("max", output, unit, mx, ci=np.stack([mx, mx], -1), method="none")
         if self.exceed_prob is not None:
-            add(f"P(position>{self.tolerance_mm:g}mm)", "position", "1", self.exceed_prob, ci=self.exceed_ci)
-        return pd.concat(rows, ignore_index=True)
+            add("exceed", "position", "1", self.exceed_prob,
+                ci=_wilson(self.exceed_prob * self.n_samples, self.n_samples, z), method="wilson")
+        frame = pd.concat(rows, ignore_index=True)
+        if statistic is not None:
+            if statistic not in set(frame["statistic"]):
+                raise KeyError(f"no statistic {statistic!r}; choose from {sorted(set(frame['statistic']))}")
+            frame = frame[frame["statistic"] == statistic].reset_index(drop=True)
+        return frame
 
     def metadata(self) -> dict:
         return {"prp3mc_version": self.version, "seed": self.seed, "n_samples": self.n_samples,
@@ -149,7 +186,7 @@ def _order_ranks(n: int, percentiles) -> tuple[np.ndarray, np.ndarray, np.ndarra
     h = q * (n - 1)
     lo_rank = np.floor(h).astype(int)
     hi_rank = np.minimum(lo_rank + 1, n - 1)
-    half = _Z95 * np.sqrt(n * q * (1 - q))
+    half = Z95 * np.sqrt(n * q * (1 - q))
     ci_lo = np.clip(np.floor(n * q - half).astype(int) - 1, 0, n - 1)
     ci_hi = np.clip(np.ceil(n * q + half).astype(int) - 1, 0, n - 1)
     return h, lo_rank, hi_rank, np.stack([ci_lo, ci_hi], -1)
@@ -185,11 +222,12 @@ def _order_statistics(rows: np.ndarray, ranks: np.ndarray) -> np.ndarray:
     return out
 
 
-def _wilson(k: np.ndarray, n: int) -> np.ndarray:
+def _wilson(k: np.ndarray, n: int, z: float = Z95) -> np.ndarray:
+    """Wilson score interval (..., 2) of a proportion k / n at normal quantile ``z``."""
     p = k / n
-    denom = 1 + _Z95**2 / n
-    centre = (p + _Z95**2 / (2 * n)) / denom
-    half = _Z95 * np.sqrt(p * (1 - p) / n + _Z95**2 / (4 * n * n)) / denom
+    denom = 1 + z**2 / n
+    centre = (p + z**2 / (2 * n)) / denom
+    half = z * np.sqrt(p * (1 - p) / n + z**2 / (4 * n * n)) / denom
     return np.stack([centre - half, centre + half], -1)
 
 
@@ -263,7 +301,7 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     del X
     fmean, fcov, bmeans, bcovs = _feature_moments(F)
     C = model.coef.reshape((-1, 3, F.shape[1]))
-    deg = np.array([1.0, 1.0, _RAD2DEG])
+    deg = np.array([1.0, 1.0, RAD2DEG])
     mean = np.einsum("pof,f->po", C, fmean) * deg
     cov = np.einsum("pof,fg,pqg->poq", C, fcov, C) * np.outer(deg, deg)
     bm = np.einsum("pof,bf->pbo", C, bmeans) * deg
@@ -320,7 +358,7 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
         if tolerance_mm is not None:
             out["exceed"][sl] = np.count_nonzero(pos > tolerance_mm, axis=-1)
         summarise(pos, "pos_pct", "pos_ci", "pos_max", sl, 1.0)
-        summarise(phi, "phi_pct", "phi_ci", "phi_max", sl, _RAD2DEG)
+        summarise(phi, "phi_pct", "phi_ci", "phi_max", sl, RAD2DEG)
         return p
 
     starts = range(0, n_poses, chunk)
@@ -360,7 +398,7 @@ def _linearization(model: LinearModel, budget: Budget, seed: int, n_poses: int, 
     exact = exact_pose_error(model.geometry, poses, errors, check=False)
     sub = linear_model(model.geometry, budget, flat[idx], check=False)
     lin = sub.evaluate(X)
-    lin[..., 2] *= _RAD2DEG
+    lin[..., 2] *= RAD2DEG
     diff = exact - lin
     dpos_um = 1e3 * np.hypot(diff[..., 0], diff[..., 1])
     dphi_arcsec = 3600.0 * np.abs(diff[..., 2])

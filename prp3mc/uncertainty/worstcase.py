@@ -19,6 +19,7 @@ joint), which is why it adds a segment, not a disc.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from concurrent.futures import ThreadPoolExecutor
@@ -27,7 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from .._result import freeze, pose_columns, short_repr
 from .._version import __version__
+from ..units import OUTPUT_UNITS, RAD2DEG
 from .budget import Budget, parse_input
 from ..kinematics.geometry import Geometry
 from ..kinematics.chain import as_poses
@@ -37,20 +40,17 @@ __all__ = ["WorstCase", "worst_case", "QUANTITIES"]
 
 #: Quantities maximised: the position-error norm, |dphi|, |dx| and |dy|.
 QUANTITIES = ("position", "phi", "x", "y")
-_RAD2DEG = 180.0 / math.pi
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, repr=False)
 class WorstCase:
     """Exact worst case of the linear model at a batch of poses.
 
     Attributes
     ----------
-    poses : ndarray (..., 3)
-    terms : tuple of str
-        Model terms (inputs except zeta_i; ``rho_i`` is the clearance term).
-    inputs : tuple of str
-        Budget input names (for :attr:`inputs_at`).
+    model : LinearModel
+        The linear model at the poses (its poses, terms, A^-1, term scales
+        and clearance directions).
     term_bounds : ndarray (..., T, 2)
         Interval of every term, mm or deg (the clearance term's is
         pose-dependent when its contact angle is restricted).
@@ -59,47 +59,51 @@ class WorstCase:
     leg_signs : dict of str to ndarray (..., 3)
         For each quantity, the sign of each leg's u_i (-1 lower end, +1
         upper end of its interval) at the maximiser.
-    legs, Ainv, scale :
-        The linear model's term legs, A^-1 (..., 3, 3) and term scales (..., T)
-        (see :class:`~prp3mc.model.LinearModel`).
     input_bounds : ndarray (d, 2)
         The interval of every input used, mm or deg.
-    cos_omega, sin_omega : ndarray (..., 3)
-        Worst contact direction of each leg's clearance.
     k_sigma : float or None
         How unbounded laws were bounded (mean ± k·sd), if any.
     term_at, inputs_at, contribution : dict of str to ndarray
         Computed on access from :attr:`signs` (see the properties).
     """
 
-    poses: np.ndarray
-    terms: tuple
-    inputs: tuple
+    model: LinearModel
     term_bounds: np.ndarray
     position_mm: np.ndarray
     phi_deg: np.ndarray
     x_mm: np.ndarray
     y_mm: np.ndarray
     leg_signs: dict
-    legs: tuple
-    Ainv: np.ndarray
-    scale: np.ndarray
     input_bounds: np.ndarray
-    cos_omega: np.ndarray
-    sin_omega: np.ndarray
     k_sigma: float | None = None
     version: str = __version__
+
+    def __post_init__(self):
+        freeze(self)
+
+    def __repr__(self) -> str:
+        return short_repr(self, "poses", "terms", "k_sigma")
+
+    @property
+    def poses(self) -> np.ndarray:
+        """Poses ``[x_mm, y_mm, phi_deg]``, shape (..., 3)."""
+        return self.model.poses
+
+    @property
+    def terms(self) -> tuple:
+        """Model terms (inputs except zeta_i; ``rho_i`` is the clearance term)."""
+        return self.model.terms
+
+    @property
+    def inputs(self) -> tuple:
+        """Budget input names (for :attr:`inputs_at`)."""
+        return self.model.budget.names
 
     @property
     def signs(self) -> dict:
         """For each quantity, which end of every term's interval (-1, +1) realises the maximum."""
-        term_sign = np.where(self.scale >= 0, 1.0, -1.0)
-        return {q: ls[..., list(self.legs)] * term_sign for q, ls in self.leg_signs.items()}
-
-    @property
-    def columns(self) -> np.ndarray:
-        """Pose error (dx mm, dy mm, dphi rad) per unit of each term, (..., 3, T)."""
-        return self.Ainv[..., :, list(self.legs)] * self.scale[..., None, :]
+        term_sign = np.where(self.model.scale >= 0, 1.0, -1.0)
+        return {q: ls[..., list(self.model.legs)] * term_sign for q, ls in self.leg_signs.items()}
 
     @property
     def term_at(self) -> dict:
@@ -116,7 +120,7 @@ class WorstCase:
         vector; for |dx|, |dy|, |dphi|, the term's signed share.
         """
         out = {}
-        columns = self.columns
+        columns = self.model.columns
         for q, t_val in self.term_at.items():
             err = columns * t_val[..., None, :]                 # (..., 3, T)
             if q == "position":
@@ -127,7 +131,7 @@ class WorstCase:
             else:
                 o = {"phi": 2, "x": 0, "y": 1}[q]
                 sign = np.where(err[..., o, :].sum(-1) >= 0, 1.0, -1.0)
-                out[q] = sign[..., None] * err[..., o, :] * (_RAD2DEG if q == "phi" else 1.0)
+                out[q] = sign[..., None] * err[..., o, :] * (RAD2DEG if q == "phi" else 1.0)
         return out
 
     @property
@@ -138,7 +142,7 @@ class WorstCase:
         term's chosen end.
         """
         out = {}
-        omega = np.arctan2(self.sin_omega, self.cos_omega)
+        omega = self.model.omega
         signs = self.signs
         for q, t_val in self.term_at.items():
             x = np.empty(self.poses.shape[:-1] + (len(self.inputs),))
@@ -162,25 +166,24 @@ class WorstCase:
         return {"position": self.position_mm, "phi": self.phi_deg, "x": self.x_mm, "y": self.y_mm}[quantity]
 
     def to_frame(self) -> pd.DataFrame:
-        """Tidy table of the maxima: x_mm, y_mm, phi_deg, quantity, value, unit."""
-        flat = self.poses.reshape(-1, 3)
-        frames = []
-        for q, unit in zip(QUANTITIES, ("mm", "deg", "mm", "mm")):
-            frames.append(pd.DataFrame({"x_mm": flat[:, 0], "y_mm": flat[:, 1], "phi_deg": flat[:, 2],
-                                        "quantity": q, "value": self.value(q).ravel(), "unit": unit}))
-        return pd.concat(frames, ignore_index=True)
+        """Tidy table of the maxima: x_mm, y_mm, phi_deg, output, statistic (``worst_case``), value, unit."""
+        cols = pose_columns(self.poses)
+        return pd.concat([pd.DataFrame({**cols, "output": q, "statistic": "worst_case",
+                                        "value": self.value(q).ravel(), "unit": OUTPUT_UNITS[q]})
+                          for q in QUANTITIES], ignore_index=True)
 
     def contributions_frame(self, quantity: str = "position") -> pd.DataFrame:
-        """Per pose and term: the maximiser's term value, its contribution and share of the maximum."""
-        flat = self.poses.reshape(-1, 3)
-        n, T = flat.shape[0], len(self.terms)
+        """Per pose and term: the maximiser's term value, its contribution and share of the maximum.
+
+        Columns: x_mm, y_mm, phi_deg, output, term, term_value (mm or deg),
+        contribution (the output's unit), share (of the maximum, 0-1).
+        """
+        n, T = int(np.prod(self.poses.shape[:-1], dtype=int)), len(self.terms)
         total = self.value(quantity).reshape(n, 1)
         contrib = self.contribution[quantity].reshape(n, T)
         share = np.divide(contrib, total, out=np.zeros_like(contrib), where=total > 0)
-        idx = np.repeat(np.arange(n), T)
         return pd.DataFrame({
-            "x_mm": flat[idx, 0], "y_mm": flat[idx, 1], "phi_deg": flat[idx, 2],
-            "quantity": quantity, "term": np.tile(self.terms, n),
+            **pose_columns(self.poses, repeat=T), "output": quantity, "term": np.tile(self.terms, n),
             "term_value": self.term_at[quantity].reshape(n, T).ravel(),
             "contribution": contrib.ravel(), "share": share.ravel(),
         })
@@ -331,11 +334,12 @@ def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | No
         return (arrs[0] if len(arrs) == 1 else np.concatenate(arrs)).reshape(shape + tail)
 
     T = len(parts[0][0].terms)
+    model = dataclasses.replace(parts[0][0], poses=poses, Ainv=join(lambda p: p[0].Ainv, (3, 3)),
+                                scale=join(lambda p: p[0].scale, (T,)), cos_omega=join(lambda p: p[0].cos_omega, (3,)),
+                                sin_omega=join(lambda p: p[0].sin_omega, (3,)))
     return WorstCase(
-        poses=poses, terms=parts[0][0].terms, inputs=budget.names, term_bounds=join(lambda p: p[1], (T, 2)),
-        position_mm=join(lambda p: p[2]["position"]), phi_deg=join(lambda p: p[2]["phi"]) * _RAD2DEG,
+        model=model, term_bounds=join(lambda p: p[1], (T, 2)),
+        position_mm=join(lambda p: p[2]["position"]), phi_deg=join(lambda p: p[2]["phi"]) * RAD2DEG,
         x_mm=join(lambda p: p[2]["x"]), y_mm=join(lambda p: p[2]["y"]),
-        leg_signs={q: join(lambda p, q=q: p[3][q], (3,)) for q in QUANTITIES}, legs=parts[0][0].legs,
-        Ainv=join(lambda p: p[0].Ainv, (3, 3)), scale=join(lambda p: p[0].scale, (T,)), input_bounds=bounds,
-        cos_omega=join(lambda p: p[0].cos_omega, (3,)), sin_omega=join(lambda p: p[0].sin_omega, (3,)),
+        leg_signs={q: join(lambda p, q=q: p[3][q], (3,)) for q in QUANTITIES}, input_bounds=bounds,
         k_sigma=k_sigma)
