@@ -35,7 +35,8 @@ class AllocateCommand:
                        help="Monte Carlo samples confirming a percentile spec (default 20000)")
         p.add_argument("--seed", type=int, default=None, metavar="S", help="random seed of the confirmation")
         p.add_argument("--front", action="store_true",
-                       help="also sweep the cost-accuracy Pareto front of the worst-case position error")
+                       help="also sweep the cost-accuracy Pareto front of the worst-case position error "
+                            "(of |dphi| with only a phi spec; the phi spec holds along a position front)")
         add_json(p)
 
     @staticmethod
@@ -46,8 +47,10 @@ class AllocateCommand:
                      rng=args.seed)
         front = None
         if args.front:
-            front = allocation_front(args.geometry, r.menu, args.region, spec_phi_arcsec=args.spec_phi_arcsec,
-                                     grid=args.grid, phi_deg=args.phi_deg, k_sigma=args.k_sigma)
+            output = "position" if args.spec_position_um is not None else "phi"
+            side = {"spec_phi_arcsec": args.spec_phi_arcsec} if output == "position" else {}
+            front = allocation_front(r.geometry, r.menu, args.region, output=output, grid=args.grid,
+                                     phi_deg=args.phi_deg, k_sigma=args.k_sigma, **side)
         if args.json:
             doc = r.to_dict()
             if front is not None:

@@ -233,7 +233,7 @@ def allocate(geometry, classes, region, *, spec_position_um: float | None = None
     >>> from prp3mc import allocate
     >>> r = allocate("u-shape", "example", "u-shape", spec_position_um=60.0, grid=11)
     >>> r.feasible, r.cost, r.choice["rho_1"]
-    (True, 20.0, 'CN')
+    (True, 36.0, 'CN')
     """
     t0 = time.perf_counter()
     limits = _spec_limits(spec_position_um, spec_phi_arcsec, spec_percentile)
