@@ -64,3 +64,43 @@ def test_console_script_exit_status():
     assert proc.returncode == 1
     assert proc.stderr.strip().splitlines() == ["prp3mc sensitivity: error: unknown geometry preset 'nope' "
                                                 "(known: u-shape, delta-shape)"]
+
+
+@pytest.mark.parametrize("argv", [
+    ["sensitivity", "--geometry", "GEOM", "--pose", "0", "100", "0"],
+    ["worstcase", "--geometry", "GEOM", "--budget", "paper", "--pose", "0", "100", "0"],
+    ["montecarlo", "--geometry", "GEOM", "--budget", "paper", "--pose", "0", "100", "0", "--samples", "500",
+     "--seed", "4"],
+    ["sobol", "--geometry", "GEOM", "--budget", "paper", "--pose", "0", "100", "0", "--samples", "64",
+     "--seed", "4"],
+], ids=lambda a: a[0])
+def test_json_outputs_describe_themselves(argv, tmp_path, capsys):
+    """Every --json output names its inputs (file hashes included) and the versions it ran on."""
+    import hashlib
+    geometry_file = tmp_path / "g.toml"
+    Geometry.from_preset("u-shape").to_toml(geometry_file)
+    argv = [str(geometry_file) if a == "GEOM" else a for a in argv] + ["--json"]
+    assert main(argv) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["inputs"]["geometry"]["sha256"] == hashlib.sha256(geometry_file.read_bytes()).hexdigest()
+    assert doc["inputs"]["pose"] == {"x_mm": 0.0, "y_mm": 100.0, "phi_deg": 0.0}
+    if "--budget" in argv:
+        assert doc["inputs"]["budget"] == {"name": "paper", "preset": "paper"}
+    if "--seed" in argv:
+        assert doc["inputs"]["seed"] == 4
+    assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib"}
+
+
+def test_init_templates_run_as_written(tmp_path, capsys):
+    """`prp3mc init` writes templates that every command reads as they are, and refuses to overwrite."""
+    for kind in ("geometry", "budget", "study", "classes"):
+        assert main(["init", kind, str(tmp_path / f"{kind}.toml")]) == 0
+    assert main(["init", "budget", str(tmp_path / "budget.toml")]) == 1
+    assert "exists" in capsys.readouterr().err
+    assert main(["worstcase", "--geometry", str(tmp_path / "geometry.toml"), "--budget",
+                 str(tmp_path / "budget.toml"), "--pose", "0", "100", "0", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["inputs"]["geometry"]["name"] == "my-manipulator" and doc["position_mm"] > 0
+    from prp3mc.study.runner import Study
+    study = Study.load(tmp_path / "study.toml")
+    assert [c.name for c in study.configurations] == ["u-shape", "delta-shape"]

@@ -15,15 +15,9 @@ PAPER = Budget.from_preset("paper")
 N_SE = 5.0  # |estimate - truth| < 5 standard errors: fails with probability ~6e-7 per comparison
 
 
-def fresh_seed() -> int:
-    seed = int(np.random.SeedSequence().entropy % 2**32)
-    print("seed", seed)  # shown by pytest on failure
-    return seed
-
-
-def test_moments_agree_with_closed_forms(geometry, region):
-    poses = random_poses(region, 8, np.random.default_rng())
-    r = monte_carlo(geometry, PAPER, poses, 200_000, rng=fresh_seed())
+def test_moments_agree_with_closed_forms(geometry, region, seed):
+    poses = random_poses(region, 8, np.random.default_rng(seed))
+    r = monte_carlo(geometry, PAPER, poses, 200_000, rng=seed)
     mean, cov = linear_model(geometry, PAPER, poses).moments()
     assert np.all(np.abs(r.mean - mean) < N_SE * r.mean_se)
     std = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
@@ -33,22 +27,21 @@ def test_moments_agree_with_closed_forms(geometry, region):
     assert np.all(np.abs(mean[:, :2]).max(axis=-1) > 10 * r.mean_se[:, :2].max(axis=-1))
 
 
-def test_other_laws_closed_forms(geometry):
+def test_other_laws_closed_forms(geometry, seed):
     from prp3mc import Disc, Discrete, Triangular, TruncNormal
     budget = PAPER.replace(rho_1=Disc(0.016), theta_2=Triangular(-0.01, 0.03, 0.04),
                            b_3=Discrete((0.0, 0.01, 0.02), (0.6, 0.3, 0.1)), theta_3=TruncNormal(0.0, 0.04, 1.0),
                            zeta_2=Uniform(0.0, 90.0))
     pose = np.array([0.0, 100.0, 1.0]) if geometry.name == "u-shape" else np.array([0.0, 160.0, 1.0])
-    r = monte_carlo(geometry, budget, pose, 200_000, rng=fresh_seed())
+    r = monte_carlo(geometry, budget, pose, 200_000, rng=seed)
     mean, cov = linear_model(geometry, budget, pose).moments()
     assert np.all(np.abs(r.mean - mean) < N_SE * r.mean_se)
     assert np.all(np.abs(r.std - np.sqrt(np.diag(cov))) < N_SE * r.std_se)
 
 
-def test_percentiles_equal_brute_force_on_same_samples(geometry, region):
+def test_percentiles_equal_brute_force_on_same_samples(geometry, region, seed):
     """Streaming order statistics equal numpy's percentiles of the same samples."""
     poses = region.grid(3)
-    seed = fresh_seed()
     r = monte_carlo(geometry, PAPER, poses, 30_001, rng=seed, tolerance_mm=0.08, max_chunk_bytes=1 << 18)
     E = linear_model(geometry, PAPER, poses).evaluate(PAPER.sample(30_001, seed))
     pos = np.hypot(E[..., 0], E[..., 1])
@@ -64,7 +57,7 @@ def test_percentiles_equal_brute_force_on_same_samples(geometry, region):
     assert np.all((lo <= r.position_pct) & (r.position_pct <= hi))
 
 
-def test_confidence_intervals_cover_the_truth():
+def test_confidence_intervals_cover_the_truth(seed):
     """95 % intervals of the mean, of p95 and of an exceedance probability cover in 90-99 % of seeds.
 
     One encoder error b_1 ~ U[0, 0.025] alone: the position error is
@@ -76,7 +69,7 @@ def test_confidence_intervals_cover_the_truth():
     gain = np.linalg.norm(linear_model(g, budget, pose).columns[:2, 0])
     true_p95, true_mean, tol = 0.95 * 0.025 * gain, 0.0125 * gain, 0.02 * gain
     reps, hits = 300, np.zeros(3)
-    rng = np.random.default_rng()
+    rng = np.random.default_rng(seed)
     for _ in range(reps):
         r = monte_carlo(g, budget, pose, 2000, rng=int(rng.integers(2**32)), tolerance_mm=tol)
         lo, hi = r.position_pct_ci[1]

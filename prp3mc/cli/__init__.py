@@ -16,6 +16,7 @@ import numpy as np
 
 from .._version import __version__
 from ..errors import Prp3mcError
+from ..provenance import spec_record, versions
 
 __all__ = ["main"]
 
@@ -80,6 +81,23 @@ def finite_float(text: str) -> float:
 
 def add_json(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON object to stdout")
+
+
+def provenance(args, geometry=None, budget=None, **inputs) -> dict:
+    """``{"inputs": ..., "versions": ...}`` of a command's JSON output (what it was run on).
+
+    ``inputs`` names the geometry and budget (preset, or file and sha256),
+    the pose if the command takes one, and any further ``inputs`` given
+    (seed, sample counts, data files).
+    """
+    record = {}
+    if geometry is not None:
+        record["geometry"] = spec_record(args.geometry, geometry)
+    if budget is not None:
+        record["budget"] = spec_record(args.budget, budget)
+    if getattr(args, "pose", None) is not None:
+        record["pose"] = dict(zip(("x_mm", "y_mm", "phi_deg"), map(float, args.pose)))
+    return {"inputs": record | inputs, "versions": versions()}
 
 
 def emit_json(obj: dict) -> None:

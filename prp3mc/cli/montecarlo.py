@@ -4,7 +4,7 @@ from .._version import __version__
 from ..uncertainty.budget import Budget
 from ..kinematics.geometry import Geometry
 from ..uncertainty.montecarlo import monte_carlo
-from . import (add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
+from . import (provenance, add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
                emit_json, finite_float)
 
 
@@ -50,6 +50,7 @@ class MonteCarloCommand:
                      "phi_abs_deg": {_pkey(p): ci.tolist() for p, ci in zip(r.percentiles, r.phi_pct_ci)}},
             "cov": r.cov.tolist(),
             "seed": r.seed, "n_samples": r.n_samples, "prp3mc_version": __version__,
+            **provenance(args, geometry, budget, seed=r.seed, n_samples=r.n_samples),
         }
         if r.exceed_prob is not None:
             doc["exceed"] = {"tolerance_mm": args.tolerance_mm, "probability": float(r.exceed_prob),

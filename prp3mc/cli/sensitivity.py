@@ -3,7 +3,7 @@
 from .._version import __version__
 from ..kinematics.geometry import Geometry
 from ..kinematics.sensitivity import FAMILIES, sensitivity
-from . import LEGS, matrix_table, add_geometry, add_json, add_pose, command, emit_json
+from . import LEGS, provenance, matrix_table, add_geometry, add_json, add_pose, command, emit_json
 
 
 @command("sensitivity", "A, B and every sensitivity matrix J_q at one pose")
@@ -23,7 +23,7 @@ class SensitivityCommand:
                 "A": s.A.tolist(), "B": s.B.tolist(),
                 "J": {q: s.J[q].tolist() for q in FAMILIES},
                 "pose": {"x_mm": args.pose[0], "y_mm": args.pose[1], "phi_deg": args.pose[2]},
-                "prp3mc_version": __version__,
+                "prp3mc_version": __version__, **provenance(args, geometry),
             })
             return
         x, y, phi = args.pose

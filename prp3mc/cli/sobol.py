@@ -6,13 +6,14 @@ from .._version import __version__
 from ..uncertainty.budget import Budget
 from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
-from ..uncertainty.sobol import OUTPUTS, ranking, sobol_indices
+from ..uncertainty.ranking import ranking
+from ..uncertainty.sobol import sobol_indices
+from ..units import DISPLAY, OUTPUTS
 from ..uncertainty.worstcase import worst_case
-from . import (add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
+from . import (provenance, add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
                emit_json, finite_float, positive_int)
 
 _KEYS = ("S1", "S1_conf", "ST", "ST_conf")
-_SCALE = {"x": (1e3, "um"), "y": (1e3, "um"), "phi": (3600.0, "arcsec"), "position": (1e3, "um")}
 
 
 def _group(text: str) -> tuple[str, list[str]]:
@@ -70,6 +71,7 @@ class SobolCommand:
                                "x_mm": float(wc.x_mm), "y_mm": float(wc.y_mm)},
                 "groups": {k: list(v) for k, v in r.groups.items()},
                 **r.metadata(), "k_sigma": args.k_sigma,
+                **provenance(args, geometry, budget, seed=r.seed, n_samples=r.n_samples),
             })
             return
         x, y, phi = args.pose
@@ -79,7 +81,7 @@ class SobolCommand:
                  f"seed {r.seed}, {100 * r.conf_level:g} % bootstrap intervals ({r.num_resamples} resamples), "
                  f"method {r.method}"]
         for o, df in tables.items():
-            scale, unit = _SCALE[o]
+            scale, unit = DISPLAY[o]
             total = wc.value(o) * scale
             lines += ["", f"{o}: worst case {float(total):.3f} {unit}; sorted by total index ST",
                       f"  {'name':13s}{'S1':>8s}{'± conf':>8s}{'ST':>9s}{'± conf':>8s}"

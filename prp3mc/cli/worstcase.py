@@ -4,7 +4,7 @@ from .._version import __version__
 from ..uncertainty.budget import Budget
 from ..kinematics.geometry import Geometry
 from ..uncertainty.worstcase import worst_case
-from . import add_budget, add_geometry, add_json, add_pose, command, emit_json, finite_float
+from . import provenance, add_budget, add_geometry, add_json, add_pose, command, emit_json, finite_float
 
 
 @command("worstcase", "exact worst-case pose error of the linear model at one pose")
@@ -30,6 +30,7 @@ class WorstCaseCommand:
                 "maximizer": {q: wc.maximizer(q) for q in ("position", "phi", "x", "y")},
                 "position_contributions_mm": dict(zip(frame["term"], frame["contribution"].astype(float))),
                 "k_sigma": args.k_sigma, "prp3mc_version": __version__,
+                **provenance(args, geometry, budget, k_sigma=args.k_sigma),
             })
             return
         x, y, phi = args.pose
