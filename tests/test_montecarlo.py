@@ -146,13 +146,13 @@ def test_cli_montecarlo_bad_input(capsys, extra, message):
 
 
 @pytest.mark.parametrize("budget", [PAPER, Budget({"b_1": Uniform(0.0, 0.025), "theta_2": Uniform(0.0, 0.0)})])
-def test_streamed_order_statistics_are_exact_in_any_memory(geometry, region, budget):
+def test_streamed_order_statistics_are_exact_in_any_memory(geometry, region, budget, seed):
     """Tiny buffers force the narrowing passes; the order statistics stay those of all samples.
 
     The second budget has |dphi| = 0 for every sample (a window of one value).
     """
     from prp3mc.uncertainty.montecarlo import _order_ranks
-    poses, n, seed = region.grid(2), 70_000, fresh_seed()
+    poses, n = region.grid(2), 70_000
     small = monte_carlo(geometry, budget, poses, n, rng=seed, max_chunk_bytes=1 << 12, workers=2)
     big = monte_carlo(geometry, budget, poses, n, rng=seed, workers=1)
     for name in ("position_pct", "position_pct_ci", "phi_pct", "phi_pct_ci", "position_max", "mean", "cov"):

@@ -178,7 +178,11 @@ class Budget:
         u = np.asarray(u, dtype=float)
         if u.ndim != 2 or u.shape[1] != len(self):
             raise BudgetError(f"expected uniforms of shape (n, {len(self)}), got {u.shape}")
-        return np.stack([law.ppf(u[:, k]) for k, law in enumerate(self.inputs.values())], axis=1)
+        ut = np.ascontiguousarray(u.T)  # each law maps one contiguous row
+        out = np.empty_like(ut)
+        for k, law in enumerate(self.inputs.values()):
+            out[k] = law.ppf(ut[k])
+        return out.T  # (n, d) whose columns are contiguous
 
     def sample(self, n: int, rng: "None | int | np.random.Generator" = None) -> np.ndarray:
         """``n`` independent draws of all inputs, shape (n, d), mm / deg.
