@@ -93,6 +93,7 @@ def test_sweep_table_expands_the_cartesian_product(tmp_path):
     ('"leg.1.a_mm" = [1, 1]', 22, "lists a value twice"),
     ('"leg.1.stroke_mm" = [0, 200]', 22, "[lo, hi] pairs"),
     ('"leg.*.e_mm" = [10]\n"leg.2.e_mm" = [20]', 23, "sets leg 2's e again"),
+    ("leg.3.a_mm = [200]", 21, 'must be quoted, as "leg.3.a_mm"'),
 ])
 def test_bad_sweep_names_line_and_reason(tmp_path, table, line, reason):
     with pytest.raises(StudyError) as err:

@@ -72,7 +72,7 @@ from ..kinematics.geometry import REGION_PRESETS, Geometry, Region
 from ..uncertainty.budget import Budget
 from ..uncertainty.montecarlo import PERCENTILES
 from ..units import OUTPUTS
-from .sweep import parse_key
+from .sweep import is_number, parse_entry
 
 __all__ = ["Study", "StudyConfiguration", "bundled_studies", "STUDIES_DIR", "ANALYSES"]
 
@@ -265,7 +265,7 @@ class _Reader:
         checks = {
             "str": lambda v: isinstance(v, str),
             "int": lambda v: isinstance(v, int) and not isinstance(v, bool),
-            "number": lambda v: isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v),
+            "number": is_number,
             "table": lambda v: isinstance(v, dict),
             "list": lambda v: isinstance(v, list),
         }
@@ -385,22 +385,15 @@ class _Reader:
         for key, values in table.items():
             p = ("sweep", key)
             try:
-                which, attribute = parse_key(key)
+                which, attribute, values = parse_entry(key, values)
             except Prp3mcError as exc:
                 self.fail(p, str(exc))
-            pair = attribute == "stroke"
-            ok = (lambda v: isinstance(v, list) and len(v) == 2 and all(_finite(x) for x in v)) if pair else _finite
-            if not isinstance(values, list) or not values or not all(ok(v) for v in values):
-                self.fail(p, f"sweep {key!r} must be a non-empty array of "
-                          f"{'[lo, hi] pairs' if pair else 'finite numbers'}, got {values!r}")
-            if len({repr(v) for v in values}) != len(values):
-                self.fail(p, f"sweep {key!r} lists a value twice: {values!r}")
             for i in which:
                 if (i, attribute) in legs:
                     self.fail(p, f"sweep {key!r} sets leg {i + 1}'s {attribute} again (also set by "
                               f"{legs[i, attribute]!r})")
                 legs[i, attribute] = key
-            out.append((key, tuple(tuple(v) if pair else v for v in values)))
+            out.append((key, values))
         return tuple(out)
 
     def configuration(self, c: dict, k: int, grid: tuple | None) -> StudyConfiguration:
@@ -456,10 +449,6 @@ class _Reader:
             ref = (float(ref[0]), float(ref[1]))
         return StudyConfiguration(name=name, geometry=geometry, region=region, poses=poses,
                                   reference_position_um=ref, reference=self.get(c, p + ("reference",), "str", ""))
-
-
-def _finite(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
 _HEADER = re.compile(r"^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")

@@ -24,6 +24,7 @@ a combination by name and parameters and carries on with the others.
 from __future__ import annotations
 
 import itertools
+import math
 import re
 from dataclasses import dataclass, replace
 from typing import Any
@@ -34,7 +35,7 @@ import pandas as pd
 from ..errors import GeometryError
 from ..kinematics.chain import check_poses
 
-__all__ = ["SWEEP_KEY", "parse_key", "Variant", "expand", "design_frame", "best_configurations"]
+__all__ = ["SWEEP_KEY", "is_number", "parse_key", "parse_entry", "Variant", "expand", "design_frame", "best_configurations"]
 
 #: Syntax of a sweep key: ``leg.<1|2|3|*>.<leg parameter>``.
 SWEEP_KEY = re.compile(r"^leg\.([123*])\.(a_mm|alpha_deg|beta_deg|gamma_deg|theta_deg|c_mm|e_mm|psi_deg|stroke_mm)$")
@@ -61,6 +62,34 @@ def parse_key(key: str) -> tuple[tuple[int, ...], str]:
                             f"{', '.join(_ATTRIBUTE)}")
     leg, name = match.groups()
     return ((0, 1, 2) if leg == "*" else (int(leg) - 1,)), _ATTRIBUTE[name]
+
+
+def is_number(v) -> bool:
+    """A finite int or float (not a bool), as TOML gives them."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def parse_entry(key: str, values: Any) -> tuple[tuple[int, ...], str, tuple]:
+    """Legs (0-based), Geometry attribute and values of one ``[sweep]`` entry.
+
+    Raises
+    ------
+    GeometryError
+        One line: the key is malformed (or unquoted, so TOML read a table),
+        or the values are not a non-empty array of distinct finite numbers
+        (``[lo, hi]`` pairs for ``stroke_mm``).
+    """
+    if isinstance(values, dict):  # leg.3.a_mm = [...] unquoted is a TOML dotted key: a nested table
+        raise GeometryError(f'sweep keys must be quoted, as "leg.3.a_mm" = [...], got a table {key!r}')
+    legs, attribute = parse_key(key)
+    pair = attribute == "stroke"  # values are [lo, hi]
+    ok = (lambda v: isinstance(v, list) and len(v) == 2 and all(map(is_number, v))) if pair else is_number
+    if not isinstance(values, list) or not values or not all(ok(v) for v in values):
+        raise GeometryError(f"sweep {key!r} must be a non-empty array of "
+                            f"{'[lo, hi] pairs' if pair else 'finite numbers'}, got {values!r}")
+    if len({repr(v) for v in values}) != len(values):
+        raise GeometryError(f"sweep {key!r} lists a value twice: {values!r}")
+    return legs, attribute, tuple(tuple(v) if pair else v for v in values)
 
 
 def apply(geometry, parameters: dict[str, Any]):
