@@ -16,6 +16,12 @@ Layout (µm and arcsec)::
          "sobol": {"position": {"theta_1": {"kind": "input", "S1": {"value": ..., "se": ...},
                                             "ST": {...}, "worst_case_share": 0.31}, ...}, ...}},
                                             # worst_case_share null where undefined (rho_i, zeta_i alone)
+         "allocation": {"cost": 26.0, "choice": {"rho_1": "CN", ...}, "worst_case_position_um": 77.6,
+                        "worst_case_phi_arcsec": 88.2, "feasible": true,
+                        "spec": {"position_um": 80.0, "phi_arcsec": 120.0, "percentile": null},
+                        "binding": "position", "binding_poses": [{"x_mm": ..., "y_mm": ..., "phi_deg": ...}],
+                        "front": [{"cost": 12.0, "worst_case_position_um": ..., "worst_case_phi_arcsec": ...}, ...]}},
+                                            # with [allocation]; layout in prp3mc.study.allocation
        "delta-shape": {...}},
      "metadata": {"prp3mc_version": ..., "seed": ..., "montecarlo_samples": ..., "wall_time_s": ...}}
 
@@ -35,6 +41,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..units import DEG2ARCSEC, MM2UM, Z95
+from .allocation import allocation_summary
 from .results import ConfigurationResult, StudyResult, over_grid, pct_se
 
 __all__ = ["build_summary"]
@@ -96,5 +103,7 @@ def build_summary(result: StudyResult) -> dict:
             doc["montecarlo"] = _montecarlo(c)
         if c.sobol is not None:
             doc["sobol"] = _sobol(c)
+        if c.allocation is not None:
+            doc["allocation"] = allocation_summary(c.allocation, c.allocation_front)
         configs[c.name] = doc
     return {"study": result.study.name, "configurations": configs, "metadata": result.metadata()}
