@@ -117,4 +117,6 @@ def allocation_map(result, shape: tuple, *, ax=None, title: str = ""):
     if reached:
         ax.plot([], [], color="C3", ls="--", lw=1.5, label=f"spec {scale * spec:g} {unit}")
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), fontsize=7, frameon=False, ncol=1)
+    label = "position error" if output == "position" else "|δφ|"
+    ax.set_title(f"{title + ': ' if title else ''}worst-case {label} of the chosen classes ({unit})", fontsize=10)
     return fig

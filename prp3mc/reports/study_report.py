@@ -193,16 +193,20 @@ def _allocation_figures(result: StudyResult) -> list[tuple[str, str, object]]:
         if a is None:
             continue
         nx, ny = spec.grid or result.study.worstcase_grid
+        binding = ("the pose where the Monte Carlo percentile's 95 % upper bound is largest"
+                   if a.binding == "percentile" else "the binding poses, dashed red the spec where the map reaches it")
         figs.append((f"allocation_{c.name}_map", f"{c.name}: the exact worst case of the chosen classes over the "
-                     "test region; ★ the binding poses, dashed red the spec (where the map reaches it).",
-                     allocation_map(a, (ny, nx), ax=_canvas_axes((5.6, 5.6)), title=c.name)))
+                     f"test region; ★ {binding}.", allocation_map(a, (ny, nx), ax=_canvas_axes((5.6, 5.6)),
+                                                                 title=c.name)))
         if front is not None and len(front):
             output = spec.front_output
             limit = spec.spec_phi_arcsec if output == "phi" else (
                 spec.spec_position_um if spec.spec_percentile is None else None)
             figs.append((f"allocation_{c.name}_front", f"{c.name}: the least cost of every reachable worst-case "
                          f"{'|δφ|' if output == 'phi' else 'position error'} (the Pareto front); each point is "
-                         "labelled with the classes that changed from the previous one; ★ the chosen classes.",
+                         "labelled with the classes that changed from the previous one; ★ the chosen classes."
+                         + (" The front is of the worst case: the percentile spec is not drawn, and the chosen "
+                            "classes are marked only where they lie on it." if limit is None else ""),
                          allocation_front_plot(front, output, spec=limit, chosen_cost=a.cost if a.feasible else None,
                                                ax=_canvas_axes((6.4, 4.4)))))
     return figs
