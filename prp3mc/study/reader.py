@@ -220,7 +220,7 @@ class Study:
                        mc_grid=cap(self.mc_grid, _REDUCED["mc_grid"]),
                        sobol_samples=min(self.sobol_samples, _REDUCED["sobol_samples"]),
                        sobol_grid=cap(self.sobol_grid, _REDUCED["sobol_grid"]),
-                       allocation=self.allocation and self.allocation.reduced())
+                       allocation=None if self.allocation is None else self.allocation.reduced())
 
     def with_budget(self, budget: Budget) -> "Study":
         """The same study with another budget (what-if studies, perturbation tests)."""
