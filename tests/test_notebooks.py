@@ -1,4 +1,4 @@
-"""Every notebook in notebooks/ runs top to bottom at a small sample size, and every cell that draws shows its picture."""
+"""Every notebook in notebooks/ runs top to bottom at a small sample size and shows every picture it draws."""
 
 import re
 from pathlib import Path

@@ -297,7 +297,8 @@ def test_inputs_name_files_and_their_hashes(tmp_path):
     assert geometries["delta"]["geometry"] == {"name": "delta-shape", "preset": "delta-shape"}
     # a budget replaced in code is not the file's: named, and said so
     what_if = build_summary(run_study(study, progress=False, budget=study.budget.scaled(1.1, "theta")))
-    assert what_if["inputs"]["budget"]["given"].startswith("in code") and "sha256" not in what_if["inputs"]["budget"]
+    budget = what_if["inputs"]["budget"]
+    assert budget["note"].startswith("not as the study file") and "sha256" not in budget
     # run metadata never fails a regression check, whichever side has it
     golden = {k: v for k, v in summary.items() if k not in ("inputs", "versions", "metadata")}
     assert_summary_close(summary, golden)

@@ -132,7 +132,7 @@ def _record(used, specs: list[str], base: Path, loader) -> dict:
                 return spec_record(target, used)
         except Prp3mcError:
             continue
-    return {"name": used.name, "given": "in code, not by the study file"}
+    return {"name": used.name, "note": "not as the study file names it (replaced in code, or varied)"}
 
 
 def study_inputs(result: StudyResult) -> dict:
