@@ -7,7 +7,7 @@
     summary.json           summary statistics with standard errors (prp3mc.summary)
     figures/*.png, *.svg   every figure of the report
     tables/*.csv           summary, worst-case and Monte Carlo grids, Sobol indices and rankings,
-                           worst-case contributions, the budget
+                           worst-case contributions, the budget, allocated classes and fronts
 
 The report is built from a :class:`~prp3mc.study.results.StudyResult` only;
 it is readable without prp3mc installed. Figures are drawn on figures of
@@ -188,6 +188,43 @@ def _figures(result: StudyResult) -> list[tuple[str, str, object]]:
                          f"by ST) and each input's share of the exact worst case (right, ranked by share); "
                          f"both the {basis} of the Sobol grid.",
                          plots.ranking_figure(frame, f"{r.name}: {output}", fig=_canvas())))
+    return figs + _allocation_figures(result)
+
+
+def _canvas_axes(size: tuple[float, float]):
+    """One axes on a new Agg-canvas figure of ``size`` inches, constrained layout."""
+    fig = _canvas()
+    fig.set_size_inches(size)
+    fig.set_layout_engine("constrained")
+    return fig.subplots()
+
+
+def _allocation_figures(result: StudyResult) -> list[tuple[str, str, object]]:
+    """The binding-pose map and the Pareto front of every configuration's allocation."""
+    from .allocation_plots import allocation_front_plot, allocation_map
+    spec = result.study.allocation
+    figs = []
+    for c in result.configurations:
+        a, front = c.allocation, c.allocation_front
+        if a is None:
+            continue
+        nx, ny = spec.grid or result.study.worstcase_grid
+        binding = ("the pose where the Monte Carlo percentile's 95 % upper bound is largest"
+                   if a.binding == "percentile" else "the binding poses, dashed red the spec where the map reaches it")
+        figs.append((f"allocation_{c.name}_map", f"{c.name}: the exact worst case of the chosen classes over the "
+                     f"test region; ★ {binding}.", allocation_map(a, (ny, nx), ax=_canvas_axes((5.6, 5.6)),
+                                                                 title=c.name)))
+        if front is not None and len(front):
+            output = spec.front_output
+            limit = spec.spec_phi_arcsec if output == "phi" else (
+                spec.spec_position_um if spec.spec_percentile is None else None)
+            figs.append((f"allocation_{c.name}_front", f"{c.name}: the least cost of every reachable worst-case "
+                         f"{'|δφ|' if output == 'phi' else 'position error'} (the Pareto front); each point is "
+                         "labelled with the classes that changed from the previous one; ★ the chosen classes."
+                         + (" The front is of the worst case: the percentile spec is not drawn, and the chosen "
+                            "classes are marked only where they lie on it." if limit is None else ""),
+                         allocation_front_plot(front, output, spec=limit, chosen_cost=a.cost if a.feasible else None,
+                                               ax=_canvas_axes((6.4, 4.4)))))
     return figs
 
 
@@ -203,7 +240,56 @@ def _tables(result: StudyResult) -> dict[str, pd.DataFrame]:
             tables[f"sobol_{c.name}"] = c.sobol.to_frame()
             for output, frame in c.ranking.items():
                 tables[f"ranking_{c.name}_{output}"] = frame
+        if c.allocation is not None:
+            tables[f"allocation_{c.name}"] = c.allocation.choice_frame()
+            if c.allocation_front is not None:
+                tables[f"allocation_front_{c.name}"] = c.allocation_front
     return tables
+
+
+def _poses_text(poses: np.ndarray, n: int = 6) -> str:
+    """``(x, y, φ)`` of the first ``n`` poses, and how many more."""
+    text = "; ".join(f"({x:g}, {y:g}, {p:g})" for x, y, p in poses[:n])
+    return text + (f" and {len(poses) - n} more" if len(poses) > n else "")
+
+
+def _allocations(result: StudyResult, tables: dict[str, pd.DataFrame]) -> list[dict]:
+    """Per configuration with an allocation: its figures, in report units, for the template."""
+    from .allocation_plots import class_changes
+    out = []
+    for c in result.configurations:
+        a = c.allocation
+        if a is None:
+            continue
+        choice = tables[f"allocation_{c.name}"].copy()
+        factor = np.where(choice["unit"] == "mm", MM2UM, DEG2ARCSEC)
+        choice = choice.assign(lo=choice["lo"] * factor, hi=choice["hi"] * factor,
+                               unit=np.where(choice["unit"] == "mm", "µm", "arcsec"))
+        usage = {"position": a.worst_case_position_mm / a.spec["position_mm"]
+                 if a.spec["position_mm"] and a.spec["percentile"] is None else None,
+                 "phi": a.worst_case_phi_deg / a.spec["phi_deg"] if a.spec["phi_deg"] else None}
+        doc = {"name": c.name, "result": a, "choice": _html_table(choice),
+               "position_um": MM2UM * a.worst_case_position_mm, "phi_arcsec": DEG2ARCSEC * a.worst_case_phi_deg,
+               "usage": usage, "binding_poses": _poses_text(a.binding_poses), "front": None}
+        if a.statistical is not None:
+            st = a.statistical
+            doc["statistical"] = {"percentile": st["percentile"], "screen_um": MM2UM * st["screen_mm"],
+                                  "percentile_um": MM2UM * st["percentile_mm"],
+                                  "ci_high_um": MM2UM * st["ci_high_mm"], "n_samples": st["n_samples"],
+                                  "confirmed": st["confirmed"]}
+        front = c.allocation_front
+        if front is not None and len(front):
+            inputs = list(a.choice)
+            wide = front.pivot_table(index=["point", "cost"], columns="output", values="value").reset_index()
+            firsts = front.groupby("point")[inputs].first()
+            changed = [class_changes(firsts.iloc[k - 1] if k else None, firsts.iloc[k]) for k in range(len(firsts))]
+            doc["front"] = _html_table(pd.DataFrame({
+                "cost": wide["cost"], "worst-case position error (µm)": MM2UM * wide["position"],
+                "worst-case |δφ| (arcsec)": DEG2ARCSEC * wide["phi"], "classes changed": changed}))
+        elif front is not None:
+            doc["front"] = ""
+        out.append(doc)
+    return out
 
 
 def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tables: dict[str, pd.DataFrame],
@@ -234,7 +320,7 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
         summary_table=_html_table(summary_table), families=_html_table(families, 3),
         budget_table=_html_table(tables["budget"]), cmp=comparison(result, summary),
         summary=summary, mc_percentile=f"p{_MC_PERCENTILE:g}", tables=sorted(tables),
-        inputs=summary["inputs"], versions=summary["versions"])
+        inputs=summary["inputs"], versions=summary["versions"], allocations=_allocations(result, tables))
 
 
 def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = False) -> Path:

@@ -16,6 +16,12 @@ Layout (µm and arcsec)::
          "sobol": {"position": {"theta_1": {"kind": "input", "S1": {"value": ..., "se": ...},
                                             "ST": {...}, "worst_case_share": 0.31}, ...}, ...}},
                                             # worst_case_share null where undefined (rho_i, zeta_i alone)
+         "allocation": {"cost": 26.0, "choice": {"rho_1": "CN", ...}, "worst_case_position_um": 77.6,
+                        "worst_case_phi_arcsec": 88.2, "feasible": true,
+                        "spec": {"position_um": 80.0, "phi_arcsec": 120.0, "percentile": null},
+                        "binding": "position", "binding_poses": [{"x_mm": ..., "y_mm": ..., "phi_deg": ...}],
+                        "front": [{"cost": 12.0, "worst_case_position_um": ..., "worst_case_phi_arcsec": ...}, ...]}},
+                                            # with [allocation]; layout in prp3mc.study.allocation
        "delta-shape": {...}},
      "metadata": {"prp3mc_version": ..., "seed": ..., "montecarlo_samples": ..., "wall_time_s": ...},
      "inputs": {"study": {"name": "quick", "file": "/abs/quick.toml", "sha256": "..."},
@@ -55,6 +61,7 @@ from ..kinematics.geometry import Geometry
 from ..provenance import file_record, spec_record, versions
 from ..uncertainty.budget import Budget
 from ..units import DEG2ARCSEC, MM2UM, Z95
+from .allocation import allocation_summary
 from .results import ConfigurationResult, StudyResult, over_grid, pct_se
 
 __all__ = ["build_summary", "study_inputs"]
@@ -148,9 +155,16 @@ def study_inputs(result: StudyResult) -> dict:
         configs[c.name] = {"geometry": _record(c.geometry, geometries, base, Geometry.load),
                            "region": {"x_mm": [float(v) for v in region.x_mm],
                                       "y_mm": [float(v) for v in region.y_mm], "phi_deg": float(region.phi_deg)}}
-    return {"study": record, "budget": _record(study.budget, budgets, base, Budget.load),
-            "configurations": configs, "seed": result.seed, "montecarlo_seed": result.montecarlo_seed,
-            "sobol_seed": result.sobol_seed, **study.sizes()}
+    out = {"study": record, "budget": _record(study.budget, budgets, base, Budget.load),
+           "configurations": configs, "seed": result.seed, "montecarlo_seed": result.montecarlo_seed,
+           "sobol_seed": result.sobol_seed, **study.sizes()}
+    if getattr(study, "allocation", None) is not None:
+        source = study.allocation.classes_source
+        out["allocation_classes"] = spec_record(base / source if source.endswith(".toml") else source,
+                                                study.allocation.classes)
+        if getattr(result, "allocation_seed", None) is not None:
+            out["allocation_seed"] = result.allocation_seed
+    return out
 
 
 def build_summary(result: StudyResult) -> dict:
@@ -164,6 +178,8 @@ def build_summary(result: StudyResult) -> dict:
             doc["montecarlo"] = _montecarlo(c)
         if c.sobol is not None:
             doc["sobol"] = _sobol(c)
+        if c.allocation is not None:
+            doc["allocation"] = allocation_summary(c.allocation, c.allocation_front)
         configs[c.name] = doc
     return {"study": result.study.name, "configurations": configs, "metadata": result.metadata(),
             "inputs": study_inputs(result), "versions": versions()}

@@ -35,7 +35,7 @@ from .budget import Budget
 from .montecarlo import monte_carlo
 from .worstcase import worst_case
 
-__all__ = ["AllocationResult", "allocate", "allocation_front"]
+__all__ = ["AllocationResult", "allocate", "allocation_front", "front_records"]
 
 _CONFIRM_ROUNDS = 3
 
@@ -341,4 +341,15 @@ def allocation_front(geometry, classes, region, *, output: str = "position",
     rows = [{"point": k, "cost": cost, "output": q, "statistic": "worst_case", "value": env[q],
              "unit": "mm" if q == "position" else "deg", **choice}
             for k, (cost, env, choice) in enumerate(points) for q in ("position", "phi")]
-    return pd.DataFrame(rows)
+    return pd.DataFrame(rows, columns=["point", "cost", "output", "statistic", "value", "unit", *problem.inputs])
+
+
+def front_records(front: pd.DataFrame) -> list[dict]:
+    """The points of a tidy front as JSON-ready dicts: ``cost``, ``worst_case_position_um``, ``worst_case_phi_arcsec``.
+
+    Cheapest first; empty when no choice meets the side spec.
+    """
+    wide = front.pivot(index="point", columns="output", values="value")
+    cost = front.groupby("point")["cost"].first()
+    return [{"cost": float(cost[k]), "worst_case_position_um": MM2UM * float(row["position"]),
+             "worst_case_phi_arcsec": DEG2ARCSEC * float(row["phi"])} for k, row in wide.iterrows()]
