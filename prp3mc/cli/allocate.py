@@ -1,4 +1,4 @@
-"""``prp3mc allocate``: the least-cost tolerance classes that meet an accuracy spec over a region (SPEC §7)."""
+"""``prp3mc allocate``: the least-cost tolerance classes that meet an accuracy spec over a region."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ class AllocateCommand:
         p.add_argument("--region", required=True, choices=tuple(REGION_PRESETS), metavar="R",
                        help=f"test region preset ({', '.join(REGION_PRESETS)})")
         p.add_argument("--classes", required=True, metavar="FILE.toml",
-                       help="classes file (SPEC §7), or the bundled example: example")
+                       help="classes file (README, File formats), or the bundled example: example")
         p.add_argument("--spec-position-um", type=finite_float, default=None, metavar="X",
                        help="worst-case position error bound, µm (with --spec-percentile: that percentile's bound)")
         p.add_argument("--spec-phi-arcsec", type=finite_float, default=None, metavar="Z",

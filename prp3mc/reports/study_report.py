@@ -101,6 +101,13 @@ def _family_shares(result: StudyResult) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def _worst_pose(c) -> str:
+    """The pose where a configuration's worst-case position error is largest, for labels."""
+    wc = c.worst_case
+    x, y, phi = wc.poses[np.unravel_index(np.argmax(wc.position_mm), wc.position_mm.shape)]
+    return f"x = {x:.4g} mm, y = {y:.4g} mm, φ = {phi:.4g}°"
+
+
 def _contributions(c) -> pd.DataFrame:
     """Worst-case contributions at the configuration's worst pose."""
     wc = c.worst_case
@@ -150,27 +157,36 @@ def _figures(result: StudyResult) -> list[tuple[str, str, object]]:
     """(file name, caption, figure) of every figure of the report, in order."""
     from . import plots
     res = list(result.configurations)
-    figs = [("worstcase_position", "Exact worst-case position error (µm) over each test region, one colour "
-             "scale (the paper's Figs. 4-5, computed exactly). ✕ marks the maximum, ○ the minimum.",
+    scale = ("Panels share one colour scale when that helps the comparison, else each has its own "
+             "(the title says which); a field constant over a region is labelled so, without extrema.")
+    figs = [("worstcase_position", "Exact worst-case position error (µm) over each test region (the paper's "
+             f"Figs. 4-5, computed exactly). ✕ marks the maximum, ○ the minimum. {scale}",
              plots.compare_maps_figure(res, "worstcase", "position", fig=_canvas())),
-            ("worstcase_phi", "Exact worst-case orientation error |δφ| (arcsec), one colour scale.",
+            ("worstcase_phi", f"Exact worst-case orientation error |δφ| (arcsec). {scale}",
              plots.compare_maps_figure(res, "worstcase", "phi", fig=_canvas()))]
     if all(r.montecarlo is not None for r in res):
         pct = _MC_PERCENTILE if _MC_PERCENTILE in res[0].montecarlo.percentiles else res[0].montecarlo.percentiles[-1]
-        figs += [("montecarlo_position", f"Monte Carlo p{pct:g} of the position error (µm), one colour scale.",
+        figs += [("montecarlo_position", f"Monte Carlo p{pct:g} of the position error (µm). {scale}",
                   plots.compare_maps_figure(res, "montecarlo", "position", pct, fig=_canvas())),
-                 ("montecarlo_phi", f"Monte Carlo p{pct:g} of |δφ| (arcsec), one colour scale.",
+                 ("montecarlo_phi", f"Monte Carlo p{pct:g} of |δφ| (arcsec). {scale}",
                   plots.compare_maps_figure(res, "montecarlo", "phi", pct, fig=_canvas())),
                  ("histograms_position", "Distribution of the position error at chosen poses; dashed: the exact "
                   f"worst case at that pose, dotted: p{pct:g}.",
                   plots.histograms_figure(res, "position", pct, fig=_canvas())),
+                 ("ecdf_position", "ECDF of the position error at the same poses: the fraction of assemblies "
+                  f"whose error is at most x; dashed: the exact worst case, dot: p{pct:g}.",
+                  plots.ecdf_figure(res, "position", pct, fig=_canvas())),
                  ("histograms_phi", "Distribution of |δφ| at the same poses, worst case dashed.",
-                  plots.histograms_figure(res, "phi", pct, fig=_canvas()))]
+                  plots.histograms_figure(res, "phi", pct, fig=_canvas())),
+                 ("ecdf_phi", "ECDF of |δφ| at the same poses, worst case dashed.",
+                  plots.ecdf_figure(res, "phi", pct, fig=_canvas()))]
     for r in res:
         for output, frame in r.ranking.items():
+            basis = plots.ranking_basis(frame)[0]
             figs.append((f"sobol_{r.name}_{output}",
-                         f"{r.name}, output {output}: Sobol indices over the Sobol grid with 95 % bootstrap "
-                         "intervals (left) next to each input's share of the exact worst case (right).",
+                         f"{r.name}, output {output}: Sobol indices with 95 % bootstrap intervals (left, ranked "
+                         f"by ST) and each input's share of the exact worst case (right, ranked by share); "
+                         f"both the {basis} of the Sobol grid.",
                          plots.ranking_figure(frame, f"{r.name}: {output}", fig=_canvas())))
     return figs + _allocation_figures(result)
 
@@ -284,13 +300,13 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
                              autoescape=jinja2.select_autoescape(["html", "j2"]))
     study = result.study
     meta = result.metadata()
-    meta.update(python=platform.python_version(), numpy=np.__version__, platform=platform.platform(),
-                date=_dt.datetime.now().astimezone().isoformat(timespec="seconds"))
+    meta.update(platform=platform.platform(), date=_dt.datetime.now().astimezone().isoformat(timespec="seconds"))
     configs = [{"name": c.name, "geometry": c.configuration.geometry.name,
                 "region": f"x ∈ [{c.configuration.region.x_mm[0]:g}, {c.configuration.region.x_mm[1]:g}] mm, "
                           f"y ∈ [{c.configuration.region.y_mm[0]:g}, {c.configuration.region.y_mm[1]:g}] mm, "
                           f"φ = {c.configuration.region.phi_deg:g}°",
                 "reference": c.configuration.reference,
+                "worst_pose": _worst_pose(c),
                 "contributions": _html_table(tables[f"contributions_{c.name}"].drop(columns=["output"]).assign(
                     **{"contribution (µm)": lambda d: MM2UM * d["contribution"],
                        "share (%)": lambda d: 100 * d["share"]})
@@ -304,7 +320,7 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
         summary_table=_html_table(summary_table), families=_html_table(families, 3),
         budget_table=_html_table(tables["budget"]), cmp=comparison(result, summary),
         summary=summary, mc_percentile=f"p{_MC_PERCENTILE:g}", tables=sorted(tables),
-        allocations=_allocations(result, tables))
+        inputs=summary["inputs"], versions=summary["versions"], allocations=_allocations(result, tables))
 
 
 def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = False) -> Path:

@@ -4,7 +4,7 @@
 file, or the name of a bundled study) and returns a
 :class:`~prp3mc.study.results.StudyResult`;
 :func:`prp3mc.reports.study_report.write_study` writes its report, figures,
-tables and ``summary.json`` (``prp3mc study FILE.toml --out DIR``, SPEC §6).
+tables and ``summary.json`` (``prp3mc study FILE.toml --out DIR``).
 
 Randomness: the study seed gives one Monte Carlo seed and one Sobol seed,
 shared by all configurations (common random numbers, so differences between

@@ -134,7 +134,7 @@ class AllocationResult:
         return pd.concat(frames, ignore_index=True)
 
     def to_dict(self) -> dict:
-        """The SPEC §7 JSON object (µm, arcsec) with the binding poses, the spec and the search."""
+        """The ``prp3mc allocate --json`` object (µm, arcsec) with the binding poses, the spec and the search."""
         spec = {"position_um": _scaled(self.spec["position_mm"], MM2UM),
                 "phi_arcsec": _scaled(self.spec["phi_deg"], DEG2ARCSEC), "percentile": self.spec["percentile"]}
         doc = {"cost": self.cost, "choice": dict(self.choice),
