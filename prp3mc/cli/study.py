@@ -52,7 +52,7 @@ class StudyCommand:
         span = worst.pivot(index="configuration", columns="aggregate", values="value") * MM2UM
         names = (list(span.sort_values("max").index[:_NAMED]) if study.sweep
                  else [c.name for c in result.configurations])
-        ranges = ", ".join(f"{n} {span.at[n, 'min']:.1f}-{span.at[n, 'max']:.1f} um" for n in names)
+        ranges = ", ".join(f"{n} {span.at[n, 'min']:.1f}-{span.at[n, 'max']:.1f} µm" for n in names)
         if study.sweep:
             ranges = (f"{len(result.configurations)} of {len(result.configurations) + len(result.skipped)} "
                       f"configurations ran, best: {ranges}")

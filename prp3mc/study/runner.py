@@ -4,11 +4,12 @@
 file, or the name of a bundled study) and returns a
 :class:`~prp3mc.study.results.StudyResult`;
 :func:`prp3mc.reports.study_report.write_study` writes its report, figures,
-tables and ``summary.json`` (``prp3mc study FILE.toml --out DIR``, SPEC §6).
+tables and ``summary.json`` (``prp3mc study FILE.toml --out DIR``).
 
 Randomness: the study seed gives one Monte Carlo seed and one Sobol seed,
 shared by all configurations, swept ones included (common random numbers, so
-differences between configurations are not blurred by sampling noise). The
+differences between configurations are not blurred by sampling noise), and the
+seed of the allocation's Monte Carlo confirmation (stream 3, also shared). The
 streams are keyed by the study seed alone, never by the process that runs a
 configuration, so a study gives the same numbers serially or on a Dask
 cluster (:mod:`prp3mc.study.distributed`).
@@ -39,6 +40,7 @@ from ..uncertainty.ranking import ranking
 from ..uncertainty.sobol import sobol_indices
 from ..uncertainty.worstcase import WorstCase, worst_case
 from ..units import RAD2DEG
+from .allocation import ALLOCATION_STREAM, run_allocation
 from .reader import Study, StudyConfiguration
 from .results import ConfigurationResult, PoseSamples, SkippedConfiguration, StudyResult
 from .sweep import Variant, expand
@@ -80,6 +82,8 @@ class Plan:
         carries its own), so a task's inputs do not grow with the sweep.
     montecarlo_seed, sobol_seed : int
         Shared by every configuration (common random numbers).
+    allocation_seed : int or None
+        Seed of the allocation's Monte Carlo confirmation (with an ``[allocation]`` table), shared too.
     n_tasks : int
         Number of configurations, for progress messages.
     progress : bool
@@ -89,6 +93,7 @@ class Plan:
     study: Study
     montecarlo_seed: int
     sobol_seed: int
+    allocation_seed: int | None = None
     n_tasks: int = 1
     progress: bool = False
 
@@ -120,7 +125,7 @@ def run_configuration(plan: Plan, variant: Variant) -> Outcome:
     except (GeometryError, InfeasiblePoseError) as exc:
         return _skip(variant, "infeasible", exc)
     try:
-        result, timings = _analyses(plan, config, variant.index)
+        result, timings = _analyses(plan, config, variant)
     except InfeasiblePoseError as exc:
         if not variant.parameters:
             raise
@@ -132,10 +137,15 @@ def run_configuration(plan: Plan, variant: Variant) -> Outcome:
     return Outcome(variant.index, result, None, timings)
 
 
-def _analyses(plan: Plan, config: StudyConfiguration, index: int) -> tuple[ConfigurationResult, dict]:
-    study, progress = plan.study, plan.progress
+def _timings(study: Study) -> dict[str, float]:
+    """Zero time for every analysis the study runs."""
+    return dict.fromkeys(("worstcase",) + study.outputs + (("allocation",) if study.allocation else ()), 0.0)
+
+
+def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple[ConfigurationResult, dict]:
+    study, progress, index = plan.study, plan.progress, variant.index
     mc_seed, sobol_seed = plan.montecarlo_seed, plan.sobol_seed
-    timings = dict.fromkeys(("worstcase",) + study.outputs, 0.0)
+    timings = _timings(study)
 
     def stage(what: str) -> None:
         if progress:
@@ -170,6 +180,12 @@ def _analyses(plan: Plan, config: StudyConfiguration, index: int) -> tuple[Confi
         kw["sobol"] = s
         kw["ranking"] = {o: ranking(s, wc_s, output=o) for o in study.sobol_outputs}
         timings["sobol"] += time.perf_counter() - t
+    allocation = study.allocation
+    if allocation is not None and allocation.applies_to(variant.base.name):  # a swept one: by its base's name
+        stage("tolerance allocation" + (" and its Pareto front" if allocation.front else ""))
+        t = time.perf_counter()
+        kw.update(run_allocation(config, allocation, study.worstcase_grid, study.k_sigma, plan.allocation_seed))
+        timings["allocation"] += time.perf_counter() - t
     return ConfigurationResult(configuration=config, worst_case=wc, **kw), timings
 
 
@@ -232,11 +248,12 @@ def run_study(study: "Study | str | os.PathLike", *, rng: "None | int | np.rando
     seed, _ = resolve_rng(rng if rng is not None else study.seed)
     mc_seed, sobol_seed = child_seed(seed, 1), child_seed(seed, 2)
     show = sys.stderr.isatty() if progress is None else progress
+    allocation_seed = child_seed(seed, ALLOCATION_STREAM) if study.allocation is not None else None
     variants = expand(study)
     outcomes: dict[int, Outcome] = {}
     with _executor(scheduler) as executor:
         in_process = getattr(executor, "in_process", False)
-        plan = Plan(replace(study, configurations=()), mc_seed, sobol_seed, len(variants),
+        plan = Plan(replace(study, configurations=()), mc_seed, sobol_seed, allocation_seed, len(variants),
                     progress=bool(show and in_process))
         for k, value in executor.map(run_configuration, [(plan, v) for v in variants]):
             if isinstance(value, BaseException):  # the task itself was lost (a worker died too often)
@@ -250,11 +267,12 @@ def run_study(study: "Study | str | os.PathLike", *, rng: "None | int | np.rando
                       file=sys.stderr, flush=True)
         name = executor.name
     ordered = [outcomes[k] for k in range(len(variants))]
-    timings = dict.fromkeys(("worstcase",) + study.outputs, 0.0)
+    timings = _timings(study)
     for o in ordered:
         for key, v in o.timings_s.items():
             timings[key] += v
     return StudyResult(study=study, seed=seed, montecarlo_seed=mc_seed, sobol_seed=sobol_seed,
                        configurations=tuple(o.result for o in ordered if o.result is not None),
                        timings_s=timings, wall_time_s=time.perf_counter() - t0,
-                       skipped=tuple(o.skipped for o in ordered if o.skipped is not None), scheduler=name)
+                       skipped=tuple(o.skipped for o in ordered if o.skipped is not None), scheduler=name,
+                       allocation_seed=allocation_seed)

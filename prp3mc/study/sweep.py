@@ -35,12 +35,12 @@ import pandas as pd
 from ..errors import GeometryError
 from ..kinematics.chain import check_poses
 
-__all__ = ["SWEEP_KEY", "is_number", "parse_key", "parse_entry", "Variant", "expand", "design_frame", "best_configurations"]
+__all__ = ["SWEEP_KEY", "is_number", "parse_key", "parse_entry", "read_sweep", "Variant", "expand", "design_frame", "best_configurations"]
 
 #: Syntax of a sweep key: ``leg.<1|2|3|*>.<leg parameter>``.
-SWEEP_KEY = re.compile(r"^leg\.([123*])\.(a_mm|alpha_deg|beta_deg|gamma_deg|theta_deg|c_mm|e_mm|psi_deg|stroke_mm)$")
 _ATTRIBUTE = {"a_mm": "a", "alpha_deg": "alpha", "beta_deg": "beta", "gamma_deg": "gamma", "theta_deg": "theta",
               "c_mm": "c", "e_mm": "e", "psi_deg": "psi", "stroke_mm": "stroke"}
+SWEEP_KEY = re.compile(rf"^leg\.([123*])\.({'|'.join(_ATTRIBUTE)})$")
 
 
 def parse_key(key: str) -> tuple[tuple[int, ...], str]:
@@ -90,6 +90,28 @@ def parse_entry(key: str, values: Any) -> tuple[tuple[int, ...], str, tuple]:
     if len({repr(v) for v in values}) != len(values):
         raise GeometryError(f"sweep {key!r} lists a value twice: {values!r}")
     return legs, attribute, tuple(tuple(v) if pair else v for v in values)
+
+
+def read_sweep(reader, table: dict) -> tuple:
+    """The ``[sweep]`` table as ``((key, values), ...)``, mistakes failing through the study ``reader``.
+
+    ``reader.fail(path, reason)`` raises the study file's ``FILE:LINE: reason``;
+    besides :func:`parse_entry`'s checks, no leg parameter may be set by two keys.
+    """
+    out, legs = [], {}
+    for key, values in table.items():
+        path = ("sweep", key)
+        try:
+            which, attribute, values = parse_entry(key, values)
+        except GeometryError as exc:
+            reader.fail(path, str(exc))
+        for i in which:
+            if (i, attribute) in legs:
+                reader.fail(path, f"sweep {key!r} sets leg {i + 1}'s {attribute} again (also set by "
+                            f"{legs[i, attribute]!r})")
+            legs[i, attribute] = key
+        out.append((key, values))
+    return tuple(out)
 
 
 def apply(geometry, parameters: dict[str, Any]):
