@@ -35,11 +35,12 @@ import pandas as pd
 from ..errors import GeometryError
 from ..kinematics.chain import check_poses
 
-__all__ = ["SWEEP_KEY", "is_number", "parse_key", "parse_entry", "read_sweep", "Variant", "expand", "design_frame", "best_configurations"]
+__all__ = ["SWEEP_KEY", "is_number", "parse_key", "parse_entry", "read_sweep", "Variant", "expand",
+           "design_frame", "best_configurations"]
 
-#: Syntax of a sweep key: ``leg.<1|2|3|*>.<leg parameter>``.
 _ATTRIBUTE = {"a_mm": "a", "alpha_deg": "alpha", "beta_deg": "beta", "gamma_deg": "gamma", "theta_deg": "theta",
               "c_mm": "c", "e_mm": "e", "psi_deg": "psi", "stroke_mm": "stroke"}
+#: Syntax of a sweep key: ``leg.<1|2|3|*>.<leg parameter>``.
 SWEEP_KEY = re.compile(rf"^leg\.([123*])\.({'|'.join(_ATTRIBUTE)})$")
 
 
