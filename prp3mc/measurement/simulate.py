@@ -1,9 +1,20 @@
 """Simulated measurement campaigns with hidden effects, on the exact nonlinear chain.
 
-:func:`simulate_campaign` makes campaigns with the exact nonlinear model,
-fresh draws of the budget's random errors at every measurement, approach
-directions, a temperature drift, instrument noise and hidden effects of the
-library (:mod:`prp3mc.measurement.effects`).
+:func:`simulate_campaign` makes campaigns with the exact nonlinear model and
+the realities a metrology campaign carries: budget errors that are drawn
+afresh at every visit or partly repeat per pose, approach directions, a
+temperature drift, the instrument's registration to the machine and its
+drift in time, instrument noise, gross outliers (a lost tracker beam), and
+hidden effects of the library (:mod:`prp3mc.measurement.effects`), several at
+once if wanted.
+
+Randomness (one seed, recorded in ``metadata["seed"]``): the root generator
+draws, in this order, the visiting order, the approach directions (``both``),
+the budget errors of every visit and the instrument noise; the per-pose
+errors and the repeat coins (``repeatable_fraction``) come from the stream
+``child_seed(seed, 1)`` and the outliers from ``child_seed(seed, 2)``. So a
+campaign with all new realities off has the same numbers as before they
+existed, and switching one reality on leaves the others' draws unchanged.
 """
 
 from __future__ import annotations
@@ -11,32 +22,145 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from .._rng import resolve_rng
+from .._rng import child_seed, resolve_rng
 from .._version import __version__
 from ..errors import CampaignError
 from ..kinematics.chain import as_poses, check_poses, inverse_kinematics
 from ..kinematics.exact import exact_pose_error
 from ..kinematics.geometry import Geometry
-from ..uncertainty.budget import Budget
-from .campaign import CMD_COLUMNS, DIR_COLUMNS, MEAS_COLUMNS, Campaign
+from ..uncertainty.budget import Budget, parse_input
+from ..units import DEG2RAD
+from .campaign import CMD_COLUMNS, DIR_COLUMNS, MAX_ERROR, MEAS_COLUMNS, Campaign
 from .effects import effect, offset_errors, slider_error, spread_budget
 
-__all__ = ["simulate_campaign"]
+__all__ = ["simulate_campaign", "visit_times", "frame_transform", "SETTLE_S", "SLIDER_SPEED_MM_S"]
+
+#: Seconds from arriving at a pose to the measurement (settling plus the instrument's averaging).
+SETTLE_S = 4.0
+#: Slider speed of a move between poses, mm/s (the slowest actuator sets the move's duration).
+SLIDER_SPEED_MM_S = 20.0
+#: Sub-streams under the root seed (see the module notes).
+_STREAM_REPEATS, _STREAM_OUTLIERS = 1, 2
+
+
+def visit_times(b: np.ndarray) -> np.ndarray:
+    """Time of each measurement since the campaign began, from the slider moves between them.
+
+    Every measurement comes :data:`SETTLE_S` after the move that reaches it,
+    and a move lasts as long as its largest slider travel at
+    :data:`SLIDER_SPEED_MM_S` (the machine starts at the first pose).
+
+    Parameters
+    ----------
+    b : ndarray, shape (M, 3)
+        Commanded slider positions of the measurements in visiting order, mm.
+
+    Returns
+    -------
+    ndarray, shape (M,)
+        Seconds, increasing.
+    """
+    move = np.abs(np.diff(b, axis=0, prepend=b[:1])).max(axis=1) / SLIDER_SPEED_MM_S
+    return np.cumsum(move + SETTLE_S)
+
+
+def frame_transform(poses: np.ndarray, dx_mm, dy_mm, dphi_deg) -> np.ndarray:
+    """Poses of the machine frame seen in an instrument frame (planar rigid transform).
+
+    The pose is rotated about the instrument's origin by ``dphi_deg``, then
+    translated by ``(dx_mm, dy_mm)``; its orientation gains ``dphi_deg``.
+
+    Parameters
+    ----------
+    poses : ndarray, shape (M, 3)
+        ``[x_mm, y_mm, phi_deg]`` in the machine frame.
+    dx_mm, dy_mm, dphi_deg : float or ndarray, shape (M,)
+        The transform (one per pose when arrays: a drifting instrument).
+
+    Returns
+    -------
+    ndarray, shape (M, 3)
+        The same poses in the instrument frame.
+    """
+    a = np.asarray(dphi_deg, dtype=float) * DEG2RAD
+    c, s = np.cos(a), np.sin(a)
+    x, y = poses[:, 0], poses[:, 1]
+    return np.stack([c * x - s * y + dx_mm, s * x + c * y + dy_mm, poses[:, 2] + dphi_deg], axis=1)
+
+
+def _triple(value, name: str) -> tuple[float, float, float] | None:
+    """``(dx_mm, dy_mm, dphi_deg)`` as three finite floats, or None."""
+    if value is None:
+        return None
+    v = np.asarray(value, dtype=float)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise CampaignError(f"{name} must be three finite numbers (dx_mm, dy_mm, dphi_deg), got {value!r}")
+    return tuple(float(t) for t in v)
+
+
+def _outlier_setting(value) -> tuple[float, float] | None:
+    if value is None:
+        return None
+    try:
+        fraction, size = (float(t) for t in value)
+    except (TypeError, ValueError):
+        raise CampaignError(f"outliers must be (fraction, size_mm), got {value!r}") from None
+    if not (0.0 <= fraction <= 1.0 and 0.0 < size < MAX_ERROR[0]):
+        raise CampaignError(f"outliers: fraction must lie in [0, 1] and size_mm in (0, {MAX_ERROR[0]:g}), "
+                            f"got ({fraction:g}, {size:g})")
+    return fraction, size
+
+
+def _repeat_units(budget: Budget) -> np.ndarray:
+    """Index of each input's repeat unit: a clearance's rho_i and zeta_i share one, every other input has its own."""
+    keys = []
+    for name in budget.names:
+        family, leg = parse_input(name)
+        keys.append(f"clearance_{leg + 1}" if family in ("rho", "zeta") else name)
+    return np.unique(keys, return_inverse=True)[1].ravel()
+
+
+def _repeat_errors(budget: Budget, X: np.ndarray, pose_of_visit: np.ndarray, n_poses: int, r: float,
+                   rng: np.random.Generator) -> np.ndarray:
+    """Budget inputs of every visit, each unit repeating its pose's draw with probability sqrt(r).
+
+    Every pose draws the budget once (its *settled* state). At every visit
+    each repeat unit (a clearance's size and contact angle together, any
+    other input alone) takes the pose's settled value with probability
+    ``sqrt(r)`` and the visit's fresh draw ``X`` otherwise, independently
+    between units and visits. Two visits of a pose then share a unit's value
+    with probability ``r``, so the covariance between visits is ``r`` times
+    the budget's covariance and the within-pose covariance ``1 - r`` times it
+    (exactly, for any law, also for the clearance's nonlinear pair), while
+    each visit's inputs keep the budget's law exactly (shape and support).
+    """
+    settled = budget.sample(n_poses, rng)[pose_of_visit]
+    units = _repeat_units(budget)
+    stick = rng.random((X.shape[0], units.max() + 1)) < np.sqrt(r)
+    return np.where(stick[:, units], settled, X)
 
 
 def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int = 8, *,
                       effects: dict | None = None, approach: str = "both",
                       temp_drift_C: tuple[float, float] | None = (20.0, 28.0),
                       instrument_sigma_mm: float = 0.002, instrument_sigma_deg: float = 0.0005,
+                      registration: tuple[float, float, float] | None = None,
+                      drift: tuple[float, float, float] | None = None,
+                      outliers: tuple[float, float] | None = None,
+                      repeatable_fraction: float = 0.0,
                       slider_error_fn=None, pose_error_fn=None,
                       rng: "None | int | np.random.Generator" = None) -> Campaign:
     """Simulate a measurement campaign with the exact nonlinear model.
 
     The campaign visits every pose once per round, in a fresh random order
     each round, for ``n_repeats`` rounds; the temperature drifts linearly in
-    time over the campaign. Every measurement draws fresh budget errors (a
-    clearance settles at a new contact angle, an encoder reads a new count
-    error each time the pose is approached) and fresh instrument noise.
+    time over the campaign. Every measurement has a time (``time_s``, from
+    the moves between poses: :func:`visit_times`). By default every
+    measurement draws fresh budget errors (a clearance settles at a new
+    contact angle, an encoder reads a new count error each time the pose is
+    approached) and fresh instrument noise, and the instrument is perfectly
+    registered, does not drift and never loses its beam; each of these
+    realities can be switched on.
 
     Parameters
     ----------
@@ -48,7 +172,8 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     n_repeats : int
         Measurements per pose.
     effects : dict of str to float, optional
-        Hidden effects of the library (SPEC §5 names and units).
+        Hidden effects of the library (SPEC §5 names and units); any number
+        at once, their pose errors add up through the exact chain.
     approach : {"both", "positive", "negative", "sequence"}
         Approach direction of each actuator: random +-1 per actuator and
         measurement; always +1; always -1; or the sign of the actuator's
@@ -58,19 +183,51 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         a campaign without a ``temp_C`` column (thermal effects then need it).
     instrument_sigma_mm, instrument_sigma_deg : float
         Standard deviation of the Gaussian measurement noise per coordinate.
+    registration : (dx_mm, dy_mm, dphi_deg), optional
+        The instrument's frame error: measured poses are the machine's poses
+        rotated about the instrument's origin by ``dphi_deg``, then
+        translated by ``(dx_mm, dy_mm)`` (:func:`frame_transform`);
+        ``phi_meas`` gains ``dphi_deg``.
+    drift : (dx_mm, dy_mm, dphi_deg), optional
+        Instrument drift from the first to the last measurement, linear in
+        ``time_s``: the frame transform at a measurement is the registration
+        plus this drift times the fraction of the campaign's time elapsed.
+    outliers : (fraction, size_mm), optional
+        ``round(fraction * M)`` measurements, chosen at random, get a gross
+        position error of ``size_mm`` in a uniformly random direction of the
+        plane (a lost tracker beam; ``phi_meas`` is left alone).
+    repeatable_fraction : float in [0, 1]
+        Share of the budget's variance that repeats when a pose is revisited
+        (0: every visit draws afresh; 1: each pose keeps its errors). Each
+        pose draws the budget once; at every visit each input (a clearance's
+        size and angle together) keeps its pose's value with probability
+        ``sqrt(repeatable_fraction)``, else takes a fresh draw. This keeps
+        the mean, the covariance and the law of every visit exactly; two
+        visits of a pose then share an input's value exactly with
+        probability ``repeatable_fraction`` (a clearance that settles at the
+        same contact), so the law of the within-pose scatter is a mixture,
+        not a Gaussian's.
     slider_error_fn, pose_error_fn : callable, optional
         Effects outside the library, for testing the workflow:
         ``f(commanded (M, 3), b (M, 3), direction (M, 3), temp_C (M,) or None)``
         returning an extra slider error delta b (M, 3) mm, or an extra pose
         error (M, 3) ``[mm, mm, deg]`` added to the exact one.
     rng : None, int or numpy.random.Generator
-        Randomness (Scientific Python SPEC 7); the integer seed used is
-        recorded in ``metadata["seed"]``, also when a Generator is given.
+        Randomness (Scientific Python SPEC 7; streams in the module notes);
+        the integer seed used is recorded in ``metadata["seed"]``, also when
+        a Generator is given.
 
     Returns
     -------
     Campaign
-        ``metadata`` records the seed, the hidden effects and the settings.
+        With a ``time_s`` column. ``metadata`` records the seed, the hidden
+        effects, every setting and the rows given outliers
+        (``outlier_rows``, 0-based).
+
+    Raises
+    ------
+    CampaignError
+        A setting out of range.
     """
     seed_used, rng = resolve_rng(rng)
     poses = as_poses(poses).reshape(-1, 3)
@@ -80,6 +237,11 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         raise CampaignError(f"n_repeats must be at least 1, got {n_repeats}")
     if approach not in ("both", "positive", "negative", "sequence"):
         raise CampaignError(f"approach must be both, positive, negative or sequence, got {approach!r}")
+    registration, drift = _triple(registration, "registration"), _triple(drift, "drift")
+    outliers = _outlier_setting(outliers)
+    r = float(repeatable_fraction)
+    if not 0.0 <= r <= 1.0:
+        raise CampaignError(f"repeatable_fraction must lie in [0, 1], got {repeatable_fraction!r}")
     effects = dict(effects or {})
     parsed = [effect(name) for name in effects]          # raises on unknown names
     if any(e.kind == "thermal" for e in parsed) and temp_drift_C is None:
@@ -101,9 +263,12 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         direction = pd.DataFrame(direction).ffill().fillna(1.0).to_numpy()
     else:
         direction = np.full((M, 3), 1.0 if approach == "positive" else -1.0)
+    time_s = visit_times(b)
     temp = None if temp_drift_C is None else np.linspace(temp_drift_C[0], temp_drift_C[1], M)
     sim_budget = spread_budget(budget, effects)
     X = sim_budget.sample(M, rng)
+    if r > 0.0:
+        X = _repeat_errors(sim_budget, X, order, P, r, np.random.default_rng(child_seed(seed_used, _STREAM_REPEATS)))
     errors = sim_budget.errors(X)
     for family, value in offset_errors(effects).items():
         errors[family] = errors.get(family, 0.0) + value
@@ -115,18 +280,39 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     if pose_error_fn is not None:
         err = err + np.asarray(pose_error_fn(cmd, b, direction, temp), dtype=float)
     noise = rng.standard_normal((M, 3)) * np.array([instrument_sigma_mm, instrument_sigma_mm, instrument_sigma_deg])
+    attained = cmd + err
+    if registration is not None or drift is not None:
+        elapsed = (time_s - time_s[0]) / (time_s[-1] - time_s[0]) if M > 1 else np.zeros(M)
+        transform = np.asarray(registration or (0.0, 0.0, 0.0)) + elapsed[:, None] * np.asarray(drift or (0.0, 0.0, 0.0))
+        attained = frame_transform(attained, *transform.T)
+    measured = attained + noise
+    outlier_rows: list[int] = []
+    if outliers is not None:
+        gen = np.random.default_rng(child_seed(seed_used, _STREAM_OUTLIERS))
+        rows = np.sort(gen.choice(M, size=int(round(outliers[0] * M)), replace=False))
+        angle = gen.uniform(0.0, 2.0 * np.pi, rows.size)
+        measured[rows, 0] += outliers[1] * np.cos(angle)
+        measured[rows, 1] += outliers[1] * np.sin(angle)
+        outlier_rows = rows.tolist()
     frame = pd.DataFrame({"pose_id": [f"P{k + 1:03d}" for k in order]})
     for k, col in enumerate(CMD_COLUMNS):
         frame[col] = cmd[:, k]
     for k, col in enumerate(MEAS_COLUMNS):
-        frame[col] = cmd[:, k] + err[:, k] + noise[:, k]
+        frame[col] = measured[:, k]
     for k, col in enumerate(DIR_COLUMNS):
         frame[col] = direction[:, k].astype(int)
     if temp is not None:
         frame["temp_C"] = temp
+    frame["time_s"] = time_s
     metadata = {"seed": seed_used, "effects": effects, "n_repeats": n_repeats, "approach": approach,
                 "temp_drift_C": None if temp_drift_C is None else list(temp_drift_C),
                 "instrument_sigma_mm": instrument_sigma_mm, "instrument_sigma_deg": instrument_sigma_deg,
+                "registration": None if registration is None else list(registration),
+                "drift": None if drift is None else list(drift),
+                "outliers": None if outliers is None else list(outliers), "outlier_rows": outlier_rows,
+                "repeatable_fraction": r, "settle_s": SETTLE_S, "slider_speed_mm_s": SLIDER_SPEED_MM_S,
+                "rng": "root stream: order, directions, budget, noise; child_seed(seed, 1): repeats; "
+                       "child_seed(seed, 2): outliers",
                 "budget": budget.name, "geometry": geometry.name, "version": __version__,
                 "out_of_library": slider_error_fn is not None or pose_error_fn is not None}
     return Campaign.from_frame(frame, None, "simulated campaign", metadata)
