@@ -11,7 +11,7 @@ once if wanted.
 Randomness (one seed, recorded in ``metadata["seed"]``): the root generator
 draws, in this order, the visiting order, the approach directions (``both``),
 the budget errors of every visit and the instrument noise; the per-pose
-errors and the repeat coins (``repeatable_fraction``) come from the stream
+errors (``repeatable_fraction``) come from the stream
 ``child_seed(seed, 1)`` and the outliers from ``child_seed(seed, 2)``. So a
 campaign with all new realities off has the same numbers as before they
 existed, and switching one reality on leaves the others' draws unchanged.
@@ -111,33 +111,48 @@ def _outlier_setting(value) -> tuple[float, float] | None:
     return fraction, size
 
 
-def _repeat_units(budget: Budget) -> np.ndarray:
-    """Index of each input's repeat unit: a clearance's rho_i and zeta_i share one, every other input has its own."""
-    keys = []
-    for name in budget.names:
-        family, leg = parse_input(name)
-        keys.append(f"clearance_{leg + 1}" if family in ("rho", "zeta") else name)
-    return np.unique(keys, return_inverse=True)[1].ravel()
+def _circular_mean(law) -> np.ndarray:
+    """``E[u(zeta)] = [E cos zeta, E sin zeta]`` of a contact-angle law in degrees (midpoint rule on its ppf)."""
+    zeta = law.ppf((np.arange(4096) + 0.5) / 4096) * DEG2RAD
+    return np.array([np.cos(zeta).mean(), np.sin(zeta).mean()])
+
+
+def _clearance(S: np.ndarray, k: int, z: int) -> np.ndarray:
+    """Clearance vectors ``rho u(zeta)`` (n, 2) of input samples ``S`` (n, d): rho in column k, zeta (deg) in z."""
+    angle = S[:, z] * DEG2RAD
+    return S[:, k, None] * np.stack([np.cos(angle), np.sin(angle)], axis=-1)
 
 
 def _repeat_errors(budget: Budget, X: np.ndarray, pose_of_visit: np.ndarray, n_poses: int, r: float,
                    rng: np.random.Generator) -> np.ndarray:
-    """Budget inputs of every visit, each unit repeating its pose's draw with probability sqrt(r).
+    """Budget inputs of every visit: a part drawn once per pose and a part drawn at every visit.
 
-    Every pose draws the budget once (its *settled* state). At every visit
-    each repeat unit (a clearance's size and contact angle together, any
-    other input alone) takes the pose's settled value with probability
-    ``sqrt(r)`` and the visit's fresh draw ``X`` otherwise, independently
-    between units and visits. Two visits of a pose then share a unit's value
-    with probability ``r``, so the covariance between visits is ``r`` times
-    the budget's covariance and the within-pose covariance ``1 - r`` times it
-    (exactly, for any law, also for the clearance's nonlinear pair), while
-    each visit's inputs keep the budget's law exactly (shape and support).
+    Every input becomes ``mean + sqrt(r) (A - mean) + sqrt(1 - r) (B - mean)``
+    with ``A`` the pose's draw and ``B`` the visit's (``X``). A clearance
+    enters the chain as the vector ``rho_i u(zeta_i)``, so it is that vector
+    that is split so, and turned back into a size and a contact angle. The
+    mean and the covariance of every input, and of the clearance vectors,
+    are exact; the covariance between two visits of a pose is ``r`` times
+    the budget's. The law's shape is not kept: ``A`` and ``B`` add up (a
+    uniform law becomes a trapezoid and can leave its bounds), while the
+    within-pose scatter ``sqrt(1 - r) (B - B_bar)`` is the fresh-draw
+    scatter scaled.
     """
-    settled = budget.sample(n_poses, rng)[pose_of_visit]
-    units = _repeat_units(budget)
-    stick = rng.random((X.shape[0], units.max() + 1)) < np.sqrt(r)
-    return np.where(stick[:, units], settled, X)
+    A = budget.sample(n_poses, rng)[pose_of_visit]
+    mean = budget.means()
+    out = mean + np.sqrt(r) * (A - mean) + np.sqrt(1.0 - r) * (X - mean)
+    names = budget.names
+    for k, name in enumerate(names):
+        family, leg = parse_input(name)
+        if family != "rho":
+            continue
+        z = names.index(f"zeta_{leg + 1}")
+        centre = mean[k] * _circular_mean(budget.inputs[names[z]])
+        v = (centre + np.sqrt(r) * (_clearance(A, k, z) - centre)
+             + np.sqrt(1.0 - r) * (_clearance(X, k, z) - centre))
+        out[:, k] = np.hypot(v[:, 0], v[:, 1])
+        out[:, z] = np.mod(np.arctan2(v[:, 1], v[:, 0]) / DEG2RAD, 360.0)
+    return out
 
 
 def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int = 8, *,
@@ -199,14 +214,12 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     repeatable_fraction : float in [0, 1]
         Share of the budget's variance that repeats when a pose is revisited
         (0: every visit draws afresh; 1: each pose keeps its errors). Each
-        pose draws the budget once; at every visit each input (a clearance's
-        size and angle together) keeps its pose's value with probability
-        ``sqrt(repeatable_fraction)``, else takes a fresh draw. This keeps
-        the mean, the covariance and the law of every visit exactly; two
-        visits of a pose then share an input's value exactly with
-        probability ``repeatable_fraction`` (a clearance that settles at the
-        same contact), so the law of the within-pose scatter is a mixture,
-        not a Gaussian's.
+        input is ``mean + sqrt(r) (A - mean) + sqrt(1 - r) (B - mean)`` with
+        ``A`` drawn once per pose and ``B`` at every visit (a clearance as
+        its vector ``rho u(zeta)``). This keeps the mean and the covariance
+        exact, and the within-pose scatter has the fresh-draw law scaled by
+        ``sqrt(1 - r)``; the law of one visit is not kept (``A`` and ``B``
+        add: a uniform law becomes a trapezoid, wider than its bounds).
     slider_error_fn, pose_error_fn : callable, optional
         Effects outside the library, for testing the workflow:
         ``f(commanded (M, 3), b (M, 3), direction (M, 3), temp_C (M,) or None)``
@@ -311,7 +324,7 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
                 "drift": None if drift is None else list(drift),
                 "outliers": None if outliers is None else list(outliers), "outlier_rows": outlier_rows,
                 "repeatable_fraction": r, "settle_s": SETTLE_S, "slider_speed_mm_s": SLIDER_SPEED_MM_S,
-                "rng": "root stream: order, directions, budget, noise; child_seed(seed, 1): repeats; "
+                "rng": "root stream: order, directions, budget, noise; child_seed(seed, 1): per-pose draws; "
                        "child_seed(seed, 2): outliers",
                 "budget": budget.name, "geometry": geometry.name, "version": __version__,
                 "out_of_library": slider_error_fn is not None or pose_error_fn is not None}
