@@ -205,8 +205,10 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         ``phi_meas`` gains ``dphi_deg``.
     drift : (dx_mm, dy_mm, dphi_deg), optional
         Instrument drift from the first to the last measurement, linear in
-        ``time_s``: the frame transform at a measurement is the registration
-        plus this drift times the fraction of the campaign's time elapsed.
+        ``time_s``: every measured pose is offset by this drift times the
+        fraction of the campaign's time elapsed (the drift the discrepancy
+        workflow fits; an instrument that turns as it drifts would also turn
+        positions, by 1.7 µm per 0.001 deg at 100 mm from its origin).
     outliers : (fraction, size_mm), optional
         ``round(fraction * M)`` measurements, chosen at random, get a gross
         position error of ``size_mm`` in a uniformly random direction of the
@@ -293,12 +295,11 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     if pose_error_fn is not None:
         err = err + np.asarray(pose_error_fn(cmd, b, direction, temp), dtype=float)
     noise = rng.standard_normal((M, 3)) * np.array([instrument_sigma_mm, instrument_sigma_mm, instrument_sigma_deg])
-    attained = cmd + err
-    if registration is not None or drift is not None:
-        elapsed = (time_s - time_s[0]) / (time_s[-1] - time_s[0]) if M > 1 else np.zeros(M)
-        transform = np.asarray(registration or (0.0, 0.0, 0.0)) + elapsed[:, None] * np.asarray(drift or (0.0, 0.0, 0.0))
-        attained = frame_transform(attained, *transform.T)
+    attained = cmd + err if registration is None else frame_transform(cmd + err, *registration)
     measured = attained + noise
+    if drift is not None:
+        elapsed = (time_s - time_s[0]) / (time_s[-1] - time_s[0]) if M > 1 else np.zeros(M)
+        measured = measured + elapsed[:, None] * np.asarray(drift)
     outlier_rows: list[int] = []
     if outliers is not None:
         gen = np.random.default_rng(child_seed(seed_used, _STREAM_OUTLIERS))
