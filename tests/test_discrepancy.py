@@ -167,7 +167,7 @@ def test_cli_and_report(tmp_path, capsys):
     assert set(doc["named_effects"][0]) >= {"name", "value", "unit", "ci95", "aliases", "evidence"}
     html = (out / "report.html").read_text()
     assert "data:image/png;base64," in html and "backlash_2" in html
-    assert (out / "workspace.svg").exists()
+    assert (out / "workspace.png").exists() and (out / "iso9283_per_pose.csv").exists()
     assert main(args) == 1 and "exists" in capsys.readouterr().err
     assert main(args + ["--force"]) == 0
     bad = tmp_path / "bad.csv"
@@ -233,8 +233,9 @@ def test_result_protocol_conf_int_and_plots(tmp_path, monkeypatch):
     # plots draw into a given figure; nothing switches the backend
     monkeypatch.setattr(matplotlib, "use", lambda *a, **k: pytest.fail("matplotlib.use called"))
     from matplotlib.figure import Figure
-    for plot in (rep.plot_workspace, rep.plot_actuators, rep.plot_temperature, rep.plot_gap, rep.plot_candidates):
+    for plot in (rep.plot_workspace, rep.plot_actuators, rep.plot_temperature, rep.plot_gap, rep.plot_candidates,
+                 rep.plot_iso9283):
         fig = Figure()
         assert plot(r, fig=fig) is fig and fig.axes
     write_report(r, tmp_path / "rep")
-    assert (tmp_path / "rep" / "gap.png").exists()
+    assert (tmp_path / "rep" / "iso9283.png").exists() and not (tmp_path / "rep" / "workspace.svg").exists()

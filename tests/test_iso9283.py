@@ -95,3 +95,51 @@ def test_bad_shapes():
         iso9283_figures(c, np.zeros((2, 3)), np.zeros((3, 3, 3)))
     with pytest.raises(CampaignError, match="keep must have one flag"):
         iso9283_figures(c, np.zeros((3, 3)), np.zeros((3, 3, 3)), keep=[True])
+
+
+class _WithCore:
+    """A discrepancy result carrying the measurement fields of issue 10 (nuisance, outliers, repeatability)."""
+
+    def __init__(self, result, **fields):
+        self._result = result
+        self.__dict__.update(fields)
+
+    def __getattr__(self, name):
+        return getattr(self._result, name)
+
+
+def test_report_removes_nuisances_sets_outliers_aside_and_shows_them(tmp_path):
+    """The report's ISO figures are those of the campaign without registration and gross errors; the sections render."""
+    import json
+
+    from prp3mc.measurement.workflow import discrepancy
+    from prp3mc.reports.discrepancy_report import iso9283_of, write_report
+    g, b = Geometry.from_preset("u-shape"), Budget.from_preset("paper")
+    poses = Region.from_preset("u-shape").grid(5).reshape(-1, 3)
+    sigma = {"instrument_sigma_mm": 0.002, "instrument_sigma_deg": 0.0005}
+    reg = (0.05, -0.03, 0.01)
+    clean = simulate_campaign(g, b, poses, 4, rng=8, **sigma)
+    dirty = simulate_campaign(g, b, poses, 4, registration=reg, outliers=(0.05, 0.5), rng=8, **sigma)
+    rows = list(dirty.metadata["outlier_rows"])
+    result = discrepancy(g, b, dirty, n_bootstrap=50, rng=1, **sigma)
+    core = _WithCore(result, registration=True,
+                     nuisance=({"name": "registration_x", "value": reg[0], "unit": "mm", "ci95": [0.04, 0.06]},
+                               {"name": "registration_y", "value": reg[1], "unit": "mm", "ci95": [-0.04, -0.02]},
+                               {"name": "registration_phi", "value": reg[2], "unit": "deg", "ci95": [0.009, 0.011]}),
+                     outliers=tuple({"row": r, "pose_id": dirty.pose_id[r], "z": 40.0} for r in rows),
+                     repeatability={"repeatable_fraction": 0.25, "ci95": [0.1, 0.4]},
+                     with_outliers={"named_effects": ["spread_rho_1"], "gap": {"before": 300.0, "after": 20.0}})
+    iso = iso9283_of(core)
+    keep = np.ones(clean.n_measurements, bool)
+    keep[rows] = False
+    expected = iso9283_figures(clean, np.zeros((clean.n_poses, 3)), np.zeros((clean.n_poses, 3, 3)), keep=keep)
+    # the correction is the linear (small-angle) one the workflow fits: y theta^2 / 2 = 2e-6 mm here
+    np.testing.assert_allclose(iso["per_pose"]["measured"], expected["per_pose"]["measured"], atol=5e-6)
+    write_report(core, tmp_path / "rep")
+    html = (tmp_path / "rep" / "report.html").read_text()
+    for text in ("registration_phi", "Gross errors set aside", f"<td>{rows[0]}</td>", "<b>0.25</b>",
+                 "With them kept", "spread_rho_1", "ISO 9283", "iso9283"):
+        assert text in html, text
+    doc = json.loads((tmp_path / "rep" / "discrepancy.json").read_text())
+    assert set(doc["iso9283"]) == {"measured", "predicted"}
+    assert set(doc["iso9283"]["measured"]) == {"AP_mm", "RP_mm", "AP_phi_deg", "RP_phi_deg"}
