@@ -2,7 +2,7 @@
 
 Over many seeds per case, on both reference geometries (49 poses x 8 visits,
 phi in {-4, 0, 4} deg, both approach directions, 20 -> 28 degC, instrument
-noise 2 um / 0.0005 deg), it measures
+noise 2 µm / 0.0005 deg), it measures
 
 - **false names**: campaigns that name an effect that was not hidden (nor is
   an alias of one that was), in null campaigns carrying a registration
@@ -39,8 +39,8 @@ from prp3mc.measurement.workflow import discrepancy
 SIGMA = {"instrument_sigma_mm": 0.002, "instrument_sigma_deg": 0.0005}
 #: name -> (simulate_campaign keyword arguments, hidden effects)
 CASES = {
-    "null, registration 20 um / 0.005 deg": ({"registration": (0.020, -0.010, 0.005)}, ()),
-    "null, drift 15 um in x": ({"drift": (0.015, 0.0, 0.0)}, ()),
+    "null, registration 20 µm / 0.005 deg": ({"registration": (0.020, -0.010, 0.005)}, ()),
+    "null, drift 15 µm in x": ({"drift": (0.015, 0.0, 0.0)}, ()),
     "null, repeats r = 0.7": ({"repeatable_fraction": 0.7}, ()),
     "null, outliers 1 % x 0.5 mm": ({"outliers": (0.01, 0.5)}, ()),
     "scale_2 hidden, registration": ({"effects": {"scale_2": 2e-4}, "registration": (0.020, -0.010, 0.005)},

@@ -36,7 +36,7 @@ __all__ = ["iso9283_figures", "ISO_STATISTICS", "pose_means"]
 
 #: The four ISO 9283 figures per pose and their units.
 ISO_STATISTICS = {"AP": "mm", "RP": "mm", "AP_phi": "deg", "RP_phi": "deg"}
-#: JSON key of each figure (SPEC §6 ``iso9283``).
+#: Key of each figure in the ``iso9283`` entry of ``discrepancy.json``.
 _KEYS = {"AP": "AP_mm", "RP": "RP_mm", "AP_phi": "AP_phi_deg", "RP_phi": "RP_phi_deg"}
 
 

@@ -4,7 +4,7 @@ Every plotting function takes a
 :class:`~prp3mc.measurement.selection.DiscrepancyResult` and ``fig=`` (each
 figure has several panels; a new pyplot figure when None) and returns the
 Figure; none changes the matplotlib backend. :func:`write_report` writes
-``discrepancy.json`` (SPEC §6), ``report.html`` with the figures embedded,
+``discrepancy.json``, ``report.html`` with the figures embedded,
 the figures as PNG (SVG too on request), and per-pose / per-measurement
 tables as CSV; it draws on its own Agg canvases, outside pyplot, and renders
 each figure once (constrained layout, no tight bounding box), which keeps a
@@ -403,7 +403,7 @@ def _iso_summary(iso: dict) -> list[dict]:
 
 
 def render_html(result: DiscrepancyResult, figures: dict, iso: dict | None = None) -> str:
-    """The HTML report; ``figures`` maps figure names to data URIs, ``iso`` is :func:`iso9283_of` (computed when None)."""
+    """The HTML report; ``figures`` maps figure names to data URIs; ``iso`` from :func:`iso9283_of` (None: computed)."""
     import jinja2
     iso = iso9283_of(result) if iso is None else iso
     text = resources.files("prp3mc.reports").joinpath("templates/discrepancy.html.j2").read_text(encoding="utf-8")
@@ -419,7 +419,8 @@ def render_html(result: DiscrepancyResult, figures: dict, iso: dict | None = Non
             worst[f"{stat} {which[:4]}. ({shown})"] = f * wide.loc[worst["pose_id"], (which, stat)].to_numpy()
     return env.from_string(text).render(
         r=result, doc=result.to_dict(), figures=figures, captions=_CAPTIONS, mm2um=MM2UM, deg2arcsec=DEG2ARCSEC,
-        top_poses=_table(top), steps=_table(_top_candidates(result.steps)), before=result.before.summary, after=result.after.summary,
+        top_poses=_table(top), steps=_table(_top_candidates(result.steps)), before=result.before.summary,
+        after=result.after.summary,
         nuisance=list(getattr(result, "nuisance", ())), drift_test=getattr(result, "drift_test", None),
         registration_fitted=bool(getattr(result, "registration", False)),
         confounded=list(getattr(result, "confounded_with_registration", ())),
