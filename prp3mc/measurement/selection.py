@@ -1,21 +1,30 @@
-"""Naming the effects the model misses, their aliases, and the results of the workflow.
+"""Naming the effects the model misses, with selection that can change its mind.
 
 Naming
 ------
-Forward selection over the library: at each step every testable candidate
-is added in turn to the current model; the best by likelihood ratio (LR) is
-accepted only if its LR passes chi2(1) at level ``alpha / K`` (Bonferroni
-over the K candidates tried). Candidates whose LR is within the chi2(1) 99 %
-quantile of the best are its *aliases*: the campaign cannot tell them apart,
-the named effect is then reported with ``identified: false`` and each alias
-with its own value and interval. After each acceptance all accepted values
-are refitted jointly and any accepted effect that is no longer significant
-(LR of removal below the chi2(1) quantile at ``alpha``) is dropped. Effects
-whose signature vanishes over the campaign (e.g. ``c_i`` and ``e_i`` when
-theta_i = 0) are reported as invisible and never named. When no candidate
-passes, remaining disagreement (six global, per-pose, spatial and
-lack-of-fit tests at family-wise level ``alpha_unexplained``) sets
-``unexplained``.
+Every model, null and alternative, holds the nuisances (registration,
+drift) and the fitted repeatable fraction ``r``. At each step every
+testable candidate is scored by its likelihood ratio (LR) at the current
+covariance; the strongest few are refitted with ``r`` and the spread
+factors re-profiled and the best is accepted only if that LR passes chi2(1)
+at level ``alpha / K`` (Bonferroni over the K candidates tried). After each
+acceptance:
+
+- **exchange**: the systematic set is replaced by the best set of its size
+  (every set of up to three effects is compared, larger sets by exchange
+  moves, :mod:`~prp3mc.measurement.subsets`), so an early wrong pick is
+  replaced once a later effect explains what misled it;
+- **backward**: an effect whose removal LR falls below the chi2(1) quantile
+  at ``alpha`` is dropped.
+
+Aliases are computed given the final model: another candidate is an alias
+of a named effect when swapping it in leaves the fit within the chi2(1)
+99 % quantile, and a whole set of the same size that fits as well makes the
+members it replaces aliases too. An effect is ``identified`` only when no
+set of the same size explains the data as well. Effects whose signature
+vanishes over the campaign are invisible; effects whose signature lies in
+the span of the nuisances are *confounded* (with registration or drift);
+neither is ever named.
 """
 
 from __future__ import annotations
@@ -37,13 +46,17 @@ from .diagnostics import Diagnosis
 from .effects import effect
 from .likelihood import Engine, Fit
 from .prediction import Prediction, noise_cov
+from .subsets import Gram
 
 __all__ = ["NamedEffect", "DiscrepancyResult", "select", "name_effects"]
 
 _Q_ALIAS = float(stats.chi2.ppf(0.99, 1))
 #: Level of the intervals the workflow computes (``ci95``).
 _LEVEL = 0.95
+#: Most candidates refitted with r and the spreads re-profiled at each step.
+_JOINT = 3
 _EFFECT_COLUMNS = ["name", "value", "unit", "ci_low", "ci_high", "level", "aliases", "identified", "lr"]
+_STEP_COLUMNS = ["candidate", "lr", "estimate", "lr_joint", "step", "threshold", "accepted"]
 
 
 def _thawed(value):
@@ -70,9 +83,11 @@ class NamedEffect:
         Effects the campaign cannot tell apart from this one; if any, the
         effect is *not* identified (one of the set is missing).
     evidence : mapping
-        ``lr, threshold, p_bonferroni, n_candidates, step, delta_bic,
-        identified``, ``alias_fits`` (value and ci95 of each alias) and, for
-        spreads, ``budget_value`` and ``direction``.
+        ``lr`` (of removing it from the final model), ``threshold``,
+        ``p_bonferroni``, ``n_candidates``, ``step``, ``delta_bic``,
+        ``identified``, ``alias_fits`` (value and ci95 of each alias),
+        ``alternative_sets`` (other sets of the same size that fit as well)
+        and, for spreads, ``budget_value`` and ``direction``.
     """
 
     name: str
@@ -88,7 +103,7 @@ class NamedEffect:
     def __repr__(self) -> str:
         lo, hi = self.ci95
         return (f"NamedEffect(name={self.name!r}, value={self.value:.6g}, unit={self.unit!r}, "
-                f"ci95=[{lo:.6g}, {hi:.6g}], identified={not self.aliases})")
+                f"ci95=[{lo:.6g}, {hi:.6g}], identified={self.evidence['identified']})")
 
     def _row(self) -> dict:
         return {"name": self.name, "value": self.value, "unit": self.unit, "ci_low": self.ci95[0],
@@ -107,40 +122,66 @@ class NamedEffect:
 
 @dataclass(frozen=True, slots=True)
 class DiscrepancyResult:
-    """Outcome of :func:`discrepancy`.
+    """Outcome of :func:`~prp3mc.measurement.workflow.discrepancy`.
 
     Attributes
     ----------
     named_effects : tuple of NamedEffect
         Empty when the model misses nothing the campaign can see.
     unexplained : bool
-        Disagreement remains that no candidate explains.
+        Disagreement remains that no candidate explains; exactly ``not gap["closed"]``.
     gap : mapping
-        ``metric, before, after, null_level, null_sd, closed`` and the two
-        channels (see :mod:`~prp3mc.measurement.diagnostics`).
+        ``metric, before, after, null_level, closed_at, closed,
+        deciding_channel`` and every channel's evidence (see
+        :mod:`~prp3mc.measurement.diagnostics`).
     before, after : Diagnosis
-        Disagreement under the budget alone and with the named effects.
+        Disagreement under the budget alone and with the named effects
+        (nuisances in both, gross errors set aside).
     steps : DataFrame
         Every candidate's LR at every selection step.
     prediction_after : Prediction
-        The corrected model's prediction.
+        The corrected model's prediction (machine frame, no nuisances).
     budget_after : Budget
         The budget with named spreads applied.
     systematic : mapping
         Named systematic effects, name -> value: the model's new parameters.
+    nuisance : tuple of mapping
+        ``{name, value, unit, ci95}`` of the registration (when fitted) and
+        of the drift (when its test rejects).
+    drift_test : mapping
+        ``lr, df, p, significant, time`` (``time_s`` or ``row order``) and
+        the drift's fitted ``values``, listed or not.
+    registration : bool
+        Whether the registration was fitted.
+    outliers : tuple of mapping
+        ``{row, pose_id, z}`` of each measurement set aside (``z``: the
+        square root of its squared standardised prediction error).
+    outlier_rule : mapping
+        ``family_wise_rate``, ``per_measurement_level``, ``z_threshold``.
+    with_outliers : mapping or None
+        When rows were set aside: what the workflow names and the gap it
+        finds if they are kept (``named_effects, gap_before, gap_after,
+        unexplained``).
+    repeatability : mapping
+        ``repeatable_fraction`` and its profile-likelihood ``ci95``.
+    iso9283 : mapping or None
+        Largest ISO 9283 figures over the poses, ``measured`` and ``predicted``.
+    iso9283_poses : DataFrame or None
+        The ISO 9283 figures per pose.
     invisible : tuple of str
         Effects whose signature vanishes over the campaign (never named).
+    confounded_with_registration : tuple of str
+        Effects the campaign cannot tell apart from the registration (never named).
     structural_aliases : tuple of tuple of str
         Groups of effects with collinear signatures over the campaign.
     not_testable : mapping
         Effects the campaign cannot test, with the reason.
     campaign : Campaign
-        The validated campaign.
+        The validated campaign (every row).
     geometry, budget
         What the analysis ran on.
     seed, n_bootstrap : int
-    alpha : float
-    alpha_unexplained : float
+    alpha, alpha_unexplained : float
     instrument_sigma_mm, instrument_sigma_deg : float
     version : str
     wall_time_s : float
@@ -155,7 +196,17 @@ class DiscrepancyResult:
     prediction_after: Prediction
     budget_after: Budget
     systematic: dict
+    nuisance: tuple
+    drift_test: dict
+    registration: bool
+    outliers: tuple
+    outlier_rule: dict
+    with_outliers: dict | None
+    repeatability: dict
+    iso9283: dict | None
+    iso9283_poses: pd.DataFrame | None
     invisible: tuple
+    confounded_with_registration: tuple
     structural_aliases: tuple
     not_testable: dict
     campaign: Campaign
@@ -177,7 +228,12 @@ class DiscrepancyResult:
         g = self.gap
         return (f"DiscrepancyResult(named={tuple(e.name for e in self.named_effects)}, "
                 f"unexplained={self.unexplained}, gap={g['before']:.4g}->{g['after']:.4g}, "
-                f"closed={g['closed']}, seed={self.seed})")
+                f"outliers={len(self.outliers)}, seed={self.seed})")
+
+    @property
+    def repeatable_fraction(self) -> float:
+        """The fitted share of the budget's variance that repeats at every visit of a pose."""
+        return float(self.repeatability["repeatable_fraction"])
 
     def to_frame(self) -> pd.DataFrame:
         """One row per named effect: ``name, value, unit, ci_low, ci_high, level, aliases, identified, lr``.
@@ -225,6 +281,15 @@ class DiscrepancyResult:
             "named_effects": [e.to_dict() for e in self.named_effects],
             "unexplained": bool(self.unexplained),
             "gap": _thawed(self.gap),
+            "nuisance": _thawed(self.nuisance),
+            "outliers": _thawed(self.outliers),
+            "repeatability": _thawed(self.repeatability),
+            "iso9283": _thawed(self.iso9283),
+            "confounded_with_registration": list(self.confounded_with_registration),
+            "registration_fitted": bool(self.registration),
+            "drift_test": _thawed(self.drift_test),
+            "outlier_rule": _thawed(self.outlier_rule),
+            "with_outliers": _thawed(self.with_outliers),
             "tests": {"before": _thawed(self.before.summary), "after": _thawed(self.after.summary)},
             "invisible": list(self.invisible),
             "structural_aliases": [list(g) for g in self.structural_aliases],
@@ -241,115 +306,162 @@ class DiscrepancyResult:
 
 def _intervals(result: DiscrepancyResult, level: float) -> list[tuple[float, float]]:
     """Intervals at ``level`` of ``result``'s named effects, from its fitted model state."""
+    keep = np.ones(result.campaign.n_measurements, bool)
+    keep[[o["row"] for o in result.outliers]] = False
     engine = Engine(result.geometry, result.budget, result.campaign,
-                    noise_cov(result.instrument_sigma_mm, result.instrument_sigma_deg))
+                    noise_cov(result.instrument_sigma_mm, result.instrument_sigma_deg),
+                    registration=result.registration, keep=keep)
     sys = tuple(engine.sys_index(name) for name in result.systematic)
     factors = {e.name: e.value / e.evidence["budget_value"] for e in result.named_effects
                if "budget_value" in e.evidence}
-    fit = engine.fit(sys, factors)
+    fit = engine.fit(sys, factors, result.repeatable_fraction)
     return [engine.estimate(fit, e.name, level)[1] for e in result.named_effects]
 
 
-def _with(engine: Engine, fit: Fit, name: str) -> Fit:
-    """Refit ``fit``'s model with effect ``name`` added."""
-    if effect(name).systematic:
-        return engine.refit(fit.sys + (engine.sys_index(name),), fit.factors)
-    return engine.refit(fit.sys, {**fit.factors, name: 1.0})
-
-
-def _without(engine: Engine, fit: Fit, name: str) -> Fit:
-    """Refit ``fit``'s model with effect ``name`` removed."""
-    if effect(name).systematic:
-        j = engine.sys_index(name)
-        return engine.refit(tuple(s for s in fit.sys if s != j), fit.factors)
-    return engine.refit(fit.sys, {k: v for k, v in fit.factors.items() if k != name})
-
-
-def _names_in(engine: Engine, fit: Fit) -> list[str]:
+def names_in(engine: Engine, fit: Fit) -> list[str]:
     """Names of the effects in ``fit``'s model: systematic ones, then spreads."""
     return [engine.systematic[j].name for j in fit.sys] + list(fit.factors)
 
 
-def _scan(engine: Engine, fit: Fit, excluded: set) -> pd.DataFrame:
-    """LR and estimate of adding every testable candidate to ``fit``."""
+def _with(engine: Engine, fit: Fit, name: str, r: float | None = None) -> Fit:
+    """Refit ``fit``'s model with effect ``name`` added (``r`` re-profiled unless given)."""
+    if effect(name).systematic:
+        return engine.refit(fit.sys + (engine.sys_index(name),), fit.factors, r, start_r=fit.r)
+    return engine.refit(fit.sys, {**fit.factors, name: 1.0}, r, start_r=fit.r)
+
+
+def _without(engine: Engine, fit: Fit, name: str) -> Fit:
+    """Refit ``fit``'s model with effect ``name`` removed (``r`` re-profiled)."""
+    if effect(name).systematic:
+        j = engine.sys_index(name)
+        return engine.refit(tuple(s for s in fit.sys if s != j), fit.factors, start_r=fit.r)
+    return engine.refit(fit.sys, {k: v for k, v in fit.factors.items() if k != name}, start_r=fit.r)
+
+
+def _scan(engine: Engine, fit: Fit) -> pd.DataFrame:
+    """LR and estimate of adding every testable candidate to ``fit`` at its covariance (spreads: r fixed)."""
     lr, est = engine.score_systematic(fit)
     rows = [{"candidate": e.name, "lr": float(lr[j]), "estimate": float(est[j])}
-            for j, e in enumerate(engine.systematic) if np.isfinite(lr[j]) and e.name not in excluded]
+            for j, e in enumerate(engine.systematic) if np.isfinite(lr[j])]
     for e in engine.spreads:
-        if e.name in fit.factors or e.name in excluded:
+        if e.name in fit.factors:
             continue
-        value, trial = engine.score_spread(fit, e.name)
-        rows.append({"candidate": e.name, "lr": max(value, 0.0),
+        trial = engine.refit(fit.sys, {**fit.factors, e.name: 1.0}, fit.r, free=(e.name,))
+        rows.append({"candidate": e.name, "lr": max(2.0 * (trial.loglik - fit.loglik), 0.0),
                      "estimate": float(trial.factors[e.name] * engine.spread_ref[e.name])})
     return pd.DataFrame(rows, columns=["candidate", "lr", "estimate"])
 
 
+def _exchange(engine: Engine, fit: Fit) -> Fit:
+    """Replace the systematic set by the best set of its size at the fit's covariance, until stable."""
+    for _ in range(3):
+        gram = Gram(engine, fit)
+        S, g = gram.best(fit.sys)
+        if set(S) == set(fit.sys) or g <= gram.gain(fit.sys) + 1e-9:
+            break
+        fit = engine.refit(tuple(S), fit.factors, start_r=fit.r)
+    return fit
+
 
 def select(engine: Engine, base: Fit, alpha: float, max_effects: int) -> tuple[Fit, dict, pd.DataFrame]:
-    """Forward selection from ``base`` (see the module notes).
+    """Forward selection with exchange and backward moves from ``base`` (see the module notes).
 
     Returns
     -------
     fit : Fit
         The model with the accepted effects.
     accepted : dict
-        Name -> evidence of its acceptance (including its ``aliases``).
+        Name -> ``step, threshold, n_candidates`` of the step that named it.
     steps : DataFrame
-        Every candidate's ``lr`` and ``estimate`` at every ``step``, with the
-        step's ``threshold`` and whether it was ``accepted``.
+        Every candidate's ``lr`` (at the step's covariance) and ``estimate``
+        at every ``step``, ``lr_joint`` (r and spreads re-profiled) for the
+        strongest, the step's ``threshold`` and whether it was ``accepted``.
     """
-    n_obs = 3 * engine.M
     fit = base
-    accepted: dict[str, dict] = {}        # name -> evidence of its acceptance
-    excluded: set = set()
+    accepted: dict[str, dict] = {}
     step_rows = []
+    drop_level = float(stats.chi2.isf(alpha, 1))
     for step in range(1, max_effects + 1):
-        scan = _scan(engine, fit, excluded)
+        scan = _scan(engine, fit)
         if scan.empty:
             break
         K = len(scan)
         threshold = float(stats.chi2.isf(alpha / K, 1))
-        scan = scan.assign(step=step, threshold=threshold, accepted=False).sort_values("lr", ascending=False)
-        best = scan.iloc[0]
-        passed = best["lr"] > threshold
-        if passed:
-            aliases = scan.loc[(scan["lr"] > best["lr"] - _Q_ALIAS) & (scan["candidate"] != best["candidate"]),
-                               "candidate"].tolist()
-            scan.loc[scan.index[0], "accepted"] = True
-            p = float(stats.chi2.sf(best["lr"], 1))
-            accepted[best["candidate"]] = {
-                "lr": float(best["lr"]), "threshold": threshold, "p_bonferroni": min(1.0, K * p),
-                "n_candidates": K, "step": step, "delta_bic": float(best["lr"] - np.log(n_obs)),
-                "aliases": aliases,
-            }
-            excluded.update(aliases + [best["candidate"]])
-            fit = _with(engine, fit, best["candidate"])
-            for name in [n for n in _names_in(engine, fit) if n != best["candidate"]]:
-                drop = 2.0 * (fit.loglik - _without(engine, fit, name).loglik)
-                if drop < stats.chi2.isf(alpha, 1):
-                    fit = _without(engine, fit, name)
-                    accepted.pop(name)
-        step_rows.append(scan)
+        scan = scan.sort_values("lr", ascending=False, ignore_index=True)
+        # the LR with r and spreads re-profiled is at least the scan's: refit the strongest, and the next
+        # ones only when it fails (a repeatable fraction fitted high may hide an effect's pose pattern)
+        trials, joint = {}, {}
+        for name in scan["candidate"].head(_JOINT):
+            trials[name] = _with(engine, fit, name)
+            joint[name] = 2.0 * (trials[name].loglik - fit.loglik)
+            if joint[name] > threshold:
+                break
+        best = max(joint, key=joint.get)
+        scan = scan.assign(lr_joint=scan["candidate"].map(joint), step=step, threshold=threshold,
+                           accepted=scan["candidate"] == best)
+        passed = joint[best] > threshold
         if not passed:
+            step_rows.append(scan.assign(accepted=False))
             break
-    steps = pd.concat(step_rows, ignore_index=True) if step_rows else pd.DataFrame(
-        columns=["candidate", "lr", "estimate", "step", "threshold", "accepted"])
-    return fit, accepted, steps
+        step_rows.append(scan)
+        evidence = {"step": step, "threshold": threshold, "n_candidates": K}
+        before = set(names_in(engine, fit))
+        fit = _exchange(engine, trials[best])
+        for name in set(names_in(engine, fit)) - before:
+            accepted[name] = dict(evidence)
+        dropped = True
+        while dropped:
+            dropped = False
+            for name in names_in(engine, fit):
+                trial = _without(engine, fit, name)
+                if 2.0 * (fit.loglik - trial.loglik) < drop_level:
+                    fit, dropped = trial, True
+                    break
+        accepted = {k: v for k, v in accepted.items() if k in names_in(engine, fit)}
+    steps = pd.concat(step_rows, ignore_index=True) if step_rows else pd.DataFrame(columns=_STEP_COLUMNS)
+    return fit, accepted, steps[_STEP_COLUMNS]
 
 
 def name_effects(engine: Engine, fit: Fit, accepted: dict) -> tuple[NamedEffect, ...]:
-    """The effects in ``fit``'s model with their values, 95 % intervals, aliases and evidence."""
+    """The effects in ``fit``'s model with values, 95 % intervals and aliases given the final model."""
     named = []
-    for name in _names_in(engine, fit):
+    gram = Gram(engine, fit)
+    S = tuple(fit.sys)
+    alternatives = gram.alternatives(S, _Q_ALIAS) if S else []
+    top = gram.gain(S)
+    n_obs = 3 * engine.M
+    for name in names_in(engine, fit):
         ev = dict(accepted[name])
-        aliases = ev.pop("aliases")
+        lr = 2.0 * (fit.loglik - _without(engine, fit, name).loglik)
+        alias_sets = []
+        if name in fit.factors:
+            aliases = []
+            for other in engine.spreads:
+                if other.name in fit.factors:
+                    continue
+                factors = {k: v for k, v in fit.factors.items() if k != name}
+                trial = engine.refit(fit.sys, {**factors, other.name: 1.0}, fit.r)
+                if trial.loglik >= fit.loglik - _Q_ALIAS / 2:
+                    aliases.append(other.name)
+        else:
+            j = engine.sys_index(name)
+            rest = [s for s in S if s != j]
+            swaps = [c for c in gram.eligible if c not in S and gram.gain(rest + [c]) >= top - _Q_ALIAS]
+            alias_sets = [alt for alt in alternatives if j not in alt]
+            aliases = [engine.systematic[c].name for c in swaps]
+            for alt in alias_sets:
+                aliases += [engine.systematic[c].name for c in alt if c not in S]
+            aliases = list(dict.fromkeys(aliases))
         value, ci = engine.estimate(fit, name)
         alias_fits = {}
         for alias in aliases:
-            trial = _with(engine, _without(engine, fit, name), alias)
+            trial = _with(engine, _without(engine, fit, name), alias, r=fit.r)
             a_value, a_ci = engine.estimate(trial, alias)
             alias_fits[alias] = {"value": a_value, "unit": effect(alias).unit, "ci95": list(a_ci)}
-        ev.update(identified=not aliases, alias_fits=alias_fits)
+        p = float(stats.chi2.sf(lr, 1))
+        ev.update(lr=float(lr), p_bonferroni=min(1.0, ev["n_candidates"] * p),
+                  delta_bic=float(lr - np.log(n_obs)), identified=not aliases, alias_fits=alias_fits,
+                  alternative_sets=[[engine.systematic[c].name for c in alt] for alt in alias_sets])
         if name in fit.factors:
             ev.update(budget_value=engine.spread_ref[name],
                       direction="larger" if fit.factors[name] > 1 else "smaller")
