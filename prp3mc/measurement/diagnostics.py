@@ -226,6 +226,30 @@ def _probe_basis(engine: Engine) -> np.ndarray:
     return np.stack(cols, axis=-1)
 
 
+def _spatial_z(engine: Engine, fit: Fit, model_cols: np.ndarray) -> float:
+    """Standardised sum over neighbouring poses of the products of their standardised mean residuals.
+
+    ``S = zb' E zb`` with ``E`` half the neighbour adjacency (per output).
+    The fit makes ``zb = R_b eps`` with ``R = I - QQ'`` (Q: orthonormal
+    basis of the fitted columns), so under the model ``E[S] = tr(E R_bb)``
+    and, for Gaussian errors, ``Var[S] = 2 tr((E R_bb)^2)``.
+    """
+    edges = _neighbour_edges(engine.campaign.poses)
+    if not len(edges):
+        return 0.0
+    adj = np.zeros((engine.P, engine.P))
+    adj[edges[:, 0], edges[:, 1]] = adj[edges[:, 1], edges[:, 0]] = 0.5
+    E = np.kron(adj, np.eye(3))
+    R = np.eye(3 * engine.P)
+    if model_cols.shape[1]:
+        Q, _ = np.linalg.qr(model_cols)
+        Qb = Q[3 * engine.M:]
+        R = R - Qb @ Qb.T
+    ER = E @ R
+    u = fit.zb.ravel()
+    return float((u @ E @ u - np.trace(ER)) / np.sqrt(2.0 * np.trace(ER @ ER)))
+
+
 def diagnose(engine: Engine, fit: Fit, n_boot: int, rng) -> Diagnosis:
     """Every test of the module notes for the model state ``fit`` (``n_boot`` bootstrap replicates)."""
     c = engine.campaign
@@ -265,9 +289,7 @@ def diagnose(engine: Engine, fit: Fit, n_boot: int, rng) -> Diagnosis:
         "log_p_dispersion_pose": _holm_log_min(disp_logp[has_rep]) if has_rep.any() else 0.0,
         "log_p_lack_of_fit": float(_chi2_logsf(lof_stat, lof_df)) if lof_df else 0.0,
     }
-    edges = _neighbour_edges(c.poses)
-    u = fit.zb
-    moran = float(np.sum(u[edges[:, 0]] * u[edges[:, 1]]) / np.sqrt(3.0 * len(edges))) if len(edges) else 0.0
+    moran = _spatial_z(engine, fit, model_cols)
     summary.update(spatial_z=moran, log_p_spatial=float(stats.norm.logsf(moran)))
     if has_rep.any() and gS_mean > 0:
         summary["log_p_dispersion"] = float(_two_sided(S.sum(), gS_mean, gS_var))
@@ -336,7 +358,7 @@ def gap(before: Diagnosis, after: Diagnosis, alpha_unexplained: float) -> dict:
                   "the pose means, the repeat scatter, the per-pose tests of both (Holm), the spatial and the "
                   "lack-of-fit tests, all on residuals with nuisances profiled out and gross errors set aside; "
                   "closed at <= -ln(alpha_unexplained), which is exactly when nothing is unexplained",
-        "before": float(g_before), "after": float(g_after), "null_level": 1.0, "closed_at": closed_at,
+        "before": float(g_before), "after": float(g_after), "null_level": 1.0, "null_sd": 1.0, "closed_at": closed_at,
         "closed": bool(g_after <= closed_at), "deciding_channel": worst, "channels": channels,
         "residual": {"metric": "mean squared whitened residual per degree of freedom (chi2/dof of all "
                                "measurements under the model's predicted mean and covariance)",

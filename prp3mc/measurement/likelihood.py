@@ -228,13 +228,19 @@ class Engine:
         """
         swm = sw[self.idx]
         z0 = np.concatenate([(basis["yw"] * swm).ravel(), (basis["yb"] * sb).ravel()])
-        nH = self.H.shape[2]
-        X = np.concatenate([self.H[:, :, [c for c in cols if c < nH]],
-                            self.G[:, :, [c - nH for c in cols if c >= nH]]], axis=2)
-        Xbar = self.pose_mean(X)
-        cw = basis["Vm"] @ (X - Xbar[self.idx])
-        cb = basis["Vt"] @ Xbar
-        A = np.concatenate([(cw * swm[..., None]).reshape(-1, len(cols)), (cb * sb[..., None]).reshape(-1, len(cols))])
+        projected = basis.setdefault("columns", {})         # column -> its (within, between) parts in the basis
+        missing = [c for c in dict.fromkeys(cols) if c not in projected]
+        if missing:
+            nH = self.H.shape[2]
+            X = np.stack([self.H[:, :, c] if c < nH else self.G[:, :, c - nH] for c in missing], axis=2)
+            Xbar = self.pose_mean(X)
+            cw, cb = basis["Vm"] @ (X - Xbar[self.idx]), basis["Vt"] @ Xbar
+            for k, c in enumerate(missing):
+                projected[c] = (cw[:, :, k], cb[:, :, k])
+        cw = np.stack([projected[c][0] for c in cols], axis=2) if cols else np.zeros((self.M, 3, 0))
+        cb = np.stack([projected[c][1] for c in cols], axis=2) if cols else np.zeros((self.P, 3, 0))
+        A = np.concatenate([(cw * swm[..., None]).reshape(3 * self.M, len(cols)),
+                            (cb * sb[..., None]).reshape(3 * self.P, len(cols))])
         return z0, A
 
     def columns(self, sys: tuple, nuis: tuple | None = None) -> np.ndarray:
@@ -290,7 +296,7 @@ class Engine:
         if not x0:
             return self.fit(sys, factors, r, nuis)
         if len(x0) == 1:
-            best = optimize.minimize_scalar(nll, bounds=bounds[0], method="bounded", options={"xatol": 1e-4})
+            best = optimize.minimize_scalar(nll, bounds=bounds[0], method="bounded", options={"xatol": 1e-3})
             x = np.array([best.x])
             for end in bounds[0]:                         # the bounded method never evaluates the ends
                 if nll(end) < best.fun:
