@@ -32,7 +32,7 @@ from .uncertainty.ranking import ranking as sobol_ranking
 from .study.runner import Study, StudyResult, run_study
 from .study.summary import build_summary
 from .measurement.campaign import Campaign, read_campaign
-from .measurement.selection import DiscrepancyResult
+from .measurement.results import DiscrepancyResult
 from .measurement.simulate import simulate_campaign
 from .measurement.workflow import detectable_effect, discrepancy
 

@@ -81,7 +81,10 @@ def test_hidden_effect_is_named_and_gap_closes(name, value, where, vary_phi, reg
     geometry, preset = {"delta": (Geometry.from_preset("delta-shape"), "delta-shape"),
                         "u-shape": (Geometry.from_preset("u-shape"), "u-shape"),
                         "tilted": (TILTED, "delta-shape")}[where]
-    r = run(geometry, preset, vary_phi, rng=7, registration=registration, effects={name: value})
+    # seed 7 of the tilted campaign shows a neighbourhood pattern of its own (spatial z = 2.9 with nothing
+    # hidden; over seeds 20-31 its null z has mean -0.16, sd 0.67), so the tilted cases use seed 21
+    seed = 21 if where == "tilted" else 7
+    r = run(geometry, preset, vary_phi, rng=seed, registration=registration, effects={name: value})
     assert len(r.named_effects) == 1, r.to_frame()
     fit = fit_of(r, name)
     assert fit is not None, r.to_frame()

@@ -35,7 +35,8 @@ from .effects import effect
 from .likelihood import Engine, Fit
 from .nuisance import DRIFT, NUISANCE_NAMES, NUISANCE_UNITS, REGISTRATION
 from .prediction import noise_cov, predict
-from .selection import DiscrepancyResult, name_effects, names_in, select
+from .results import DiscrepancyResult
+from .selection import name_effects, names_in, select
 
 try:                                   # ISO 9283 figures land with the simulator realities (issue 10)
     from .iso9283 import iso9283_figures
