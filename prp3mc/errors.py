@@ -14,6 +14,7 @@ __all__ = [
     "BudgetError",
     "StudyError",
     "CampaignError",
+    "AllocationError",
 ]
 
 
@@ -54,3 +55,7 @@ class StudyError(Prp3mcError, ValueError):
 
 class CampaignError(Prp3mcError, ValueError):
     """A measurement campaign is malformed; the message names row and column."""
+
+
+class AllocationError(Prp3mcError, ValueError):
+    """A tolerance-allocation problem is malformed (classes file, costs, specs)."""
