@@ -1,4 +1,4 @@
-"""``prp3mc discrepancy``: name what the model misses in a measurement campaign (SPEC §6)."""
+"""``prp3mc discrepancy``: name what the model misses in a measurement campaign."""
 
 from ..uncertainty.budget import Budget
 from ..measurement.workflow import discrepancy
@@ -13,7 +13,7 @@ class DiscrepancyCommand:
     def add_arguments(p):
         add_geometry(p)
         add_budget(p)
-        p.add_argument("--data", required=True, metavar="CSV", help="measurement campaign (SPEC §4)")
+        p.add_argument("--data", required=True, metavar="CSV", help="measurement campaign CSV (README, File formats)")
         p.add_argument("--out", required=True, metavar="DIR", help="report folder (discrepancy.json, report.html)")
         p.add_argument("--force", action="store_true", help="replace an existing --out folder")
         p.add_argument("--instrument-sigma-mm", type=finite_float, default=0.0, metavar="S",

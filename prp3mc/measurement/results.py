@@ -1,4 +1,4 @@
-"""The results of the discrepancy workflow: named effects and the whole analysis (SPEC §6)."""
+"""The results of the discrepancy workflow: named effects and the whole analysis."""
 
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ class NamedEffect:
     ----------
     name : str
     value : float
-        In ``unit`` (SPEC §5).
+        In ``unit``.
     unit : str
     ci95 : (float, float)
     aliases : tuple of str
@@ -81,7 +81,7 @@ class NamedEffect:
         return pd.DataFrame([self._row()], columns=_EFFECT_COLUMNS)
 
     def to_dict(self) -> dict:
-        """The effect's entry in ``discrepancy.json`` (SPEC §6)."""
+        """The effect's entry in ``discrepancy.json``."""
         return {"name": self.name, "value": self.value, "unit": self.unit, "ci95": list(self.ci95),
                 "aliases": list(self.aliases), "evidence": _thawed(self.evidence)}
 
@@ -227,7 +227,7 @@ class DiscrepancyResult:
         -------
         DataFrame
             ``name, value, unit, ci_low, ci_high, level``, one row per named
-            effect, in the effect's unit (SPEC §5).
+            effect, in the effect's unit.
 
         Raises
         ------
@@ -242,7 +242,7 @@ class DiscrepancyResult:
         return interval_frame(frame, [ci[0] for ci in cis], [ci[1] for ci in cis], level)
 
     def to_dict(self) -> dict:
-        """The ``discrepancy.json`` document of SPEC §6 (plus diagnostics)."""
+        """The ``discrepancy.json`` document (plus diagnostics)."""
         return {
             "named_effects": [e.to_dict() for e in self.named_effects],
             "unexplained": bool(self.unexplained),

@@ -48,7 +48,7 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     n_repeats : int
         Measurements per pose.
     effects : dict of str to float, optional
-        Hidden effects of the library (SPEC §5 names and units).
+        Hidden effects of the library (:data:`~prp3mc.measurement.effects.EFFECT_NAMES`, in their units).
     approach : {"both", "positive", "negative", "sequence"}
         Approach direction of each actuator: random +-1 per actuator and
         measurement; always +1; always -1; or the sign of the actuator's

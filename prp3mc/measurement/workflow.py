@@ -59,7 +59,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     budget : Budget
         The model's random errors.
     campaign : Campaign, DataFrame or path
-        SPEC §4 campaign, measured in the instrument's frame; validated against ``geometry``.
+        A campaign (README, *File formats*), measured in the instrument's frame; validated against ``geometry``.
     instrument_sigma_mm, instrument_sigma_deg : float
         Standard deviation of the measurement noise per coordinate.
     registration : bool
@@ -217,7 +217,7 @@ def detectable_effect(geometry: Geometry, budget: Budget, campaign: Campaign, na
     Returns
     -------
     float
-        In the effect's unit (SPEC §5); inf if the campaign cannot see it.
+        In the effect's unit; inf if the campaign cannot see it.
     """
     eff = effect(name)
     if not eff.systematic:

@@ -4,7 +4,7 @@ Every plotting function takes a
 :class:`~prp3mc.measurement.selection.DiscrepancyResult` and ``fig=`` (each
 figure has several panels; a new pyplot figure when None) and returns the
 Figure; none changes the matplotlib backend. :func:`write_report` writes
-``discrepancy.json`` (SPEC §6), ``report.html`` with the figures embedded,
+``discrepancy.json``, ``report.html`` with the figures embedded,
 the figures as PNG and SVG, and per-pose / per-measurement tables as CSV;
 it draws on its own Agg canvases, outside pyplot.
 """
