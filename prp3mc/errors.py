@@ -14,6 +14,10 @@ __all__ = [
     "BudgetError",
     "StudyError",
     "CampaignError",
+    "ResourceError",
+    "Prp3mcWarning",
+    "IncompleteBudgetWarning",
+    "LinearityWarning",
 ]
 
 
@@ -54,3 +58,19 @@ class StudyError(Prp3mcError, ValueError):
 
 class CampaignError(Prp3mcError, ValueError):
     """A measurement campaign is malformed; the message names row and column."""
+
+
+class ResourceError(Prp3mcError, ValueError):
+    """A request needs more memory or time than this machine can give it."""
+
+
+class Prp3mcWarning(UserWarning):
+    """Base of the warnings prp3mc gives (an analysis runs, but a result needs care)."""
+
+
+class IncompleteBudgetWarning(Prp3mcWarning):
+    """A budget leaves out inputs that it names for other legs."""
+
+
+class LinearityWarning(Prp3mcWarning):
+    """The linear error model departs from the exact chain by more than its tolerance."""

@@ -7,9 +7,11 @@ from ..uncertainty.budget import Budget
 from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
 from ..uncertainty.sobol import OUTPUTS, ranking, sobol_indices
+from ..uncertainty.validity import check_linearity
 from ..uncertainty.worstcase import worst_case
+from ..limits import sobol_estimate
 from . import (provenance, add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
-               emit_json, finite_float, positive_int)
+               emit_json, positive_float, positive_int, probability, within_limits)
 
 _KEYS = ("S1", "S1_conf", "ST", "ST_conf")
 _SCALE = {"x": (1e3, "um"), "y": (1e3, "um"), "phi": (3600.0, "arcsec"), "position": (1e3, "um")}
@@ -38,14 +40,14 @@ class SobolCommand:
         add_sampling(p, default_samples=8192)
         p.add_argument("--resamples", type=positive_int, default=100, metavar="R",
                        help="bootstrap resamples for the confidence intervals (default 100)")
-        p.add_argument("--conf-level", type=finite_float, default=0.95, metavar="L",
+        p.add_argument("--conf-level", type=probability, default=0.95, metavar="L",
                        help="confidence level of the intervals (default 0.95)")
         p.add_argument("--group", action="append", default=[], metavar="NAME=IN,IN",
                        help="a user group of inputs, e.g. leg_1=rho_1,zeta_1,theta_1,b_1 (repeatable)")
         p.add_argument("--method", choices=("auto", "salib", "vectorised"), default="auto",
                        help="salib: SALib's analyze per output; vectorised: the same estimators for all "
                             "outputs at once (equal to round-off); auto: salib for one pose (default)")
-        p.add_argument("--k-sigma", type=finite_float, default=None, metavar="K",
+        p.add_argument("--k-sigma", type=positive_float, default=None, metavar="K",
                        help="bound unbounded (normal) laws as mean ± K·sd for the worst case")
         add_progress(p)
         add_json(p)
@@ -54,6 +56,9 @@ class SobolCommand:
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         groups = dict(_group(text) for text in args.group)
+        within_limits(args, sobol_estimate(args.samples, 1, len(budget), len(budget) + len(budget.groups) + len(groups),
+                                           len(OUTPUTS), args.resamples, salib=args.method != "vectorised"))
+        check_linearity(geometry, budget, args.pose)
         r = sobol_indices(geometry, budget, args.pose, args.samples, rng=args.seed, groups=groups,
                           num_resamples=args.resamples, conf_level=args.conf_level, method=args.method,
                           progress=args.progress)

@@ -3,10 +3,11 @@
 import sys
 import time
 
-from ..output import check_output
+from ..limits import study_estimate
+from ..uncertainty.validity import check_linearity
 from ..reports.study_report import write_study
 from ..study.runner import Study, bundled_studies, run_study
-from . import add_progress, command
+from . import add_progress, add_seed, command, within_limits
 
 
 @command("study", "run a study (TOML file or bundled name) and write its report to a folder")
@@ -17,7 +18,7 @@ class StudyCommand:
                        help=f"study file, or a bundled study: {', '.join(bundled_studies())}")
         p.add_argument("--out", required=True, metavar="DIR", help="output folder (must not exist)")
         p.add_argument("--force", action="store_true", help="replace DIR if it exists")
-        p.add_argument("--seed", type=int, default=None, metavar="S", help="override the study's seed")
+        add_seed(p, help="override the study's seed")
         p.add_argument("--quick", action="store_true",
                        help="reduced grids and sample sizes (a smoke test, as the golden regression files)")
         add_progress(p)
@@ -28,7 +29,9 @@ class StudyCommand:
         study = Study.load(args.study)
         if args.quick:
             study = study.reduced()
-        check_output(args.out, args.force)
+        within_limits(args, study_estimate(study))
+        for c in study.configurations:
+            check_linearity(c.geometry, study.budget, c.region.grid((3, 3)))
         result = run_study(study, rng=args.seed, progress=args.progress)
         report = write_study(result, args.out, force=args.force)
         summary = result.to_frame()

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import re
+import warnings
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -20,13 +21,17 @@ import numpy as np
 from .._toml import dumps_toml, load_spec, load_toml, loads_toml
 from ..output import write_text
 from .._result import FrozenDict
-from ..errors import BudgetError, UnknownPresetError
+from ..errors import BudgetError, IncompleteBudgetWarning, UnknownPresetError
 from .laws import Law, law_from_dict
 from ..kinematics.sensitivity import LENGTH_FAMILIES
 
-__all__ = ["Budget", "Catalogue", "input_unit", "parse_input", "BUDGET_PRESETS"]
+__all__ = ["Budget", "Catalogue", "input_unit", "parse_input", "BUDGET_PRESETS", "SANITY_LIMITS"]
 
 _NAME = re.compile(r"^(a|alpha|b|beta|rho|c|gamma|theta|e|psi|zeta)_([123])$")
+_FAMILY_ORDER = ("a", "alpha", "b", "beta", "rho", "zeta", "c", "gamma", "theta", "e", "psi")
+#: Largest magnitude an error input may take, per unit: an error beyond the machine's own size
+#: (links of 100-300 mm) or beyond a full turn is a mistake, and it would overflow the results.
+SANITY_LIMITS = {"mm": 1000.0, "deg": 360.0}
 _BLOCK = 1 << 16  # samples drawn per block: results do not depend on chunking
 
 
@@ -125,6 +130,11 @@ class Budget:
                 raise BudgetError(f"input {key!r}: expected a law, got {law!r}")
             if family == "rho" and law.support[0] < 0:
                 raise BudgetError(f"input {key!r}: a clearance cannot be negative (law support {law.support})")
+            unit = input_unit(key)
+            lo, hi = law.span()
+            if not max(abs(lo), abs(hi)) <= SANITY_LIMITS[unit]:
+                raise BudgetError(f"input {key!r}: values up to {max(abs(lo), abs(hi)):.3g} {unit} are beyond "
+                                  f"any error of this machine (limit ±{SANITY_LIMITS[unit]:g} {unit})")
             inputs[key] = law
         for key in inputs:
             family, leg = parse_input(key)
@@ -154,6 +164,13 @@ class Budget:
 
     def __len__(self) -> int:
         return len(self.inputs)
+
+    @property
+    def missing_inputs(self) -> tuple[str, ...]:
+        """Inputs of a family the budget names for some legs but not for all (taken as exact)."""
+        present = {parse_input(name)[0] for name in self.inputs}
+        return tuple(f"{family}_{leg}" for family in _FAMILY_ORDER if family in present
+                     for leg in (1, 2, 3) if f"{family}_{leg}" not in self.inputs)
 
     def replace(self, name: str | None = None, **laws: Law) -> "Budget":
         """A copy with some inputs' laws replaced or added (``theta_1=Uniform(...)``)."""
@@ -258,7 +275,8 @@ class Budget:
             where = f"{source}: input {key!r}"
             family, _ = _parse_where(key, source)
             if not isinstance(spec, dict):
-                raise BudgetError(f"{where}: expected a table such as {{ law = \"uniform\", lo = 0, hi = 1 }}")
+                raise BudgetError(f"{where}: {spec!r} is not a law: expected a table such as "
+                                  "{ law = \"uniform\", lo = 0, hi = 1 }")
             if "catalogue" in spec:
                 if set(spec) != {"catalogue"}:
                     raise BudgetError(f"{where}: a catalogue reference takes no other keys")
@@ -276,10 +294,17 @@ class Budget:
         groups = doc.get("groups", {})
         if not isinstance(groups, dict):
             raise BudgetError(f"{source}: [groups] must map names to lists of inputs")
+        name = doc.get("name", "custom")
+        if not isinstance(name, str):
+            raise BudgetError(f"{source}: name must be a string, got {name!r}")
         try:
-            return cls(inputs, groups=groups, sources=sources, name=str(doc.get("name", "custom")))
+            budget = cls(inputs, groups=groups, sources=sources, name=name)
         except BudgetError as exc:
             raise BudgetError(f"{source}: {exc}") from None
+        if budget.missing_inputs:
+            warnings.warn(f"{source}: no law for {', '.join(budget.missing_inputs)} (other legs have one): "
+                          "taken as exact; a budget cut short?", IncompleteBudgetWarning, stacklevel=2)
+        return budget
 
     @classmethod
     def from_toml(cls, path: str | os.PathLike) -> "Budget":
