@@ -18,7 +18,8 @@ import sys
 import time
 
 from prp3mc import Budget, Geometry, Region, worst_case
-from prp3mc.uncertainty.sobol import ranking, sobol_indices
+from prp3mc.uncertainty.ranking import ranking
+from prp3mc.uncertainty.sobol import sobol_indices
 
 PRESETS = ("u-shape", "delta-shape")
 

@@ -27,7 +27,8 @@ from .uncertainty.laws import Disc, Discrete, Normal, Triangular, TruncNormal, U
 from .uncertainty.model import LinearModel, linear_model
 from .uncertainty.montecarlo import MonteCarloResult, monte_carlo
 from .uncertainty.worstcase import WorstCase, worst_case
-from .uncertainty.sobol import SobolResult, ranking as sobol_ranking, sobol_indices
+from .uncertainty.sobol import SobolResult, sobol_indices
+from .uncertainty.ranking import ranking as sobol_ranking
 from .study.runner import Study, StudyResult, run_study
 from .study.summary import build_summary
 from .measurement.campaign import Campaign, read_campaign, simulate_campaign

@@ -89,3 +89,18 @@ def test_json_outputs_describe_themselves(argv, tmp_path, capsys):
     if "--seed" in argv:
         assert doc["inputs"]["seed"] == 4
     assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib"}
+
+
+def test_init_templates_run_as_written(tmp_path, capsys):
+    """`prp3mc init` writes templates that every command reads as they are, and refuses to overwrite."""
+    for kind in ("geometry", "budget", "study", "classes"):
+        assert main(["init", kind, str(tmp_path / f"{kind}.toml")]) == 0
+    assert main(["init", "budget", str(tmp_path / "budget.toml")]) == 1
+    assert "exists" in capsys.readouterr().err
+    assert main(["worstcase", "--geometry", str(tmp_path / "geometry.toml"), "--budget",
+                 str(tmp_path / "budget.toml"), "--pose", "0", "100", "0", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["inputs"]["geometry"]["name"] == "my-manipulator" and doc["position_mm"] > 0
+    from prp3mc.study.runner import Study
+    study = Study.load(tmp_path / "study.toml")
+    assert [c.name for c in study.configurations] == ["u-shape", "delta-shape"]

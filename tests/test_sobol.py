@@ -10,7 +10,10 @@ from SALib.sample import sobol as sobol_sample
 from prp3mc import Budget, Disc, Geometry, Normal, Region, Triangular, Uniform, linear_model, worst_case
 from prp3mc.errors import BudgetError, InfeasiblePoseError
 from prp3mc.cli import main
-from prp3mc.uncertainty.sobol import (_design, _factors, analytic_indices, ranking, sobol_converge, sobol_indices)
+from prp3mc.uncertainty.ranking import ranking
+from prp3mc.uncertainty.saltelli import design_factors as _factors, saltelli_design as _design
+from prp3mc.uncertainty.sobol import sobol_converge, sobol_indices
+from prp3mc.uncertainty.sobol_closed_form import analytic_indices
 
 from .conftest import random_poses
 
@@ -169,6 +172,33 @@ def test_result_frame_and_seed():
     assert list(df.columns) == KEYS + ["S1", "S1_conf", "ST", "ST_conf"] and len(df) == 6 * 2 * 15
     again = sobol_indices(g, PAPER, grid, 128, rng=r.seed, outputs=("position", "x"))
     np.testing.assert_array_equal(again.ST, r.ST)
+
+
+def test_result_is_read_only_with_labelled_intervals():
+    """conf_int(level) is S +- z(level) se with se = S_conf / z(conf_level): SALib's interval at conf_level."""
+    g = Geometry.from_preset("u-shape")
+    r = sobol_indices(g, PAPER, [[0, 100, 0], [10, 90, 2]], 64, rng=2, outputs=("x", "position"),
+                      conf_level=0.9, num_resamples=20)
+    with pytest.raises(ValueError):
+        r.ST[0, 0, 0] = 1.0
+    with pytest.raises(TypeError):
+        r.groups["g"] = ("rho_1",)
+    assert "\n" not in repr(r) and len(repr(r)) < 120
+    ci = r.conf_int(0.9)
+    assert list(ci.columns) == KEYS + ["statistic", "value", "unit", "se", "ci_low", "ci_high", "level"]
+    for key in ("S1", "ST"):
+        rows = ci[ci["statistic"] == key]
+        np.testing.assert_allclose(rows["value"], getattr(r, key).reshape(-1), rtol=0, atol=0)
+        np.testing.assert_allclose(rows["ci_high"] - rows["value"], getattr(r, f"{key}_conf").reshape(-1), rtol=1e-12)
+        np.testing.assert_allclose(rows["value"] - rows["ci_low"], getattr(r, f"{key}_conf").reshape(-1), rtol=1e-12)
+    wide = r.conf_int(0.99)
+    assert (wide["level"] == 0.99).all()
+    np.testing.assert_allclose(wide["se"], ci["se"], rtol=0, atol=0)
+    ratio = 2.5758293035489004 / 1.6448536269514722                   # z(0.99) / z(0.9)
+    np.testing.assert_allclose(wide["ci_high"] - wide["ci_low"], ratio * (ci["ci_high"] - ci["ci_low"]),
+                               rtol=1e-12, atol=1e-15)
+    with pytest.raises(BudgetError, match="level"):
+        r.conf_int(1.0)
 
 
 @pytest.mark.parametrize("kwargs, message", [

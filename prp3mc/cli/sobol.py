@@ -6,15 +6,16 @@ from .._version import __version__
 from ..uncertainty.budget import Budget
 from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
-from ..uncertainty.sobol import OUTPUTS, ranking, sobol_indices
+from ..uncertainty.ranking import ranking
+from ..uncertainty.sobol import sobol_indices
 from ..uncertainty.validity import check_linearity
+from ..units import DISPLAY, OUTPUTS
 from ..uncertainty.worstcase import worst_case
 from ..limits import sobol_estimate
 from . import (provenance, add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
                emit_json, positive_float, positive_int, probability, within_limits)
 
 _KEYS = ("S1", "S1_conf", "ST", "ST_conf")
-_SCALE = {"x": (1e3, "um"), "y": (1e3, "um"), "phi": (3600.0, "arcsec"), "position": (1e3, "um")}
 
 
 def _group(text: str) -> tuple[str, list[str]]:
@@ -85,7 +86,7 @@ class SobolCommand:
                  f"seed {r.seed}, {100 * r.conf_level:g} % bootstrap intervals ({r.num_resamples} resamples), "
                  f"method {r.method}"]
         for o, df in tables.items():
-            scale, unit = _SCALE[o]
+            scale, unit = DISPLAY[o]
             total = wc.value(o) * scale
             lines += ["", f"{o}: worst case {float(total):.3f} {unit}; sorted by total index ST",
                       f"  {'name':13s}{'S1':>8s}{'± conf':>8s}{'ST':>9s}{'± conf':>8s}"

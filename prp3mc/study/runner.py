@@ -75,7 +75,8 @@ from ..kinematics.geometry import REGION_PRESETS, Geometry, Region
 from ..kinematics.chain import check_poses
 from ..uncertainty.model import linear_model
 from ..uncertainty.montecarlo import PERCENTILES, MonteCarloResult, monte_carlo
-from ..uncertainty.sobol import ranking, sobol_indices
+from ..uncertainty.ranking import ranking
+from ..uncertainty.sobol import sobol_indices
 from ..uncertainty.worstcase import WorstCase, worst_case
 
 __all__ = ["Study", "StudyConfiguration", "StudyResult", "ConfigurationResult", "PoseSamples",
