@@ -31,6 +31,22 @@ def _number(value: float):
     return None if math.isnan(value) else float(value)
 
 
+_UNDEFINED = "undefined (constant input)"
+
+
+def _indices(r, i: int, k: int, name: str) -> dict:
+    """S1, S1_conf, ST, ST_conf of one output and name; null with a reason for a constant input."""
+    if name in r.constant:
+        return {**{key: None for key in _KEYS}, "reason": "constant input: no variance to share"}
+    return {key: float(getattr(r, key)[i, k]) for key in _KEYS}
+
+
+def _index_text(row) -> str:
+    if math.isnan(row.ST):
+        return f"{_UNDEFINED:>33s}"
+    return f"{row.S1:8.4f}{row.S1_conf:8.4f}{row.ST:9.4f}{row.ST_conf:8.4f}"
+
+
 @command("sobol", "Sobol indices of the pose error at one pose, next to the worst-case contributions")
 class SobolCommand:
     @staticmethod
@@ -67,8 +83,8 @@ class SobolCommand:
         tables = {o: ranking(r, wc, o) for o in OUTPUTS}
         if args.json:
             emit_json({
-                "outputs": {o: {name: {key: float(getattr(r, key)[i, k]) for key in _KEYS}
-                                for k, name in enumerate(r.names)} for i, o in enumerate(r.outputs)},
+                "outputs": {o: {name: _indices(r, i, k, name) for k, name in enumerate(r.names)}
+                            for i, o in enumerate(r.outputs)},
                 "ranking": {o: [{key: (_number(v) if isinstance(v, float) else v) for key, v in row.items()
                                  if key != "output"} for row in df.to_dict("records")]
                             for o, df in tables.items()},
@@ -94,8 +110,7 @@ class SobolCommand:
             for row in df.itertuples():
                 wc_text = (f"{'-':>18s}{'':8s}" if math.isnan(row.worst_case_contribution) else
                            f"{scale * row.worst_case_contribution:18.3f}{100 * row.worst_case_share:7.1f}%")
-                lines.append(f"  {row.name:13s}{row.S1:8.4f}{row.S1_conf:8.4f}{row.ST:9.4f}{row.ST_conf:8.4f}"
-                             f"{wc_text}")
+                lines.append(f"  {row.name:13s}{_index_text(row)}{wc_text}")
         lines += ["", "Worst case: each term's part of the maximum at the maximising vertex. A clearance "
                       "term rho_i cos(zeta_i - omega_i) needs rho_i and zeta_i together, so its part is "
                       "shown on clearance_i ('-' on rho_i and zeta_i)."]
