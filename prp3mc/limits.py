@@ -73,7 +73,8 @@ def format_seconds(s: float) -> str:
     """A duration in the largest fitting unit, e.g. ``3.2 days``."""
     for unit, size in (("years", 365.25 * 86400), ("days", 86400), ("h", 3600), ("min", 60)):
         if s >= size:
-            return f"{s / size:.3g} {unit}"
+            text = f"{s / size:.3g}"
+            return f"{text} {unit[:-1] if text == '1' and unit.endswith('s') else unit}"
     return f"{s:.2g} s"
 
 

@@ -71,7 +71,7 @@ class Catalogue:
         return Catalogue({**self.entries, **_flatten(load_toml(path))})
 
     def law(self, key: str, where: str) -> tuple[Law, dict[str, Any]]:
-        if key not in self.entries:
+        if not isinstance(key, str) or key not in self.entries:
             raise BudgetError(f"{where}: no catalogue entry {key!r}")
         entry = dict(self.entries[key])
         meta = {k: entry.pop(k) for k in ("applies_to", "unit", "source") if k in entry}
@@ -265,7 +265,10 @@ class Budget:
         if unknown:
             raise BudgetError(f"{source}: unknown key(s) {', '.join(unknown)} (expected name, inputs, groups, catalogues)")
         catalogue = catalogue or Catalogue.bundled()
-        for extra in doc.get("catalogues", []):
+        extras = doc.get("catalogues", [])
+        if not isinstance(extras, list) or not all(isinstance(e, str) for e in extras):
+            raise BudgetError(f"{source}: catalogues must be a list of file names, got {extras!r}")
+        for extra in extras:
             catalogue = catalogue.extended((base or Path(".")) / extra)
         raw = doc.get("inputs")
         if not isinstance(raw, dict) or not raw:
@@ -292,7 +295,8 @@ class Budget:
                 law = law_from_dict(spec, where)
             inputs[key] = law
         groups = doc.get("groups", {})
-        if not isinstance(groups, dict):
+        if not isinstance(groups, dict) or not all(isinstance(m, list) and all(isinstance(x, str) for x in m)
+                                                   for m in groups.values()):
             raise BudgetError(f"{source}: [groups] must map names to lists of inputs")
         name = doc.get("name", "custom")
         if not isinstance(name, str):

@@ -292,7 +292,7 @@ def law_from_dict(spec: dict[str, Any], where: str) -> Law:
         raise BudgetError(f"{where}: {_inline(spec)} is not a law: give law = \"uniform\", lo = ..., hi = ... "
                           f"(laws: {', '.join(LAWS)}) or catalogue = \"dotted.key\"")
     kind = spec.pop("law")
-    if kind not in LAWS:
+    if not isinstance(kind, str) or kind not in LAWS:
         raise BudgetError(f"{where}: unknown law {kind!r} (known: {', '.join(LAWS)})")
     cls = LAWS[kind]
     names = [f.name for f in fields(cls)]
@@ -312,5 +312,5 @@ def law_from_dict(spec: dict[str, Any], where: str) -> Law:
 
 def _inline(spec: dict[str, Any]) -> str:
     """``{a = 1, b = 2}``: a table as the user wrote it, shortened."""
-    text = "{" + ", ".join(f"{k} = {v!r}" for k, v in spec.items()) + "}"
+    text = "{" + ", ".join(f"{k if str(k).isidentifier() else repr(k)} = {v!r}" for k, v in spec.items()) + "}"
     return text if len(text) <= 60 else text[:57] + "...}"
