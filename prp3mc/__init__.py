@@ -29,10 +29,14 @@ from .uncertainty.montecarlo import MonteCarloResult, monte_carlo
 from .uncertainty.worstcase import WorstCase, worst_case
 from .uncertainty.sobol import SobolResult, sobol_indices
 from .uncertainty.ranking import ranking as sobol_ranking
-from .study.runner import Study, StudyResult, run_study
+from .study.reader import Study
+from .study.results import StudyResult
+from .study.runner import run_study
 from .study.summary import build_summary
-from .measurement.campaign import Campaign, read_campaign, simulate_campaign
-from .measurement.discrepancy import DiscrepancyResult, detectable_effect, discrepancy
+from .measurement.campaign import Campaign, read_campaign
+from .measurement.selection import DiscrepancyResult
+from .measurement.simulate import simulate_campaign
+from .measurement.workflow import detectable_effect, discrepancy
 
 __all__ = [
     "__version__", "Prp3mcError",

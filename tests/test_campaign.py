@@ -6,8 +6,9 @@ import pytest
 
 from prp3mc import Budget, Geometry, Region
 from prp3mc.errors import CampaignError
-from prp3mc.measurement.campaign import Campaign, read_campaign, simulate_campaign
-from prp3mc.measurement.discrepancy import predict
+from prp3mc.measurement.campaign import Campaign, read_campaign
+from prp3mc.measurement.prediction import predict
+from prp3mc.measurement.simulate import simulate_campaign
 from prp3mc.measurement.effects import EFFECT_NAMES, effect, library
 from prp3mc.errors import BudgetError, InputFileError
 

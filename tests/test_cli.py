@@ -101,6 +101,6 @@ def test_init_templates_run_as_written(tmp_path, capsys):
                  str(tmp_path / "budget.toml"), "--pose", "0", "100", "0", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["inputs"]["geometry"]["name"] == "my-manipulator" and doc["position_mm"] > 0
-    from prp3mc.study.runner import Study
+    from prp3mc.study.reader import Study
     study = Study.load(tmp_path / "study.toml")
     assert [c.name for c in study.configurations] == ["u-shape", "delta-shape"]

@@ -1,15 +1,19 @@
 """The discrepancy workflow on simulated campaigns with hidden effects (issue 6)."""
 
+import dataclasses
 import json
 
+import matplotlib
 import numpy as np
 import pytest
 
 from prp3mc import Budget, Geometry, Region
-from prp3mc.measurement.campaign import simulate_campaign
+from prp3mc.measurement.simulate import simulate_campaign
 from prp3mc.cli import main
-from prp3mc.measurement.discrepancy import detectable_effect, discrepancy
+from prp3mc.measurement.workflow import detectable_effect, discrepancy
+from prp3mc.reports import discrepancy_report as rep
 from prp3mc.reports.discrepancy_report import write_report
+from prp3mc.units import Z95, z_value
 
 SIGMA = {"instrument_sigma_mm": 0.002, "instrument_sigma_deg": 0.0005}
 BUDGET = Budget.from_preset("paper")
@@ -181,3 +185,56 @@ def test_report_without_optional_columns(tmp_path):
     write_report(r, tmp_path / "rep")
     assert not (tmp_path / "rep" / "temperature.png").exists()
     assert (tmp_path / "rep" / "report.html").exists()
+
+
+def test_result_protocol_conf_int_and_plots(tmp_path, monkeypatch):
+    """Read-only results with one-line reprs, frames in mm/deg, conf_int at any level, plots into a given figure."""
+    r = run(Geometry.from_preset("u-shape"), "u-shape", True, rng=4,
+            effects={"backlash_1": 0.03, "spread_theta_3": 0.1})
+    assert [e.name for e in r.named_effects] == ["backlash_1", "spread_theta_3"]
+    # immutable in fact
+    with pytest.raises(ValueError):
+        r.prediction_after.mean[0, 0] = 1.0
+    with pytest.raises(ValueError):
+        r.campaign.measured[0, 0] = 1.0
+    with pytest.raises(TypeError):
+        r.gap["after"] = 0.0
+    with pytest.raises(TypeError):
+        r.named_effects[0].evidence["lr"] = 0.0
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        r.seed = 1
+    for obj in (r, r.named_effects[0], r.before, r.prediction_after, r.campaign):
+        assert "\n" not in repr(obj) and len(repr(obj)) < 200
+    assert json.loads(json.dumps(r.to_dict()))["named_effects"][0]["ci95"] == list(r.named_effects[0].ci95)
+    # frames in boundary units
+    pred = r.prediction_after.to_frame()
+    assert {"x_mm", "y_mm", "phi_deg", "output", "statistic", "value", "unit"} <= set(pred.columns)
+    means = pred[pred["statistic"] == "mean"]
+    np.testing.assert_array_equal(means["value"].to_numpy().reshape(-1, 3), r.prediction_after.mean)
+    assert dict(zip(means["output"], means["unit"])) == {"x": "mm", "y": "mm", "phi": "deg"}
+    diag = r.before.to_frame()
+    dx = diag[(diag["statistic"] == "mean_residual") & (diag["output"] == "x")]
+    np.testing.assert_allclose(dx["value"] * 1e3, r.before.poses["dx_um"], rtol=1e-12)
+    frame = r.to_frame()
+    assert list(frame[["ci_low", "ci_high", "level"]].itertuples(index=False, name=None)) == \
+        [(*e.ci95, 0.95) for e in r.named_effects]
+    # confidence intervals at the workflow's level and at others
+    ci95 = r.conf_int()
+    assert list(ci95.columns) == ["name", "value", "unit", "ci_low", "ci_high", "level"]
+    assert list(zip(ci95["ci_low"], ci95["ci_high"])) == [e.ci95 for e in r.named_effects]
+    ci50, ci99 = r.conf_int(0.5), r.conf_int(level=0.99)
+    assert (ci99["ci_low"] < ci95["ci_low"]).all() and (ci95["ci_low"] < ci50["ci_low"]).all()
+    assert (ci50["ci_low"] < ci50["value"]).all() and (ci50["value"] < ci50["ci_high"]).all()
+    assert (ci50["ci_high"] < ci95["ci_high"]).all() and (ci95["ci_high"] < ci99["ci_high"]).all()
+    width = (ci50["ci_high"] - ci50["ci_low"]) / (ci95["ci_high"] - ci95["ci_low"])
+    assert width[0] == pytest.approx(z_value(0.5) / Z95, rel=1e-9)     # Wald interval of backlash_1
+    with pytest.raises(ValueError, match="level"):
+        r.conf_int(1.5)
+    # plots draw into a given figure; nothing switches the backend
+    monkeypatch.setattr(matplotlib, "use", lambda *a, **k: pytest.fail("matplotlib.use called"))
+    from matplotlib.figure import Figure
+    for plot in (rep.plot_workspace, rep.plot_actuators, rep.plot_temperature, rep.plot_gap, rep.plot_candidates):
+        fig = Figure()
+        assert plot(r, fig=fig) is fig and fig.axes
+    write_report(r, tmp_path / "rep")
+    assert (tmp_path / "rep" / "gap.png").exists()

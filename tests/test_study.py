@@ -12,7 +12,8 @@ import pytest
 from prp3mc import Budget, Geometry, Region, sensitivity
 from prp3mc.cli import main
 from prp3mc.errors import StudyError, UnknownPresetError
-from prp3mc.study.runner import STUDIES_DIR, Study, bundled_studies, run_study
+from prp3mc.study.reader import STUDIES_DIR, Study, bundled_studies
+from prp3mc.study.runner import run_study
 from prp3mc.testing import assert_summary_close, load_summary
 
 GOLDEN = Path(__file__).parent / "golden"
@@ -178,6 +179,30 @@ def test_seed_recorded_and_reproducible(tmp_path):
     assert a.seed != b.seed
     again = run_study(study, rng=a.seed, progress=False)
     np.testing.assert_array_equal(again["delta"].montecarlo.position_pct, a["delta"].montecarlo.position_pct)
+
+
+def test_results_follow_the_result_protocol(tmp_path):
+    result = run_study(Study.load(study_file(tmp_path)), progress=False)
+    u = result["u-shape"]
+    for obj in (result, u, u.samples):
+        assert len(repr(obj)) < 200 and "\n" not in repr(obj), repr(obj)
+    with pytest.raises(ValueError, match="read-only"):
+        u.samples.position_mm[0, 0] = 0.0
+    with pytest.raises(TypeError):
+        result.timings_s["worstcase"] = 0.0
+    with pytest.raises(TypeError):
+        u.ranking["position"] = None
+    frame = result.to_frame()
+    assert set(frame["unit"]) == {"mm", "deg"} and set(frame["output"]) == {"position", "phi"}
+    assert {"statistic", "value", "se"} <= set(frame.columns)
+    worst = frame.query("configuration == 'u-shape' and statistic == 'worst_case' and output == 'position'")
+    assert dict(zip(worst["aggregate"], worst["value"])) == pytest.approx(
+        {"min": u.worst_case.position_mm.min(), "max": u.worst_case.position_mm.max(),
+         "mean": u.worst_case.position_mm.mean()}, rel=1e-12)
+    samples = u.samples.to_frame()
+    assert set(samples["unit"]) == {"mm", "deg"} and {"x_mm", "y_mm", "phi_deg"} <= set(samples.columns)
+    drawn = samples.query("output == 'position' and statistic == 'sample'")["value"].to_numpy()
+    np.testing.assert_array_equal(drawn, u.samples.position_mm.ravel())
 
 
 # ----------------------------------------------------------------- worst-case ranges, independently

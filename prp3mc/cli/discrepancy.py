@@ -1,7 +1,7 @@
 """``prp3mc discrepancy``: name what the model misses in a measurement campaign (SPEC §6)."""
 
 from ..uncertainty.budget import Budget
-from ..measurement.discrepancy import discrepancy
+from ..measurement.workflow import discrepancy
 from ..reports.discrepancy_report import write_report
 from ..kinematics.geometry import Geometry
 from . import add_budget, add_geometry, add_json, add_seed, command, emit_json, nonnegative_float, probability

@@ -4,9 +4,11 @@ import sys
 import time
 
 from ..limits import study_estimate
-from ..uncertainty.validity import check_linearity
+from ..units import MM2UM
 from ..reports.study_report import write_study
-from ..study.runner import Study, bundled_studies, run_study
+from ..study.reader import Study, bundled_studies
+from ..study.runner import run_study
+from ..uncertainty.validity import check_linearity
 from . import add_progress, add_seed, command, within_limits
 
 
@@ -34,9 +36,10 @@ class StudyCommand:
             check_linearity(c.geometry, study.budget, c.region.grid((3, 3)))
         result = run_study(study, rng=args.seed, progress=args.progress)
         report = write_study(result, args.out, force=args.force)
-        summary = result.to_frame()
-        worst = summary[summary["statistic"] == "worst-case position"]
-        ranges = ", ".join(f"{r.configuration} {r.min:.1f}-{r.max:.1f} um" for r in worst.itertuples())
+        worst = result.to_frame().query("output == 'position' and statistic == 'worst_case'")
+        span = worst.pivot(index="configuration", columns="aggregate", values="value") * MM2UM
+        ranges = ", ".join(f"{c.name} {span.at[c.name, 'min']:.1f}-{span.at[c.name, 'max']:.1f} um"
+                           for c in result.configurations)
         print(f"prp3mc study {study.name}: wrote {report} in {time.perf_counter() - t0:.1f} s "
               f"(analyses {result.wall_time_s:.1f} s, seed {result.seed}); worst-case position error: {ranges}",
               file=sys.stdout)

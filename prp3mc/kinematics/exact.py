@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import BudgetError
+from ..units import MM2UM
 from .geometry import Geometry
 from .chain import as_poses, batch_last, frame, solve_closure, validated_frame
 from .sensitivity import FAMILIES, LENGTH_FAMILIES, h_entries
@@ -86,4 +87,4 @@ def linear_pose_error(geometry: Geometry, poses, errors: dict, *, check: bool = 
 def linearization_error_um(geometry: Geometry, poses, errors: dict) -> np.ndarray:
     """Distance between exact and linear position errors, µm, shape (...)."""
     diff = exact_pose_error(geometry, poses, errors) - linear_pose_error(geometry, poses, errors)
-    return 1e3 * np.hypot(diff[..., 0], diff[..., 1])
+    return MM2UM * np.hypot(diff[..., 0], diff[..., 1])

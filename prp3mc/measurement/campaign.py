@@ -1,4 +1,4 @@
-"""Measurement campaigns (SPEC §4): reading with validation, and a simulator.
+"""Measurement campaigns (SPEC §4): reading with validation.
 
 A campaign is a table with one row per measurement: the commanded pose
 ``x_cmd, y_cmd, phi_cmd`` (mm, mm, deg), the measured pose ``x_meas, y_meas,
@@ -12,10 +12,7 @@ repeats of one ``pose_id`` with different commands, directions other than
 +-1, commanded poses the manipulator cannot reach, and measured poses so far
 from the command that they must be a unit mistake.
 
-:func:`simulate_campaign` makes campaigns with the exact nonlinear model,
-fresh draws of the budget's random errors at every measurement, approach
-directions, a temperature drift, instrument noise and hidden effects of the
-library (:mod:`prp3mc.measurement.effects`).
+Simulated campaigns come from :mod:`~prp3mc.measurement.simulate`.
 """
 
 from __future__ import annotations
@@ -27,23 +24,22 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .._rng import resolve_rng
-from .._version import __version__
-from ..uncertainty.budget import Budget
-from .effects import effect, offset_errors, slider_error, spread_budget
+from .._result import freeze, short_repr
 from ..errors import CampaignError, InputFileError
-from ..kinematics.exact import exact_pose_error
+from ..kinematics.chain import check_poses, feasible
 from ..kinematics.geometry import Geometry
-from ..kinematics.chain import as_poses, check_poses, feasible, inverse_kinematics
 
-__all__ = ["Campaign", "read_campaign", "simulate_campaign", "REQUIRED_COLUMNS", "MAX_ERROR"]
+__all__ = ["Campaign", "read_campaign", "REQUIRED_COLUMNS", "CMD_COLUMNS", "MEAS_COLUMNS", "DIR_COLUMNS",
+           "MAX_ERROR"]
 
+#: Commanded and measured pose columns, ``[x mm, y mm, phi deg]``.
+CMD_COLUMNS, MEAS_COLUMNS = ("x_cmd", "y_cmd", "phi_cmd"), ("x_meas", "y_meas", "phi_meas")
 #: Columns every campaign needs (SPEC §4).
-REQUIRED_COLUMNS = ("pose_id", "x_cmd", "y_cmd", "phi_cmd", "x_meas", "y_meas", "phi_meas")
+REQUIRED_COLUMNS = ("pose_id", *CMD_COLUMNS, *MEAS_COLUMNS)
+#: Optional approach-direction columns.
 DIR_COLUMNS = ("dir_1", "dir_2", "dir_3")
 #: Largest |measured - commanded| accepted (mm, mm, deg): beyond it a row is a unit or sign mistake.
 MAX_ERROR = (5.0, 5.0, 5.0)
-_CMD, _MEAS = ["x_cmd", "y_cmd", "phi_cmd"], ["x_meas", "y_meas", "phi_meas"]
 _SAME_CMD_TOL = 1e-6  # mm or deg: repeats of a pose must command the same pose
 
 
@@ -71,7 +67,7 @@ class Campaign:
     pose_index : ndarray of int, shape (M,)
         Index into ``poses`` of each measurement.
     source : str
-    metadata : dict
+    metadata : mapping
         For simulated campaigns: seed, hidden effects, settings, version.
     """
 
@@ -87,6 +83,12 @@ class Campaign:
     pose_index: np.ndarray
     source: str = "campaign"
     metadata: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        freeze(self)
+
+    def __repr__(self) -> str:
+        return short_repr(self, "source", "n_measurements", "n_poses")
 
     @property
     def n_measurements(self) -> int:
@@ -107,11 +109,11 @@ class Campaign:
         return self.measured - self.commanded
 
     def to_frame(self) -> pd.DataFrame:
-        """The campaign in SPEC §4 layout (plus its extra columns)."""
+        """The campaign in SPEC §4 layout (plus its extra columns): the file format, in mm and deg."""
         df = pd.DataFrame({"pose_id": self.pose_id})
-        for k, col in enumerate(_CMD):
+        for k, col in enumerate(CMD_COLUMNS):
             df[col] = self.commanded[:, k]
-        for k, col in enumerate(_MEAS):
+        for k, col in enumerate(MEAS_COLUMNS):
             df[col] = self.measured[:, k]
         for k, col in enumerate(DIR_COLUMNS):
             if self.has_dir[k]:
@@ -182,12 +184,12 @@ class Campaign:
                                     + (f" ({int(bad.sum())} such rows)" if bad.sum() > 1 else ""))
             return values
 
-        cmd = np.stack([numeric(c) for c in _CMD], axis=1)
-        meas = np.stack([numeric(c) for c in _MEAS], axis=1)
+        cmd = np.stack([numeric(c) for c in CMD_COLUMNS], axis=1)
+        meas = np.stack([numeric(c) for c in MEAS_COLUMNS], axis=1)
         far = np.abs(meas - cmd) > np.array(MAX_ERROR)
         if far.any():
             r, k = (int(v) for v in np.argwhere(far)[0])
-            raise CampaignError(f"{where(r, _MEAS[k])}: measured {meas[r, k]:g} is {abs(meas[r, k] - cmd[r, k]):g} "
+            raise CampaignError(f"{where(r, MEAS_COLUMNS[k])}: measured {meas[r, k]:g} is {abs(meas[r, k] - cmd[r, k]):g} "
                                 f"{'deg' if k == 2 else 'mm'} from the commanded {cmd[r, k]:g} (more than "
                                 f"{MAX_ERROR[k]:g}): check units (mm, deg) and columns")
         has_dir = tuple(c in frame.columns for c in DIR_COLUMNS)
@@ -212,7 +214,7 @@ class Campaign:
         if diff.any():
             r, k = (int(v) for v in np.argwhere(diff)[0])
             r0 = int(first[order][index[r]])
-            raise CampaignError(f"{where([r0, r], _CMD[k])}: pose_id {pose_id[r]!r} is commanded twice with "
+            raise CampaignError(f"{where([r0, r], CMD_COLUMNS[k])}: pose_id {pose_id[r]!r} is commanded twice with "
                                 f"different values ({cmd[r0, k]:g} and {cmd[r, k]:g}); "
                                 "repeats of a pose must command the same pose")
         if geometry is not None:
@@ -265,111 +267,3 @@ def read_campaign(data: "str | os.PathLike | pd.DataFrame | Campaign", geometry:
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise InputFileError(f"{path}: not a readable CSV file ({str(exc).splitlines()[0]})") from None
     return Campaign.from_frame(frame, geometry, str(path), line_offset=1)
-
-
-def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int = 8, *,
-                      effects: dict | None = None, approach: str = "both",
-                      temp_drift_C: tuple[float, float] | None = (20.0, 28.0),
-                      instrument_sigma_mm: float = 0.002, instrument_sigma_deg: float = 0.0005,
-                      slider_error_fn=None, pose_error_fn=None,
-                      rng: "None | int | np.random.Generator" = None) -> Campaign:
-    """Simulate a measurement campaign with the exact nonlinear model.
-
-    The campaign visits every pose once per round, in a fresh random order
-    each round, for ``n_repeats`` rounds; the temperature drifts linearly in
-    time over the campaign. Every measurement draws fresh budget errors (a
-    clearance settles at a new contact angle, an encoder reads a new count
-    error each time the pose is approached) and fresh instrument noise.
-
-    Parameters
-    ----------
-    geometry : Geometry
-    budget : Budget
-        Random errors; spread effects in ``effects`` change its laws.
-    poses : array_like, shape (P, 3)
-        Commanded poses ``[x_mm, y_mm, phi_deg]`` (any batch shape is flattened).
-    n_repeats : int
-        Measurements per pose.
-    effects : dict of str to float, optional
-        Hidden effects of the library (SPEC §5 names and units).
-    approach : {"both", "positive", "negative", "sequence"}
-        Approach direction of each actuator: random +-1 per actuator and
-        measurement; always +1; always -1; or the sign of the actuator's
-        move from the previous pose visited.
-    temp_drift_C : (start, end) or None
-        Temperature at the first and last measurement, degrees C; None for
-        a campaign without a ``temp_C`` column (thermal effects then need it).
-    instrument_sigma_mm, instrument_sigma_deg : float
-        Standard deviation of the Gaussian measurement noise per coordinate.
-    slider_error_fn, pose_error_fn : callable, optional
-        Effects outside the library, for testing the workflow:
-        ``f(commanded (M, 3), b (M, 3), direction (M, 3), temp_C (M,) or None)``
-        returning an extra slider error delta b (M, 3) mm, or an extra pose
-        error (M, 3) ``[mm, mm, deg]`` added to the exact one.
-    rng : None, int or numpy.random.Generator
-        Randomness (Scientific Python SPEC 7); the integer seed used is
-        recorded in ``metadata["seed"]``, also when a Generator is given.
-
-    Returns
-    -------
-    Campaign
-        ``metadata`` records the seed, the hidden effects and the settings.
-    """
-    seed_used, rng = resolve_rng(rng)
-    poses = as_poses(poses).reshape(-1, 3)
-    check_poses(geometry, poses)
-    n_repeats = int(n_repeats)
-    if n_repeats < 1:
-        raise CampaignError(f"n_repeats must be at least 1, got {n_repeats}")
-    if approach not in ("both", "positive", "negative", "sequence"):
-        raise CampaignError(f"approach must be both, positive, negative or sequence, got {approach!r}")
-    effects = dict(effects or {})
-    parsed = [effect(name) for name in effects]          # raises on unknown names
-    if any(e.kind == "thermal" for e in parsed) and temp_drift_C is None:
-        raise CampaignError("a hidden thermal effect needs a temperature drift (temp_drift_C)")
-    for e, v in zip(parsed, effects.values()):
-        if e.kind == "backlash" and v < 0:
-            raise CampaignError(f"{e.name}: backlash h must be >= 0, got {v}")
-    P = poses.shape[0]
-    order = np.concatenate([rng.permutation(P) for _ in range(n_repeats)])   # visiting order
-    M = order.size
-    cmd = poses[order]
-    b_pose, _ = inverse_kinematics(geometry, poses, check=False)
-    b = b_pose[order]
-    if approach == "both":
-        direction = rng.choice([-1.0, 1.0], size=(M, 3))
-    elif approach == "sequence":
-        step = np.diff(b, axis=0, prepend=b[:1] - 1.0)
-        direction = np.where(step > 0, 1.0, np.where(step < 0, -1.0, np.nan))
-        direction = pd.DataFrame(direction).ffill().fillna(1.0).to_numpy()
-    else:
-        direction = np.full((M, 3), 1.0 if approach == "positive" else -1.0)
-    temp = None if temp_drift_C is None else np.linspace(temp_drift_C[0], temp_drift_C[1], M)
-    sim_budget = spread_budget(budget, effects)
-    X = sim_budget.sample(M, rng)
-    errors = sim_budget.errors(X)
-    for family, value in offset_errors(effects).items():
-        errors[family] = errors.get(family, 0.0) + value
-    db = slider_error(effects, b, direction, temp)
-    if slider_error_fn is not None:
-        db = db + np.asarray(slider_error_fn(cmd, b, direction, temp), dtype=float)
-    errors["b"] = errors.get("b", 0.0) + db
-    err = exact_pose_error(geometry, cmd, errors, check=False)
-    if pose_error_fn is not None:
-        err = err + np.asarray(pose_error_fn(cmd, b, direction, temp), dtype=float)
-    noise = rng.standard_normal((M, 3)) * np.array([instrument_sigma_mm, instrument_sigma_mm, instrument_sigma_deg])
-    frame = pd.DataFrame({"pose_id": [f"P{k + 1:03d}" for k in order]})
-    for k, col in enumerate(_CMD):
-        frame[col] = cmd[:, k]
-    for k, col in enumerate(_MEAS):
-        frame[col] = cmd[:, k] + err[:, k] + noise[:, k]
-    for k, col in enumerate(DIR_COLUMNS):
-        frame[col] = direction[:, k].astype(int)
-    if temp is not None:
-        frame["temp_C"] = temp
-    metadata = {"seed": seed_used, "effects": effects, "n_repeats": n_repeats, "approach": approach,
-                "temp_drift_C": None if temp_drift_C is None else list(temp_drift_C),
-                "instrument_sigma_mm": instrument_sigma_mm, "instrument_sigma_deg": instrument_sigma_deg,
-                "budget": budget.name, "geometry": geometry.name, "version": __version__,
-                "out_of_library": slider_error_fn is not None or pose_error_fn is not None}
-    return Campaign.from_frame(frame, None, "simulated campaign", metadata)

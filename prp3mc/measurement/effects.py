@@ -40,10 +40,11 @@ from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
 from ..kinematics.chain import inverse_kinematics
 from ..kinematics.sensitivity import LENGTH_FAMILIES, sensitivity
+from ..units import DEG2RAD, RAD2DEG
 
 __all__ = ["Effect", "EFFECT_NAMES", "OFFSET_FAMILIES", "SPREAD_FAMILIES", "effect", "library",
            "signatures", "slider_error", "offset_errors", "spread_reference", "spread_budget",
-           "T_REF_C"]
+           "T_REF_C", "ROW_TO_DEG"]
 
 #: Parameters whose constant offset is a library effect (``b``: encoder zero offset).
 OFFSET_FAMILIES = ("a", "alpha", "beta", "gamma", "theta", "c", "e", "psi", "b")
@@ -52,6 +53,9 @@ SPREAD_FAMILIES = ("rho", "theta", "b")
 #: Reference temperature of the thermal effect, degrees C.
 T_REF_C = 20.0
 _LEGS = (1, 2, 3)
+#: Scale of the rows of a pose error or of J_q, ``[mm, mm, rad] -> [mm, mm, deg]``.
+ROW_TO_DEG = np.array([1.0, 1.0, RAD2DEG])
+ROW_TO_DEG.flags.writeable = False
 
 #: Every effect name of SPEC §5, in library order.
 EFFECT_NAMES = (tuple(f"{q}_{i}" for q in OFFSET_FAMILIES for i in _LEGS)
@@ -218,15 +222,14 @@ def signatures(geometry: Geometry, poses: np.ndarray, pose_index: np.ndarray, ef
     effs = _as_effects(effects)
     s = sensitivity(geometry, poses, check=False)
     b, _ = inverse_kinematics(geometry, poses, check=False)
-    to_deg = np.array([1.0, 1.0, 180.0 / np.pi])[:, None]
-    Jb = s.J["b"] * to_deg                                     # (P, 3 rows, 3 legs) per mm
+    Jb = s.J["b"] * ROW_TO_DEG[:, None]                        # (P, 3 rows, 3 legs) per mm
     bm = b[pose_index]                                         # (M, 3)
     out = np.empty((len(pose_index), 3, len(effs)))
     for k, eff in enumerate(effs):
         if eff.kind == "offset":
-            col = s.J[eff.family][:, :, eff.leg] * to_deg[:, 0]
+            col = s.J[eff.family][:, :, eff.leg] * ROW_TO_DEG
             if eff.family not in LENGTH_FAMILIES:
-                col = col * (np.pi / 180.0)
+                col = col * DEG2RAD
             out[:, :, k] = col[pose_index]
             continue
         unit_db = slider_error({eff.name: 1.0}, bm, direction, temp_C)     # (M, 3) mm per unit

@@ -1,9 +1,12 @@
 """Figures and the self-contained HTML report of a discrepancy analysis.
 
-Every plotting function takes a :class:`~prp3mc.discrepancy.DiscrepancyResult`
-and returns a matplotlib Figure (Agg backend); :func:`write_report` writes
+Every plotting function takes a
+:class:`~prp3mc.measurement.selection.DiscrepancyResult` and ``fig=`` (each
+figure has several panels; a new pyplot figure when None) and returns the
+Figure; none changes the matplotlib backend. :func:`write_report` writes
 ``discrepancy.json`` (SPEC §6), ``report.html`` with the figures embedded,
-the figures as PNG and SVG, and per-pose / per-measurement tables as CSV.
+the figures as PNG and SVG, and per-pose / per-measurement tables as CSV;
+it draws on its own Agg canvases, outside pyplot.
 """
 
 from __future__ import annotations
@@ -14,21 +17,17 @@ from pathlib import Path
 
 import numpy as np
 
-from ..measurement.discrepancy import Diagnosis, DiscrepancyResult
+from ..measurement.diagnostics import GAP_CLOSED, Diagnosis
+from ..measurement.selection import DiscrepancyResult
 from ..output import figure_data_uri, output_folder, save_figure, write_json, write_text
+from ..units import DEG2ARCSEC, MM2UM
 
 __all__ = ["plot_workspace", "plot_actuators", "plot_temperature", "plot_gap", "plot_candidates",
            "write_report", "render_html"]
 
 
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
-def _quiver(ax, d: Diagnosis, title: str, scale: float) -> None:
+def _quiver(ax, d: Diagnosis, title: str, scale: float):
+    """Mean residual arrows over the significance of each pose; returns the scatter (for a colour bar)."""
     p = d.poses
     q = -np.log10(np.clip(p["sys_q"].to_numpy(), 1e-12, 1.0))
     sc = ax.scatter(p["x_mm"], p["y_mm"], c=q, cmap="magma_r", vmin=0, vmax=6, s=40, edgecolor="k", lw=0.3)
@@ -38,15 +37,13 @@ def _quiver(ax, d: Diagnosis, title: str, scale: float) -> None:
     return sc
 
 
-def plot_workspace(result: DiscrepancyResult):
-    """Mean residual per pose (arrows) and its significance, and the repeat-scatter ratio, before and after."""
-    plt = _plt()
-    fig, axes = plt.subplots(2, 2, figsize=(11, 9.5), constrained_layout=True)
+def _draw_workspace(result: DiscrepancyResult, fig) -> None:
+    axes = fig.subplots(2, 2)
     span = np.ptp(result.campaign.poses[:, :2], axis=0).max() or 1.0
     biggest = max(np.hypot(result.before.poses["dx_um"], result.before.poses["dy_um"]).max(), 1e-9)
     scale = biggest / (0.12 * span)                   # the largest arrow spans 12 % of the region
     for col, (d, label) in enumerate(((result.before, "before"), (result.after, "after"))):
-        sc = _quiver(axes[0, col], d, f"Mean residual {label} (arrow: {biggest:.1f} um = longest before)", scale)
+        sc = _quiver(axes[0, col], d, f"Mean residual {label} (arrow: {biggest:.1f} µm = longest before)", scale)
         p = d.poses
         ratio = np.log2(p["disp_ratio"].to_numpy(dtype=float))
         im = axes[1, col].scatter(p["x_mm"], p["y_mm"], c=ratio, cmap="coolwarm", vmin=-1.5, vmax=1.5, s=60,
@@ -56,13 +53,10 @@ def plot_workspace(result: DiscrepancyResult):
     fig.colorbar(sc, ax=axes[0, :], label="-log10 q (systematic, BH)")
     cb = fig.colorbar(im, ax=axes[1, :], label="log2 scatter ratio (0: as predicted)")
     cb.set_ticks([-1, 0, 1])
-    return fig
 
 
-def plot_actuators(result: DiscrepancyResult):
-    """Residual as an equivalent slider error J_b^-1 r against each slider position, by approach direction."""
-    plt = _plt()
-    fig, axes = plt.subplots(2, 3, figsize=(13, 7), sharey="row", constrained_layout=True)
+def _draw_actuators(result: DiscrepancyResult, fig) -> None:
+    axes = fig.subplots(2, 3, sharey="row")
     for row, (d, label) in enumerate(((result.before, "before"), (result.after, "after"))):
         m = d.measurements
         for i in range(3):
@@ -79,34 +73,25 @@ def plot_actuators(result: DiscrepancyResult):
             ax.legend(loc="upper left", fontsize=7, markerscale=1.5)
             ax.axhline(0.0, color="k", lw=0.6)
             ax.set(title=f"leg {i + 1} {label}", xlabel=f"b_{i + 1} (mm)",
-                   ylabel="equivalent slider error (um)" if i == 0 else None)
-    return fig
+                   ylabel="equivalent slider error (µm)" if i == 0 else None)
 
 
-def plot_temperature(result: DiscrepancyResult):
-    """Equivalent slider errors against temperature (None if the campaign has no temp_C)."""
-    if result.campaign.temp_C is None:
-        return None
-    plt = _plt()
-    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), sharey=True, constrained_layout=True)
+def _draw_temperature(result: DiscrepancyResult, fig) -> None:
+    axes = fig.subplots(1, 2, sharey=True)
     for ax, (d, label) in zip(axes, ((result.before, "before"), (result.after, "after"))):
         m = d.measurements
         for i in range(3):
             ax.scatter(m["temp_C"], m[f"db_eq_{i + 1}_um"], s=5, alpha=0.4, label=f"leg {i + 1}")
         ax.axhline(0.0, color="k", lw=0.6)
-        ax.set(title=f"Equivalent slider error vs temperature, {label}", xlabel="temp (degC)",
-               ylabel="um")
+        ax.set(title=f"Equivalent slider error vs temperature, {label}", xlabel="temperature (°C)",
+               ylabel="µm")
         ax.legend(fontsize=7, markerscale=2)
-    return fig
 
 
-def plot_gap(result: DiscrepancyResult):
-    """The gap's two channels before and after, each with its null band (± 2 sd), and the gap itself."""
-    plt = _plt()
+def _draw_gap(result: DiscrepancyResult, fig) -> None:
     g = result.gap
     ch = g["channels"]
-    fig, axes = plt.subplots(1, 2, figsize=(9.0, 3.8), constrained_layout=True,
-                             gridspec_kw={"width_ratios": [2, 1]})
+    axes = fig.subplots(1, 2, gridspec_kw={"width_ratios": [2, 1]})
     ax = axes[0]
     labels = ["systematic G_sys\n(library span)", "dispersion G_disp\n(repeat scatter)"]
     keys = ("systematic", "dispersion")
@@ -124,20 +109,21 @@ def plot_gap(result: DiscrepancyResult):
     ax = axes[1]
     ax.bar([0, 1], [max(g["before"], 0.05), max(g["after"], 0.05)], color=["tab:orange", "tab:green"])
     ax.axhline(1.0, color="k", lw=0.8)
-    ax.axhline(5.0, color="tab:red", ls="--", lw=0.8, label="closed below 5")
+    ax.axhline(GAP_CLOSED, color="tab:red", ls="--", lw=0.8, label=f"closed below {GAP_CLOSED:g}")
     ax.set_xticks([0, 1], ["before", "after"])
     ax.set(yscale="log", title="gap " + ("closed" if g["closed"] else "NOT closed") + " (null level 1)")
     ax.legend(fontsize=8)
-    return fig
 
 
-def plot_candidates(result: DiscrepancyResult, top: int = 15):
-    """Likelihood ratio of the strongest candidates at each selection step, with the Bonferroni threshold."""
-    plt = _plt()
+def _n_steps(result: DiscrepancyResult) -> int:
     steps = result.steps
-    n = max(int(steps["step"].max()) if len(steps) else 1, 1)
-    fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 4.2), squeeze=False, constrained_layout=True)
-    for k in range(n):
+    return max(int(steps["step"].max()) if len(steps) else 1, 1)
+
+
+def _draw_candidates(result: DiscrepancyResult, fig, top: int = 15) -> None:
+    steps = result.steps
+    axes = fig.subplots(1, _n_steps(result), squeeze=False)
+    for k in range(axes.shape[1]):
         ax = axes[0, k]
         s = steps[steps["step"] == k + 1].nlargest(top, "lr")
         if s.empty:
@@ -147,14 +133,91 @@ def plot_candidates(result: DiscrepancyResult, top: int = 15):
         ax.axvline(s["threshold"].iloc[0], color="tab:red", ls="--", label="Bonferroni threshold")
         ax.set(xscale="log", xlabel="likelihood ratio", title=f"step {k + 1}")
         ax.legend(fontsize=7)
+
+
+#: name -> (drawing function, figure size in inches or None when the figure does not apply).
+_FIGURES = {
+    "workspace": (_draw_workspace, lambda r: (11.0, 9.5)),
+    "actuators": (_draw_actuators, lambda r: (13.0, 7.0)),
+    "temperature": (_draw_temperature, lambda r: None if r.campaign.temp_C is None else (11.0, 3.8)),
+    "gap": (_draw_gap, lambda r: (9.0, 3.8)),
+    "candidates": (_draw_candidates, lambda r: (4.2 * _n_steps(r), 4.2)),
+}
+
+
+def _plot(name: str, result: DiscrepancyResult, fig):
+    """Draw figure ``name`` into ``fig`` (a new pyplot figure of its size when None); None if it does not apply."""
+    draw, size = _FIGURES[name]
+    figsize = size(result)
+    if figsize is None:
+        return None
+    if fig is None:
+        import matplotlib.pyplot as plt
+        fig = plt.figure(figsize=figsize, layout="constrained")
+    draw(result, fig)
     return fig
 
 
-_FIGURES = {"workspace": plot_workspace, "actuators": plot_actuators, "temperature": plot_temperature,
-            "gap": plot_gap, "candidates": plot_candidates}
+def plot_workspace(result: DiscrepancyResult, *, fig=None):
+    """Mean residual per pose (arrows) and its significance, and the repeat-scatter ratio, before and after.
+
+    Parameters
+    ----------
+    result : DiscrepancyResult
+    fig : matplotlib Figure or SubFigure, optional
+        Drawn into (2 x 2 panels); a new figure when None.
+
+    Returns
+    -------
+    Figure
+    """
+    return _plot("workspace", result, fig)
+
+
+def plot_actuators(result: DiscrepancyResult, *, fig=None):
+    """Residual as an equivalent slider error J_b^-1 r against each slider position, by approach direction.
+
+    ``fig`` (2 x 3 panels) as in :func:`plot_workspace`; returns the Figure.
+    """
+    return _plot("actuators", result, fig)
+
+
+def plot_temperature(result: DiscrepancyResult, *, fig=None):
+    """Equivalent slider errors against temperature, before and after.
+
+    ``fig`` (1 x 2 panels) as in :func:`plot_workspace`; returns the Figure,
+    or None (nothing drawn) if the campaign has no ``temp_C``.
+    """
+    return _plot("temperature", result, fig)
+
+
+def plot_gap(result: DiscrepancyResult, *, fig=None):
+    """The gap's two channels before and after, each with its null band (± 2 sd), and the gap itself.
+
+    ``fig`` (1 x 2 panels) as in :func:`plot_workspace`; returns the Figure.
+    """
+    return _plot("gap", result, fig)
+
+
+def plot_candidates(result: DiscrepancyResult, *, fig=None):
+    """Likelihood ratio of the 15 strongest candidates at each selection step, with the Bonferroni threshold.
+
+    ``fig`` (one panel per step) as in :func:`plot_workspace`; returns the Figure.
+    """
+    return _plot("candidates", result, fig)
+
+
+def _agg_figure(figsize):
+    """A figure of ``figsize`` inches on its own Agg canvas (pyplot and the backend untouched)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=figsize, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
 
 _CAPTIONS = {
-    "workspace": "Top: mean residual (measured minus predicted) per commanded pose, arrows in um; colour is "
+    "workspace": "Top: mean residual (measured minus predicted) per commanded pose, arrows in µm; colour is "
                  "the significance of the pose's systematic disagreement (-log10 of the Benjamini-Hochberg "
                  "q-value). Bottom: repeat scatter relative to the predicted scatter (red: larger, blue: smaller).",
     "actuators": "Residuals mapped to an equivalent slider error J_b^-1 r, averaged per pose "
@@ -178,9 +241,8 @@ def render_html(result: DiscrepancyResult, figures: dict) -> str:
     top = result.before.poses.nlargest(8, "sys_stat")[
         ["pose_id", "x_mm", "y_mm", "phi_deg", "n", "dx_um", "dy_um", "dphi_arcsec", "sys_q", "disp_ratio"]]
     return env.from_string(text).render(
-        r=result, doc=result.to_dict(), figures=figures, captions=_CAPTIONS,
-        effects=result.to_frame(), top_poses=top.to_html(index=False, float_format=lambda v: f"{v:.3g}",
-                                                         classes="table", border=0),
+        r=result, doc=result.to_dict(), figures=figures, captions=_CAPTIONS, mm2um=MM2UM, deg2arcsec=DEG2ARCSEC,
+        top_poses=top.to_html(index=False, float_format=lambda v: f"{v:.3g}", classes="table", border=0),
         before=result.before.summary, after=result.after.summary)
 
 
@@ -192,17 +254,17 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
     Path
         The folder.
     """
-    plt = _plt()
     with output_folder(folder, force) as tmp:
         write_json(tmp / "discrepancy.json", result.to_dict())
         uris = {}
-        for name, fn in _FIGURES.items():
-            fig = fn(result)
-            if fig is None:
+        for name, (draw, size) in _FIGURES.items():
+            figsize = size(result)
+            if figsize is None:
                 continue
+            fig = _agg_figure(figsize)
+            draw(result, fig)
             save_figure(fig, tmp, name)
             uris[name] = figure_data_uri(fig)
-            plt.close(fig)
         write_text(tmp / "report.html", render_html(result, uris))
         for label, d in (("before", result.before), ("after", result.after)):
             d.poses.to_csv(tmp / f"poses_{label}.csv", index=False)

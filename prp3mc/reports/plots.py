@@ -1,35 +1,42 @@
-"""Figures of study results (matplotlib on the Agg backend, seaborn styling).
+"""Figures of study results (matplotlib, seaborn styling).
 
-Every plotting function takes result objects and an ``ax=`` (a new figure
-when None) and returns the axes; the ``*_figure`` functions lay several
-configurations out side by side on one colour scale and return the figure.
-Maps show µm and arcsec.
+Every plotting function takes result objects and an ``ax=`` (a new pyplot
+figure when None) and returns the Figure; the ``*_figure`` functions lay
+several panels out on one figure and take ``fig=`` (an empty Figure to draw
+into, sized to fit; a new pyplot figure when None). Nothing here switches the
+matplotlib backend, so figures show inline in notebooks; reports draw on a
+:class:`matplotlib.figure.Figure` of their own. Maps show µm and arcsec.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..units import DISPLAY
+
 __all__ = ["shared_levels", "region_map", "worst_case_map", "montecarlo_map", "compare_maps_figure",
            "error_histogram", "histograms_figure", "sobol_ranking", "worst_case_shares", "ranking_figure"]
 
-_QUANTITY = {  # quantity -> (label, unit, scale from mm or deg)
-    "position": ("position error", "µm", 1e3),
-    "phi": ("|δφ|", "arcsec", 3600.0),
-}
-
-
-def _pyplot():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
+_LABEL = {"position": "position error", "phi": "|δφ|"}
+_QUANTITY = {q: (label, DISPLAY[q][1], DISPLAY[q][0]) for q, label in _LABEL.items()}  # (label, unit, scale)
 
 
 def _axes(ax, figsize=(5.0, 4.2)):
+    """``ax``, or the axes of a new pyplot figure (pyplot imported only then)."""
     if ax is None:
-        _, ax = _pyplot().subplots(figsize=figsize, layout="constrained")
+        import matplotlib.pyplot as plt
+        _, ax = plt.subplots(figsize=figsize, layout="constrained")
     return ax
+
+
+def _figure(fig, figsize):
+    """``fig`` resized to ``figsize`` with a constrained layout, or a new pyplot figure of that size."""
+    if fig is None:
+        import matplotlib.pyplot as plt
+        return plt.figure(figsize=figsize, layout="constrained")
+    fig.set_size_inches(figsize)
+    fig.set_layout_engine("constrained")
+    return fig
 
 
 def shared_levels(*arrays: np.ndarray, n: int = 12) -> np.ndarray:
@@ -44,7 +51,10 @@ def shared_levels(*arrays: np.ndarray, n: int = 12) -> np.ndarray:
 
 def region_map(poses: np.ndarray, values: np.ndarray, *, ax=None, levels=None, cmap: str = "viridis",
                title: str = "", mark_extrema: bool = True, unit: str = ""):
-    """Filled contour map of ``values`` (ny, nx) over grid ``poses`` (ny, nx, 3), extrema marked."""
+    """Filled contour map of ``values`` (ny, nx) over grid ``poses`` (ny, nx, 3), extrema marked.
+
+    Draws on ``ax`` (a new pyplot figure when None); returns the Figure holding it.
+    """
     ax = _axes(ax)
     X, Y = poses[..., 0], poses[..., 1]
     levels = shared_levels(values) if levels is None else levels
@@ -59,7 +69,7 @@ def region_map(poses: np.ndarray, values: np.ndarray, *, ax=None, levels=None, c
                     label=f"{word} {values[k]:.1f} {unit} at ({X[k]:g}, {Y[k]:g})")
         ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), fontsize=7, frameon=False, ncol=1)
     ax.set(xlabel="x (mm)", ylabel="y (mm)", title=title, aspect="equal")
-    return ax
+    return ax.figure
 
 
 def worst_case_map(wc, quantity: str = "position", *, ax=None, levels=None, title: str = ""):
@@ -78,7 +88,7 @@ def montecarlo_map(mc, percentile: float = 99.73, quantity: str = "position", *,
 
 
 def compare_maps_figure(results, kind: str = "worstcase", quantity: str = "position",
-                        percentile: float = 99.73):
+                        percentile: float = 99.73, *, fig=None):
     """Maps of several configurations side by side on ONE colour scale.
 
     Parameters
@@ -88,8 +98,14 @@ def compare_maps_figure(results, kind: str = "worstcase", quantity: str = "posit
     quantity : ``"position"`` or ``"phi"``
     percentile : float
         Monte Carlo percentile shown (``kind="montecarlo"``).
+    fig : Figure, optional
+        An empty figure to draw into; a new pyplot figure when None.
+
+    Returns
+    -------
+    Figure
     """
-    plt = _pyplot()
+    import matplotlib
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import BoundaryNorm
     label, unit, f = _QUANTITY[quantity]
@@ -102,14 +118,14 @@ def compare_maps_figure(results, kind: str = "worstcase", quantity: str = "posit
                   for r in results]
         what, cmap = f"Monte Carlo p{percentile:g} of the {label}", "magma"
     levels = shared_levels(*values, n=20)
-    fig, axes = plt.subplots(1, len(results), figsize=(5.2 * len(results) + 1.2, 5.4), layout="constrained",
-                             squeeze=False)
+    fig = _figure(fig, (5.2 * len(results) + 1.2, 5.4))
+    axes = fig.subplots(1, len(results), squeeze=False)
     for ax, r in zip(axes[0], results):
         if kind == "worstcase":
             worst_case_map(r.worst_case, quantity, ax=ax, levels=levels, title=r.name)
         else:
             montecarlo_map(r.montecarlo, percentile, quantity, ax=ax, levels=levels, title=r.name)
-    sm = ScalarMappable(norm=BoundaryNorm(levels, plt.get_cmap(cmap).N), cmap=cmap)
+    sm = ScalarMappable(norm=BoundaryNorm(levels, matplotlib.colormaps[cmap].N), cmap=cmap)
     fig.colorbar(sm, ax=axes[0].tolist(), label=f"{label} ({unit})", shrink=0.85)
     fig.suptitle(f"{what}, one colour scale")
     return fig
@@ -127,6 +143,11 @@ def error_histogram(samples, index: int, quantity: str = "position", *, ax=None,
     quantity : ``"position"`` (µm) or ``"phi"`` (|δφ|, arcsec)
     percentile : float
         Also marked (dotted).
+
+    Returns
+    -------
+    Figure
+        The figure holding ``ax`` (a new pyplot figure when ``ax`` is None).
     """
     import seaborn as sns
     ax = _axes(ax)
@@ -142,16 +163,19 @@ def error_histogram(samples, index: int, quantity: str = "position", *, ax=None,
     ax.axvline(p, ls=":", lw=1.2, color=color, label=f"p{percentile:g} {p:.1f} {unit}")
     ax.set(xlabel=f"{name} ({unit})", ylabel="density")
     ax.legend(fontsize=7)
-    return ax
+    return ax.figure
 
 
-def histograms_figure(results, quantity: str = "position", percentile: float = 99.73):
-    """Error histograms at each configuration's chosen poses, worst case marked; one row per configuration."""
-    plt = _pyplot()
+def histograms_figure(results, quantity: str = "position", percentile: float = 99.73, *, fig=None):
+    """Error histograms at each configuration's chosen poses, worst case marked; one row per configuration.
+
+    ``fig``: an empty figure to draw into (a new pyplot figure when None). Returns the Figure.
+    """
+    import matplotlib
     n_cols = max(len(r.samples.labels) for r in results)
-    fig, axes = plt.subplots(len(results), n_cols, figsize=(4.2 * n_cols, 3.2 * len(results)),
-                             layout="constrained", squeeze=False, sharex=True)
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    fig = _figure(fig, (4.2 * n_cols, 3.2 * len(results)))
+    axes = fig.subplots(len(results), n_cols, squeeze=False, sharex=True)
+    colors = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     for row, r in zip(axes, results):
         s = r.samples
         for k, ax in enumerate(row):
@@ -171,7 +195,12 @@ def sobol_ranking(frame, *, ax=None, title: str = ""):
     Parameters
     ----------
     frame : DataFrame
-        :func:`prp3mc.sobol.ranking` (columns name, kind, S1, S1_conf, ST, ST_conf).
+        :func:`prp3mc.uncertainty.ranking.ranking` (columns name, kind, S1, S1_conf, ST, ST_conf).
+
+    Returns
+    -------
+    Figure
+        The figure holding ``ax`` (a new pyplot figure when ``ax`` is None).
     """
     ax = _axes(ax, figsize=(5.0, 0.32 * len(frame) + 1.2))
     y = np.arange(len(frame))
@@ -185,25 +214,27 @@ def sobol_ranking(frame, *, ax=None, title: str = ""):
     ax.invert_yaxis()
     ax.set(xlabel="Sobol index (95 % CI)", title=title)
     ax.legend(fontsize=7, loc="lower right")
-    return ax
+    return ax.figure
 
 
 def worst_case_shares(frame, *, ax=None, title: str = "worst-case contribution"):
-    """Each input's or group's share (%) of the worst case, in the order of ``frame``."""
+    """Each input's or group's share (%) of the worst case, in the order of ``frame``; returns the Figure."""
     ax = _axes(ax, figsize=(3.5, 0.32 * len(frame) + 1.2))
     y = np.arange(len(frame))
     ax.barh(y, 100 * frame["worst_case_share"], color="#55a868")
     ax.set_yticks(y, frame["name"])
     ax.invert_yaxis()
     ax.set(xlabel="share of the worst case (%)", title=title)
-    return ax
+    return ax.figure
 
 
-def ranking_figure(frame, title: str = ""):
-    """Sobol ranking with CIs next to the worst-case shares, rows aligned."""
-    plt = _pyplot()
-    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 0.34 * len(frame) + 1.6), layout="constrained",
-                               width_ratios=(3, 2))
+def ranking_figure(frame, title: str = "", *, fig=None):
+    """Sobol ranking with CIs next to the worst-case shares, rows aligned.
+
+    ``fig``: an empty figure to draw into (a new pyplot figure when None). Returns the Figure.
+    """
+    fig = _figure(fig, (10, 0.34 * len(frame) + 1.6))
+    a, b = fig.subplots(1, 2, width_ratios=(3, 2))
     sobol_ranking(frame, ax=a, title="Sobol indices")
     worst_case_shares(frame, ax=b)
     fig.suptitle(title)

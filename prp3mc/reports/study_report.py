@@ -9,8 +9,10 @@
     tables/*.csv           summary, worst-case and Monte Carlo grids, Sobol indices and rankings,
                            worst-case contributions, the budget
 
-The report is built from a :class:`~prp3mc.study.StudyResult` only; it is
-readable without prp3mc installed.
+The report is built from a :class:`~prp3mc.study.results.StudyResult` only;
+it is readable without prp3mc installed. Figures are drawn on figures of
+their own with an Agg canvas: writing a report never touches pyplot or the
+matplotlib backend.
 """
 
 from __future__ import annotations
@@ -24,8 +26,9 @@ import numpy as np
 import pandas as pd
 
 from ..output import check_output, figure_data_uri, output_folder, save_figure, write_json, write_text
-from ..study.runner import StudyResult
+from ..study.results import StudyResult
 from ..study.summary import build_summary
+from ..units import DEG2ARCSEC, DISPLAY, MM2UM
 
 __all__ = ["write_study", "render_report", "comparison"]
 
@@ -93,7 +96,7 @@ def _family_shares(result: StudyResult) -> pd.DataFrame:
         contrib = wc.contribution["position"][k]
         fam = pd.Series(contrib, index=[t.rsplit("_", 1)[0] for t in wc.terms]).groupby(level=0).sum()
         for f, v in fam.items():
-            rows.append({"configuration": c.name, "family": f, "contribution_um": 1e3 * v,
+            rows.append({"configuration": c.name, "family": f, "contribution_um": MM2UM * v,
                          "share_pct": 100 * v / float(wc.position_mm[k])})
     return pd.DataFrame(rows)
 
@@ -112,13 +115,35 @@ def _grid_frame(c) -> pd.DataFrame:
     wc = c.worst_case
     flat = wc.poses.reshape(-1, 3)
     return pd.DataFrame({"x_mm": flat[:, 0], "y_mm": flat[:, 1], "phi_deg": flat[:, 2],
-                         "position_um": 1e3 * wc.position_mm.ravel(), "phi_arcsec": 3600 * wc.phi_deg.ravel(),
-                         "x_um": 1e3 * wc.x_mm.ravel(), "y_um": 1e3 * wc.y_mm.ravel()})
+                         "position_um": MM2UM * wc.position_mm.ravel(),
+                         "phi_arcsec": DEG2ARCSEC * wc.phi_deg.ravel(),
+                         "x_um": MM2UM * wc.x_mm.ravel(), "y_um": MM2UM * wc.y_mm.ravel()})
 
 
 def _html_table(df: pd.DataFrame, digits: int = 4) -> str:
     return df.to_html(index=False, border=0, classes="table", float_format=lambda v: f"{v:.{digits}g}",
                       na_rep="")
+
+
+def _summary_display(frame: pd.DataFrame) -> pd.DataFrame:
+    """The summary frame in report units (µm, arcsec): one row per statistic with min, max, mean, se of max."""
+    keys = ["configuration", "analysis", "output", "statistic"]
+    rows = []
+    for key, g in frame.groupby(keys, sort=False):
+        by = g.set_index("aggregate")
+        factor, unit = DISPLAY[key[2]]
+        rows.append({"configuration": key[0], "analysis": key[1], "output": "|δφ|" if key[2] == "phi" else key[2],
+                     "statistic": key[3].replace("_", " "), "unit": unit,
+                     **{a: factor * by.at[a, "value"] for a in ("min", "max", "mean")},
+                     "se of max": factor * by.at["max", "se"]})
+    return pd.DataFrame(rows)
+
+
+def _canvas():
+    """An empty figure on its own Agg canvas (no pyplot, no backend switch)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    return FigureCanvasAgg(Figure()).figure
 
 
 def _figures(result: StudyResult) -> list[tuple[str, str, object]]:
@@ -127,25 +152,26 @@ def _figures(result: StudyResult) -> list[tuple[str, str, object]]:
     res = list(result.configurations)
     figs = [("worstcase_position", "Exact worst-case position error (µm) over each test region, one colour "
              "scale (the paper's Figs. 4-5, computed exactly). ✕ marks the maximum, ○ the minimum.",
-             plots.compare_maps_figure(res, "worstcase", "position")),
+             plots.compare_maps_figure(res, "worstcase", "position", fig=_canvas())),
             ("worstcase_phi", "Exact worst-case orientation error |δφ| (arcsec), one colour scale.",
-             plots.compare_maps_figure(res, "worstcase", "phi"))]
+             plots.compare_maps_figure(res, "worstcase", "phi", fig=_canvas()))]
     if all(r.montecarlo is not None for r in res):
         pct = _MC_PERCENTILE if _MC_PERCENTILE in res[0].montecarlo.percentiles else res[0].montecarlo.percentiles[-1]
         figs += [("montecarlo_position", f"Monte Carlo p{pct:g} of the position error (µm), one colour scale.",
-                  plots.compare_maps_figure(res, "montecarlo", "position", pct)),
+                  plots.compare_maps_figure(res, "montecarlo", "position", pct, fig=_canvas())),
                  ("montecarlo_phi", f"Monte Carlo p{pct:g} of |δφ| (arcsec), one colour scale.",
-                  plots.compare_maps_figure(res, "montecarlo", "phi", pct)),
+                  plots.compare_maps_figure(res, "montecarlo", "phi", pct, fig=_canvas())),
                  ("histograms_position", "Distribution of the position error at chosen poses; dashed: the exact "
-                  f"worst case at that pose, dotted: p{pct:g}.", plots.histograms_figure(res, "position", pct)),
+                  f"worst case at that pose, dotted: p{pct:g}.",
+                  plots.histograms_figure(res, "position", pct, fig=_canvas())),
                  ("histograms_phi", "Distribution of |δφ| at the same poses, worst case dashed.",
-                  plots.histograms_figure(res, "phi", pct))]
+                  plots.histograms_figure(res, "phi", pct, fig=_canvas()))]
     for r in res:
         for output, frame in r.ranking.items():
             figs.append((f"sobol_{r.name}_{output}",
                          f"{r.name}, output {output}: Sobol indices over the Sobol grid with 95 % bootstrap "
                          "intervals (left) next to each input's share of the exact worst case (right).",
-                         plots.ranking_figure(frame, f"{r.name}: {output}")))
+                         plots.ranking_figure(frame, f"{r.name}: {output}", fig=_canvas())))
     return figs
 
 
@@ -180,10 +206,11 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
                           f"φ = {c.configuration.region.phi_deg:g}°",
                 "reference": c.configuration.reference,
                 "contributions": _html_table(tables[f"contributions_{c.name}"].drop(columns=["output"]).assign(
-                    contribution_um=lambda d: 1e3 * d["contribution"], share_pct=lambda d: 100 * d["share"])
+                    **{"contribution (µm)": lambda d: MM2UM * d["contribution"],
+                       "share (%)": lambda d: 100 * d["share"]})
                     .drop(columns=["contribution", "share"]))}
                for c in result.configurations]
-    summary_table = tables["summary"].rename(columns={"se_max": "se of max"})
+    summary_table = _summary_display(tables["summary"])
     families = (tables["worstcase_families"].pivot(index="family", columns="configuration", values="share_pct")
                 .rename_axis(columns=None).reset_index())
     return env.get_template("study_report.html.j2").render(
@@ -199,7 +226,6 @@ def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = Fa
     ``out`` must not exist unless ``force``; it is replaced atomically.
     Returns the path of ``report.html``.
     """
-    import matplotlib.pyplot as plt
     check_output(out, force)
     summary = build_summary(result)
     with output_folder(out, force) as tmp:
@@ -209,7 +235,6 @@ def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = Fa
         for name, caption, fig in _figures(result):
             save_figure(fig, tmp / "figures", name)
             embedded.append((name, caption, figure_data_uri(fig)))
-            plt.close(fig)
         tables = _tables(result)
         for name, frame in tables.items():
             frame.to_csv(tmp / "tables" / f"{name}.csv", index=False)

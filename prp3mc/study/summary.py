@@ -34,11 +34,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .runner import ConfigurationResult, StudyResult, pct_se
+from ..units import DEG2ARCSEC, MM2UM, Z95
+from .results import ConfigurationResult, StudyResult, over_grid, pct_se
 
 __all__ = ["build_summary"]
-
-_Z95 = 1.959963984540054
 
 
 def _stat(value, se) -> dict:
@@ -47,9 +46,7 @@ def _stat(value, se) -> dict:
 
 def _over_grid(values: np.ndarray, se: np.ndarray) -> dict:
     """min, max and mean over a grid of a statistic with pose-wise standard errors."""
-    v, s = values.ravel(), se.ravel()
-    lo, hi = int(np.argmin(v)), int(np.argmax(v))
-    return {"min": _stat(v[lo], s[lo]), "max": _stat(v[hi], s[hi]), "mean": _stat(v.mean(), s.mean())}
+    return {k: _stat(v, s) for k, (v, s) in over_grid(values, se).items()}
 
 
 def _exact_or_none(value) -> float | None:
@@ -63,13 +60,13 @@ def _exact(values: np.ndarray) -> dict:
 
 def _montecarlo(c: ConfigurationResult) -> dict:
     mc = c.montecarlo
-    pos = {f"p{p:g}": _over_grid(1e3 * mc.position_pct[..., q], 1e3 * pct_se(mc.position_pct_ci[..., q, :]))
+    pos = {f"p{p:g}": _over_grid(MM2UM * mc.position_pct[..., q], MM2UM * pct_se(mc.position_pct_ci[..., q, :]))
            for q, p in enumerate(mc.percentiles)}
-    pos["mean"] = _over_grid(1e3 * mc.position_mean, 1e3 * mc.position_mean_se)
-    phi = {f"p{p:g}": _over_grid(3600 * mc.phi_pct[..., q], 3600 * pct_se(mc.phi_pct_ci[..., q, :]))
+    pos["mean"] = _over_grid(MM2UM * mc.position_mean, MM2UM * mc.position_mean_se)
+    phi = {f"p{p:g}": _over_grid(DEG2ARCSEC * mc.phi_pct[..., q], DEG2ARCSEC * pct_se(mc.phi_pct_ci[..., q, :]))
            for q, p in enumerate(mc.percentiles)}
     std = {key: _over_grid(f * mc.std[..., o], f * mc.std_se[..., o])
-           for o, (key, f) in enumerate((("x_um", 1e3), ("y_um", 1e3), ("phi_arcsec", 3600.0)))}
+           for o, (key, f) in enumerate((("x_um", MM2UM), ("y_um", MM2UM), ("phi_arcsec", DEG2ARCSEC)))}
     out = {"position_um": pos, "phi_arcsec": phi, "std": std}
     if mc.exceed_prob is not None:
         out["exceed"] = {"tolerance_mm": float(mc.tolerance_mm),
@@ -81,8 +78,8 @@ def _sobol(c: ConfigurationResult) -> dict:
     out = {}
     for output, frame in c.ranking.items():
         out[output] = {row.name: {"kind": row.kind,
-                                  "S1": _stat(row.S1, row.S1_conf / _Z95),
-                                  "ST": _stat(row.ST, row.ST_conf / _Z95),
+                                  "S1": _stat(row.S1, row.S1_conf / Z95),
+                                  "ST": _stat(row.ST, row.ST_conf / Z95),
                                   "worst_case_share": _exact_or_none(row.worst_case_share)}
                        for row in frame.itertuples(index=False)}
     return out
@@ -93,8 +90,8 @@ def build_summary(result: StudyResult) -> dict:
     configs = {}
     for c in result.configurations:
         wc = c.worst_case
-        doc = {"worst_case_position_um": _exact(1e3 * wc.position_mm),
-               "worst_case_phi_arcsec": _exact(3600.0 * wc.phi_deg)}
+        doc = {"worst_case_position_um": _exact(MM2UM * wc.position_mm),
+               "worst_case_phi_arcsec": _exact(DEG2ARCSEC * wc.phi_deg)}
         if c.montecarlo is not None:
             doc["montecarlo"] = _montecarlo(c)
         if c.sobol is not None:

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._result import freeze, short_repr
-from ..units import RAD2DEG
+from ..units import DEG2RAD, RAD2DEG
 from .budget import Budget, parse_input
 from .laws import angle_moments
 from ..kinematics.geometry import Geometry
@@ -183,7 +183,7 @@ def linear_model(geometry: Geometry, budget: Budget, poses, *, check: bool = Tru
             h[family] = h_entries(geometry, fr, family)
         terms.append(name)
         legs.append(leg)
-        scales.append(h[family][leg] * (1.0 if family in LENGTH_FAMILIES else np.pi / 180.0))
+        scales.append(h[family][leg] * (1.0 if family in LENGTH_FAMILIES else DEG2RAD))
         plan.append(("clearance", (k, names.index(f"zeta_{leg + 1}"))) if family == "rho" else ("value", k))
     return LinearModel(geometry=geometry, budget=budget, poses=poses, terms=tuple(terms), legs=tuple(legs),
                        Ainv=np.moveaxis(fr.Ainv, (0, 1), (-2, -1)), scale=np.stack(scales, axis=-1),

@@ -13,7 +13,8 @@ by more than its standard errors allow fails them.
 from pathlib import Path
 
 from prp3mc.output import write_json
-from prp3mc.study.runner import Study, bundled_studies, run_study
+from prp3mc.study.reader import Study, bundled_studies
+from prp3mc.study.runner import run_study
 from prp3mc.study.summary import build_summary
 
 GOLDEN_DIR = Path(__file__).resolve().parent
