@@ -27,6 +27,7 @@ from .uncertainty.laws import Disc, Discrete, Normal, Triangular, TruncNormal, U
 from .uncertainty.model import LinearModel, linear_model
 from .uncertainty.montecarlo import MonteCarloResult, monte_carlo
 from .uncertainty.worstcase import WorstCase, worst_case
+from .uncertainty.allocation import AllocationResult, allocate
 from .uncertainty.sobol import SobolResult, sobol_indices
 from .uncertainty.ranking import ranking as sobol_ranking
 from .study.reader import Study
@@ -46,6 +47,7 @@ __all__ = [
     # budgets and their propagation
     "Budget", "Catalogue", "Uniform", "Normal", "TruncNormal", "Triangular", "Disc", "Discrete",
     "linear_model", "LinearModel", "monte_carlo", "MonteCarloResult", "worst_case", "WorstCase",
+    "allocate", "AllocationResult",
     "sobol_indices", "SobolResult", "sobol_ranking",
     # studies
     "Study", "StudyResult", "run_study", "build_summary",

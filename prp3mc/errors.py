@@ -14,6 +14,7 @@ __all__ = [
     "BudgetError",
     "StudyError",
     "CampaignError",
+    "AllocationError",
     "ResourceError",
     "Prp3mcWarning",
     "IncompleteBudgetWarning",
@@ -58,6 +59,10 @@ class StudyError(Prp3mcError, ValueError):
 
 class CampaignError(Prp3mcError, ValueError):
     """A measurement campaign is malformed; the message names row and column."""
+
+
+class AllocationError(Prp3mcError, ValueError):
+    """A tolerance-allocation problem is malformed (classes file, costs, specs)."""
 
 
 class ResourceError(Prp3mcError, ValueError):

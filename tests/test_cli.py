@@ -104,3 +104,7 @@ def test_init_templates_run_as_written(tmp_path, capsys):
     from prp3mc.study.reader import Study
     study = Study.load(tmp_path / "study.toml")
     assert [c.name for c in study.configurations] == ["u-shape", "delta-shape"]
+    assert main(["allocate", "--geometry", "u-shape", "--region", "u-shape", "--classes",
+                 str(tmp_path / "classes.toml"), "--spec-position-um", "150", "--grid", "11", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["feasible"] and set(doc["choice"]) == {f"{q}_{i}" for q in ("rho", "theta", "b") for i in (1, 2, 3)}

@@ -1,0 +1,74 @@
+"""Figure of a tolerance allocation: the cost-accuracy Pareto front.
+
+Takes the tidy front of :func:`prp3mc.uncertainty.allocation.allocation_front`
+and an ``ax=`` (a new figure when None) and returns the Figure; pyplot is
+imported lazily and the backend is never switched. Shows µm and arcsec.
+"""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from ..units import DISPLAY
+
+__all__ = ["allocation_front_plot"]
+
+
+def _changes(previous: pd.Series | None, current: pd.Series) -> str:
+    """The classes that changed from one front point to the next, as ``input→class`` words."""
+    if previous is None:
+        return "cheapest"
+    changed = [f"{name}→{cls}" for name, cls in current.items() if previous[name] != cls]
+    return ", ".join(changed[:3]) + (f" +{len(changed) - 3}" if len(changed) > 3 else "")
+
+
+def allocation_front_plot(front: pd.DataFrame, output: str = "position", *, spec: float | None = None,
+                          chosen_cost: float | None = None, annotate: bool | None = None, ax=None):
+    """Step plot of the least cost of every reachable worst case of ``output``.
+
+    Parameters
+    ----------
+    front : DataFrame
+        The tidy front (``point``, ``cost``, ``output``, ``value``, one column per input).
+    output : {"position", "phi"}
+    spec : float, optional
+        The spec, in display units (µm or arcsec), drawn as a horizontal line.
+    chosen_cost : float, optional
+        Mark the front point of this cost (the allocation's choice).
+    annotate : bool, optional
+        Label each point with the classes that changed from the previous one
+        (default: when the front has at most 15 points).
+    ax : matplotlib Axes, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    if ax is None:
+        import matplotlib.pyplot as plt
+        fig, ax = plt.subplots(figsize=(6.4, 4.4), layout="constrained")
+    fig = ax.figure
+    scale, unit = DISPLAY[output]
+    rows = front[front["output"] == output].sort_values("point")
+    inputs = [c for c in front.columns if c not in ("point", "cost", "output", "statistic", "value", "unit")]
+    y = scale * rows["value"].to_numpy()
+    ax.step(rows["cost"], y, where="post", color="0.6", lw=1)
+    ax.plot(rows["cost"], y, "o", color="C0", ms=4, label="Pareto-optimal choices")
+    if annotate or (annotate is None and len(rows) <= 15):
+        previous = None
+        for (_, row), value in zip(rows.iterrows(), y):
+            ax.annotate(_changes(previous, row[inputs]), (row["cost"], value), xytext=(4, 3),
+                        textcoords="offset points", fontsize=6, color="0.3")
+            previous = row[inputs]
+    if spec is not None:
+        ax.axhline(spec, color="C3", ls="--", lw=1, label=f"spec {spec:g} {unit}")
+    if chosen_cost is not None:
+        hit = rows[abs(rows["cost"] - chosen_cost) <= 1e-9 * max(1.0, abs(chosen_cost))]
+        if len(hit):
+            ax.plot(hit["cost"], scale * hit["value"], "*", color="C3", ms=12, label="least cost within spec")
+    label = "position error" if output == "position" else "|δφ|"
+    ax.set_xlabel("total cost")
+    ax.set_ylabel(f"worst-case {label} over the region ({unit})")
+    ax.set_title("What each step of cost buys", fontsize=10)
+    ax.legend(fontsize=8, frameon=False)
+    return fig
