@@ -89,6 +89,10 @@ FILES = {
     "csv_text_value": _HEADER + "".join(f"{k},0,100,0,abc,100,0\n" for k in range(8)),
     "csv_infeasible": _HEADER + "".join(f"{k},0,300,0,0,300,0\n" for k in range(8)),
     "csv_header_only": _HEADER,
+    "csv_duplicate_header": _HEADER.replace("\n", ",x_meas\n") + "".join(f"{k % 4},0,100,0,0,100,0,5\n" for k in range(8)),
+    "csv_one_row": _HEADER + "1,0,100,0,0.001,100,0\n",
+    "csv_no_repeats": _HEADER + "".join(f"{k},{10 * k},100,0,{10 * k},100,0\n" for k in range(3)),
+    "csv_two_poses": _HEADER + "".join(f"{k % 2},{10 * (k % 2)},100,0,{10 * (k % 2)},100,0\n" for k in range(6)),
     "existing_file": "x",
 }
 
@@ -246,6 +250,38 @@ CASES = [
     _case("discrepancy", *G, *B, "--data", "{csv_header_only}", "--out", "{root}/d14", message="csv_header_only"),
     _case("discrepancy", *G, "--budget", "{budget_hi}", "--data", "{csv_nan}", "--out", "{root}/d15",
           message="beyond any error"),
+    _case("discrepancy", *G, *B, "--data", "{csv_duplicate_header}", "--out", "{root}/d16",
+          message="column 'x_meas' appears twice in the header (columns 5 and 8)"),
+    _case("discrepancy", *G, *B, "--data", "{csv_one_row}", "--out", "{root}/d17",
+          message="too small to test anything: 1 measurement(s) of 1 pose(s)"),
+    _case("discrepancy", *G, *B, "--data", "{csv_no_repeats}", "--out", "{root}/d18",
+          message="0 of them repeated; the discrepancy workflow needs at least 3 distinct poses"),
+    _case("discrepancy", *G, *B, "--data", "{csv_two_poses}", "--out", "{root}/d19", message="too small"),
+    # ----------------------------------------------------------- allocate
+    _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150", "--grid",
+          "100000", message="of memory, this machine has"),
+    _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150",
+          "--spec-percentile", "95", "--samples", "1000000000000", message="of memory, this machine has"),
+    _case("--max-hours", "0.01", "allocate", *G, "--region", "u-shape", "--classes", "example",
+          "--spec-position-um", "150", "--grid", "301", message="would take"),
+    _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150", "--seed",
+          "-1", status=2, message="non-negative integer"),
+    _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150",
+          "--k-sigma", "-1", status=2, message="> 0"),
+    _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "nan", status=2,
+          message="finite"),
+    _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "-5",
+          message="spec_position_um must be a finite number > 0"),
+    _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150",
+          "--spec-percentile", "150", message="spec_percentile must lie in"),
+    _case("allocate", *G, "--region", "nowhere", "--classes", "example", "--spec-position-um", "150", status=2,
+          message="invalid choice"),
+    _case("allocate", *G, "--region", "u-shape", "--classes", "{root}/none.toml", "--spec-position-um", "150",
+          message="none.toml"),
+    _case("allocate", *G, "--region", "u-shape", "--classes", "{bad_toml}", "--spec-position-um", "150",
+          message="malformed TOML"),
+    _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150", "--grid",
+          "0", status=2, message="positive integer"),
     # ----------------------------------------------------------- init
     _case("init", status=2, message="required"),
     _case("init", "wobble", "{root}/x.toml", status=2, message="invalid choice"),
@@ -271,8 +307,8 @@ def test_bad_input_is_one_line(argv, status, message, files, capsys):
 
 def test_enough_cases():
     assert len(CASES) >= 80
-    commands = {argv[0] if argv else "" for argv, *_ in (c.values for c in CASES)}
-    assert {"sensitivity", "worstcase", "montecarlo", "sobol", "study", "discrepancy", "init"} <= commands
+    commands = {a for argv, *_ in (c.values for c in CASES) for a in argv[:3] if not a.startswith("-")}
+    assert {"sensitivity", "worstcase", "montecarlo", "sobol", "study", "discrepancy", "init", "allocate"} <= commands
 
 
 @pytest.mark.parametrize("argv, status, message", [

@@ -20,7 +20,7 @@ from .._rng import resolve_rng
 from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
 from ..uncertainty.budget import Budget
-from .campaign import Campaign, read_campaign
+from .campaign import Campaign, read_campaign, require_testable
 from .diagnostics import diagnose, gap, is_unexplained
 from .effects import effect
 from .likelihood import Engine
@@ -71,7 +71,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     seed, rng = resolve_rng(rng)
     if not (0 < alpha < 1 and 0 < alpha_unexplained < 1):
         raise BudgetError(f"alpha and alpha_unexplained must lie in (0, 1), got {alpha}, {alpha_unexplained}")
-    campaign = read_campaign(campaign, geometry)
+    campaign = require_testable(read_campaign(campaign, geometry))
     noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
     engine = Engine(geometry, budget, campaign, noise)
     base = engine.fit((), {})
