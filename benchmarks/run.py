@@ -13,10 +13,11 @@ import sys
 import time
 
 import numpy as np
+from bench_montecarlo import bench_montecarlo
 from bench_sobol import bench_sobol
 
 import prp3mc
-from prp3mc import Budget, Geometry, Region, linear_model, monte_carlo, sensitivity, worst_case
+from prp3mc import Budget, Geometry, Region, sensitivity, worst_case
 from prp3mc.uncertainty.crosscheck import optimizer_worst_case
 
 
@@ -70,43 +71,6 @@ def bench_worstcase(quick: bool) -> dict:
     }
 
 
-def naive_monte_carlo(g, budget, poses, n):
-    """The obvious implementation: a Python loop over samples, J_q products per sample, np.percentile."""
-    J = sensitivity(g, poses).J
-    X = budget.sample(n, 0)
-    names = budget.names
-    idx = {f: [names.index(f"{f}_{i}") for i in (1, 2, 3)] for f in ("rho", "zeta", "theta", "b")}
-    omega = linear_model(g, budget, poses).omega
-    out = np.empty((n,) + poses.shape[:-1] + (3,))
-    for k in range(n):
-        x = X[k]
-        rho = x[idx["rho"]] * np.cos(np.deg2rad(x[idx["zeta"]]) - omega)
-        out[k] = (np.einsum("...ij,...j->...i", J["rho"], rho)
-                  + np.einsum("...ij,j->...i", J["theta"], np.deg2rad(x[idx["theta"]]))
-                  + np.einsum("...ij,j->...i", J["b"], x[idx["b"]]))
-    pos = np.hypot(out[..., 0], out[..., 1])
-    phi = np.abs(out[..., 2])
-    q = [50, 95, 99, 99.73]
-    return out.mean(0), out.std(0), np.percentile(pos, q, axis=0), np.percentile(phi, q, axis=0)
-
-
-def bench_montecarlo(quick: bool) -> dict:
-    """Paper budget, U-shape 21x21 grid, full summaries, against the per-sample loop."""
-    g, budget = Geometry.from_preset("u-shape"), Budget.from_preset("paper")
-    grid = Region.from_preset("u-shape").grid(21)
-    n = 200_000 if quick else 1_000_000
-    monte_carlo(g, budget, grid, 20_000, rng=0)  # warm-up
-    t = best_of(lambda: monte_carlo(g, budget, grid, n, rng=1), 1 if quick else 3)
-    n_naive = 500 if quick else 2000
-    t_naive = best_of(lambda: naive_monte_carlo(g, budget, grid, n_naive), 1)
-    rate, naive = grid[..., 0].size * n / t, grid[..., 0].size * n_naive / t_naive
-    return {
-        "mc_poses": int(grid[..., 0].size), "mc_samples": n, "mc_seconds": t,
-        "mc_pose_samples_per_s": rate, "mc_naive_pose_samples_per_s": naive,
-        "mc_speedup_vs_naive": rate / naive,
-    }
-
-
 BENCHES = [bench_sensitivity, bench_worstcase, bench_montecarlo, bench_sobol]
 
 
@@ -122,8 +86,36 @@ def main(argv=None) -> int:
         json.dump(result, sys.stdout, indent=2)
         print()
     else:
-        for key, value in result.items():
-            print(f"{key:45s} {value:.4g}" if isinstance(value, float) else f"{key:45s} {value}")
+        print(table(result))
+    return 0
+
+
+def table(r: dict) -> str:
+    """The README's benchmark table: each figure, the alternative, the ratio and the limit."""
+    g = lambda v: f"{v:.3g}"  # noqa: E731
+    rows = [
+        ("Monte Carlo, 21x21 poses x %d samples (pose-samples/s)" % r["mc_grid_samples"],
+         g(r["mc_grid_pose_samples_per_s"]), "numpy per pose: product, norm, np.percentile",
+         g(r["mc_grid_numpy_pose_samples_per_s"]), g(r["mc_grid_speedup_vs_numpy"]),
+         "%s (float32 matmul / 72 flops)" % g(r["mc_limit_pose_samples_per_s"])),
+        ("Monte Carlo, one pose x %d samples (samples/s)" % r["mc_pose_samples"],
+         g(r["mc_pose_samples_per_s"]), "the same numpy code", g(r["mc_pose_numpy_samples_per_s"]),
+         g(r["mc_pose_speedup_vs_numpy"]), "-"),
+        ("Exact envelope, 201x201 (poses/s)", g(r["worstcase_poses_per_s"]),
+         "differential evolution per pose", g(1 / r["de_seconds_per_pose"]), g(r["worstcase_speedup_vs_de"]), "-"),
+        ("J_q, 201x201 (poses/s)", g(r["sensitivity_poses_per_s"]), "per-pose loop",
+         g(r["sensitivity_poses_per_s"] / r["sensitivity_speedup_vs_loop"]), g(r["sensitivity_speedup_vs_loop"]), "-"),
+    ]
+    for k in sorted(r):
+        if k.endswith("_peak_gb"):
+            n = k.split("_")[2]
+            rows.append((f"Monte Carlo, one pose x {n} samples: peak memory (GB)", g(r[k]), "-", "-", "-", "-"))
+    lines = ["| figure | prp3mc | alternative | alternative's figure | ratio | limit |", "|---|---|---|---|---|---|"]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    lines.append(f"\n1-minute load average during the run: {r['load_average_1min']:.1f} (2 cores)")
+    extra = {k: v for k, v in r.items() if k.startswith(("sobol", "salib", "ot_"))}
+    lines += [f"{k:45s} {v:.4g}" if isinstance(v, float) else f"{k:45s} {v}" for k, v in extra.items()]
+    return "\n".join(lines)
     return 0
 
 

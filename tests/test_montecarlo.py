@@ -143,3 +143,32 @@ def test_cli_montecarlo_bad_input(capsys, extra, message):
     code = main(argv)
     err = capsys.readouterr().err
     assert code != 0 and message in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("budget", [PAPER, Budget({"b_1": Uniform(0.0, 0.025), "theta_2": Uniform(0.0, 0.0)})])
+def test_streamed_order_statistics_are_exact_in_any_memory(geometry, region, budget, seed):
+    """Tiny buffers force the narrowing passes; the order statistics stay those of all samples.
+
+    The second budget has |dphi| = 0 for every sample (a window of one value).
+    """
+    from prp3mc.uncertainty.montecarlo import _order_ranks
+    poses, n = region.grid(2), 70_000
+    small = monte_carlo(geometry, budget, poses, n, rng=seed, max_chunk_bytes=1 << 12, workers=2)
+    big = monte_carlo(geometry, budget, poses, n, rng=seed, workers=1)
+    for name in ("position_pct", "position_pct_ci", "phi_pct", "phi_pct_ci", "position_max", "mean", "cov"):
+        np.testing.assert_array_equal(getattr(small, name), getattr(big, name))
+    E = linear_model(geometry, budget, poses).evaluate(budget.sample(n, seed), dtype=np.float32)
+    pos = np.sort(np.hypot(E[..., 0], E[..., 1]), axis=-1)
+    _, lo, hi, ci = _order_ranks(n, small.percentiles)
+    np.testing.assert_allclose(small.position_pct_ci, pos[..., ci], rtol=1e-6)
+    assert np.all((pos[..., lo] * (1 - 1e-6) <= small.position_pct) & (small.position_pct <= pos[..., hi] * (1 + 1e-6)))
+
+
+def test_sample_blocks_equal_the_sample():
+    from prp3mc.uncertainty.budget import SAMPLE_BLOCK
+    n = 2 * SAMPLE_BLOCK + 17
+    X = PAPER.sample(n, 5)
+    for k in (2, 0, 1):
+        np.testing.assert_array_equal(PAPER.sample_block(5, k, n), X[k * SAMPLE_BLOCK:(k + 1) * SAMPLE_BLOCK])
+    with pytest.raises(BudgetError, match="outside"):
+        PAPER.sample_block(5, 3, n)

@@ -32,7 +32,7 @@ _FAMILY_ORDER = ("a", "alpha", "b", "beta", "rho", "zeta", "c", "gamma", "theta"
 #: Largest magnitude an error input may take, per unit: an error beyond the machine's own size
 #: (links of 100-300 mm) or beyond a full turn is a mistake, and it would overflow the results.
 SANITY_LIMITS = {"mm": 1000.0, "deg": 360.0}
-_BLOCK = 1 << 16  # samples drawn per block: results do not depend on chunking
+SAMPLE_BLOCK = 1 << 16  # samples drawn per block: results do not depend on chunking
 
 
 def parse_input(name: str) -> tuple[str, int]:
@@ -195,7 +195,11 @@ class Budget:
         u = np.asarray(u, dtype=float)
         if u.ndim != 2 or u.shape[1] != len(self):
             raise BudgetError(f"expected uniforms of shape (n, {len(self)}), got {u.shape}")
-        return np.stack([law.ppf(u[:, k]) for k, law in enumerate(self.inputs.values())], axis=1)
+        ut = np.ascontiguousarray(u.T)  # each law maps one contiguous row
+        out = np.empty_like(ut)
+        for k, law in enumerate(self.inputs.values()):
+            out[k] = law.ppf(ut[k])
+        return out.T  # (n, d) whose columns are contiguous
 
     def sample(self, n: int, rng: "None | int | np.random.Generator" = None) -> np.ndarray:
         """``n`` independent draws of all inputs, shape (n, d), mm / deg.
@@ -207,10 +211,24 @@ class Budget:
         if n < 1:
             raise BudgetError(f"sample count must be positive, got {n}")
         out = np.empty((n, len(self)))
-        for start in range(0, n, _BLOCK):
-            stop = min(n, start + _BLOCK)
+        for start in range(0, n, SAMPLE_BLOCK):
+            stop = min(n, start + SAMPLE_BLOCK)
             out[start:stop] = self.ppf(rng.random((stop - start, len(self))))
         return out
+
+    def sample_block(self, seed: int, k: int, n: int) -> np.ndarray:
+        """Block ``k`` of ``sample(n, seed)``: rows ``k * SAMPLE_BLOCK`` to the next block, mm / deg.
+
+        Drawn alone by jumping the PCG64 stream of ``seed`` ahead past the
+        blocks before it (one 64-bit draw per uniform), so blocks can be drawn
+        in any order or in parallel and still equal :meth:`sample`.
+        """
+        start = k * SAMPLE_BLOCK
+        if not 0 <= start < n:
+            raise BudgetError(f"block {k} is outside a sample of {n}")
+        bits = np.random.PCG64(seed)
+        bits.advance(start * len(self))
+        return self.ppf(np.random.Generator(bits).random((min(n - start, SAMPLE_BLOCK), len(self))))
 
     def errors(self, X: np.ndarray) -> dict[str, np.ndarray]:
         """Input samples ``X`` (n, d) as per-family errors ``{family: (n, 3)}``, mm / deg.

@@ -1,12 +1,16 @@
 """Monte Carlo propagation of an error budget through the linear model.
 
-One sample matrix is shared by all poses (common random numbers). Means and
-covariances of the pose error are linear images of the sample moments of the
-model's features (:class:`prp3mc.uncertainty.model.LinearModel`), so they are computed
-once for all poses; their standard errors come from 64 batch means. The
-position-error norm and |dphi| are evaluated per pose and sample in float32,
-streamed in pose chunks of bounded memory, and summarised by exact order
-statistics with distribution-free confidence intervals.
+One sample matrix is shared by all poses (common random numbers); it is
+never held whole. Samples are streamed in blocks that are drawn
+independently (jumps in the seed's stream, :meth:`Budget.sample_block`), so
+memory is bounded whatever ``n_samples`` and the numbers do not depend on the
+chunking or the threads. Means and covariances of the pose error are linear
+images of the features' sample moments (:class:`prp3mc.uncertainty.model.LinearModel`),
+summed per block and batch, with standard errors from 64 batch means. The
+position-error norm and |dphi| are evaluated per pose and sample in float32
+by a compiled kernel and summarised by EXACT order statistics (the values a
+full sort would give), found in streamed passes (:mod:`._stream`), with
+distribution-free confidence intervals.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from .budget import Budget
 from ..errors import BudgetError
 from ..kinematics.exact import exact_pose_error
 from ..kinematics.geometry import Geometry
+from ._stream import Stream, pilot_fraction, select_order_statistics
 from .model import LinearModel, linear_model
 from ..progress import Progress
 
@@ -36,7 +41,7 @@ __all__ = ["MonteCarloResult", "monte_carlo", "PERCENTILES"]
 #: Percentiles reported by default (p99.73 is the 3-sigma level of a normal law).
 PERCENTILES = (50.0, 95.0, 99.0, 99.73)
 _N_BATCHES = 64
-_BLOCK = 1 << 15  # samples per block of the pose-error evaluation (fits in cache)
+_PILOT_MIN = 1 << 15  # fewest pilot samples placing the selection windows (see _stream)
 
 
 @dataclass(frozen=True, slots=True, repr=False)
@@ -192,36 +197,6 @@ def _order_ranks(n: int, percentiles) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return h, lo_rank, hi_rank, np.stack([ci_lo, ci_hi], -1)
 
 
-def _order_statistics(rows: np.ndarray, ranks: np.ndarray) -> np.ndarray:
-    """Exact order statistics of each row at sorted 0-based ``ranks``; rows are reordered in place.
-
-    ``np.partition`` with many kth re-partitions large ranges for each; here
-    ranks are taken in clusters in ascending order, each cluster by one
-    partition of the remaining part of the row and one of the (shrinking)
-    rest, then a sort of the few values in between: about half the work.
-    One loop iteration handles a whole row of samples.
-    """
-    ranks = np.asarray(ranks)
-    n = rows.shape[-1]
-    gaps = np.flatnonzero(np.diff(ranks) > max(64, n // 1000)) + 1
-    clusters = np.split(ranks, gaps)
-    out = np.empty((rows.shape[0], len(ranks)), rows.dtype)
-    for i, row in enumerate(rows):
-        start, j = 0, 0
-        for cl in clusters:
-            r0, r1 = int(cl[0]), int(cl[-1])
-            seg = row[start:]
-            seg.partition(r0 - start)
-            if r1 > r0:
-                rest = row[r0 + 1:]
-                rest.partition(r1 - r0 - 1)
-                row[r0 + 1:r1 + 1].sort()
-            out[i, j:j + len(cl)] = row[cl]
-            j += len(cl)
-            start = r1 + 1
-    return out
-
-
 def _wilson(k: np.ndarray, n: int, z: float = Z95) -> np.ndarray:
     """Wilson score interval (..., 2) of a proportion k / n at normal quantile ``z``."""
     p = k / n
@@ -229,20 +204,6 @@ def _wilson(k: np.ndarray, n: int, z: float = Z95) -> np.ndarray:
     centre = (p + z**2 / (2 * n)) / denom
     half = z * np.sqrt(p * (1 - p) / n + z**2 / (4 * n * n)) / denom
     return np.stack([centre - half, centre + half], -1)
-
-
-def _feature_moments(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Mean and covariance of the features overall and per batch (float64)."""
-    n = F.shape[0]
-    edges = np.linspace(0, n, _N_BATCHES + 1).astype(int)
-    means, covs = [], []
-    for a, b in zip(edges[:-1], edges[1:]):  # 64 batches: a loop over batches, not samples
-        Fb = F[a:b]
-        means.append(Fb.mean(axis=0))
-        covs.append(np.cov(Fb, rowvar=False, ddof=1).reshape(F.shape[1], F.shape[1]))
-    mean = F.mean(axis=0)
-    cov = np.cov(F, rowvar=False, ddof=1).reshape(F.shape[1], F.shape[1])
-    return mean, cov, np.array(means), np.array(covs)
 
 
 def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
@@ -276,9 +237,10 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     progress : bool, optional
         Progress bar on stderr (default: when stderr is a terminal).
     max_chunk_bytes : int
-        Memory for one chunk of poses x samples (the run streams over chunks).
+        Memory for the values kept around the wanted ranks per chunk of poses
+        (the run streams over pose chunks; a smaller limit costs passes, never accuracy).
     workers : int, optional
-        Threads for the per-pose order statistics (default: CPU count).
+        Threads, each streaming a range of sample blocks (default: CPU count).
 
     Returns
     -------
@@ -296,82 +258,63 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     seed, _ = resolve_rng(rng)
     model = linear_model(geometry, budget, poses)
     batch_shape = model.poses.shape[:-1]
-    X = budget.sample(n_samples, seed)
-    F = model.features(X)
-    del X
-    fmean, fcov, bmeans, bcovs = _feature_moments(F)
-    C = model.coef.reshape((-1, 3, F.shape[1]))
+    C = model.coef.reshape((-1, 3, model.coef.shape[-1]))
+    n_poses, n_feat = C.shape[0], C.shape[2]
+    h, r_lo, r_hi, r_ci = _order_ranks(n_samples, pct)
+    ranks = np.unique(np.concatenate([r_lo, r_hi, r_ci.ravel()]))
+    pilot_m = min(n_samples, max(_PILOT_MIN, n_samples >> 10))
+    window_values = max(64, max_chunk_bytes // 16)
+    per_pose = 2 * 4 * 1.3 * n_samples * pilot_fraction(ranks, n_samples, pilot_m) + (16 << 10)
+    chunk = max(1, min(n_poses, int(max_chunk_bytes // per_pose)))
+    n_threads = workers or os.cpu_count() or 1
+    stream = Stream(model, budget, seed, n_samples, _N_BATCHES, n_threads)
+    n_seg = stream.seg_start.size
+    sums = {"S1": np.empty((n_seg, n_feat)), "S2": np.empty((n_seg, n_feat, n_feat))}
+    C32 = C.astype(np.float32)
+    stats = np.empty((n_poses, 2, len(ranks)))
+    vmax = np.empty((n_poses, 2))
+    exceed = np.zeros(n_poses)
+    possum = np.zeros((n_poses, n_seg))
+    S1, S2 = sums["S1"], sums["S2"]
+    with Progress(n_poses, "montecarlo", progress) as bar, ThreadPoolExecutor(max_workers=n_threads) as pool:
+        pilot = stream.pilot(pilot_m)
+        for start in range(0, n_poses, chunk):
+            sl = slice(start, min(n_poses, start + chunk))
+            sums["possum"] = possum[sl]
+            stats[sl], vmax[sl], exceed[sl] = select_order_statistics(
+                stream, C32[sl], ranks, pilot, tolerance_mm, sums, pool, window_values)
+            sums.pop("S1", None), sums.pop("S2", None)  # feature sums: on the first chunk's first pass
+            bar.update(sl.stop - sl.start)
+    mom = stream.moments(S1, S2)
     deg = np.array([1.0, 1.0, RAD2DEG])
-    mean = np.einsum("pof,f->po", C, fmean) * deg
-    cov = np.einsum("pof,fg,pqg->poq", C, fcov, C) * np.outer(deg, deg)
-    bm = np.einsum("pof,bf->pbo", C, bmeans) * deg
-    bc = np.einsum("pof,bfg,pqg->pboq", C, bcovs, C) * np.outer(deg, deg)
+    mean = np.einsum("pof,f->po", C, mom.mean) * deg
+    cov = np.einsum("pof,fg,pqg->poq", C, mom.cov, C) * np.outer(deg, deg)
+    bm = np.einsum("pof,bf->pbo", C, mom.batch_means) * deg
+    bc = np.einsum("pof,bfg,pqg->pboq", C, mom.batch_covs, C) * np.outer(deg, deg)
     mean_se = bm.std(axis=1, ddof=1) / math.sqrt(_N_BATCHES)
     cov_se = bc.std(axis=1, ddof=1) / math.sqrt(_N_BATCHES)
     std = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
     var_se = np.diagonal(cov_se, axis1=-2, axis2=-1)
     std_se = np.divide(var_se, 2 * std, out=np.zeros_like(std), where=std > 0)
 
-    # per-pose order statistics, streamed over pose chunks
-    FT = np.ascontiguousarray(F.T, dtype=np.float32)
-    del F
-    n_poses = C.shape[0]
-    h, r_lo, r_hi, r_ci = _order_ranks(n_samples, pct)
-    kth = np.unique(np.concatenate([r_lo, r_hi, r_ci.ravel(), [n_samples - 1]]))
-    Q = len(pct)
-    out = {"pos_pct": np.empty((n_poses, Q)), "pos_ci": np.empty((n_poses, Q, 2)),
-           "phi_pct": np.empty((n_poses, Q)), "phi_ci": np.empty((n_poses, Q, 2)),
-           "pos_max": np.empty(n_poses), "phi_max": np.empty(n_poses),
-           "pos_mean": np.empty(n_poses), "pos_mean_se": np.empty(n_poses),
-           "exceed": np.zeros(n_poses)}
-    chunk = max(1, min(n_poses, int(max_chunk_bytes // (3 * 4 * n_samples))))
-    C32 = C.astype(np.float32)
+    bsum = np.zeros((n_poses, _N_BATCHES))
+    np.add.at(bsum.T, stream.seg_batch, possum.T)
+    pos_mean = bsum.sum(axis=-1) / n_samples
+    pos_mean_se = (bsum / np.diff(stream.batch_edges)).std(axis=-1, ddof=1) / math.sqrt(_N_BATCHES)
     frac = h - np.floor(h)
-    batch_edges = np.linspace(0, n_samples, _N_BATCHES + 1).astype(int)
-
-    i_lo, i_hi = np.searchsorted(kth, r_lo), np.searchsorted(kth, r_hi)
-    i_ci, i_max = np.searchsorted(kth, r_ci), np.searchsorted(kth, n_samples - 1)
-
-    def summarise(values: np.ndarray, pct_key: str, ci_key: str, max_key: str, sl: slice, scale: float):
-        part = _order_statistics(values, kth).astype(float)  # (p, len(kth))
-        lo, hi = part[:, i_lo], part[:, i_hi]
-        out[pct_key][sl] = scale * (lo + frac * (hi - lo))
-        out[ci_key][sl] = scale * part[:, i_ci]
-        out[max_key][sl] = scale * part[:, i_max]
-
-    def work(start: int) -> int:
-        sl = slice(start, min(n_poses, start + chunk))
-        p = sl.stop - sl.start
-        Cp = C32[sl].reshape(p * 3, -1)
-        pos = np.empty((p, n_samples), np.float32)
-        phi = np.empty((p, n_samples), np.float32)
-        for b0 in range(0, n_samples, _BLOCK):  # cache-sized sample blocks
-            b1 = min(n_samples, b0 + _BLOCK)
-            D = (Cp @ FT[:, b0:b1]).reshape(p, 3, b1 - b0)
-            np.square(D, out=D)
-            np.add(D[:, 0], D[:, 1], out=pos[:, b0:b1])
-            np.sqrt(pos[:, b0:b1], out=pos[:, b0:b1])
-            np.sqrt(D[:, 2], out=phi[:, b0:b1])
-        bsum = np.add.reduceat(pos, batch_edges[:-1], axis=-1).astype(np.float64)
-        out["pos_mean"][sl] = bsum.sum(axis=-1) / n_samples
-        out["pos_mean_se"][sl] = (bsum / np.diff(batch_edges)).std(axis=-1, ddof=1) / math.sqrt(_N_BATCHES)
-        if tolerance_mm is not None:
-            out["exceed"][sl] = np.count_nonzero(pos > tolerance_mm, axis=-1)
-        summarise(pos, "pos_pct", "pos_ci", "pos_max", sl, 1.0)
-        summarise(phi, "phi_pct", "phi_ci", "phi_max", sl, RAD2DEG)
-        return p
-
-    starts = range(0, n_poses, chunk)
-    with Progress(n_poses, "montecarlo", progress) as bar, \
-            ThreadPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
-        for done in pool.map(work, starts):
-            bar.update(done)
+    i_lo, i_hi, i_ci = np.searchsorted(ranks, r_lo), np.searchsorted(ranks, r_hi), np.searchsorted(ranks, r_ci)
+    scale = np.array([1.0, RAD2DEG])[None, :, None]
+    lo, hi = stats[..., i_lo] * scale, stats[..., i_hi] * scale
+    pct_values = lo + frac * (hi - lo)  # (P, 2, Q)
+    ci_values = stats[..., i_ci] * scale[..., None]  # (P, 2, Q, 2)
+    vmax = vmax * scale[..., 0]
+    Q = len(pct)
 
     shape = batch_shape
-    exceed = exceed_ci = None
+    exceed_ci = None
     if tolerance_mm is not None:
-        exceed = (out["exceed"] / n_samples).reshape(shape)
-        exceed_ci = _wilson(out["exceed"], n_samples).reshape(shape + (2,))
+        exceed_ci = _wilson(exceed, n_samples).reshape(shape + (2,))
+        exceed = (exceed / n_samples).reshape(shape)
     lin = _linearization(model, budget, seed, exact_check_poses, exact_check_samples) if exact_check_poses else None
     return MonteCarloResult(
         poses=model.poses, n_samples=n_samples, seed=seed,
@@ -379,11 +322,12 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
         std=std.reshape(shape + (3,)), std_se=std_se.reshape(shape + (3,)),
         cov=cov.reshape(shape + (3, 3)), cov_se=cov_se.reshape(shape + (3, 3)),
         percentiles=pct,
-        position_pct=out["pos_pct"].reshape(shape + (Q,)), position_pct_ci=out["pos_ci"].reshape(shape + (Q, 2)),
-        phi_pct=out["phi_pct"].reshape(shape + (Q,)), phi_pct_ci=out["phi_ci"].reshape(shape + (Q, 2)),
-        position_max=out["pos_max"].reshape(shape), phi_max=out["phi_max"].reshape(shape),
-        position_mean=out["pos_mean"].reshape(shape), position_mean_se=out["pos_mean_se"].reshape(shape),
-        tolerance_mm=tolerance_mm, exceed_prob=exceed, exceed_ci=exceed_ci, linearization=lin,
+        position_pct=pct_values[:, 0].reshape(shape + (Q,)), position_pct_ci=ci_values[:, 0].reshape(shape + (Q, 2)),
+        phi_pct=pct_values[:, 1].reshape(shape + (Q,)), phi_pct_ci=ci_values[:, 1].reshape(shape + (Q, 2)),
+        position_max=vmax[:, 0].reshape(shape), phi_max=vmax[:, 1].reshape(shape),
+        position_mean=pos_mean.reshape(shape), position_mean_se=pos_mean_se.reshape(shape),
+        tolerance_mm=tolerance_mm, exceed_prob=exceed if tolerance_mm is not None else None, exceed_ci=exceed_ci,
+        linearization=lin,
         wall_time_s=time.perf_counter() - t0,
     )
 

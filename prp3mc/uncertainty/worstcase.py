@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+from numba import njit
 
 from .._result import freeze, pose_columns, short_repr
 from .._version import __version__
@@ -244,42 +245,60 @@ def _term_bounds(model: LinearModel, bounds: np.ndarray) -> np.ndarray:
     return tb
 
 
-_CORNERS = np.array([[sx, sy, sz] for sx in (-1.0, 1.0) for sy in (-1.0, 1.0) for sz in (-1.0, 1.0)])
+@njit(nogil=True, cache=True)
+def _corner_maxima(Ai, u_mid, u_half, values, signs):
+    """Maxima over the zonotope of every pose (compiled; one pass, nothing per corner kept).
+
+    Ai : (N, 3, 3) A^-1; u_mid, u_half : (N, 3) centre and half-width of u.
+    values : (4, N) out, position mm, |dphi| rad, |dx| mm, |dy| mm.
+    signs : (4, N, 3) out, the sign of each leg's u_i at the maximum. The
+    corners are visited in the order sx, sy, sz in (-1, +1), the first of
+    equal maxima kept.
+    """
+    for n in range(Ai.shape[0]):
+        c = np.empty(3)
+        g = np.empty((3, 3))
+        for r in range(3):
+            c[r] = Ai[n, r, 0] * u_mid[n, 0] + Ai[n, r, 1] * u_mid[n, 1] + Ai[n, r, 2] * u_mid[n, 2]
+            for i in range(3):
+                g[r, i] = Ai[n, r, i] * u_half[n, i]
+        best, arg = -1.0, 0
+        for k in range(8):
+            vx, vy = c[0], c[1]
+            for i in range(3):
+                if (k >> (2 - i)) & 1:
+                    vx, vy = vx + g[0, i], vy + g[1, i]
+                else:
+                    vx, vy = vx - g[0, i], vy - g[1, i]
+            q = vx * vx + vy * vy
+            if q > best:
+                best, arg = q, k
+        values[0, n] = np.sqrt(best)
+        for i in range(3):
+            signs[0, n, i] = 1.0 if (arg >> (2 - i)) & 1 else -1.0
+        for j, r in ((1, 2), (2, 0), (3, 1)):
+            sc = 1.0 if c[r] >= 0 else -1.0
+            values[j, n] = abs(c[r]) + abs(g[r, 0]) + abs(g[r, 1]) + abs(g[r, 2])
+            for i in range(3):
+                signs[j, n, i] = sc * (1.0 if g[r, i] >= 0 else -1.0)
 
 
 def _maxima(model: LinearModel, tb: np.ndarray):
     """Maxima and the sign (-1, +1) of each leg's u_i realising them, for flat poses (N,).
 
     Returns ``values`` (position mm, |dphi| rad, |dx| mm, |dy| mm), each (N,),
-    and ``leg_signs``, each (N, 3). Written on per-component arrays of shape
-    (N,): the 3x3 and 8-corner algebra is spelled out, which is several
-    times faster than einsum over small trailing axes.
+    and ``leg_signs``, each (N, 3).
     """
     mid = 0.5 * (tb[..., 0] + tb[..., 1])                            # (N, T)
     half = 0.5 * (tb[..., 1] - tb[..., 0])
     onehot = (np.array(model.legs)[:, None] == np.arange(3)).astype(float)   # (T, 3)
     u_mid = (model.scale * mid) @ onehot                             # (N, 3)
     u_half = (np.abs(model.scale) * half) @ onehot
-    Ai = np.ascontiguousarray(np.moveaxis(model.Ainv, (-2, -1), (0, 1)))  # (3, 3, N): a view, no copy
-    uT_mid, uT_half = np.ascontiguousarray(u_mid.T), np.ascontiguousarray(u_half.T)
-    center = [Ai[r, 0] * uT_mid[0] + Ai[r, 1] * uT_mid[1] + Ai[r, 2] * uT_mid[2] for r in range(3)]
-    g = [[Ai[r, i] * uT_half[i] for i in range(3)] for r in range(3)]  # g[row][leg]
-
-    def corners(r):  # c_r + s0 g_r0 + s1 g_r1 + s2 g_r2 for the 8 sign patterns of _CORNERS
-        level = [center[r]]
-        for i in range(3):
-            level = [w for v in level for w in (v - g[r][i], v + g[r][i])]
-        return level
-
-    norms2 = np.stack([vx * vx + vy * vy for vx, vy in zip(corners(0), corners(1))])
-    best = np.argmax(norms2, axis=0)
-    values = {"position": np.sqrt(np.take_along_axis(norms2, best[None], 0)[0])}
-    leg_signs = {"position": _CORNERS[best]}
-    for r, q in ((2, "phi"), (0, "x"), (1, "y")):
-        sc = np.where(center[r] >= 0, 1.0, -1.0)
-        leg_signs[q] = np.stack([sc * np.where(g[r][i] >= 0, 1.0, -1.0) for i in range(3)], axis=-1)
-        values[q] = np.abs(center[r]) + np.abs(g[r][0]) + np.abs(g[r][1]) + np.abs(g[r][2])
-    return values, leg_signs
+    N = u_mid.shape[0]
+    values, signs = np.empty((4, N)), np.empty((4, N, 3))
+    _corner_maxima(np.ascontiguousarray(model.Ainv), u_mid, u_half, values, signs)
+    order = ("position", "phi", "x", "y")
+    return dict(zip(order, values)), dict(zip(order, signs))
 
 
 def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | None = None,
