@@ -27,15 +27,15 @@ MAX_HOURS = 24.0
 #: Share of the available memory a request may use.
 MEMORY_MARGIN = 0.8
 
-# Monte Carlo today: the samples X (n, d) and features F (n, f) in float64, F again
-# transposed in float32, and per pose in flight the position and |dphi| rows in float32;
-# the poses in flight are a chunk of at most _MC_CHUNK_BYTES per worker thread.
-# Once Monte Carlo streams over samples, these become per-block figures (one line).
-_MC_BYTES_PER_SAMPLE = lambda d, f: 8 * d + 8 * f + 4 * f  # noqa: E731
-_MC_BYTES_PER_SAMPLE_POSE = 8
+# Monte Carlo streams its samples in blocks of 65536 (prp3mc.uncertainty._stream): what still grows
+# with n is the float32 pilot (n / 1024 samples of f features), the per-segment feature sums
+# (S1, S2: f + f^2 float64 per block) and, per pose, one position sum per block; the order
+# statistics of a chunk of poses take at most _MC_CHUNK_BYTES, plus the blocks in flight.
+_MC_BYTES_PER_SAMPLE = lambda d, f: 4 * f / 1024 + 8 * f * (f + 1) / 65536  # noqa: E731
+_MC_BYTES_PER_SAMPLE_POSE = 8 / 65536
 _MC_CHUNK_BYTES = 256 << 20
-_MC_SECONDS_PER_SAMPLE = 3e-6           # sampling, features, moments (measured: 1e6 samples, 3.4 s)
-_MC_SECONDS_PER_SAMPLE_POSE = 3e-7      # order statistics per pose (measured: 1e5 x 441 poses, 11 s)
+_MC_SECONDS_PER_SAMPLE = 2.5e-6         # blocks, features, moments (measured: 6.4e7 samples, 167 s)
+_MC_SECONDS_PER_SAMPLE_POSE = 1e-6      # streamed order statistics per pose (measured: 4e6 x 21 poses, 104 s)
 # Sobol: the design and its features for (K + 2) N model runs, SALib's bootstrap index
 # arrays (N x R, about ten of them alive), and per pose in flight the outputs of every run.
 _SOBOL_BOOTSTRAP_BYTES = 80
@@ -145,10 +145,9 @@ def montecarlo_estimate(n_samples: int, n_poses: int, n_inputs: int, workers: in
     """Memory and time of :func:`prp3mc.uncertainty.montecarlo.monte_carlo` (features ~ inputs)."""
     n, d = float(n_samples), n_inputs
     workers = workers or os.cpu_count() or 1
-    per_pose = _MC_BYTES_PER_SAMPLE_POSE * n
-    in_flight = min(n_poses, workers * max(1, _MC_CHUNK_BYTES // max(per_pose, 1)))
     return Estimate(f"Monte Carlo of {n_samples} samples at {n_poses} pose(s)",
-                    n * _MC_BYTES_PER_SAMPLE(d, d) + in_flight * per_pose,
+                    n * _MC_BYTES_PER_SAMPLE(d, d) + n * n_poses * _MC_BYTES_PER_SAMPLE_POSE
+                    + _MC_CHUNK_BYTES + workers * 16 * d * 65536,
                     n * _MC_SECONDS_PER_SAMPLE + n * n_poses * _MC_SECONDS_PER_SAMPLE_POSE)
 
 

@@ -181,7 +181,7 @@ CASES = [
     _case("montecarlo", *G, *B, *P, "--samples", "-5", status=2, message="positive integer"),
     _case("montecarlo", *G, *B, *P, "--samples", "1.5", status=2, message="positive integer"),
     _case("montecarlo", *G, *B, *P, "--samples", "1", message="at least 2 samples"),
-    _case("montecarlo", *G, *B, *P, "--samples", "1000000000000", message="TiB of memory, this machine has"),
+    _case("montecarlo", *G, *B, *P, "--samples", "1000000000000", message="GiB of memory, this machine has"),
     _case("montecarlo", *G, *B, *P, "--samples", "9" * 30, message="of memory, this machine has"),
     _case("montecarlo", *G, *B, *P, "--tolerance-mm", "-1", status=2, message=">= 0"),
     _case("montecarlo", *G, *B, *P, "--tolerance-mm", "nan", status=2, message="finite"),
