@@ -1,4 +1,4 @@
-"""Measurement campaigns (SPEC §4): reading with validation.
+"""Measurement campaigns (CSV, README *File formats*): reading with validation.
 
 A campaign is a table with one row per measurement: the commanded pose
 ``x_cmd, y_cmd, phi_cmd`` (mm, mm, deg), the measured pose ``x_meas, y_meas,
@@ -35,7 +35,7 @@ __all__ = ["Campaign", "read_campaign", "REQUIRED_COLUMNS", "CMD_COLUMNS", "MEAS
 
 #: Commanded and measured pose columns, ``[x mm, y mm, phi deg]``.
 CMD_COLUMNS, MEAS_COLUMNS = ("x_cmd", "y_cmd", "phi_cmd"), ("x_meas", "y_meas", "phi_meas")
-#: Columns every campaign needs (SPEC §4).
+#: Columns every campaign needs.
 REQUIRED_COLUMNS = ("pose_id", *CMD_COLUMNS, *MEAS_COLUMNS)
 #: Optional approach-direction columns.
 DIR_COLUMNS = ("dir_1", "dir_2", "dir_3")
@@ -43,14 +43,14 @@ DIR_COLUMNS = ("dir_1", "dir_2", "dir_3")
 MAX_ERROR = (5.0, 5.0, 5.0)
 _SAME_CMD_TOL = 1e-6  # mm or deg: repeats of a pose must command the same pose
 #: Fewest distinct poses a campaign must visit for the discrepancy workflow to test anything: one pose
-#: is held out to cross-validate the others, and a pose-independent offset already takes 3 of the
-#: 3 per pose degrees of freedom of the systematic channel, so two fitted poses are the least that leave any.
+#: is held out to cross-validate the others, and the instrument's registration (a pose-independent
+#: rigid offset) takes 3 of the 3 per pose degrees of freedom, so two fitted poses are the least that leave any.
 MIN_POSES = 3
 
 
 @dataclass(frozen=True, slots=True)
 class Campaign:
-    """A validated measurement campaign (SPEC §4).
+    """A validated measurement campaign (layout in the module docstring).
 
     Attributes
     ----------
@@ -114,7 +114,7 @@ class Campaign:
         return self.measured - self.commanded
 
     def to_frame(self) -> pd.DataFrame:
-        """The campaign in SPEC §4 layout (plus its extra columns): the file format, in mm and deg."""
+        """The campaign in the file layout (plus its extra columns): the file format, in mm and deg."""
         df = pd.DataFrame({"pose_id": self.pose_id})
         for k, col in enumerate(CMD_COLUMNS):
             df[col] = self.commanded[:, k]
@@ -128,13 +128,13 @@ class Campaign:
         return pd.concat([df, self.extra.reset_index(drop=True)], axis=1)
 
     def to_csv(self, path: str | os.PathLike) -> None:
-        """Write the campaign as a SPEC §4 CSV file (full float precision)."""
+        """Write the campaign as a campaign CSV file (full float precision)."""
         self.to_frame().to_csv(path, index=False, float_format="%.12g")
 
     @classmethod
     def from_frame(cls, frame: pd.DataFrame, geometry: Geometry | None = None,
                    source: str = "campaign", metadata: dict | None = None, line_offset: int | None = None) -> "Campaign":
-        """Validate a table in SPEC §4 layout.
+        """Validate a table in the campaign layout.
 
         Parameters
         ----------
@@ -248,7 +248,7 @@ def read_campaign(data: "str | os.PathLike | pd.DataFrame | Campaign", geometry:
     Parameters
     ----------
     data : path, DataFrame or Campaign
-        A CSV file with a header (SPEC §4), or a table in that layout.
+        A CSV file with a header (the campaign layout), or a table in that layout.
     geometry : Geometry, optional
         If given, every commanded pose must be reachable by it.
 
@@ -305,6 +305,6 @@ def require_testable(campaign: Campaign) -> Campaign:
         raise CampaignError(
             f"{campaign.source}: too small to test anything: {campaign.n_measurements} measurement(s) of "
             f"{campaign.n_poses} pose(s), {repeated} of them repeated; the discrepancy workflow needs at least "
-            f"{MIN_POSES} distinct poses (one is held out, an offset takes 3 degrees of freedom) and at least "
+            f"{MIN_POSES} distinct poses (one is held out, the registration takes 3 degrees of freedom) and at least "
             "one pose measured twice (the dispersion test compares repeats)")
     return campaign
