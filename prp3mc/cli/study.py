@@ -1,16 +1,17 @@
-"""``prp3mc study``: run a study file and write its report, figures, tables and summary.json (SPEC §6, §8)."""
+"""``prp3mc study``: run a study file and write its report, figures, tables and summary.json (optionally over a design sweep, on Dask)."""
 
 import sys
 import time
 
 from ..errors import Prp3mcError
-from ..output import check_output
+from ..limits import study_estimate
 from ..units import MM2UM
 from ..reports.study_report import write_study
 from ..study.distributed import parse_scheduler
 from ..study.reader import Study, bundled_studies
 from ..study.runner import run_study
-from . import add_progress, command
+from ..uncertainty.validity import check_linearity
+from . import add_progress, add_seed, command, within_limits
 
 #: Configurations named in the closing line; a sweep's best ones beyond that are in the report.
 _NAMED = 4
@@ -24,7 +25,7 @@ class StudyCommand:
                        help=f"study file, or a bundled study: {', '.join(bundled_studies())}")
         p.add_argument("--out", required=True, metavar="DIR", help="output folder (must not exist)")
         p.add_argument("--force", action="store_true", help="replace DIR if it exists")
-        p.add_argument("--seed", type=int, default=None, metavar="S", help="override the study's seed")
+        add_seed(p, help="override the study's seed")
         p.add_argument("--quick", action="store_true",
                        help="reduced grids and sample sizes (a smoke test, as the golden regression files)")
         p.add_argument("--scheduler", default=None, metavar="SPEC",
@@ -41,7 +42,10 @@ class StudyCommand:
         study = Study.load(args.study)
         if args.quick:
             study = study.reduced()
-        check_output(args.out, args.force)
+        within_limits(args, study_estimate(study))
+        if not study.sweep:  # a sweep's base configuration need not be feasible: its combinations are checked
+            for c in study.configurations:
+                check_linearity(c.geometry, study.budget, c.region.grid((3, 3)))
         result = run_study(study, rng=args.seed, progress=args.progress, scheduler=args.scheduler)
         if not result.configurations:
             first = result.skipped[0]

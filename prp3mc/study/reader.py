@@ -81,7 +81,8 @@ from typing import Any
 import numpy as np
 
 from .._toml import read_text_file
-from ..errors import Prp3mcError, StudyError, UnknownPresetError
+from ..errors import Prp3mcError, ResourceError, StudyError, UnknownPresetError
+from ..limits import check, worstcase_estimate
 from ..kinematics.chain import check_poses
 from ..kinematics.geometry import REGION_PRESETS, Geometry, Region
 from ..uncertainty.budget import Budget
@@ -309,8 +310,12 @@ class _Reader:
             return default
         ok_int = lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 2  # noqa: E731
         if ok_int(value):
-            return (value, value)
+            value = [value, value]
         if isinstance(value, list) and len(value) == 2 and all(ok_int(v) for v in value):
+            try:  # the configurations' grids are checked for feasibility below: refuse what cannot be built
+                check(worstcase_estimate(value[0] * value[1], 0), max_hours=math.inf)
+            except ResourceError as exc:
+                self.fail(path, f"{'.'.join(path)}: {exc}")
             return (value[0], value[1])
         self.fail(path, f"{'.'.join(path)} must be an integer n >= 2 (n x n poses) or [nx, ny], got {value!r}")
 
