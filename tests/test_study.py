@@ -1,5 +1,6 @@
 """Studies: the file format and its errors, the report folder, the worst-case ranges, golden regression."""
 
+import base64
 import dataclasses
 import importlib.util
 import json
@@ -129,7 +130,7 @@ def test_unknown_study_name():
 # ----------------------------------------------------------------- running and the report folder
 def test_cli_writes_report_folder(tmp_path, capsys):
     out = tmp_path / "out"
-    assert main(["study", str(study_file(tmp_path)), "--out", str(out), "--no-progress"]) == 0
+    assert main(["study", str(study_file(tmp_path)), "--out", str(out), "--no-progress", "--formats", "png,svg"]) == 0
     note = capsys.readouterr().out
     assert re.search(r"wrote .*report\.html in [\d.]+ s .*u-shape [\d.]+-[\d.]+ um, delta [\d.]+-[\d.]+ um", note)
     summary = json.loads((out / "summary.json").read_text())
@@ -146,6 +147,8 @@ def test_cli_writes_report_folder(tmp_path, capsys):
     pngs = sorted(p.stem for p in (out / "figures").glob("*.png"))
     assert sorted(p.stem for p in (out / "figures").glob("*.svg")) == pngs
     assert len(images) == len(pngs) >= 8 and all(src.startswith("data:image/png;base64,") for src in images)
+    first = base64.b64decode(images[0].split(",", 1)[1])      # the embedded PNG is the written file
+    assert first in [(out / "figures" / f"{p}.png").read_bytes() for p in pngs]
     assert "href=" not in html and "<script" not in html  # self-contained
     assert "holds by" in html or "does not hold" in html
     for table in ("summary", "budget", "worstcase_u-shape", "montecarlo_delta", "sobol_delta",
@@ -164,6 +167,11 @@ def test_cli_refuses_existing_folder_without_force(tmp_path, capsys):
     assert (out / "keep.txt").read_text() == "mine"
     assert main(["study", str(path), "--out", str(out), "--force", "--no-progress"]) == 0
     assert not (out / "keep.txt").exists() and (out / "report.html").is_file()
+    figures = {p.suffix for p in (out / "figures").iterdir()}
+    assert figures == {".png"}                                      # one format by default
+    assert main(["study", str(path), "--out", str(tmp_path / "o"), "--formats", "png,pdf"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "png, svg" in err and not (tmp_path / "o").exists()
 
 
 def test_cli_bad_study_one_line(tmp_path, capsys):

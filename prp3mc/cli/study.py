@@ -3,7 +3,7 @@
 import sys
 import time
 
-from ..output import check_output
+from ..output import check_output, figure_formats
 from ..units import MM2UM
 from ..reports.study_report import write_study
 from ..study.reader import Study, bundled_studies
@@ -22,6 +22,9 @@ class StudyCommand:
         p.add_argument("--seed", type=int, default=None, metavar="S", help="override the study's seed")
         p.add_argument("--quick", action="store_true",
                        help="reduced grids and sample sizes (a smoke test, as the golden regression files)")
+        p.add_argument("--formats", default="png", metavar="LIST",
+                       help="figure files to write, comma-separated among png, svg (default png; "
+                            "the report embeds the PNG either way)")
         add_progress(p)
 
     @staticmethod
@@ -30,9 +33,10 @@ class StudyCommand:
         study = Study.load(args.study)
         if args.quick:
             study = study.reduced()
+        formats = figure_formats(args.formats)
         check_output(args.out, args.force)
         result = run_study(study, rng=args.seed, progress=args.progress)
-        report = write_study(result, args.out, force=args.force)
+        report = write_study(result, args.out, force=args.force, formats=formats)
         worst = result.to_frame().query("output == 'position' and statistic == 'worst_case'")
         span = worst.pivot(index="configuration", columns="aggregate", values="value") * MM2UM
         ranges = ", ".join(f"{c.name} {span.at[c.name, 'min']:.1f}-{span.at[c.name, 'max']:.1f} um"

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..measurement.diagnostics import GAP_CLOSED, Diagnosis
 from ..measurement.selection import DiscrepancyResult
-from ..output import figure_data_uri, output_folder, save_figure, write_json, write_text
+from ..output import output_folder, png_data_uri, save_figure, write_json, write_text
 from ..units import DEG2ARCSEC, MM2UM
 
 __all__ = ["plot_workspace", "plot_actuators", "plot_temperature", "plot_gap", "plot_candidates",
@@ -263,8 +263,7 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
                 continue
             fig = _agg_figure(figsize)
             draw(result, fig)
-            save_figure(fig, tmp, name)
-            uris[name] = figure_data_uri(fig)
+            uris[name] = png_data_uri(save_figure(fig, tmp, name, ("png", "svg")))
         write_text(tmp / "report.html", render_html(result, uris))
         for label, d in (("before", result.before), ("after", result.after)):
             d.poses.to_csv(tmp / f"poses_{label}.csv", index=False)
