@@ -155,7 +155,7 @@ def error_histogram(samples, index: int, quantity: str = "position", *, ax=None,
     values = f * (samples.position_mm if quantity == "position" else samples.phi_deg)[index]
     worst = f * (samples.worst_position_mm if quantity == "position" else samples.worst_phi_deg)[index]
     label = samples.labels[index] if label is None else label
-    sns.histplot(values, bins=bins, stat="density", element="step", fill=True, alpha=0.25, ax=ax,
+    sns.histplot(x=values, bins=bins, stat="density", element="step", fill=True, alpha=0.25, ax=ax,
                  label=label, color=color)
     color = ax.get_lines()[-1].get_color() if ax.get_lines() and color is None else color
     p = float(np.percentile(values, percentile))
