@@ -13,7 +13,11 @@ def test_notebooks_found():
     assert {"quickstart.ipynb", "u_vs_delta.ipynb", "tolerance_whatif.ipynb"} <= {p.name for p in NOTEBOOKS}
 
 
-@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+SLOW_NOTEBOOKS = {"discrepancy_walkthrough"}  # runs the whole discrepancy workflow (~10 s idle)
+
+
+@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem in SLOW_NOTEBOOKS else p
+                                  for p in NOTEBOOKS], ids=[p.stem for p in NOTEBOOKS])
 def test_notebook_executes(path, monkeypatch):
     monkeypatch.setenv("PRP3MC_NOTEBOOK_SAMPLES", "4096")
     monkeypatch.setenv("MPLBACKEND", "Agg")
