@@ -39,7 +39,7 @@ def test_kernel_equals_numpy_path(geometry, region, name, theta):
 
 def test_threaded_grid_equals_numpy_path(geometry, region):
     """A grid large enough for the threaded blocks, with the shape kept."""
-    grid = region.grid(71)
+    grid = region.grid(131)
     wc, mx = worst_case(geometry, PAPER, grid), worst_case_maxima(geometry, PAPER, grid)
     assert mx.position_mm.shape == grid.shape[:-1]
     for q in QUANTITIES:

@@ -133,7 +133,7 @@ def envelope_kernel(poses, legc, family, leg, unit, box, limits, check, values, 
     bad : (N,) int64 out, bit ``3 * reason + leg`` set for each refusal (see REASONS).
     Small batches run on the calling thread, larger ones in blocks on all cores.
     """
-    run = _blocks_threaded if poses.shape[0] > 4 * BLOCK else _blocks_serial
+    run = _blocks_threaded if poses.shape[0] > 16 * BLOCK else _blocks_serial   # threads pay from ~128^2
     run(poses, legc, family, leg, unit, box, limits, check, values, signs, bad)
 
 
