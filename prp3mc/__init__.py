@@ -35,7 +35,7 @@ from .study.results import StudyResult
 from .study.runner import run_study
 from .study.summary import build_summary
 from .measurement.campaign import Campaign, read_campaign
-from .measurement.selection import DiscrepancyResult
+from .measurement.results import DiscrepancyResult
 from .measurement.simulate import simulate_campaign
 from .measurement.workflow import detectable_effect, discrepancy
 

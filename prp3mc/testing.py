@@ -42,7 +42,7 @@ def _number(x: Any) -> bool:
 
 def assert_summary_close(actual: "dict | str | os.PathLike", golden: "dict | str | os.PathLike", *,
                          n_se: float = 5.0, rtol_exact: float = 1e-9, atol_exact: float = 1e-12,
-                         ignore: tuple = ("metadata",)) -> None:
+                         ignore: tuple = ("metadata", "inputs", "versions")) -> None:
     """Assert that two study summaries agree within their statistical uncertainty.
 
     Walks both nested dicts (``summary.json`` layout, see
@@ -61,7 +61,8 @@ def assert_summary_close(actual: "dict | str | os.PathLike", golden: "dict | str
     rtol_exact, atol_exact : float
         Tolerance of exact quantities.
     ignore : tuple of str
-        Top-level keys not compared (run metadata: seeds, versions, times).
+        Top-level keys not compared, present or not on either side (what a
+        run was made from and how: files, seeds, versions, times).
 
     Raises
     ------
@@ -82,12 +83,14 @@ def assert_summary_close(actual: "dict | str | os.PathLike", golden: "dict | str
         elif isinstance(g, dict) and isinstance(a, dict):
             for key in g:
                 where = f"{path}.{key}" if path else key
+                if not path and key in ignore:
+                    continue
                 if key not in a:
                     failures.append(f"{where}: missing from actual")
-                elif path or key not in ignore:
+                else:
                     walk(a[key], g[key], where)
             failures.extend(f"{path}.{key}: not in golden" if path else f"{key}: not in golden"
-                            for key in a if key not in g)
+                            for key in a if key not in g and (path or key not in ignore))
         elif isinstance(g, list) and isinstance(a, list):
             if len(a) != len(g):
                 failures.append(f"{path}: length {len(a)} != golden {len(g)}")

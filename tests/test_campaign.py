@@ -8,7 +8,7 @@ from prp3mc import Budget, Geometry, Region
 from prp3mc.errors import CampaignError
 from prp3mc.measurement.campaign import Campaign, read_campaign
 from prp3mc.measurement.prediction import predict
-from prp3mc.measurement.simulate import simulate_campaign
+from prp3mc.measurement.simulate import SETTLE_S, SLIDER_SPEED_MM_S, simulate_campaign
 from prp3mc.measurement.effects import EFFECT_NAMES, effect, library
 from prp3mc.errors import BudgetError, InputFileError
 
@@ -40,7 +40,7 @@ def test_round_trip_csv(setup, tmp_path):
 
 def test_any_labels_unequal_repeats_optional_columns(frame, setup):
     g, _, _ = setup
-    f = frame.drop(columns=["dir_2", "temp_C"]).iloc[:-3].copy()
+    f = frame.drop(columns=["dir_2", "temp_C", "time_s"]).iloc[:-3].copy()
     f["pose_id"] = f["pose_id"].map(lambda s: f"pose {s.lower()} / A")
     f["operator"] = "kim"                     # other columns are kept and ignored
     c = read_campaign(f, g)
@@ -117,7 +117,7 @@ def test_simulator_is_reproducible_and_records(setup):
 
 
 @pytest.mark.parametrize("effects", [{}, {"b_1": 0.03, "backlash_2": 0.04, "thermal": 2e-5, "alpha_3": 0.05,
-                                          "spread_theta_1": 0.1}])
+                                          "spread_theta_1": 0.1}, {"scale_2": 2e-4, "beta_1": 0.03}])
 def test_simulator_matches_prediction(setup, effects):
     """The exact-model simulator's mean and covariance agree with the linear prediction within 4.5 SE."""
     g, b, _ = setup
@@ -140,3 +140,110 @@ def test_sequence_and_one_sided_approach(setup):
     assert set(np.unique(c.direction)) <= {-1.0, 1.0}
     assert np.all(simulate_campaign(g, b, poses, 1, approach="negative", rng=2).direction == -1)
     assert isinstance(c, Campaign) and isinstance(c.to_frame(), pd.DataFrame)
+
+
+# --------------------------------------------------------------------------- the realities of issue 10
+
+SIGMA = {"instrument_sigma_mm": 0.002, "instrument_sigma_deg": 0.0005}
+
+
+@pytest.fixture(scope="module")
+def grid49():
+    g, b = Geometry.from_preset("u-shape"), Budget.from_preset("paper")
+    return g, b, Region.from_preset("u-shape").grid(7).reshape(-1, 3)
+
+
+def test_realities_off_are_the_plain_campaign(grid49):
+    """Zero registration, drift and outliers and r = 0 give the very same numbers as the defaults."""
+    g, b, poses = grid49
+    plain = simulate_campaign(g, b, poses, 2, effects={"beta_1": 0.02}, rng=6)
+    off = simulate_campaign(g, b, poses, 2, effects={"beta_1": 0.02}, registration=(0, 0, 0), drift=(0, 0, 0),
+                            outliers=(0.0, 0.5), repeatable_fraction=0.0, rng=6)
+    np.testing.assert_array_equal(plain.measured, off.measured)
+    assert plain.metadata["registration"] is None and off.metadata["outlier_rows"] == ()
+
+
+def test_visit_times_are_moves_plus_settling(grid49):
+    g, b, poses = grid49
+    t = simulate_campaign(g, b, poses, 3, rng=1).to_frame()["time_s"].to_numpy()
+    step = np.diff(t)
+    assert t[0] == SETTLE_S and (step >= SETTLE_S).all()
+    assert (step <= SETTLE_S + 200.0 / SLIDER_SPEED_MM_S).all() and step.std() > 0.5   # realistic, uneven
+
+
+def _gls(G, r, cov_rows):
+    """Generalised least squares of r (M, 3) on G (M, 3, K) with block covariance (M, 3, 3): estimate, SE."""
+    W = np.linalg.inv(cov_rows)
+    info = np.einsum("mok,mop,mpl->kl", G, W, G)
+    est = np.linalg.solve(info, np.einsum("mok,mop,mp->k", G, W, r))
+    return est, np.sqrt(np.diag(np.linalg.inv(info)))
+
+
+def test_registration_and_drift_are_recovered_by_a_rigid_fit(grid49):
+    """A rigid transform plus an offset linear in time, fitted to measured minus predicted, recover both within 4.5 SE."""
+    g, b, poses = grid49
+    reg, drift = (0.060, -0.040, 0.020), (0.050, -0.040, 0.015)
+    c = simulate_campaign(g, b, poses, 8, registration=reg, drift=drift, rng=12, **SIGMA)
+    pred = predict(g, b, c, **SIGMA)
+    t = c.to_frame()["time_s"].to_numpy()
+    s = (t - t[0]) / (t[-1] - t[0])
+    x, y = c.commanded[:, 0], c.commanded[:, 1]
+    rad = np.pi / 180.0
+    one, zero = np.ones_like(x), np.zeros_like(x)
+    rigid = np.stack([np.stack([one, zero, zero], -1), np.stack([zero, one, zero], -1),
+                      np.stack([-y * rad, x * rad, one], -1)], axis=-1)          # (M, 3 rows, 3 params)
+    G = np.concatenate([rigid, np.eye(3) * s[:, None, None]], axis=-1)       # registration, then drift
+    est, se = _gls(G, c.error - pred.mean, pred.cov[c.pose_index])
+    truth = np.array(reg + drift)
+    np.testing.assert_array_less(np.abs(est - truth), 4.5 * se)
+    assert (4.5 * se < np.abs(truth)).all()                                    # the test can fail
+    assert c.metadata["registration"] == reg and c.metadata["drift"] == drift
+
+
+def test_outliers_have_the_stated_count_and_size(grid49):
+    g, b, poses = grid49
+    clean = simulate_campaign(g, b, poses, 8, rng=3, **SIGMA)
+    dirty = simulate_campaign(g, b, poses, 8, outliers=(0.01, 0.5), rng=3, **SIGMA)
+    rows = np.array(dirty.metadata["outlier_rows"])
+    assert rows.size == round(0.01 * dirty.n_measurements) == 4
+    jump = dirty.measured - clean.measured                                    # the other draws are unchanged
+    np.testing.assert_allclose(np.hypot(jump[rows, 0], jump[rows, 1]), 0.5, rtol=1e-12)
+    np.testing.assert_array_equal(np.delete(jump, rows, axis=0), 0.0)
+    np.testing.assert_array_equal(jump[:, 2], 0.0)
+
+
+@pytest.mark.parametrize("r", [0.0, 0.6, 1.0])
+def test_repeatable_fraction_splits_the_variance(r):
+    """Between-pose excess variance over the predicted variance estimates r without bias, within 4.5 SE."""
+    g, b = Geometry.from_preset("delta-shape"), Budget.from_preset("paper")
+    rng = np.random.default_rng(0)
+    poses = np.stack([rng.uniform(-40, 40, 150), rng.uniform(120, 200, 150), rng.uniform(-4, 4, 150)], -1)
+    n = 4
+    c = simulate_campaign(g, b, poses, n, repeatable_fraction=r, instrument_sigma_mm=0.0,
+                          instrument_sigma_deg=0.0, rng=21)
+    pred = predict(g, b, c)
+    var = np.diagonal(pred.cov, axis1=1, axis2=2)                             # (P, 3)
+    resid = c.error - pred.mean
+    P = c.n_poses
+    mean = np.stack([np.bincount(c.pose_index, resid[:, k], P) for k in range(3)], -1) / n
+    within = np.stack([np.bincount(c.pose_index, (resid[:, k] - mean[c.pose_index, k]) ** 2, P)
+                       for k in range(3)], -1) / (n - 1)
+    t = ((mean**2 - within / n) / var).mean(axis=1)                           # unbiased for r, per pose
+    se = t.std(ddof=1) / np.sqrt(P)
+    assert abs(t.mean() - r) < 4.5 * se and se < 0.1
+    if r == 1.0:                                                              # each pose keeps its errors
+        np.testing.assert_allclose(within, 0.0, atol=1e-20)
+    assert c.metadata["repeatable_fraction"] == r
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"registration": (0.01, 0.02)}, "registration must be three finite numbers"),
+    ({"drift": (0.0, np.nan, 0.0)}, "drift must be three finite numbers"),
+    ({"outliers": (1.5, 0.5)}, "outliers: fraction must lie in"),
+    ({"outliers": 0.01}, "outliers must be"),
+    ({"repeatable_fraction": -0.1}, "repeatable_fraction must lie in"),
+])
+def test_bad_reality_settings(setup, kwargs, message):
+    g, b, poses = setup
+    with pytest.raises(CampaignError, match=message):
+        simulate_campaign(g, b, poses, 1, **kwargs)

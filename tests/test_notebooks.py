@@ -1,5 +1,6 @@
-"""Every notebook in notebooks/ runs top to bottom at a small sample size."""
+"""Every notebook in notebooks/ runs top to bottom at a small sample size and shows every picture it draws."""
 
+import re
 from pathlib import Path
 
 import nbformat
@@ -8,9 +9,36 @@ from nbclient import NotebookClient
 
 NOTEBOOKS = sorted((Path(__file__).resolve().parent.parent / "notebooks").glob("*.ipynb"))
 
+#: A cell draws when its code (imports aside) calls a plotting function: ``plots.x(``, ``.plot*(``,
+#: ``sns.x(``, ``plt.x(`` or ``*_figure(``.
+DRAWS = re.compile(r"\bplots\.\w+\(|\.plot\w*\(|\bsns\.\w+\(|\bplt\.\w+\(|_figure\(")
+IMPORT = re.compile(r"\s*(import|from)\s")
+IMAGES = ("image/png", "image/svg+xml")
+
+
+def draws(cell) -> bool:
+    """Whether a code cell calls a plotting function (import lines do not count)."""
+    code = "\n".join(line for line in cell.source.splitlines() if not IMPORT.match(line))
+    return cell.cell_type == "code" and bool(DRAWS.search(code))
+
+
+def shows_picture(cell) -> bool:
+    return any(kind in out.get("data", {}) for out in cell.get("outputs", []) for kind in IMAGES)
+
 
 def test_notebooks_found():
     assert {"quickstart.ipynb", "u_vs_delta.ipynb", "tolerance_whatif.ipynb"} <= {p.name for p in NOTEBOOKS}
+
+
+def test_draw_heuristic():
+    code = lambda src: nbformat.v4.new_code_cell(src)  # noqa: E731
+    assert draws(code("plots.worst_case_map(wc)")) and draws(code("fig = rep.plot_gap(r)"))
+    assert draws(code("x = 1\nplots.compare_maps_figure(res)")) and draws(code("plt.subplots(1, 2)"))
+    assert not draws(code("from prp3mc.reports import plots\nimport matplotlib.pyplot as plt"))
+    assert not draws(nbformat.v4.new_markdown_cell("plots.worst_case_map(wc)"))
+    png = nbformat.v4.new_output("display_data", data={"image/png": "iVBOR", "text/plain": "<Figure>"})
+    assert shows_picture(code("") | {"outputs": [png]})
+    assert not shows_picture(code("") | {"outputs": [nbformat.v4.new_output("stream", text="hi")]})
 
 
 SLOW_NOTEBOOKS = {"discrepancy_walkthrough"}  # runs the whole discrepancy workflow (~10 s idle)
@@ -18,12 +46,17 @@ SLOW_NOTEBOOKS = {"discrepancy_walkthrough"}  # runs the whole discrepancy workf
 
 @pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem in SLOW_NOTEBOOKS else p
                                   for p in NOTEBOOKS], ids=[p.stem for p in NOTEBOOKS])
-def test_notebook_executes(path, monkeypatch):
+def test_notebook_executes_and_shows_its_figures(path, monkeypatch):
     monkeypatch.setenv("PRP3MC_NOTEBOOK_SAMPLES", "4096")
-    monkeypatch.setenv("MPLBACKEND", "Agg")
+    monkeypatch.delenv("MPLBACKEND", raising=False)  # the kernel's inline backend, as a user has it
     nb = nbformat.read(path, as_version=4)
     assert all(not cell.get("outputs") for cell in nb.cells if cell.cell_type == "code"), \
         f"{path.name} is saved with outputs: clear them"
     first_code = next(cell for cell in nb.cells if cell.cell_type == "code")
     assert "PRP3MC_NOTEBOOK_SAMPLES" in first_code.source
     NotebookClient(nb, timeout=120, kernel_name="python3", resources={"metadata": {"path": str(path.parent)}}).execute()
+    drawing = [i for i, cell in enumerate(nb.cells) if draws(cell)]
+    blank = [f"cell {i}: {nb.cells[i].source.strip().splitlines()[-1][:80]}" for i in drawing
+             if not shows_picture(nb.cells[i])]
+    assert not blank, f"{path.name}: {len(blank)} of {len(drawing)} drawing cells show no picture:\n  " \
+        + "\n  ".join(blank)

@@ -2,10 +2,12 @@
 
 import base64
 import dataclasses
+import hashlib
 import importlib.util
 import json
 import re
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -13,6 +15,10 @@ import pytest
 from prp3mc import Budget, Geometry, Region, sensitivity
 from prp3mc.cli import main
 from prp3mc.errors import StudyError, UnknownPresetError
+from prp3mc.reports import plots
+from prp3mc.study.summary import build_summary
+from prp3mc.uncertainty.ranking import ranking
+from prp3mc.uncertainty.worstcase import worst_case
 from prp3mc.study.reader import STUDIES_DIR, Study, bundled_studies
 from prp3mc.study.runner import run_study
 from prp3mc.testing import assert_summary_close, load_summary
@@ -132,7 +138,7 @@ def test_cli_writes_report_folder(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["study", str(study_file(tmp_path)), "--out", str(out), "--no-progress", "--formats", "png,svg"]) == 0
     note = capsys.readouterr().out
-    assert re.search(r"wrote .*report\.html in [\d.]+ s .*u-shape [\d.]+-[\d.]+ um, delta [\d.]+-[\d.]+ um", note)
+    assert re.search(r"wrote .*report\.html in [\d.]+ s .*u-shape [\d.]+-[\d.]+ µm, delta [\d.]+-[\d.]+ µm", note)
     summary = json.loads((out / "summary.json").read_text())
     assert set(summary["configurations"]) == {"u-shape", "delta"}
     u = summary["configurations"]["u-shape"]
@@ -142,7 +148,19 @@ def test_cli_writes_report_folder(tmp_path, capsys):
     assert set(u["sobol"]["position"]["clearance_1"]) == {"kind", "S1", "ST", "worst_case_share"}
     meta = summary["metadata"]
     assert meta["seed"] == 3 and meta["montecarlo_samples"] == 4096 and meta["wall_time_s"] > 0
+    inputs = summary["inputs"]   # what the run was made from
+    path = study_file(tmp_path)
+    assert inputs["study"] == {"name": "small", "file": str(path.resolve()),
+                               "sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
+    assert inputs["budget"] == {"name": "paper", "preset": "paper"}
+    assert inputs["configurations"]["delta"]["geometry"] == {"name": "delta-shape", "preset": "delta-shape"}
+    assert inputs["configurations"]["delta"]["region"]["x_mm"] == [-20.0, 20.0]
+    assert inputs["seed"] == 3 and inputs["montecarlo_samples"] == 4096 and inputs["sobol_grid"] == [2, 2]
+    assert set(summary["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib"}
     html = (out / "report.html").read_text()
+    assert "<h2>7. Run</h2>" in html and inputs["study"]["sha256"] in html and "SALib" in html
+    assert not re.search(r"\d um\b|\(um\)", html) and "SPEC" not in html  # µm, and no internal references
+    assert {"ecdf_position", "ecdf_phi"} <= {p.stem for p in (out / "figures").glob("*.png")}
     images = re.findall(r'<img src="([^"]+)"', html)
     pngs = sorted(p.stem for p in (out / "figures").glob("*.png"))
     assert sorted(p.stem for p in (out / "figures").glob("*.svg")) == pngs
@@ -270,3 +288,92 @@ def test_golden_summary_catches_guide_play_10_percent(name):
     assert any(".worst_case_position_um.max" in f for f in failing)
     # not only the exact worst case: the Monte Carlo statistics see it beyond their standard errors too
     assert sum(".montecarlo.position_um." in f for f in failing) >= 10
+
+
+# ----------------------------------------------------------------- what the summary says about its run
+def test_inputs_name_files_and_their_hashes(tmp_path):
+    Budget.from_preset("paper").to_toml(tmp_path / "b.toml")
+    Geometry.from_preset("u-shape").to_toml(tmp_path / "g.toml")
+    text = _replace('budget = "paper"', 'budget = "b.toml"').replace('geometry = "u-shape"', 'geometry = "g.toml"')
+    study = dataclasses.replace(Study.load(study_file(tmp_path, text)), outputs=())
+    summary = build_summary(run_study(study, progress=False))
+    sha = lambda name: hashlib.sha256((tmp_path / name).read_bytes()).hexdigest()  # noqa: E731
+    assert summary["inputs"]["budget"] == {"name": "paper", "file": str((tmp_path / "b.toml").resolve()),
+                                           "sha256": sha("b.toml")}
+    geometries = summary["inputs"]["configurations"]
+    assert geometries["u-shape"]["geometry"]["sha256"] == sha("g.toml")
+    assert geometries["delta"]["geometry"] == {"name": "delta-shape", "preset": "delta-shape"}
+    # a budget replaced in code is not the file's: named, and said so
+    what_if = build_summary(run_study(study, progress=False, budget=study.budget.scaled(1.1, "theta")))
+    budget = what_if["inputs"]["budget"]
+    assert budget["note"].startswith("not as the study file") and "sha256" not in budget
+    # run metadata never fails a regression check, whichever side has it
+    golden = {k: v for k, v in summary.items() if k not in ("inputs", "versions", "metadata")}
+    assert_summary_close(summary, golden)
+    assert_summary_close(golden, summary)
+
+
+# ----------------------------------------------------------------- honest pictures
+def _fake_config(name, values, x=(-40, 40), y=(60, 140)):
+    """What compare_maps_figure reads of a ConfigurationResult: a name and a worst case on a grid."""
+    ny, nx = values.shape
+    poses = np.stack([*np.meshgrid(np.linspace(*x, nx), np.linspace(*y, ny)), np.zeros((ny, nx))], axis=-1)
+    return SimpleNamespace(name=name, worst_case=SimpleNamespace(poses=poses, value=lambda q: values / 3600))
+
+
+def _figure():
+    from matplotlib.figure import Figure
+    return Figure()
+
+
+def test_constant_field_says_so_without_extrema():
+    flat = np.full((5, 6), 155.13247841458747) * (1 + 1e-13 * np.arange(30).reshape(5, 6))  # round-off only
+    config = _fake_config("u-shape", flat)
+    fig = plots.worst_case_map(config.worst_case, "phi", ax=_figure().subplots())
+    ax = fig.axes[0]
+    assert [t.get_text() for t in ax.texts] == ["constant: 155.1 arcsec"]
+    assert ax.get_legend() is None and not ax.get_lines()          # no max/min markers
+    varying = _fake_config("u-shape", flat + np.arange(6))
+    ax = plots.worst_case_map(varying.worst_case, "phi", ax=_figure().subplots()).axes[0]
+    assert not any(t.get_text().startswith("constant") for t in ax.texts)
+    assert [t.get_text()[:3] for t in ax.get_legend().get_texts()] == ["max", "min"]
+    fig = plots.compare_maps_figure([config, _fake_config("delta", flat + 55)], "worstcase", "phi", fig=_figure())
+    assert "constant over each region" in fig.get_suptitle() and len(fig.axes) == 2   # no colour bar
+
+
+@pytest.mark.parametrize("spread, shared", [(20.0, True), (1.5, False)])
+def test_colour_scale_shared_only_when_no_panel_is_left_in_one_colour(spread, shared):
+    ramp = np.linspace(0, 1, 6)[None, :] * np.ones((5, 1))
+    configs = [_fake_config("u-shape", 115 + spread * ramp), _fake_config("delta", 115 + 17 * ramp)]
+    fig = plots.compare_maps_figure(configs, "worstcase", "phi", fig=_figure())
+    colour_bars = [ax for ax in fig.axes if ax.get_label() == "<colorbar>"]
+    assert len(colour_bars) == (1 if shared else 2)
+    assert ("one colour scale" in fig.get_suptitle()) == shared
+    assert ("its own colour scale" in fig.get_suptitle()) != shared
+
+
+def test_ranking_figure_one_basis_each_ranking_in_its_own_order(tmp_path):
+    result = run_study(Study.load(study_file(tmp_path)), progress=False)
+    frame = result["u-shape"].ranking["position"]
+    assert frame.attrs["n_poses"] == 4
+    basis, column = plots.ranking_basis(frame)
+    assert basis == "mean over the 4 poses" and column == "worst_case_share_mean"
+    sobol_ax, wc_ax = plots.ranking_figure(frame, fig=_figure()).axes
+    assert basis in sobol_ax.get_title() and basis in wc_ax.get_title()
+    shares = frame.dropna(subset=[column]).set_index("name")[column]
+    drawn = [t.get_text().removesuffix(" (group)") for t in wc_ax.get_yticklabels()]
+    assert drawn == list(shares.sort_values(ascending=False).index)                # ranked by its own share
+    assert [t.get_text().removesuffix(" (group)") for t in sobol_ax.get_yticklabels()] == list(frame["name"])
+    # the mean share is the mean over the poses of the per-pose shares
+    c = result["u-shape"]
+    wc = worst_case(c.configuration.geometry, result.study.budget, c.sobol.poses)
+    per_pose = [ranking(c.sobol, wc, "position", index=k).set_index("name")["worst_case_share"]
+                for k in np.ndindex(c.sobol.poses.shape[:-1])]
+    np.testing.assert_allclose(shares, sum(per_pose)[shares.index] / len(per_pose), rtol=1e-12)
+
+    ecdf = plots.ecdf_figure(list(result.configurations), "position", fig=_figure())
+    ax = ecdf.axes[0]
+    worst = 1e3 * c.samples.worst_position_mm[0]
+    assert any(np.allclose(line.get_xdata(), worst) for line in ax.get_lines())   # the worst case, dashed
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert any(label.startswith("worst case") and label.endswith("µm") for label in labels)

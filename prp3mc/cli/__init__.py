@@ -1,4 +1,4 @@
-"""Command-line interface: ``prp3mc <command> ...`` (SPEC §6).
+"""Command-line interface: ``prp3mc <command> ...`` (README, *Command line*).
 
 A thin wrapper over the Python API, one module per command in this package;
 each registers itself with :func:`command`. Bad input ends with a one-line

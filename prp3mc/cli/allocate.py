@@ -1,11 +1,11 @@
-"""``prp3mc allocate``: the least-cost tolerance classes that meet an accuracy spec over a region (SPEC §7)."""
+"""``prp3mc allocate``: the least-cost tolerance classes that meet an accuracy spec over a region."""
 
 from __future__ import annotations
 
 from .._version import __version__
 from ..kinematics.geometry import REGION_PRESETS
 from ..provenance import spec_record
-from ..uncertainty.allocation import allocate, allocation_front
+from ..uncertainty.allocation import allocate, allocation_front, front_records
 from ..units import DEG2ARCSEC, MM2UM
 from . import add_geometry, add_json, command, emit_json, finite_float, positive_int, provenance
 
@@ -18,7 +18,7 @@ class AllocateCommand:
         p.add_argument("--region", required=True, choices=tuple(REGION_PRESETS), metavar="R",
                        help=f"test region preset ({', '.join(REGION_PRESETS)})")
         p.add_argument("--classes", required=True, metavar="FILE.toml",
-                       help="classes file (SPEC §7), or the bundled example: example")
+                       help="classes file (README, File formats), or the bundled example: example")
         p.add_argument("--spec-position-um", type=finite_float, default=None, metavar="X",
                        help="worst-case position error bound, µm (with --spec-percentile: that percentile's bound)")
         p.add_argument("--spec-phi-arcsec", type=finite_float, default=None, metavar="Z",
@@ -54,11 +54,7 @@ class AllocateCommand:
         if args.json:
             doc = r.to_dict()
             if front is not None:
-                wide = front.pivot(index="point", columns="output", values="value")
-                doc["front"] = [{"cost": float(front.loc[front["point"] == k, "cost"].iloc[0]),
-                                 "worst_case_position_um": MM2UM * float(row["position"]),
-                                 "worst_case_phi_arcsec": DEG2ARCSEC * float(row["phi"])}
-                                for k, row in wide.iterrows()]
+                doc["front"] = front_records(front)
             doc.update(provenance(args, r.geometry, classes=spec_record(args.classes, r.menu), region=args.region,
                                   grid=args.grid, phi_deg=args.phi_deg, n_poses=int(r.poses.shape[0]),
                                   k_sigma=args.k_sigma, seed=r.seed,

@@ -1,4 +1,4 @@
-"""``prp3mc discrepancy``: name what the model misses in a measurement campaign (SPEC §6)."""
+"""``prp3mc discrepancy``: name what the model misses in a measurement campaign."""
 
 from ..uncertainty.budget import Budget
 from ..measurement.workflow import discrepancy
@@ -13,7 +13,7 @@ class DiscrepancyCommand:
     def add_arguments(p):
         add_geometry(p)
         add_budget(p)
-        p.add_argument("--data", required=True, metavar="CSV", help="measurement campaign (SPEC §4)")
+        p.add_argument("--data", required=True, metavar="CSV", help="measurement campaign CSV (README, File formats)")
         p.add_argument("--out", required=True, metavar="DIR", help="report folder (discrepancy.json, report.html)")
         p.add_argument("--force", action="store_true", help="replace an existing --out folder")
         p.add_argument("--instrument-sigma-mm", type=finite_float, default=0.0, metavar="S",
@@ -24,6 +24,10 @@ class DiscrepancyCommand:
                        help="family-wise level of the naming tests (default 0.01)")
         p.add_argument("--alpha-unexplained", type=finite_float, default=0.05, metavar="A",
                        help="family-wise level of the final test for unexplained disagreement (default 0.05)")
+        p.add_argument("--no-registration", action="store_true",
+                       help="the instrument is known to be registered to the machine: do not fit its registration")
+        p.add_argument("--outlier-rate", type=finite_float, default=0.01, metavar="A",
+                       help="family-wise false-alarm rate of the gross-error test over all rows (default 0.01)")
         p.add_argument("--seed", type=int, default=None, metavar="S",
                        help="seed of the bootstrap (default: fresh, recorded in the output)")
         add_json(p)
@@ -32,22 +36,40 @@ class DiscrepancyCommand:
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         result = discrepancy(geometry, budget, args.data, instrument_sigma_mm=args.instrument_sigma_mm,
-                             instrument_sigma_deg=args.instrument_sigma_deg, alpha=args.alpha,
-                             alpha_unexplained=args.alpha_unexplained, rng=args.seed)
+                             instrument_sigma_deg=args.instrument_sigma_deg, registration=not args.no_registration,
+                             alpha=args.alpha, alpha_unexplained=args.alpha_unexplained,
+                             outlier_rate=args.outlier_rate, rng=args.seed)
         folder = write_report(result, args.out, force=args.force)
         if args.json:
             emit_json(result.to_dict())
             return
-        g = result.gap
-        lines = [f"{result.campaign.n_measurements} measurements of {result.campaign.n_poses} poses; "
-                 f"seed {result.seed}; {result.wall_time_s:.1f} s"]
-        for e in result.named_effects:
-            alias = f" (not separable from {', '.join(e.aliases)})" if e.aliases else ""
-            lines.append(f"named {e.name} = {e.value:.4g} {e.unit}  95% CI [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]{alias}")
-        if not result.named_effects:
-            lines.append("named nothing: the model misses nothing this campaign can see")
-        lines.append(f"gap {g['before']:.4g} -> {g['after']:.4g} (null level 1, closed below 5); "
-                     f"{'closed' if g['closed'] else 'not closed'}"
-                     + ("; UNEXPLAINED disagreement remains" if result.unexplained else ""))
-        lines.append(f"report: {folder / 'report.html'}")
-        print("\n".join(lines))
+        print("\n".join(headline(result) + [f"report: {folder / 'report.html'}"]))
+
+
+def headline(result) -> list[str]:
+    """The lines printed after an analysis: what was named, the nuisances, the gap and the one verdict."""
+    g = result.gap
+    lines = [f"{result.campaign.n_measurements} measurements of {result.campaign.n_poses} poses; "
+             f"seed {result.seed}; {result.wall_time_s:.1f} s"]
+    if result.outliers:
+        rows = ", ".join(str(o["row"]) for o in result.outliers[:8]) + (" ..." if len(result.outliers) > 8 else "")
+        lines.append(f"{len(result.outliers)} gross error(s) set aside (data rows {rows}; false-alarm rate "
+                     f"{result.outlier_rule['family_wise_rate']:g} over all rows)")
+    for n in result.nuisance:
+        lines.append(f"nuisance {n['name']} = {n['value']:.4g} {n['unit']}  95% CI [{n['ci95'][0]:.4g}, "
+                     f"{n['ci95'][1]:.4g}]")
+    rep = result.repeatability
+    lines.append(f"repeatable fraction {rep['repeatable_fraction']:.2f}  95% CI [{rep['ci95'][0]:.2f}, "
+                 f"{rep['ci95'][1]:.2f}]")
+    for e in result.named_effects:
+        alias = f" (not separable from {', '.join(e.aliases)})" if e.aliases else ""
+        lines.append(f"named {e.name} = {e.value:.4g} {e.unit}  95% CI [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]{alias}")
+    if not result.named_effects:
+        lines.append("named nothing: the model misses nothing this campaign can see")
+    if result.confounded_with_registration:
+        lines.append("not testable, confounded with registration: " + ", ".join(result.confounded_with_registration))
+    verdict = ("closed" if g["closed"] else
+               f"not closed: UNEXPLAINED disagreement remains ({g['deciding_channel'].replace('_', ' ')})")
+    lines.append(f"gap {g['before']:.3g} -> {g['after']:.3g} (null level <= 1, closed at <= {g['closed_at']:.2g}): "
+                 f"{verdict}")
+    return lines

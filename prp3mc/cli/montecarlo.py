@@ -1,4 +1,4 @@
-"""``prp3mc montecarlo``: Monte Carlo statistics of the pose error at one pose (SPEC §6)."""
+"""``prp3mc montecarlo``: Monte Carlo statistics of the pose error at one pose."""
 
 from .._version import __version__
 from ..uncertainty.budget import Budget
@@ -65,11 +65,11 @@ class MonteCarloCommand:
                  f"pose x={x:g} mm  y={y:g} mm  phi={phi_:g} deg",
                  f"{r.n_samples} samples, seed {r.seed}", "",
                  f"{'':14s}{'mean':>12s}{'± se':>10s}{'std':>12s}{'± se':>10s}"]
-        for k, name in enumerate(("dx um", "dy um", "dphi arcsec")):
+        for k, name in enumerate(("dx µm", "dy µm", "dphi arcsec")):
             f = 1e3 if k < 2 else 3600.0
             lines.append(f"{name:14s}{f * r.mean[k]:12.3f}{f * r.mean_se[k]:10.3f}"
                          f"{f * r.std[k]:12.3f}{f * r.std_se[k]:10.3f}")
-        lines += ["", f"{'percentile':14s}{'position um':>14s}{'95% CI':>22s}{'|dphi| arcsec':>16s}"]
+        lines += ["", f"{'percentile':14s}{'position µm':>14s}{'95% CI':>22s}{'|dphi| arcsec':>16s}"]
         for q, p in enumerate(r.percentiles):
             lo, hi = 1e3 * r.position_pct_ci[q]
             lines.append(f"{_pkey(p):14s}{1e3 * r.position_pct[q]:14.3f}   [{lo:8.3f}, {hi:8.3f}]"
@@ -82,5 +82,5 @@ class MonteCarloCommand:
         if r.linearization is not None:
             row = r.linearization.iloc[0]
             lines.append(f"\nExact vs linear model ({int(row['n_samples'])} samples): max "
-                         f"{row['position_max_um']:.4f} um, RMS {row['position_rms_um']:.4f} um")
+                         f"{row['position_max_um']:.4f} µm, RMS {row['position_rms_um']:.4f} µm")
         print("\n".join(lines))

@@ -1,4 +1,4 @@
-"""``prp3mc sensitivity``: A, B and every J_q at one pose (SPEC §6)."""
+"""``prp3mc sensitivity``: A, B and every J_q at one pose."""
 
 from .._version import __version__
 from ..kinematics.geometry import Geometry

@@ -1,4 +1,4 @@
-"""``prp3mc sobol``: Sobol indices at one pose, ranked next to the worst case (SPEC §6)."""
+"""``prp3mc sobol``: Sobol indices at one pose, ranked next to the worst case."""
 
 import math
 

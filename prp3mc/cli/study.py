@@ -1,4 +1,4 @@
-"""``prp3mc study``: run a study file and write its report, figures, tables and summary.json (SPEC §6)."""
+"""``prp3mc study``: run a study file and write its report, figures, tables and summary.json."""
 
 import sys
 import time
@@ -39,7 +39,7 @@ class StudyCommand:
         report = write_study(result, args.out, force=args.force, formats=formats)
         worst = result.to_frame().query("output == 'position' and statistic == 'worst_case'")
         span = worst.pivot(index="configuration", columns="aggregate", values="value") * MM2UM
-        ranges = ", ".join(f"{c.name} {span.at[c.name, 'min']:.1f}-{span.at[c.name, 'max']:.1f} um"
+        ranges = ", ".join(f"{c.name} {span.at[c.name, 'min']:.1f}-{span.at[c.name, 'max']:.1f} µm"
                            for c in result.configurations)
         print(f"prp3mc study {study.name}: wrote {report} in {time.perf_counter() - t0:.1f} s "
               f"(analyses {result.wall_time_s:.1f} s, seed {result.seed}); worst-case position error: {ranges}",

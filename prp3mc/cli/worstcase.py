@@ -1,4 +1,4 @@
-"""``prp3mc worstcase``: exact maximum of the linear model over the budget's box (SPEC §6)."""
+"""``prp3mc worstcase``: exact maximum of the linear model over the budget's box."""
 
 from .._version import __version__
 from ..uncertainty.budget import Budget
@@ -37,9 +37,9 @@ class WorstCaseCommand:
         lines = [f"prp3mc {__version__}  geometry {geometry.name}  budget {budget.name}  "
                  f"pose x={x:g} mm  y={y:g} mm  phi={phi:g} deg",
                  "Exact maximum of the linear model over the budget's box:",
-                 f"  position error  {1e3 * float(wc.position_mm):10.3f} um",
-                 f"  |dx|            {1e3 * float(wc.x_mm):10.3f} um",
-                 f"  |dy|            {1e3 * float(wc.y_mm):10.3f} um",
+                 f"  position error  {1e3 * float(wc.position_mm):10.3f} µm",
+                 f"  |dx|            {1e3 * float(wc.x_mm):10.3f} µm",
+                 f"  |dy|            {1e3 * float(wc.y_mm):10.3f} µm",
                  f"  |dphi|          {3600 * float(wc.phi_deg):10.3f} arcsec ({float(wc.phi_deg):.6g} deg)",
                  "", "Inputs at the position maximum, and each term's contribution:"]
         at = wc.maximizer("position")
@@ -47,7 +47,7 @@ class WorstCaseCommand:
             term = row["term"]
             value = (f"rho={at[term]:.4g} mm at zeta={at['zeta_' + term[-1]]:.1f} deg"
                      if term.startswith("rho_") else f"{at[term]:.4g}")
-            lines.append(f"  {term:10s} {value:34s} {1e3 * row['contribution']:9.3f} um  "
+            lines.append(f"  {term:10s} {value:34s} {1e3 * row['contribution']:9.3f} µm  "
                          f"({100 * row['share']:5.1f} %)")
         if args.k_sigma is not None:
             lines.append(f"Unbounded laws bounded at mean ± {args.k_sigma:g} sd.")

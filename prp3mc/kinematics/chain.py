@@ -2,7 +2,7 @@
 
 Poses at the boundary are ``[x_mm, y_mm, phi_deg]``; every function here
 converts phi to radians once and works in radians inside. Jacobians are
-returned in mm and rad (SPEC §1).
+returned in mm and rad of pose per mm or rad of parameter.
 
 Inside, every leg quantity is an array of shape (3, ...) (legs first, the
 batch last, so per-leg constants broadcast along long contiguous rows) and a

@@ -129,7 +129,7 @@ class Geometry:
     # ------------------------------------------------------------------ I/O
     @classmethod
     def from_preset(cls, name: str) -> "Geometry":
-        """One of the reference geometries of SPEC §2: ``u-shape`` or ``delta-shape``."""
+        """One of the two reference geometries: ``u-shape`` or ``delta-shape`` (our link lengths; the paper gives none)."""
         try:
             table = GEOMETRY_PRESETS[name]
         except KeyError:
@@ -224,7 +224,7 @@ class Region:
 
     @classmethod
     def from_preset(cls, name: str) -> "Region":
-        """The test region of a reference geometry (SPEC §2)."""
+        """The test region of a reference geometry (the paper's 80 mm x 80 mm square at phi = 0)."""
         try:
             return cls(**REGION_PRESETS[name])
         except KeyError:
@@ -254,7 +254,7 @@ def _preset(name, rows):
     return {"name": name, "leg": [dict(zip(keys, row), theta_deg=0.0) for row in rows]}
 
 
-#: Reference geometries of SPEC §2 (the paper gives no link lengths).
+#: The reference geometries (link lengths chosen by us: the paper gives none).
 GEOMETRY_PRESETS: dict[str, dict[str, Any]] = {
     "u-shape": _preset("u-shape", [
         (140.0, 180.0, -90.0, -90.0, 40.0, 10.0, 180.0, [0.0, 200.0]),
@@ -268,7 +268,7 @@ GEOMETRY_PRESETS: dict[str, dict[str, Any]] = {
     ]),
 }
 
-#: Test regions of SPEC §2 (the paper's 80 mm x 80 mm square, phi = 0).
+#: Test regions of the reference geometries (the paper's 80 mm x 80 mm square, phi = 0).
 REGION_PRESETS: dict[str, dict[str, Any]] = {
     "u-shape": {"x_mm": (-40.0, 40.0), "y_mm": (60.0, 140.0), "phi_deg": 0.0},
     "delta-shape": {"x_mm": (-40.0, 40.0), "y_mm": (120.0, 200.0), "phi_deg": 0.0},

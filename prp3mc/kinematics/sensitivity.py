@@ -38,7 +38,7 @@ from .chain import (
 
 __all__ = ["FAMILIES", "LENGTH_FAMILIES", "Sensitivity", "sensitivity", "h_entries"]
 
-#: The ten error families of SPEC §1, in the paper's order.
+#: The ten error families of the paper's model, in the paper's order.
 FAMILIES = ("a", "alpha", "b", "beta", "rho", "c", "gamma", "theta", "e", "psi")
 #: Families whose parameter is a length (mm); the others are angles (rad).
 LENGTH_FAMILIES = frozenset({"a", "b", "rho", "c", "e"})

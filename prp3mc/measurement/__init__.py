@@ -4,9 +4,14 @@
 - :mod:`~prp3mc.measurement.simulate` — simulated campaigns with hidden effects (exact chain).
 - :mod:`~prp3mc.measurement.effects` — the effect library and its signatures.
 - :mod:`~prp3mc.measurement.prediction` — the predicted distribution of every measurement.
-- :mod:`~prp3mc.measurement.likelihood` — the likelihood engine (fits with and without effects).
-- :mod:`~prp3mc.measurement.diagnostics` — the gap and the lack-of-fit diagnoses.
-- :mod:`~prp3mc.measurement.selection` — naming effects, aliases, results.
+- :mod:`~prp3mc.measurement.nuisance` — registration and drift of the instrument (nuisances).
+- :mod:`~prp3mc.measurement.likelihood` — the likelihood engine (fits with and without effects,
+  the repeatable fraction of the budget's errors).
+- :mod:`~prp3mc.measurement.outliers` — gross errors at a stated family-wise false-alarm rate.
+- :mod:`~prp3mc.measurement.subsets` — best subsets and alias sets of systematic effects.
+- :mod:`~prp3mc.measurement.diagnostics` — the tests, the one verdict and the gap.
+- :mod:`~prp3mc.measurement.selection` — naming effects with exchange moves, aliases.
+- :mod:`~prp3mc.measurement.results` — :class:`DiscrepancyResult` and the named effects.
 - :mod:`~prp3mc.measurement.workflow` — :func:`discrepancy`, the whole workflow.
 
 Imports uncertainty, kinematics and the foundations; never study or reports.

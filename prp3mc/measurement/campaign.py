@@ -1,4 +1,4 @@
-"""Measurement campaigns (SPEC §4): reading with validation.
+"""Measurement campaigns (CSV, README *File formats*): reading with validation.
 
 A campaign is a table with one row per measurement: the commanded pose
 ``x_cmd, y_cmd, phi_cmd`` (mm, mm, deg), the measured pose ``x_meas, y_meas,
@@ -34,7 +34,7 @@ __all__ = ["Campaign", "read_campaign", "REQUIRED_COLUMNS", "CMD_COLUMNS", "MEAS
 
 #: Commanded and measured pose columns, ``[x mm, y mm, phi deg]``.
 CMD_COLUMNS, MEAS_COLUMNS = ("x_cmd", "y_cmd", "phi_cmd"), ("x_meas", "y_meas", "phi_meas")
-#: Columns every campaign needs (SPEC §4).
+#: Columns every campaign needs.
 REQUIRED_COLUMNS = ("pose_id", *CMD_COLUMNS, *MEAS_COLUMNS)
 #: Optional approach-direction columns.
 DIR_COLUMNS = ("dir_1", "dir_2", "dir_3")
@@ -45,7 +45,7 @@ _SAME_CMD_TOL = 1e-6  # mm or deg: repeats of a pose must command the same pose
 
 @dataclass(frozen=True, slots=True)
 class Campaign:
-    """A validated measurement campaign (SPEC §4).
+    """A validated measurement campaign (layout in the module docstring).
 
     Attributes
     ----------
@@ -109,7 +109,7 @@ class Campaign:
         return self.measured - self.commanded
 
     def to_frame(self) -> pd.DataFrame:
-        """The campaign in SPEC §4 layout (plus its extra columns): the file format, in mm and deg."""
+        """The campaign in the file layout (plus its extra columns): the file format, in mm and deg."""
         df = pd.DataFrame({"pose_id": self.pose_id})
         for k, col in enumerate(CMD_COLUMNS):
             df[col] = self.commanded[:, k]
@@ -123,13 +123,13 @@ class Campaign:
         return pd.concat([df, self.extra.reset_index(drop=True)], axis=1)
 
     def to_csv(self, path: str | os.PathLike) -> None:
-        """Write the campaign as a SPEC §4 CSV file (full float precision)."""
+        """Write the campaign as a campaign CSV file (full float precision)."""
         self.to_frame().to_csv(path, index=False, float_format="%.12g")
 
     @classmethod
     def from_frame(cls, frame: pd.DataFrame, geometry: Geometry | None = None,
                    source: str = "campaign", metadata: dict | None = None, line_offset: int | None = None) -> "Campaign":
-        """Validate a table in SPEC §4 layout.
+        """Validate a table in the campaign layout.
 
         Parameters
         ----------
@@ -243,7 +243,7 @@ def read_campaign(data: "str | os.PathLike | pd.DataFrame | Campaign", geometry:
     Parameters
     ----------
     data : path, DataFrame or Campaign
-        A CSV file with a header (SPEC §4), or a table in that layout.
+        A CSV file with a header (the campaign layout), or a table in that layout.
     geometry : Geometry, optional
         If given, every commanded pose must be reachable by it.
 

@@ -1,4 +1,4 @@
-"""The library of candidate model effects (SPEC §5) and their signatures.
+"""The library of candidate model effects and their signatures.
 
 An *effect* is something the model may be missing. Systematic effects add a
 deterministic pose error that is linear in one parameter, its *signature*
@@ -57,7 +57,7 @@ _LEGS = (1, 2, 3)
 ROW_TO_DEG = np.array([1.0, 1.0, RAD2DEG])
 ROW_TO_DEG.flags.writeable = False
 
-#: Every effect name of SPEC §5, in library order.
+#: Every effect name of the library, in library order.
 EFFECT_NAMES = (tuple(f"{q}_{i}" for q in OFFSET_FAMILIES for i in _LEGS)
                 + tuple(f"scale_{i}" for i in _LEGS) + tuple(f"backlash_{i}" for i in _LEGS)
                 + ("thermal",) + tuple(f"spread_{q}_{i}" for q in SPREAD_FAMILIES for i in _LEGS))
@@ -72,7 +72,7 @@ class Effect:
     Attributes
     ----------
     name : str
-        SPEC §5 name, e.g. ``beta_2``, ``backlash_1``, ``spread_b_3``.
+        Library name, e.g. ``beta_2``, ``backlash_1``, ``spread_b_3``.
     kind : str
         ``offset``, ``scale``, ``backlash``, ``thermal`` or ``spread``.
     family : str or None
@@ -111,7 +111,7 @@ class Effect:
 
 
 def effect(name: str) -> Effect:
-    """Parse an effect name of SPEC §5; :class:`BudgetError` names the known ones otherwise."""
+    """Parse an effect name of the library; :class:`BudgetError` names the known ones otherwise."""
     if name == "thermal":
         return Effect("thermal", "thermal", None, None, "1/K")
     m = _PATTERN.match(str(name))
@@ -123,7 +123,7 @@ def effect(name: str) -> Effect:
         if family in ("scale", "backlash"):
             return Effect(name, family, "b", leg, "1" if family == "scale" else "mm")
         return Effect(name, "offset", family, leg, "mm" if family in LENGTH_FAMILIES else "deg")
-    raise BudgetError(f"unknown effect {name!r}: the library (SPEC §5) has "
+    raise BudgetError(f"unknown effect {name!r}: the library has "
                       "q_i for q in a, alpha, beta, gamma, theta, c, e, psi, b; scale_i; backlash_i; "
                       "thermal; spread_rho_i, spread_theta_i, spread_b_i (i = 1, 2, 3)")
 

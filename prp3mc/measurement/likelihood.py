@@ -1,18 +1,24 @@
 """The likelihood engine: fits of the model with and without library effects.
 
-Inference uses the Gaussian likelihood of the residuals ``measured -
-commanded - mu_p`` with covariance ``V_p = Sigma_p + N`` (see
-:mod:`~prp3mc.measurement.prediction`); systematic values are generalized
-least squares (exact covariance whatever the error law), a spread effect
-scales one input's law about 0 so its contribution to ``(mu_p, Sigma_p)``
-becomes ``(f mu_p, f^2 Sigma_p)`` and ``f`` is found by maximum likelihood
-with a profile-likelihood interval.
+Measurement j of pose p is ``y = commanded + mu_p + H theta_n + G theta + u_p + w_j + n_j``
+(:mod:`~prp3mc.measurement.prediction`): the budget's mean ``mu_p``, the
+nuisances (registration and drift, :mod:`~prp3mc.measurement.nuisance`),
+systematic effects, and random errors whose budget covariance ``Sigma_p``
+splits into a part ``u_p`` that repeats at every visit of the pose (``r
+Sigma_p``) and a part ``w_j`` drawn afresh at each visit (``(1 - r)
+Sigma_p``), plus instrument noise ``N``. With ``W_p = (1 - r) Sigma_p + N``,
+the visits' deviations from their pose mean carry ``W_p`` and the pose mean
+carries ``Vbar_p = r Sigma_p + W_p / n_p``. Whitening each part by its own
+Cholesky factor turns the Gaussian likelihood into least squares: the
+nuisances and the systematic values are generalized least squares (exact
+covariance whatever the error laws), the repeatable fraction ``r`` and the
+spread factors (a spread scales one input's law about 0, so its
+contribution to ``(mu_p, Sigma_p)`` becomes ``(f mu_p, f^2 Sigma_p)``) are
+found by maximum likelihood, with profile-likelihood intervals.
 
-:class:`Engine` holds the arrays of one campaign under one budget (per-input
-moments, whitening, signatures of every visible systematic candidate, the
-slider positions and J_b, the neighbour graph and the lack-of-fit probe
-directions) and turns a model state (systematic effects in, spread factors)
-into a :class:`Fit`.
+:class:`Engine` holds the arrays of one campaign (or of its rows kept after
+setting outliers aside) under one budget; a model state (nuisances in,
+systematic effects in, spread factors, ``r``) gives a :class:`Fit`.
 """
 
 from __future__ import annotations
@@ -30,36 +36,87 @@ from ..uncertainty.model import linear_model
 from ..units import z_value
 from .campaign import Campaign
 from .effects import EFFECT_NAMES, ROW_TO_DEG, effect, library, signatures, spread_reference
+from .nuisance import DRIFT, NUISANCE_NAMES, REGISTRATION, campaign_time, nuisance_signatures
 
-__all__ = ["Engine", "Fit"]
+__all__ = ["Engine", "Fit", "subset_campaign"]
 
 _FACTOR_BOUNDS = (np.log(0.01), np.log(100.0))
 #: Largest contribution (mm or deg) of an effect at a generous magnitude below which it is invisible.
 _INVISIBLE = 1e-9
 _GENEROUS = {"mm": 1.0, "deg": 1.0, "1": 1e-2, "1/K": 1e-3}
+#: Share of a signature's whitened energy that must lie outside the nuisance span for it to be testable.
+CONFOUNDED = 1e-4
 
 
 @dataclass(frozen=True, slots=True)
 class Fit:
-    """One fitted model state of an :class:`Engine`."""
+    """One fitted model state of an :class:`Engine`.
+
+    ``theta`` holds the nuisance values (those of ``nuis``) then the
+    systematic values (those of ``sys``); ``z`` is the whitened residual
+    (3M within rows, then 3P between rows), ``zw`` (M, 3) and ``zb`` (P, 3)
+    its two parts (``zb``: standardised pose means).
+    """
 
     sys: tuple            # indices into Engine.systematic
     factors: dict         # spread effect name -> factor on its input's bound
-    theta: np.ndarray     # (k,)
-    theta_cov: np.ndarray  # (k, k)
+    r: float              # repeatable fraction
+    nuis: tuple           # indices into NUISANCE_NAMES
+    theta: np.ndarray     # (n_nuis + k,)
+    theta_cov: np.ndarray
     loglik: float
-    z: np.ndarray         # (M, 3) whitened residual after the fit
+    z: np.ndarray         # (3M + 3P,)
     resid: np.ndarray     # (M, 3) residual [mm, mm, deg] after the fit
-    Gw: np.ndarray        # (M, 3, C) whitened signatures of every systematic candidate
-    Linv: np.ndarray      # (P, 3, 3)
+    Lw: np.ndarray        # (P, 3, 3) whitening matrix of W_p (Lw' Lw = W_p^-1)
+    Lb: np.ndarray        # (P, 3, 3) whitening matrix of Vbar_p
     k_between: float      # fitted dof taken from the pose means
+
+    @property
+    def zw(self) -> np.ndarray:
+        return self.z[:self.resid.size].reshape(-1, 3)
+
+    @property
+    def zb(self) -> np.ndarray:
+        return self.z[self.resid.size:].reshape(-1, 3)
+
+
+def subset_campaign(campaign: Campaign, keep: np.ndarray) -> Campaign:
+    """The rows ``keep`` (bool, shape (M,)) of ``campaign``; poses left without rows are dropped."""
+    kept_poses = np.unique(campaign.pose_index[keep])
+    remap = np.full(campaign.n_poses, -1)
+    remap[kept_poses] = np.arange(kept_poses.size)
+    return Campaign(
+        pose_id=campaign.pose_id[keep], commanded=campaign.commanded[keep], measured=campaign.measured[keep],
+        direction=campaign.direction[keep], has_dir=campaign.has_dir,
+        temp_C=None if campaign.temp_C is None else campaign.temp_C[keep],
+        extra=campaign.extra[keep].reset_index(drop=True), poses=campaign.poses[kept_poses],
+        pose_labels=tuple(campaign.pose_labels[p] for p in kept_poses),
+        pose_index=remap[campaign.pose_index[keep]], source=campaign.source, metadata=campaign.metadata)
 
 
 class Engine:
-    """Arrays of one campaign under one budget; fits model states."""
+    """Arrays of one campaign under one budget; fits model states.
 
-    def __init__(self, geometry: Geometry, budget: Budget, campaign: Campaign, noise: np.ndarray):
-        self.geometry, self.budget, self.campaign, self.noise = geometry, budget, campaign, noise
+    Parameters
+    ----------
+    geometry, budget, campaign
+    noise : ndarray, shape (3, 3)
+        Instrument noise covariance.
+    registration : bool
+        Fit the instrument's registration (else the campaign is taken as registered).
+    keep : ndarray of bool, shape (M,), optional
+        Rows used (outliers set aside); time and row numbers stay those of the whole campaign.
+    """
+
+    def __init__(self, geometry: Geometry, budget: Budget, campaign: Campaign, noise: np.ndarray, *,
+                 registration: bool = True, keep: np.ndarray | None = None):
+        self.geometry, self.budget, self.noise, self.registration = geometry, budget, noise, registration
+        self.full_campaign = campaign
+        s, self.time_source = campaign_time(campaign)
+        keep = np.ones(campaign.n_measurements, bool) if keep is None else np.asarray(keep, bool)
+        self.keep, self.rows = keep, np.flatnonzero(keep)
+        campaign = campaign if keep.all() else subset_campaign(campaign, keep)
+        self.campaign = campaign
         self.idx = campaign.pose_index
         self.P, self.M = campaign.n_poses, campaign.n_measurements
         self.n = campaign.repeats.astype(float)
@@ -77,6 +134,9 @@ class Engine:
         self.mu_k, self.cov_k = np.stack(mus), np.stack(covs)            # (I, P, 3), (I, P, 3, 3)
         base = self.cov_k.sum(0) + noise
         self.jitter = 1e-10 * np.trace(base, axis1=-2, axis2=-1)[:, None, None] * np.eye(3)
+        self.H = nuisance_signatures(campaign.commanded, s[keep])
+        self.nuisance = tuple(j for j, name in enumerate(NUISANCE_NAMES)
+                              if name in DRIFT or (registration and name in REGISTRATION))
         lib = library(budget, campaign.has_dir, campaign.temp_C is not None)
         sys_effects = [e for e in lib if e.systematic]
         G = signatures(geometry, campaign.poses, self.idx, sys_effects, campaign.direction, campaign.temp_C)
@@ -90,109 +150,247 @@ class Engine:
         self.spread_ref = {e.name: spread_reference(budget, e) for e in self.spreads}
         self.not_testable = {e: f"needs {', '.join(effect(e).needs) or 'its budget input'}"
                              for e in EFFECT_NAMES if e not in {x.name for x in lib}}
-        onehot = np.zeros((self.P, self.M))
-        onehot[self.idx, np.arange(self.M)] = 1.0
-        self.pose_mean_op = onehot / self.n[:, None]                      # (P, M)
-        self.edges = _neighbour_edges(campaign.poses)
+        self._order = np.argsort(self.idx, kind="stable")
+        self._starts = np.concatenate([[0], np.cumsum(campaign.repeats)[:-1]])
         self.b_pose, _ = inverse_kinematics(geometry, campaign.poses, check=False)   # (P, 3) mm
         self.Jb = sensitivity(geometry, campaign.poses, check=False).J["b"] * ROW_TO_DEG[:, None]  # (P, 3, 3)
-        self.probes = _probe_basis(campaign, self.b_pose, self.Jb)
+        self._cache: dict = {}
+        self.confounded = self._confounded()
 
-    # -- model moments
-    def moments(self, factors: dict) -> tuple[np.ndarray, np.ndarray]:
-        """Model mean (P, 3) and covariance (P, 3, 3) with spread ``factors`` applied, noise included."""
+    # -- model moments and whitening
+    def moments(self, factors: dict, r: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Budget mean (P, 3), within-pose covariance W (P, 3, 3) and repeatable covariance r Sigma (P, 3, 3)."""
+        mean, sigma = self._sigma(factors)
+        return mean, (1.0 - r) * sigma + self.noise + self.jitter, r * sigma
+
+    def _sigma(self, factors: dict) -> tuple[np.ndarray, np.ndarray]:
         f = np.ones(len(self.inputs))
         for name, value in factors.items():
             f[self.spread_input[name]] = value
-        mean = np.einsum("i,ipo->po", f, self.mu_k)
-        cov = np.einsum("i,ipoq->poq", f**2, self.cov_k) + self.noise + self.jitter
-        return mean, cov
+        return np.einsum("i,ipo->po", f, self.mu_k), np.einsum("i,ipoq->poq", f**2, self.cov_k)
 
-    def fit(self, sys: tuple, factors: dict) -> Fit:
-        """Fit of the systematic candidates ``sys`` (indices) at fixed spread ``factors``."""
-        mean, cov = self.moments(factors)
-        L = np.linalg.cholesky(cov)
-        Linv = np.linalg.inv(L)
-        Lm = Linv[self.idx]
-        z0 = np.einsum("mij,mj->mi", Lm, self.err - mean[self.idx])
-        Gw = np.einsum("mij,mjc->mic", Lm, self.G)
-        logdet = 2.0 * np.log(np.diagonal(L, axis1=-2, axis2=-1)).sum(-1)[self.idx].sum()
+    def _basis(self, factors: dict) -> dict:
+        """Per-pose basis that diagonalises Sigma_p and N at once, and the data and signatures in it.
+
+        With ``V' N V = I`` and ``V' Sigma V = diag(lam)``, ``W`` and
+        ``Vbar`` are diagonal in it for every ``r``: ``(1 - r) lam + 1`` and
+        ``r lam + ((1 - r) lam + 1) / n``, so a new ``r`` only rescales.
+        """
+        key = tuple(sorted(factors.items()))
+        cached = self._cache.get(key)
+        if cached is not None:
+            return cached
+        mean, sigma = self._sigma(factors)
+        noise = self.noise + self.jitter
+        C = np.linalg.cholesky(noise)
+        Ci = np.linalg.inv(C)
+        lam, U = np.linalg.eigh(Ci @ sigma @ np.swapaxes(Ci, 1, 2))
+        Vt = np.swapaxes(U, 1, 2) @ Ci                                     # (P, 3, 3): V'
+        y = self.err - mean[self.idx]
+        ybar = self.pose_mean(y)
+        Vm = Vt[self.idx]
+        basis = {"mean": mean, "lam": np.maximum(lam, 0.0), "Vt": Vt, "Vm": Vm,
+                 "logdet_noise": 2.0 * np.log(np.diagonal(C, axis1=-2, axis2=-1)).sum(-1),
+                 "yw": np.einsum("mij,mj->mi", Vm, y - ybar[self.idx]), "yb": np.einsum("pij,pj->pi", Vt, ybar)}
+        if len(self._cache) > 64:
+            self._cache.clear()
+        self._cache[key] = basis
+        return basis
+
+    def _scales(self, basis: dict, r: float) -> tuple[np.ndarray, np.ndarray, float]:
+        """Whitening scales (P, 3) of the within and between parts at ``r``, and the log-determinant term."""
+        dw = (1.0 - r) * basis["lam"] + 1.0
+        db = r * basis["lam"] + dw / self.n[:, None]
+        ld = basis["logdet_noise"]
+        logdet = np.sum((self.n - 1.0) * (np.log(dw).sum(-1) + ld) + np.log(db).sum(-1) + ld + 3.0 * np.log(self.n))
+        return 1.0 / np.sqrt(dw), 1.0 / np.sqrt(db), float(logdet)
+
+    def pose_mean(self, X: np.ndarray, axis: int = 0) -> np.ndarray:
+        """Mean over each pose's measurements along ``axis`` (of length M) of X: that axis becomes P."""
+        sums = np.add.reduceat(np.take(X, self._order, axis=axis), self._starts, axis=axis)
+        shape = [1] * X.ndim
+        shape[axis] = self.P
+        return sums / self.n.reshape(shape)
+
+    def whiten(self, X: np.ndarray, Lw: np.ndarray, Lb: np.ndarray) -> np.ndarray:
+        """Whitened rows of per-measurement pose errors X (M, 3[, K]): (3M + 3P[, K])."""
+        tail = X.shape[2:]
+        X3 = X.reshape(self.M, 3, -1)
+        Xbar = self.pose_mean(X3)                                           # (P, 3, K)
+        within = Lw[self.idx] @ (X3 - Xbar[self.idx])
+        between = Lb @ Xbar
+        return np.concatenate([within.reshape(-1, *tail), between.reshape(-1, *tail)])
+
+    def _stacked(self, basis: dict, sw: np.ndarray, sb: np.ndarray, cols: list) -> tuple[np.ndarray, np.ndarray]:
+        """Whitened residual (3M + 3P,) and signature columns ``cols`` (3M + 3P, k) from a basis and scales.
+
+        ``cols`` index the nuisance signatures, then the systematic candidates.
+        """
+        swm = sw[self.idx]
+        z0 = np.concatenate([(basis["yw"] * swm).ravel(), (basis["yb"] * sb).ravel()])
+        projected = basis.setdefault("columns", {})         # column -> its (within, between) parts in the basis
+        missing = [c for c in dict.fromkeys(cols) if c not in projected]
+        if missing:
+            nH = self.H.shape[2]
+            X = np.stack([self.H[:, :, c] if c < nH else self.G[:, :, c - nH] for c in missing], axis=2)
+            Xbar = self.pose_mean(X)
+            cw, cb = basis["Vm"] @ (X - Xbar[self.idx]), basis["Vt"] @ Xbar
+            for k, c in enumerate(missing):
+                projected[c] = (cw[:, :, k], cb[:, :, k])
+        cw = np.stack([projected[c][0] for c in cols], axis=2) if cols else np.zeros((self.M, 3, 0))
+        cb = np.stack([projected[c][1] for c in cols], axis=2) if cols else np.zeros((self.P, 3, 0))
+        A = np.concatenate([(cw * swm[..., None]).reshape(3 * self.M, len(cols)),
+                            (cb * sb[..., None]).reshape(3 * self.P, len(cols))])
+        return z0, A
+
+    def columns(self, sys: tuple, nuis: tuple | None = None) -> np.ndarray:
+        """Signatures (M, 3, n_nuis + k) of the nuisances ``nuis`` (all fitted ones if None), then ``sys``."""
+        nuis = self.nuisance if nuis is None else nuis
+        return np.concatenate([self.H[:, :, list(nuis)], self.G[:, :, list(sys)]], axis=2)
+
+    def fit(self, sys: tuple, factors: dict, r: float, nuis: tuple | None = None) -> Fit:
+        """Fit of the systematic candidates ``sys`` (indices) at fixed spread ``factors`` and ``r``."""
+        nuis = self.nuisance if nuis is None else tuple(nuis)
         sys = tuple(sys)
-        if sys:
-            A = Gw[:, :, list(sys)].reshape(-1, len(sys))
-            theta, *_ = np.linalg.lstsq(A, z0.ravel(), rcond=None)
-            theta_cov = np.linalg.inv(A.T @ A)
-            z = z0 - (A @ theta).reshape(-1, 3)
-            resid = self.err - mean[self.idx] - self.G[:, :, list(sys)] @ theta
-            Ab = np.einsum("pm,mic->pic", self.pose_mean_op, Gw[:, :, list(sys)])
-            Ab = Ab * np.sqrt(self.n)[:, None, None]
-            k_between = float(np.trace(theta_cov @ (Ab.reshape(-1, len(sys)).T @ Ab.reshape(-1, len(sys)))))
+        basis = self._basis(factors)
+        sw, sb, logdet = self._scales(basis, r)
+        cols = list(nuis) + [self.H.shape[2] + j for j in sys]
+        z0, A = self._stacked(basis, sw, sb, cols)
+        resid = self.err - basis["mean"][self.idx]
+        if cols:
+            gram = A.T @ A
+            theta_cov = np.linalg.pinv(gram)
+            theta = theta_cov @ (A.T @ z0)
+            z = z0 - A @ theta
+            Ab = A[3 * self.M:]
+            k_between = float(np.trace(theta_cov @ (Ab.T @ Ab)))
+            resid = resid - self.columns(sys, nuis) @ theta
         else:
-            theta, theta_cov, z, resid, k_between = np.zeros(0), np.zeros((0, 0)), z0, self.err - mean[self.idx], 0.0
-        loglik = -0.5 * (float(np.sum(z * z)) + logdet + 3 * self.M * np.log(2 * np.pi))
-        return Fit(sys, dict(factors), theta, theta_cov, loglik, z, resid, Gw, Linv, k_between)
+            theta, theta_cov, z, k_between = np.zeros(0), np.zeros((0, 0)), z0, 0.0
+        loglik = -0.5 * (float(z @ z) + logdet + 3 * self.M * np.log(2 * np.pi))
+        Lw = sw[:, :, None] * basis["Vt"]
+        Lb = sb[:, :, None] * basis["Vt"]
+        return Fit(sys, dict(factors), float(r), nuis, theta, theta_cov, loglik, z, resid, Lw, Lb, k_between)
 
-    def refit(self, sys: tuple, factors: dict) -> Fit:
-        """Maximum likelihood of the spread factors with the systematic values profiled out."""
-        names = list(factors)
-        if not names:
-            return self.fit(sys, {})
+    def refit(self, sys: tuple, factors: dict, r: float | None = None, start_r: float = 0.5,
+              nuis: tuple | None = None, free: tuple | None = None) -> Fit:
+        """Maximum likelihood of the spread factors and (if ``r`` is None) of ``r``, values profiled out.
 
-        def nll(logf):
-            return -self.fit(sys, dict(zip(names, np.exp(np.atleast_1d(logf))))).loglik
+        ``free`` names the spread factors optimised (all by default); the
+        others stay at their value in ``factors``.
+        """
+        names = list(factors) if free is None else list(free)
+        free_r = r is None
 
-        x0 = np.log([factors[n] for n in names])
-        if len(names) == 1:
-            best = optimize.minimize_scalar(nll, bounds=_FACTOR_BOUNDS, method="bounded",
-                                            options={"xatol": 1e-4})
+        def state(x):
+            x = np.atleast_1d(x)
+            f = {**factors, **dict(zip(names, np.exp(x[:len(names)])))}
+            return f, (float(x[-1]) if free_r else r)
+
+        def nll(x):
+            f, rr = state(x)
+            return -self.fit(sys, f, rr, nuis).loglik
+
+        x0 = [np.log(factors[n]) for n in names] + ([start_r] if free_r else [])
+        bounds = [_FACTOR_BOUNDS] * len(names) + ([(0.0, 1.0)] if free_r else [])
+        if not x0:
+            return self.fit(sys, factors, r, nuis)
+        if len(x0) == 1:
+            best = optimize.minimize_scalar(nll, bounds=bounds[0], method="bounded", options={"xatol": 1e-3})
             x = np.array([best.x])
+            for end in bounds[0]:                         # the bounded method never evaluates the ends
+                if nll(end) < best.fun:
+                    x = np.array([end])
         else:
-            best = optimize.minimize(nll, x0, method="L-BFGS-B", bounds=[_FACTOR_BOUNDS] * len(names))
-            x = best.x
-        return self.fit(sys, dict(zip(names, np.exp(x))))
+            x = optimize.minimize(nll, np.array(x0, float), method="L-BFGS-B", bounds=bounds).x
+        f, rr = state(x)
+        return self.fit(sys, f, rr, nuis)
 
     # -- candidates
+    def whitened(self, fit: Fit, sys: tuple = (), nuis: tuple = ()) -> tuple[np.ndarray, np.ndarray]:
+        """Whitened error before any value is fitted (3M + 3P,) and signatures of ``nuis`` then ``sys``
+        (3M + 3P, k), at ``fit``'s covariance."""
+        basis = self._basis(fit.factors)
+        sw, sb, _ = self._scales(basis, fit.r)
+        return self._stacked(basis, sw, sb, list(nuis) + [self.H.shape[2] + j for j in sys])
+
+    def whitened_candidates(self, fit: Fit) -> np.ndarray:
+        """Whitened signatures of every systematic candidate at ``fit``'s covariance, (3M + 3P, C)."""
+        return self.whitened(fit, tuple(range(self.G.shape[2])))[1]
+
+    def _confounded(self) -> dict:
+        """Candidates whose whitened signature lies (almost) in the nuisance span, name -> what with."""
+        fit = self.fit((), {}, 0.0)
+        A = self.whitened_candidates(fit)
+        total = np.sum(A * A, axis=0)
+        out = {}
+        X = self.whitened(fit, (), tuple(range(self.H.shape[2])))[1]
+        spans = {"registration": [j for j in self.nuisance if NUISANCE_NAMES[j] in REGISTRATION],
+                 "drift": [j for j in self.nuisance if NUISANCE_NAMES[j] in DRIFT]}
+        spans["registration and drift"] = list(self.nuisance)
+        for label, cols in spans.items():
+            if not cols:
+                continue
+            Q, _ = np.linalg.qr(X[:, cols])
+            rest = A - Q @ (Q.T @ A)
+            for j in np.flatnonzero(np.sum(rest * rest, axis=0) < CONFOUNDED * total):
+                out.setdefault(self.systematic[j].name, label)
+        return out
+
     def score_systematic(self, fit: Fit) -> tuple[np.ndarray, np.ndarray]:
-        """LR and estimate of adding each systematic candidate to ``fit`` (NaN if not testable)."""
-        C = len(self.systematic)
-        Gall = fit.Gw.reshape(-1, C)
-        if fit.sys:
-            Q, _ = np.linalg.qr(Gall[:, list(fit.sys)])
+        """LR and estimate of adding each systematic candidate to ``fit`` at its covariance (NaN if not testable)."""
+        Gall = self.whitened_candidates(fit)
+        X = self.whitened(fit, fit.sys, fit.nuis)[1]
+        if X.shape[1]:
+            Q, _ = np.linalg.qr(X)
             Gp = Gall - Q @ (Q.T @ Gall)
         else:
             Gp = Gall
         den = np.sum(Gp * Gp, axis=0)
-        num = Gp.T @ fit.z.ravel()
-        ok = den > 1e-4 * np.sum(Gall * Gall, axis=0)   # >= 1 % of the signature outside the model
+        num = Gp.T @ fit.z
+        ok = den > CONFOUNDED * np.sum(Gall * Gall, axis=0)
         ok[list(fit.sys)] = False
+        ok &= np.array([e.name not in self.confounded for e in self.systematic], bool)
         est = np.where(ok, num / np.where(ok, den, 1.0), np.nan)
         lr = np.where(ok, num**2 / np.where(ok, den, 1.0), np.nan)
         backlash = np.array([e.kind == "backlash" for e in self.systematic])
         lr = np.where(backlash & (est < 0), 0.0, lr)       # h >= 0: constrained maximum at 0
         return lr, est
 
-    def score_spread(self, fit: Fit, name: str) -> tuple[float, Fit]:
-        """LR of adding spread ``name`` to ``fit``, and the refitted state."""
-        trial = self.refit(fit.sys, {**fit.factors, name: 1.0})
-        return 2.0 * (trial.loglik - fit.loglik), trial
-
     # -- intervals
-    def spread_interval(self, fit: Fit, name: str, level: float = 0.95) -> tuple[float, float]:
-        """Profile-likelihood interval of a spread factor at ``level`` (other spreads fixed)."""
+    def _profile_interval(self, loglik, x_hat: float, lo: float, hi: float, level: float) -> tuple[float, float]:
+        """Ends of {x: 2 (max - loglik(x)) <= chi2_1(level)} within [lo, hi], by root finding."""
         q = stats.chi2.ppf(level, 1)
-        top = fit.loglik
-        x_hat = np.log(fit.factors[name])
+        top = loglik(x_hat)
 
         def g(x):
-            return 2.0 * (top - self.fit(fit.sys, {**fit.factors, name: np.exp(x)}).loglik) - q
+            return 2.0 * (top - loglik(x)) - q
 
         ends = []
-        for bound in _FACTOR_BOUNDS:
-            if g(bound) < 0:
+        for bound in (lo, hi):
+            if bound == x_hat or g(bound) < 0:
                 ends.append(bound)
             else:
                 ends.append(optimize.brentq(g, min(x_hat, bound), max(x_hat, bound), xtol=1e-5))
-        return float(np.exp(ends[0])), float(np.exp(ends[1]))
+        return float(ends[0]), float(ends[1])
+
+    def spread_interval(self, fit: Fit, name: str, level: float = 0.95) -> tuple[float, float]:
+        """Profile-likelihood interval of a spread factor at ``level`` (other spreads and r fixed)."""
+        def ll(x):
+            return self.fit(fit.sys, {**fit.factors, name: np.exp(x)}, fit.r, fit.nuis).loglik
+        lo, hi = self._profile_interval(ll, np.log(fit.factors[name]), *_FACTOR_BOUNDS, level)
+        return float(np.exp(lo)), float(np.exp(hi))
+
+    def r_interval(self, fit: Fit, level: float = 0.95) -> tuple[float, float]:
+        """Profile-likelihood interval of the repeatable fraction (spread factors fixed)."""
+        return self._profile_interval(lambda r: self.fit(fit.sys, fit.factors, r, fit.nuis).loglik,
+                                      fit.r, 0.0, 1.0, level)
+
+    def wald(self, fit: Fit, j: int, level: float = 0.95) -> tuple[float, tuple[float, float]]:
+        """Value and Wald interval of ``fit.theta[j]``."""
+        value = float(fit.theta[j])
+        half = z_value(level) * float(np.sqrt(max(fit.theta_cov[j, j], 0.0)))
+        return value, (value - half, value + half)
 
     def estimate(self, fit: Fit, name: str, level: float = 0.95) -> tuple[float, tuple[float, float]]:
         """Value and ``level`` confidence interval of effect ``name`` in ``fit``, in the effect's unit.
@@ -204,12 +402,15 @@ class Engine:
             ref = self.spread_ref[name]
             lo, hi = self.spread_interval(fit, name, level)
             return ref * fit.factors[name], (ref * lo, ref * hi)
-        j = list(fit.sys).index(self.sys_index(name))
-        value = float(fit.theta[j])
-        half = z_value(level) * float(np.sqrt(max(fit.theta_cov[j, j], 0.0)))
+        value, (lo, hi) = self.wald(fit, len(fit.nuis) + list(fit.sys).index(self.sys_index(name)), level)
         if effect(name).kind == "backlash":          # h >= 0
-            return max(value, 0.0), (max(value - half, 0.0), max(value + half, 0.0))
-        return value, (value - half, value + half)
+            return max(value, 0.0), (max(lo, 0.0), max(hi, 0.0))
+        return value, (lo, hi)
+
+    def values(self, fit: Fit) -> dict:
+        """Fitted nuisance and systematic values of ``fit``, name -> value."""
+        names = [NUISANCE_NAMES[j] for j in fit.nuis] + [self.systematic[j].name for j in fit.sys]
+        return dict(zip(names, (float(v) for v in fit.theta)))
 
     def sys_index(self, name: str) -> int:
         """Index of systematic candidate ``name`` in :attr:`systematic`."""
@@ -217,7 +418,7 @@ class Engine:
 
     def structural_aliases(self) -> list[list[str]]:
         """Groups of systematic candidates with (nearly) collinear whitened signatures."""
-        Gw = self.fit((), {}).Gw.reshape(-1, len(self.systematic))
+        Gw = self.whitened_candidates(self.fit((), {}, 0.0))
         norm = Gw / np.linalg.norm(Gw, axis=0)
         corr = np.abs(norm.T @ norm)
         groups, seen = [], set()
@@ -229,43 +430,3 @@ class Engine:
             if len(members) > 1:
                 groups.append([self.systematic[j].name for j in members])
         return groups
-
-
-def _neighbour_edges(poses: np.ndarray, k: int = 4) -> np.ndarray:
-    """Undirected edges (E, 2) joining each pose to its k nearest (coordinates scaled by their range)."""
-    P = poses.shape[0]
-    if P < 2:
-        return np.zeros((0, 2), dtype=int)
-    span = np.ptp(poses, axis=0)
-    x = poses / np.where(span > 0, span, 1.0)
-    d = np.linalg.norm(x[:, None, :] - x[None, :, :], axis=-1)
-    np.fill_diagonal(d, np.inf)
-    near = np.argsort(d, axis=1)[:, :min(k, P - 1)]
-    pairs = np.stack([np.repeat(np.arange(P), near.shape[1]), near.ravel()], axis=1)
-    return np.unique(np.sort(pairs, axis=1), axis=0)
-
-
-def _probe_basis(campaign: Campaign, b_pose: np.ndarray, Jb: np.ndarray) -> np.ndarray:
-    """Smooth lack-of-fit directions (M, 3, Q), [mm, mm, deg] per unit.
-
-    Quadratic polynomials of the commanded pose for each output, cubic
-    Legendre terms of each slider position along its J_b column, and a
-    linear temperature trend per output: structure a missing effect outside
-    the library is likely to leave behind.
-    """
-    c = campaign
-    lo, span = c.poses.min(0), np.ptp(c.poses, axis=0)
-    u = np.where(span > 0, 2.0 * (c.commanded - lo) / np.where(span > 0, span, 1.0) - 1.0, 0.0)
-    ones = np.ones(c.n_measurements)
-    terms = [ones, *u.T] + [u[:, a] * u[:, b] for a in range(3) for b in range(a, 3)]
-    cols = [np.einsum("m,o->mo", t, np.eye(3)[o]) for t in terms for o in range(3)]
-    if c.temp_C is not None:
-        t = c.temp_C - c.temp_C.mean()
-        cols += [np.einsum("m,o->mo", t, np.eye(3)[o]) for o in range(3)]
-    bm = b_pose[c.pose_index]
-    bspan = np.ptp(bm, axis=0)
-    v = np.where(bspan > 0, 2.0 * (bm - bm.min(0)) / np.where(bspan > 0, bspan, 1.0) - 1.0, 0.0)
-    for i in range(3):
-        for poly in (0.5 * (3 * v[:, i] ** 2 - 1), 0.5 * (5 * v[:, i] ** 3 - 3 * v[:, i])):
-            cols.append(Jb[c.pose_index][:, :, i] * poly[:, None])
-    return np.stack(cols, axis=-1)

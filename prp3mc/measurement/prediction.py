@@ -2,13 +2,14 @@
 
 Measurement m of commanded pose p is ``measured = commanded + e_m + s_m + n_m``:
 
-- ``e_m`` is the budget's random pose error, drawn afresh at every
-  measurement (clearances settle at a new contact angle and encoders read a
-  new count error each time a pose is approached; repeats of a pose are
-  therefore independent). Its mean ``mu_p`` is *not* zero (encoder errors
-  are one-sided) and its covariance is ``Sigma_p``; both are exact moments of
-  the linear model (:meth:`prp3mc.LinearModel.moments`), which the exact
-  nonlinear chain matches to < 0.1 µm at these magnitudes.
+- ``e_m`` is the budget's random pose error. Its mean ``mu_p`` is *not*
+  zero (encoder errors are one-sided) and its covariance is ``Sigma_p``;
+  both are exact moments of the linear model
+  (:meth:`prp3mc.LinearModel.moments`), which the exact nonlinear chain
+  matches to < 0.1 µm at these magnitudes. A share ``r`` of ``Sigma_p``
+  (the repeatable fraction) repeats at every visit of the pose (a clearance
+  settling at the same contact under the same load); the rest, ``(1 - r)
+  Sigma_p``, is drawn afresh at each visit.
 - ``s_m = sum_k theta_k g_k(m)`` are systematic effects of the library, each
   linear in its value through its signature
   (:func:`prp3mc.measurement.effects.signatures`).
@@ -44,7 +45,10 @@ class Prediction:
         Expected ``[dx mm, dy mm, dphi deg]`` per measurement (budget mean
         plus systematic effects, which may differ between repeats).
     cov : ndarray, shape (P, 3, 3)
-        Covariance per commanded pose: budget plus instrument noise.
+        Covariance of one measurement per commanded pose: budget plus instrument noise.
+    scatter_cov : ndarray, shape (P, 3, 3)
+        Visit-to-visit covariance per pose: the budget's part that does not
+        repeat, ``(1 - r) Sigma_p``, plus instrument noise.
     pose_index : ndarray of int, shape (M,)
     poses : ndarray, shape (P, 3)
         The commanded poses ``[x_mm, y_mm, phi_deg]``.
@@ -52,14 +56,18 @@ class Prediction:
         The budget, with spread effects applied.
     effects : mapping
         Effects included (systematic values and spreads), name -> value.
+    repeatable_fraction : float
+        ``r``.
     """
 
     mean: np.ndarray
     cov: np.ndarray
+    scatter_cov: np.ndarray
     pose_index: np.ndarray
     poses: np.ndarray
     budget: Budget
     effects: dict
+    repeatable_fraction: float = 0.0
 
     def __post_init__(self):
         freeze(self)
@@ -103,7 +111,8 @@ def noise_cov(sigma_mm: float, sigma_deg: float) -> np.ndarray:
 
 
 def predict(geometry: Geometry, budget: Budget, campaign: Campaign, *, effects: dict | None = None,
-            instrument_sigma_mm: float = 0.0, instrument_sigma_deg: float = 0.0) -> Prediction:
+            instrument_sigma_mm: float = 0.0, instrument_sigma_deg: float = 0.0,
+            repeatable_fraction: float = 0.0) -> Prediction:
     """Distribution of ``measured - commanded`` for every measurement of ``campaign``.
 
     Parameters
@@ -113,6 +122,8 @@ def predict(geometry: Geometry, budget: Budget, campaign: Campaign, *, effects: 
     effects : dict of str to float, optional
         Library effects added to the model (systematic values and spreads).
     instrument_sigma_mm, instrument_sigma_deg : float
+    repeatable_fraction : float
+        Share ``r`` in [0, 1] of the budget's covariance that repeats at every visit of a pose.
 
     Returns
     -------
@@ -120,13 +131,16 @@ def predict(geometry: Geometry, budget: Budget, campaign: Campaign, *, effects: 
     """
     effects = dict(effects or {})
     model_budget = spread_budget(budget, effects)
-    mean, cov = linear_model(geometry, model_budget, campaign.poses, check=False).moments()
-    cov = cov + noise_cov(instrument_sigma_mm, instrument_sigma_deg)
+    if not 0.0 <= repeatable_fraction <= 1.0:
+        raise BudgetError(f"repeatable_fraction must lie in [0, 1], got {repeatable_fraction}")
+    mean, sigma = linear_model(geometry, model_budget, campaign.poses, check=False).moments()
+    noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
     systematic = {k: v for k, v in effects.items() if effect(k).systematic}
     m = mean[campaign.pose_index]
     if systematic:
         G = signatures(geometry, campaign.poses, campaign.pose_index, list(systematic),
                        campaign.direction, campaign.temp_C)
         m = m + G @ np.array(list(systematic.values()))
-    return Prediction(mean=m, cov=cov, pose_index=campaign.pose_index, poses=campaign.poses,
-                      budget=model_budget, effects=effects)
+    return Prediction(mean=m, cov=sigma + noise, scatter_cov=(1.0 - repeatable_fraction) * sigma + noise,
+                      pose_index=campaign.pose_index, poses=campaign.poses, budget=model_budget, effects=effects,
+                      repeatable_fraction=float(repeatable_fraction))

@@ -1,20 +1,25 @@
-"""Figure of a tolerance allocation: the cost-accuracy Pareto front.
+"""Figures of a tolerance allocation: the cost-accuracy Pareto front and the binding poses.
 
-Takes the tidy front of :func:`prp3mc.uncertainty.allocation.allocation_front`
-and an ``ax=`` (a new figure when None) and returns the Figure; pyplot is
-imported lazily and the backend is never switched. Shows µm and arcsec.
+:func:`allocation_front_plot` takes the tidy front of
+:func:`prp3mc.uncertainty.allocation.allocation_front`;
+:func:`allocation_map` the :class:`~prp3mc.uncertainty.allocation.AllocationResult`
+of a gridded region. Both take an ``ax=`` (a new figure when None) and
+return the Figure; pyplot is imported lazily and the backend is never
+switched. Shows µm and arcsec.
 """
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 
 from ..units import DISPLAY
+from .plots import region_map
 
-__all__ = ["allocation_front_plot"]
+__all__ = ["allocation_front_plot", "allocation_map", "class_changes"]
 
 
-def _changes(previous: pd.Series | None, current: pd.Series) -> str:
+def class_changes(previous: pd.Series | None, current: pd.Series) -> str:
     """The classes that changed from one front point to the next, as ``input→class`` words."""
     if previous is None:
         return "cheapest"
@@ -57,7 +62,7 @@ def allocation_front_plot(front: pd.DataFrame, output: str = "position", *, spec
     if annotate or (annotate is None and len(rows) <= 15):
         previous = None
         for (_, row), value in zip(rows.iterrows(), y):
-            ax.annotate(_changes(previous, row[inputs]), (row["cost"], value), xytext=(4, 3),
+            ax.annotate(class_changes(previous, row[inputs]), (row["cost"], value), xytext=(4, 3),
                         textcoords="offset points", fontsize=6, color="0.3")
             previous = row[inputs]
     if spec is not None:
@@ -71,4 +76,47 @@ def allocation_front_plot(front: pd.DataFrame, output: str = "position", *, spec
     ax.set_ylabel(f"worst-case {label} over the region ({unit})")
     ax.set_title("What each step of cost buys", fontsize=10)
     ax.legend(fontsize=8, frameon=False)
+    return fig
+
+
+def allocation_map(result, shape: tuple, *, ax=None, title: str = ""):
+    """Map of the chosen classes' worst case over the region, the binding poses and the spec marked.
+
+    Shows the position error, or |δφ| when the orientation spec binds; the
+    spec's level is drawn as a red contour when it is a worst-case bound.
+
+    Parameters
+    ----------
+    result : AllocationResult
+        Of a gridded region: ``result.poses`` holds ``ny * nx`` poses in grid order.
+    shape : (ny, nx)
+    ax : matplotlib Axes, optional
+    title : str
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    output = "phi" if result.binding == "phi" else "position"
+    scale, unit = DISPLAY[output]
+    values = scale * (result.phi_deg if output == "phi" else result.position_mm).reshape(shape)
+    poses = result.poses.reshape(*shape, 3)
+    fig = region_map(poses, values, ax=ax, mark_extrema=False, unit=unit, title=title)
+    ax = fig.axes[0] if ax is None else ax
+    spec = {"position": None if result.spec["percentile"] is not None else result.spec["position_mm"],
+            "phi": result.spec["phi_deg"]}[output]
+    reached = spec is not None and values.min() < scale * spec < values.max()
+    if reached:
+        ax.contour(poses[..., 0], poses[..., 1], values, levels=[scale * spec], colors="C3", linewidths=1.5,
+                   linestyles="--")
+    binding = np.asarray(result.binding_poses)
+    what = {"position": "worst-case position error", "phi": "worst-case |δφ|",
+            "percentile": "Monte Carlo percentile upper bound"}[result.binding]
+    ax.plot(binding[:, 0], binding[:, 1], "*", color="C3", mec="k", ms=11, ls="none", clip_on=False, zorder=5,
+            label=f"binding: {what} ({len(binding)} pose{'s' if len(binding) != 1 else ''})")
+    if reached:
+        ax.plot([], [], color="C3", ls="--", lw=1.5, label=f"spec {scale * spec:g} {unit}")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), fontsize=7, frameon=False, ncol=1)
+    label = "position error" if output == "position" else "|δφ|"
+    ax.set_title(f"{title + ': ' if title else ''}worst-case {label} of the chosen classes ({unit})", fontsize=10)
     return fig

@@ -14,11 +14,16 @@ import numpy as np
 
 from ..units import DISPLAY
 
-__all__ = ["shared_levels", "region_map", "worst_case_map", "montecarlo_map", "compare_maps_figure",
-           "error_histogram", "histograms_figure", "sobol_ranking", "worst_case_shares", "ranking_figure"]
+__all__ = ["is_constant", "shared_levels", "region_map", "worst_case_map", "montecarlo_map", "compare_maps_figure",
+           "error_histogram", "histograms_figure", "error_ecdf", "ecdf_figure", "sobol_ranking",
+           "worst_case_shares", "ranking_figure"]
 
 _LABEL = {"position": "position error", "phi": "|δφ|"}
 _QUANTITY = {q: (label, DISPLAY[q][1], DISPLAY[q][0]) for q, label in _LABEL.items()}  # (label, unit, scale)
+#: A field whose range is below this fraction of its magnitude is drawn as a constant.
+CONSTANT_RTOL = 1e-9
+#: Maps share one colour scale only when every varying panel spans at least this fraction of it.
+MIN_SCALE_FRACTION = 0.25
 
 
 def _axes(ax, figsize=(5.0, 4.2)):
@@ -39,12 +44,18 @@ def _figure(fig, figsize):
     return fig
 
 
+def is_constant(values: np.ndarray, rtol: float = CONSTANT_RTOL) -> bool:
+    """Whether a field is constant up to round-off: its range is at most ``rtol`` of its magnitude."""
+    v = np.asarray(values, dtype=float)
+    return float(np.ptp(v)) <= rtol * max(float(np.max(np.abs(v))), np.finfo(float).tiny)
+
+
 def shared_levels(*arrays: np.ndarray, n: int = 12) -> np.ndarray:
     """Round contour levels spanning all ``arrays`` (one colour scale for several maps)."""
     from matplotlib.ticker import MaxNLocator
     lo = min(float(np.min(a)) for a in arrays)
     hi = max(float(np.max(a)) for a in arrays)
-    if hi - lo < 1e-9 * max(abs(hi), 1.0):  # a constant field still gets a band around it
+    if is_constant(np.array([lo, hi])):  # a constant field still gets a band around it
         lo, hi = lo - max(abs(lo), 1.0) * 0.01, hi + max(abs(hi), 1.0) * 0.01
     return MaxNLocator(n).tick_values(lo, hi)
 
@@ -53,22 +64,27 @@ def region_map(poses: np.ndarray, values: np.ndarray, *, ax=None, levels=None, c
                title: str = "", mark_extrema: bool = True, unit: str = ""):
     """Filled contour map of ``values`` (ny, nx) over grid ``poses`` (ny, nx, 3), extrema marked.
 
+    A constant field (:func:`is_constant`) is filled in one colour and
+    labelled "constant: value unit", with neither contour lines nor extrema.
     Draws on ``ax`` (a new pyplot figure when None); returns the Figure holding it.
     """
     ax = _axes(ax)
     X, Y = poses[..., 0], poses[..., 1]
     levels = shared_levels(values) if levels is None else levels
     ax.contourf(X, Y, values, levels=levels, cmap=cmap, extend="neither")
-    if np.ptp(values) > 1e-9 * max(abs(float(np.max(values))), 1.0):
-        lines = ax.contour(X, Y, values, levels=levels, colors="k", linewidths=0.5, alpha=0.6)
-        ax.clabel(lines, fmt="%g", fontsize=7)
+    ax.set(xlabel="x (mm)", ylabel="y (mm)", title=title, aspect="equal")
+    if is_constant(values):
+        ax.text(0.5, 0.5, f"constant: {float(np.mean(values)):.4g} {unit}".rstrip(), transform=ax.transAxes,
+                ha="center", va="center", fontsize=11, bbox={"boxstyle": "round", "fc": "white", "ec": "0.6"})
+        return ax.figure
+    lines = ax.contour(X, Y, values, levels=levels, colors="k", linewidths=0.5, alpha=0.6)
+    ax.clabel(lines, lines.levels[::max(1, len(lines.levels) // 8)], fmt="%g", fontsize=7)
     if mark_extrema:
         for fn, marker, word in ((np.argmax, "X", "max"), (np.argmin, "o", "min")):
             k = np.unravel_index(fn(values), values.shape)
             ax.plot(X[k], Y[k], marker=marker, color="white", mec="k", ms=8, ls="none", clip_on=False, zorder=5,
-                    label=f"{word} {values[k]:.1f} {unit} at ({X[k]:g}, {Y[k]:g})")
+                    label=f"{word} {values[k]:.4g} {unit} at ({X[k]:.4g}, {Y[k]:.4g})")
         ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), fontsize=7, frameon=False, ncol=1)
-    ax.set(xlabel="x (mm)", ylabel="y (mm)", title=title, aspect="equal")
     return ax.figure
 
 
@@ -87,9 +103,17 @@ def montecarlo_map(mc, percentile: float = 99.73, quantity: str = "position", *,
     return region_map(mc.poses, f * values, ax=ax, levels=levels, title=title, cmap="magma", unit=unit)
 
 
+def _share_scale(values, share_scale) -> bool:
+    """Whether maps of ``values`` go on one colour scale (``"auto"``: when no varying panel gets too little of it)."""
+    if share_scale != "auto":
+        return bool(share_scale)
+    span = max(float(np.max(v)) for v in values) - min(float(np.min(v)) for v in values)
+    return all(np.ptp(v) >= MIN_SCALE_FRACTION * span for v in values if not is_constant(v))
+
+
 def compare_maps_figure(results, kind: str = "worstcase", quantity: str = "position",
-                        percentile: float = 99.73, *, fig=None):
-    """Maps of several configurations side by side on ONE colour scale.
+                        percentile: float = 99.73, *, fig=None, share_scale="auto"):
+    """Maps of several configurations side by side, on one colour scale where that helps.
 
     Parameters
     ----------
@@ -100,6 +124,11 @@ def compare_maps_figure(results, kind: str = "worstcase", quantity: str = "posit
         Monte Carlo percentile shown (``kind="montecarlo"``).
     fig : Figure, optional
         An empty figure to draw into; a new pyplot figure when None.
+    share_scale : ``"auto"``, True or False
+        One colour scale for all panels, or one per panel. ``"auto"`` shares
+        it unless a varying panel would span less than
+        :data:`MIN_SCALE_FRACTION` of it (it would show in one or two
+        colours); the title says which. Constant panels are labelled so.
 
     Returns
     -------
@@ -117,18 +146,37 @@ def compare_maps_figure(results, kind: str = "worstcase", quantity: str = "posit
         values = [f * (r.montecarlo.position_pct if quantity == "position" else r.montecarlo.phi_pct)[..., q]
                   for r in results]
         what, cmap = f"Monte Carlo p{percentile:g} of the {label}", "magma"
-    levels = shared_levels(*values, n=20)
-    fig = _figure(fig, (5.2 * len(results) + 1.2, 5.4))
-    axes = fig.subplots(1, len(results), squeeze=False)
-    for ax, r in zip(axes[0], results):
+    shared = _share_scale(values, share_scale)
+    constant = [is_constant(v) for v in values]
+    fig = _figure(fig, ((5.2 if shared else 5.8) * len(results) + 1.2, 5.4))
+    axes = fig.subplots(1, len(results), squeeze=False)[0]
+    common = shared_levels(*values, n=20)
+    for ax, r, v, flat in zip(axes, results, values, constant):
+        levels = common if shared else shared_levels(v, n=20)
         if kind == "worstcase":
             worst_case_map(r.worst_case, quantity, ax=ax, levels=levels, title=r.name)
         else:
             montecarlo_map(r.montecarlo, percentile, quantity, ax=ax, levels=levels, title=r.name)
-    sm = ScalarMappable(norm=BoundaryNorm(levels, matplotlib.colormaps[cmap].N), cmap=cmap)
-    fig.colorbar(sm, ax=axes[0].tolist(), label=f"{label} ({unit})", shrink=0.85)
-    fig.suptitle(f"{what}, one colour scale")
+        if not shared and not flat:
+            sm = ScalarMappable(norm=BoundaryNorm(levels, matplotlib.colormaps[cmap].N), cmap=cmap)
+            fig.colorbar(sm, ax=ax, label=f"{label} ({unit})", shrink=0.85)
+    if all(constant):
+        fig.suptitle(f"{what}: constant over each region")
+    elif shared:
+        sm = ScalarMappable(norm=BoundaryNorm(common, matplotlib.colormaps[cmap].N), cmap=cmap)
+        fig.colorbar(sm, ax=axes.tolist(), label=f"{label} ({unit})", shrink=0.85)
+        fig.suptitle(f"{what}, one colour scale")
+    else:
+        fig.suptitle(f"{what}, each panel on its own colour scale (their ranges differ too much to share one)")
     return fig
+
+
+def _at_pose(samples, index: int, quantity: str):
+    """(label, unit, Monte Carlo errors (n,), exact worst case) of ``quantity`` at pose ``index``, in µm or arcsec."""
+    name, unit, f = _QUANTITY[quantity]
+    values = f * (samples.position_mm if quantity == "position" else samples.phi_deg)[index]
+    worst = f * (samples.worst_position_mm if quantity == "position" else samples.worst_phi_deg)[index]
+    return name, unit, values, float(worst)
 
 
 def error_histogram(samples, index: int, quantity: str = "position", *, ax=None, bins: int = 80,
@@ -151,29 +199,24 @@ def error_histogram(samples, index: int, quantity: str = "position", *, ax=None,
     """
     import seaborn as sns
     ax = _axes(ax)
-    name, unit, f = _QUANTITY[quantity]
-    values = f * (samples.position_mm if quantity == "position" else samples.phi_deg)[index]
-    worst = f * (samples.worst_position_mm if quantity == "position" else samples.worst_phi_deg)[index]
+    name, unit, values, worst = _at_pose(samples, index, quantity)
     label = samples.labels[index] if label is None else label
     sns.histplot(x=values, bins=bins, stat="density", element="step", fill=True, alpha=0.25, ax=ax,
                  label=label, color=color)
     color = ax.get_lines()[-1].get_color() if ax.get_lines() and color is None else color
     p = float(np.percentile(values, percentile))
-    ax.axvline(worst, ls="--", lw=1.5, color=color, label=f"worst case {worst:.1f} {unit}")
-    ax.axvline(p, ls=":", lw=1.2, color=color, label=f"p{percentile:g} {p:.1f} {unit}")
+    ax.axvline(worst, ls="--", lw=1.5, color=color, label=f"worst case {worst:.4g} {unit}")
+    ax.axvline(p, ls=":", lw=1.2, color=color, label=f"p{percentile:g} {p:.4g} {unit}")
     ax.set(xlabel=f"{name} ({unit})", ylabel="density")
     ax.legend(fontsize=7)
     return ax.figure
 
 
-def histograms_figure(results, quantity: str = "position", percentile: float = 99.73, *, fig=None):
-    """Error histograms at each configuration's chosen poses, worst case marked; one row per configuration.
-
-    ``fig``: an empty figure to draw into (a new pyplot figure when None). Returns the Figure.
-    """
+def _pose_grid(results, fig, draw, title: str, panel=(4.2, 3.2)):
+    """One row per configuration, one panel per chosen pose: ``draw(samples, k, ax, color)`` fills each."""
     import matplotlib
     n_cols = max(len(r.samples.labels) for r in results)
-    fig = _figure(fig, (4.2 * n_cols, 3.2 * len(results)))
+    fig = _figure(fig, (panel[0] * n_cols, panel[1] * len(results)))
     axes = fig.subplots(len(results), n_cols, squeeze=False, sharex=True)
     colors = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     for row, r in zip(axes, results):
@@ -182,11 +225,66 @@ def histograms_figure(results, quantity: str = "position", percentile: float = 9
             if k >= len(s.labels):
                 ax.set_visible(False)
                 continue
-            error_histogram(s, k, quantity, ax=ax, percentile=percentile, color=colors[k % len(colors)])
+            draw(s, k, ax, colors[k % len(colors)])
             x, y, phi = s.poses[k]
-            ax.set_title(f"{r.name}: {s.labels[k]}\n(x={x:g}, y={y:g} mm, φ={phi:g}°)", fontsize=9)
-    fig.suptitle(f"Monte Carlo {_QUANTITY[quantity][0]} at chosen poses ({results[0].samples.n_samples} samples)")
+            ax.set_title(f"{r.name}: {s.labels[k]}\n(x={x:.4g}, y={y:.4g} mm, φ={phi:.4g}°)", fontsize=9)
+    fig.suptitle(f"{title} ({results[0].samples.n_samples} samples)")
     return fig
+
+
+def histograms_figure(results, quantity: str = "position", percentile: float = 99.73, *, fig=None):
+    """Error histograms at each configuration's chosen poses, worst case marked; one row per configuration.
+
+    ``fig``: an empty figure to draw into (a new pyplot figure when None). Returns the Figure.
+    """
+    def draw(s, k, ax, color):
+        error_histogram(s, k, quantity, ax=ax, percentile=percentile, color=color)
+    return _pose_grid(results, fig, draw, f"Monte Carlo {_QUANTITY[quantity][0]} at chosen poses")
+
+
+def error_ecdf(samples, index: int, quantity: str = "position", *, ax=None, percentile: float = 99.73,
+               label: str | None = None, color=None):
+    """Empirical CDF of the Monte Carlo error at one pose, its percentile (dot) and exact worst case (dashed).
+
+    Parameters as :func:`error_histogram`; the y axis is the fraction of
+    assemblies whose error is at most x. Returns the Figure holding ``ax``.
+    """
+    ax = _axes(ax)
+    name, unit, values, worst = _at_pose(samples, index, quantity)
+    line = ax.ecdf(values, color=color, label=samples.labels[index] if label is None else label)
+    color = line.get_color()
+    p = float(np.percentile(values, percentile))
+    ax.plot([p], [percentile / 100], marker="o", ms=4, color=color, ls="none",
+            label=f"p{percentile:g} {p:.4g} {unit}")
+    ax.axvline(worst, ls="--", lw=1.5, color=color, label=f"worst case {worst:.4g} {unit}")
+    ax.axhline(percentile / 100, ls=":", lw=0.8, color="0.5")
+    ax.set(xlabel=f"{name} ({unit})", ylabel="fraction of assemblies at most x", ylim=(0, 1.02))
+    ax.legend(fontsize=7, loc="lower right")
+    return ax.figure
+
+
+def ecdf_figure(results, quantity: str = "position", percentile: float = 99.73, *, fig=None):
+    """ECDFs of the error at each configuration's chosen poses, worst case dashed; one row per configuration.
+
+    ``fig``: an empty figure to draw into (a new pyplot figure when None). Returns the Figure.
+    """
+    def draw(s, k, ax, color):
+        error_ecdf(s, k, quantity, ax=ax, percentile=percentile, color=color)
+    return _pose_grid(results, fig, draw, f"ECDF of the {_QUANTITY[quantity][0]} at chosen poses, "
+                      "exact worst case dashed")
+
+
+def ranking_basis(frame) -> tuple[str, str]:
+    """Where a ranking frame's indices and worst-case shares are taken, and its share column.
+
+    Returns ``(basis, column)``: for a region, ``"mean over the N poses"`` and
+    ``worst_case_share_mean`` (both Sobol indices and shares averaged over
+    the same poses); for one pose, ``"at (x, y, φ)"`` and ``worst_case_share``.
+    """
+    if "worst_case_share_mean" in frame:
+        return f"mean over the {frame.attrs.get('n_poses', '')} poses".replace("  ", " "), "worst_case_share_mean"
+    x, y, phi = frame.attrs.get("pose", (np.nan,) * 3)
+    return f"at (x={x:.4g} mm, y={y:.4g} mm, φ={phi:.4g}°)", "worst_case_share"
 
 
 def sobol_ranking(frame, *, ax=None, title: str = ""):
@@ -202,6 +300,7 @@ def sobol_ranking(frame, *, ax=None, title: str = ""):
     Figure
         The figure holding ``ax`` (a new pyplot figure when ``ax`` is None).
     """
+    frame = frame.sort_values("ST", ascending=False, kind="stable")
     ax = _axes(ax, figsize=(5.0, 0.32 * len(frame) + 1.2))
     y = np.arange(len(frame))
     h = 0.38
@@ -217,25 +316,42 @@ def sobol_ranking(frame, *, ax=None, title: str = ""):
     return ax.figure
 
 
-def worst_case_shares(frame, *, ax=None, title: str = "worst-case contribution"):
-    """Each input's or group's share (%) of the worst case, in the order of ``frame``; returns the Figure."""
+def worst_case_shares(frame, *, ax=None, title: str = "share of the exact worst case", column: str | None = None):
+    """Each input's or group's share (%) of the worst case, ranked by that share; returns the Figure.
+
+    ``column``: the share column of ``frame`` (default: :func:`ranking_basis`'s).
+    Names without a share of their own (rho_i, zeta_i: their clearance term
+    is counted in clearance_i) are listed under the bars, not drawn.
+    """
+    import textwrap
+    column = ranking_basis(frame)[1] if column is None else column
+    undefined = frame[frame[column].isna()]["name"].tolist()
+    frame = frame.dropna(subset=[column]).sort_values(column, ascending=False, kind="stable")
     ax = _axes(ax, figsize=(3.5, 0.32 * len(frame) + 1.2))
     y = np.arange(len(frame))
-    ax.barh(y, 100 * frame["worst_case_share"], color="#55a868")
-    ax.set_yticks(y, frame["name"])
+    ax.barh(y, 100 * frame[column], color="#55a868")
+    ax.set_yticks(y, [f"{n} (group)" if k == "group" else n for n, k in zip(frame["name"], frame["kind"])])
     ax.invert_yaxis()
-    ax.set(xlabel="share of the worst case (%)", title=title)
+    xlabel = "share of the worst case (%)"
+    if undefined:
+        xlabel += "\n" + textwrap.fill(f"no share of their own (counted in their group): {', '.join(undefined)}",
+                                        48)
+    ax.set_xlabel(xlabel, fontsize=8)
+    ax.set_title(title)
     return ax.figure
 
 
 def ranking_figure(frame, title: str = "", *, fig=None):
-    """Sobol ranking with CIs next to the worst-case shares, rows aligned.
+    """Sobol ranking with CIs next to the worst-case shares, each ranked in its own order, on one basis.
 
+    Both panels are taken on the same basis (:func:`ranking_basis`: the mean
+    over the poses of a region, or one pose) and say which.
     ``fig``: an empty figure to draw into (a new pyplot figure when None). Returns the Figure.
     """
-    fig = _figure(fig, (10, 0.34 * len(frame) + 1.6))
+    basis, column = ranking_basis(frame)
+    fig = _figure(fig, (10, 0.34 * len(frame) + 1.9))
     a, b = fig.subplots(1, 2, width_ratios=(3, 2))
-    sobol_ranking(frame, ax=a, title="Sobol indices")
-    worst_case_shares(frame, ax=b)
+    sobol_ranking(frame, ax=a, title=f"Sobol indices (variance shares),\n{basis}")
+    worst_case_shares(frame, ax=b, column=column, title=f"share of the exact worst case,\n{basis}")
     fig.suptitle(title)
     return fig

@@ -7,7 +7,7 @@
     summary.json           summary statistics with standard errors (prp3mc.summary)
     figures/*.png          every figure of the report (and *.svg on request)
     tables/*.csv           summary, worst-case and Monte Carlo grids, Sobol indices and rankings,
-                           worst-case contributions, the budget
+                           worst-case contributions, the budget, allocated classes and fronts
 
 The report is built from a :class:`~prp3mc.study.results.StudyResult` only;
 it is readable without prp3mc installed. Figures are drawn on figures of
@@ -101,6 +101,13 @@ def _family_shares(result: StudyResult) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def _worst_pose(c) -> str:
+    """The pose where a configuration's worst-case position error is largest, for labels."""
+    wc = c.worst_case
+    x, y, phi = wc.poses[np.unravel_index(np.argmax(wc.position_mm), wc.position_mm.shape)]
+    return f"x = {x:.4g} mm, y = {y:.4g} mm, φ = {phi:.4g}°"
+
+
 def _contributions(c) -> pd.DataFrame:
     """Worst-case contributions at the configuration's worst pose."""
     wc = c.worst_case
@@ -150,28 +157,74 @@ def _figures(result: StudyResult) -> list[tuple[str, str, object]]:
     """(file name, caption, figure) of every figure of the report, in order."""
     from . import plots
     res = list(result.configurations)
-    figs = [("worstcase_position", "Exact worst-case position error (µm) over each test region, one colour "
-             "scale (the paper's Figs. 4-5, computed exactly). ✕ marks the maximum, ○ the minimum.",
+    scale = ("Panels share one colour scale when that helps the comparison, else each has its own "
+             "(the title says which); a field constant over a region is labelled so, without extrema.")
+    figs = [("worstcase_position", "Exact worst-case position error (µm) over each test region (the paper's "
+             f"Figs. 4-5, computed exactly). ✕ marks the maximum, ○ the minimum. {scale}",
              plots.compare_maps_figure(res, "worstcase", "position", fig=_canvas())),
-            ("worstcase_phi", "Exact worst-case orientation error |δφ| (arcsec), one colour scale.",
+            ("worstcase_phi", f"Exact worst-case orientation error |δφ| (arcsec). {scale}",
              plots.compare_maps_figure(res, "worstcase", "phi", fig=_canvas()))]
     if all(r.montecarlo is not None for r in res):
         pct = _MC_PERCENTILE if _MC_PERCENTILE in res[0].montecarlo.percentiles else res[0].montecarlo.percentiles[-1]
-        figs += [("montecarlo_position", f"Monte Carlo p{pct:g} of the position error (µm), one colour scale.",
+        figs += [("montecarlo_position", f"Monte Carlo p{pct:g} of the position error (µm). {scale}",
                   plots.compare_maps_figure(res, "montecarlo", "position", pct, fig=_canvas())),
-                 ("montecarlo_phi", f"Monte Carlo p{pct:g} of |δφ| (arcsec), one colour scale.",
+                 ("montecarlo_phi", f"Monte Carlo p{pct:g} of |δφ| (arcsec). {scale}",
                   plots.compare_maps_figure(res, "montecarlo", "phi", pct, fig=_canvas())),
                  ("histograms_position", "Distribution of the position error at chosen poses; dashed: the exact "
                   f"worst case at that pose, dotted: p{pct:g}.",
                   plots.histograms_figure(res, "position", pct, fig=_canvas())),
+                 ("ecdf_position", "ECDF of the position error at the same poses: the fraction of assemblies "
+                  f"whose error is at most x; dashed: the exact worst case, dot: p{pct:g}.",
+                  plots.ecdf_figure(res, "position", pct, fig=_canvas())),
                  ("histograms_phi", "Distribution of |δφ| at the same poses, worst case dashed.",
-                  plots.histograms_figure(res, "phi", pct, fig=_canvas()))]
+                  plots.histograms_figure(res, "phi", pct, fig=_canvas())),
+                 ("ecdf_phi", "ECDF of |δφ| at the same poses, worst case dashed.",
+                  plots.ecdf_figure(res, "phi", pct, fig=_canvas()))]
     for r in res:
         for output, frame in r.ranking.items():
+            basis = plots.ranking_basis(frame)[0]
             figs.append((f"sobol_{r.name}_{output}",
-                         f"{r.name}, output {output}: Sobol indices over the Sobol grid with 95 % bootstrap "
-                         "intervals (left) next to each input's share of the exact worst case (right).",
+                         f"{r.name}, output {output}: Sobol indices with 95 % bootstrap intervals (left, ranked "
+                         f"by ST) and each input's share of the exact worst case (right, ranked by share); "
+                         f"both the {basis} of the Sobol grid.",
                          plots.ranking_figure(frame, f"{r.name}: {output}", fig=_canvas())))
+    return figs + _allocation_figures(result)
+
+
+def _canvas_axes(size: tuple[float, float]):
+    """One axes on a new Agg-canvas figure of ``size`` inches, constrained layout."""
+    fig = _canvas()
+    fig.set_size_inches(size)
+    fig.set_layout_engine("constrained")
+    return fig.subplots()
+
+
+def _allocation_figures(result: StudyResult) -> list[tuple[str, str, object]]:
+    """The binding-pose map and the Pareto front of every configuration's allocation."""
+    from .allocation_plots import allocation_front_plot, allocation_map
+    spec = result.study.allocation
+    figs = []
+    for c in result.configurations:
+        a, front = c.allocation, c.allocation_front
+        if a is None:
+            continue
+        nx, ny = spec.grid or result.study.worstcase_grid
+        binding = ("the pose where the Monte Carlo percentile's 95 % upper bound is largest"
+                   if a.binding == "percentile" else "the binding poses, dashed red the spec where the map reaches it")
+        figs.append((f"allocation_{c.name}_map", f"{c.name}: the exact worst case of the chosen classes over the "
+                     f"test region; ★ {binding}.", allocation_map(a, (ny, nx), ax=_canvas_axes((5.6, 5.6)),
+                                                                 title=c.name)))
+        if front is not None and len(front):
+            output = spec.front_output
+            limit = spec.spec_phi_arcsec if output == "phi" else (
+                spec.spec_position_um if spec.spec_percentile is None else None)
+            figs.append((f"allocation_{c.name}_front", f"{c.name}: the least cost of every reachable worst-case "
+                         f"{'|δφ|' if output == 'phi' else 'position error'} (the Pareto front); each point is "
+                         "labelled with the classes that changed from the previous one; ★ the chosen classes."
+                         + (" The front is of the worst case: the percentile spec is not drawn, and the chosen "
+                            "classes are marked only where they lie on it." if limit is None else ""),
+                         allocation_front_plot(front, output, spec=limit, chosen_cost=a.cost if a.feasible else None,
+                                               ax=_canvas_axes((6.4, 4.4)))))
     return figs
 
 
@@ -187,7 +240,56 @@ def _tables(result: StudyResult) -> dict[str, pd.DataFrame]:
             tables[f"sobol_{c.name}"] = c.sobol.to_frame()
             for output, frame in c.ranking.items():
                 tables[f"ranking_{c.name}_{output}"] = frame
+        if c.allocation is not None:
+            tables[f"allocation_{c.name}"] = c.allocation.choice_frame()
+            if c.allocation_front is not None:
+                tables[f"allocation_front_{c.name}"] = c.allocation_front
     return tables
+
+
+def _poses_text(poses: np.ndarray, n: int = 6) -> str:
+    """``(x, y, φ)`` of the first ``n`` poses, and how many more."""
+    text = "; ".join(f"({x:g}, {y:g}, {p:g})" for x, y, p in poses[:n])
+    return text + (f" and {len(poses) - n} more" if len(poses) > n else "")
+
+
+def _allocations(result: StudyResult, tables: dict[str, pd.DataFrame]) -> list[dict]:
+    """Per configuration with an allocation: its figures, in report units, for the template."""
+    from .allocation_plots import class_changes
+    out = []
+    for c in result.configurations:
+        a = c.allocation
+        if a is None:
+            continue
+        choice = tables[f"allocation_{c.name}"].copy()
+        factor = np.where(choice["unit"] == "mm", MM2UM, DEG2ARCSEC)
+        choice = choice.assign(lo=choice["lo"] * factor, hi=choice["hi"] * factor,
+                               unit=np.where(choice["unit"] == "mm", "µm", "arcsec"))
+        usage = {"position": a.worst_case_position_mm / a.spec["position_mm"]
+                 if a.spec["position_mm"] and a.spec["percentile"] is None else None,
+                 "phi": a.worst_case_phi_deg / a.spec["phi_deg"] if a.spec["phi_deg"] else None}
+        doc = {"name": c.name, "result": a, "choice": _html_table(choice),
+               "position_um": MM2UM * a.worst_case_position_mm, "phi_arcsec": DEG2ARCSEC * a.worst_case_phi_deg,
+               "usage": usage, "binding_poses": _poses_text(a.binding_poses), "front": None}
+        if a.statistical is not None:
+            st = a.statistical
+            doc["statistical"] = {"percentile": st["percentile"], "screen_um": MM2UM * st["screen_mm"],
+                                  "percentile_um": MM2UM * st["percentile_mm"],
+                                  "ci_high_um": MM2UM * st["ci_high_mm"], "n_samples": st["n_samples"],
+                                  "confirmed": st["confirmed"]}
+        front = c.allocation_front
+        if front is not None and len(front):
+            inputs = list(a.choice)
+            wide = front.pivot_table(index=["point", "cost"], columns="output", values="value").reset_index()
+            firsts = front.groupby("point")[inputs].first()
+            changed = [class_changes(firsts.iloc[k - 1] if k else None, firsts.iloc[k]) for k in range(len(firsts))]
+            doc["front"] = _html_table(pd.DataFrame({
+                "cost": wide["cost"], "worst-case position error (µm)": MM2UM * wide["position"],
+                "worst-case |δφ| (arcsec)": DEG2ARCSEC * wide["phi"], "classes changed": changed}))
+        elif front is not None:
+            doc["front"] = ""
+        out.append(doc)
+    return out
 
 
 def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tables: dict[str, pd.DataFrame],
@@ -198,13 +300,13 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
                              autoescape=jinja2.select_autoescape(["html", "j2"]))
     study = result.study
     meta = result.metadata()
-    meta.update(python=platform.python_version(), numpy=np.__version__, platform=platform.platform(),
-                date=_dt.datetime.now().astimezone().isoformat(timespec="seconds"))
+    meta.update(platform=platform.platform(), date=_dt.datetime.now().astimezone().isoformat(timespec="seconds"))
     configs = [{"name": c.name, "geometry": c.configuration.geometry.name,
                 "region": f"x ∈ [{c.configuration.region.x_mm[0]:g}, {c.configuration.region.x_mm[1]:g}] mm, "
                           f"y ∈ [{c.configuration.region.y_mm[0]:g}, {c.configuration.region.y_mm[1]:g}] mm, "
                           f"φ = {c.configuration.region.phi_deg:g}°",
                 "reference": c.configuration.reference,
+                "worst_pose": _worst_pose(c),
                 "contributions": _html_table(tables[f"contributions_{c.name}"].drop(columns=["output"]).assign(
                     **{"contribution (µm)": lambda d: MM2UM * d["contribution"],
                        "share (%)": lambda d: 100 * d["share"]})
@@ -217,7 +319,8 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
         study=study, result=result, meta=meta, configs=configs, figures=figures,
         summary_table=_html_table(summary_table), families=_html_table(families, 3),
         budget_table=_html_table(tables["budget"]), cmp=comparison(result, summary),
-        summary=summary, mc_percentile=f"p{_MC_PERCENTILE:g}", tables=sorted(tables))
+        summary=summary, mc_percentile=f"p{_MC_PERCENTILE:g}", tables=sorted(tables),
+        inputs=summary["inputs"], versions=summary["versions"], allocations=_allocations(result, tables))
 
 
 def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = False,

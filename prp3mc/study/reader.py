@@ -40,12 +40,28 @@ optional; paths are relative to the study file)::
     reference_position_um = [110, 150]  # a published worst-case range to compare with
     reference = "paper, Fig. 4"         # where that range comes from
 
+    [allocation]                      # least-cost tolerance classes meeting a spec (prp3mc allocate)
+    classes = "example"               # the bundled classes preset, or a classes TOML file
+    spec_position_um = 80.0           # worst-case position error bound, µm; and/or
+    spec_phi_arcsec = 120.0           # worst-case |dphi| bound, arcsec
+    spec_percentile = 99.73           # optional: the position spec bounds this percentile instead
+    samples = 20000                   # Monte Carlo samples confirming it (only with spec_percentile)
+    grid = 41                         # n or [nx, ny] (default: the [worstcase] grid)
+    front = true                      # also the cost-accuracy Pareto front (default true)
+    configurations = ["u-shape"]      # default: every configuration
+
+The allocation runs for every configuration (or those listed), each over
+its own geometry and test region; its budget is the classes' laws alone, not
+the study budget (see :mod:`prp3mc.study.allocation`).
+
 A mistake (unknown key, wrong type, unknown preset, impossible value, a pose
 or region outside the workspace) raises :class:`~prp3mc.errors.StudyError`
 whose message reads ``FILE:LINE: reason``.
 
-Randomness: the study seed gives one Monte Carlo seed and one Sobol seed,
-shared by all configurations (common random numbers, so differences between
+Randomness: the study seed gives one Monte Carlo seed, one Sobol seed and
+one seed of the allocation's Monte Carlo confirmation, each shared by all
+configurations (common random numbers, so differences between configurations
+are not blurred by sampling noise).
 """
 
 from __future__ import annotations
@@ -67,6 +83,7 @@ from ..kinematics.geometry import REGION_PRESETS, Geometry, Region
 from ..uncertainty.budget import Budget
 from ..uncertainty.montecarlo import PERCENTILES
 from ..units import OUTPUTS
+from .allocation import AllocationSpec, read_allocation
 
 __all__ = ["Study", "StudyConfiguration", "bundled_studies", "STUDIES_DIR", "ANALYSES"]
 
@@ -135,6 +152,8 @@ class Study:
         Base sample size N of Saltelli's scheme, a power of two.
     sobol_outputs : tuple of str
     sobol_groups : dict of str to tuple of str
+    allocation : AllocationSpec or None
+        The ``[allocation]`` table.
     source : str
         The file it was read from.
     """
@@ -156,6 +175,7 @@ class Study:
     sobol_grid: tuple = _DEFAULT["sobol_grid"]
     sobol_outputs: tuple = _DEFAULT["sobol_outputs"]
     sobol_groups: dict = field(default_factory=dict)
+    allocation: AllocationSpec | None = None
     source: str = "<study>"
 
     @classmethod
@@ -199,7 +219,8 @@ class Study:
                        mc_samples=min(self.mc_samples, _REDUCED["mc_samples"]),
                        mc_grid=cap(self.mc_grid, _REDUCED["mc_grid"]),
                        sobol_samples=min(self.sobol_samples, _REDUCED["sobol_samples"]),
-                       sobol_grid=cap(self.sobol_grid, _REDUCED["sobol_grid"]))
+                       sobol_grid=cap(self.sobol_grid, _REDUCED["sobol_grid"]),
+                       allocation=None if self.allocation is None else self.allocation.reduced())
 
     def with_budget(self, budget: Budget) -> "Study":
         """The same study with another budget (what-if studies, perturbation tests)."""
@@ -212,6 +233,8 @@ class Study:
             out.update(montecarlo_samples=self.mc_samples, montecarlo_grid=list(self.mc_grid))
         if "sobol" in self.outputs:
             out.update(sobol_samples=self.sobol_samples, sobol_grid=list(self.sobol_grid))
+        if self.allocation is not None:
+            out.update(self.allocation.sizes(self.worstcase_grid))
         return out
 
 
@@ -224,7 +247,7 @@ class _Reader:
     """Validation of a parsed study document, pointing errors at their lines."""
 
     _TOP = {"name", "title", "description", "seed", "budget", "outputs", "worstcase", "montecarlo",
-            "sobol", "configuration"}
+            "sobol", "configuration", "allocation"}
     _TABLES = {"worstcase": {"grid", "k_sigma"},
                "montecarlo": {"samples", "grid", "percentiles", "tolerance_mm"},
                "sobol": {"samples", "grid", "outputs", "groups"}}
@@ -351,6 +374,7 @@ class _Reader:
         for k, n in enumerate(names):
             if n in names[:k]:
                 self.fail(("configuration", k, "name"), f"configuration name {n!r} is used twice")
+        kw["allocation"] = read_allocation(self, doc, parsed, kw["worstcase_grid"], kw["k_sigma"])
         return Study(name=name, budget=budget, configurations=parsed, seed=seed,
                      title=self.get(doc, ("title",), "str", ""),
                      description=self.get(doc, ("description",), "str", ""),

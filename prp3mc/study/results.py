@@ -16,6 +16,7 @@ import pandas as pd
 from .._result import freeze, short_repr
 from .._version import __version__
 from ..units import OUTPUT_UNITS, Z95
+from ..uncertainty.allocation import AllocationResult
 from ..uncertainty.montecarlo import MonteCarloResult
 from ..uncertainty.worstcase import WorstCase
 from .reader import Study, StudyConfiguration
@@ -118,6 +119,10 @@ class ConfigurationResult:
         On the Sobol grid.
     ranking : mapping of str to DataFrame
         Per Sobol output, :func:`prp3mc.uncertainty.ranking.ranking` over the Sobol grid.
+    allocation : AllocationResult or None
+        The least-cost tolerance classes (the study's ``[allocation]``), on the allocation grid.
+    allocation_front : DataFrame or None
+        Its cost-accuracy Pareto front (tidy, :func:`~prp3mc.uncertainty.allocation.allocation_front`).
     """
 
     configuration: StudyConfiguration
@@ -126,6 +131,8 @@ class ConfigurationResult:
     samples: PoseSamples | None = None
     sobol: Any = None
     ranking: dict = field(default_factory=dict)
+    allocation: AllocationResult | None = None
+    allocation_front: pd.DataFrame | None = None
 
     def __post_init__(self):
         freeze(self)
@@ -136,8 +143,9 @@ class ConfigurationResult:
 
     @property
     def analyses(self) -> tuple[str, ...]:
-        """The analyses that ran: ``worstcase`` and those of ``montecarlo``, ``sobol`` present."""
-        return ("worstcase",) + tuple(a for a in ("montecarlo", "sobol") if getattr(self, a) is not None)
+        """The analyses that ran: ``worstcase`` and those of ``montecarlo``, ``sobol``, ``allocation`` present."""
+        return ("worstcase",) + tuple(a for a in ("montecarlo", "sobol", "allocation")
+                                      if getattr(self, a) is not None)
 
     def __repr__(self) -> str:
         return f"ConfigurationResult(name={self.name!r}, analyses={self.analyses!r})"
@@ -184,6 +192,8 @@ class StudyResult:
         Wall time per analysis.
     wall_time_s : float
     version : str
+    allocation_seed : int or None
+        Seed of the allocation's Monte Carlo confirmation (with an ``[allocation]`` table).
     """
 
     study: Study
@@ -194,6 +204,7 @@ class StudyResult:
     timings_s: dict
     wall_time_s: float
     version: str = __version__
+    allocation_seed: int | None = None
 
     def __post_init__(self):
         freeze(self)
@@ -213,7 +224,9 @@ class StudyResult:
         """Package version, seeds, sample sizes and wall times."""
         return {"prp3mc_version": self.version, "study": self.study.name, "source": self.study.source,
                 "budget": self.study.budget.name, "seed": self.seed, "montecarlo_seed": self.montecarlo_seed,
-                "sobol_seed": self.sobol_seed, **self.study.sizes(),
+                "sobol_seed": self.sobol_seed,
+                **({} if self.allocation_seed is None else {"allocation_seed": self.allocation_seed}),
+                **self.study.sizes(),
                 "wall_time_s": round(self.wall_time_s, 3),
                 "timings_s": {k: round(v, 3) for k, v in self.timings_s.items()}}
 

@@ -4,11 +4,12 @@
 file, or the name of a bundled study) and returns a
 :class:`~prp3mc.study.results.StudyResult`;
 :func:`prp3mc.reports.study_report.write_study` writes its report, figures,
-tables and ``summary.json`` (``prp3mc study FILE.toml --out DIR``, SPEC §6).
+tables and ``summary.json`` (``prp3mc study FILE.toml --out DIR``).
 
 Randomness: the study seed gives one Monte Carlo seed and one Sobol seed,
 shared by all configurations (common random numbers, so differences between
-configurations are not blurred by sampling noise).
+configurations are not blurred by sampling noise), and the seed of the
+allocation's Monte Carlo confirmation (stream 3, also shared).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from ..uncertainty.ranking import ranking
 from ..uncertainty.sobol import sobol_indices
 from ..uncertainty.worstcase import WorstCase, worst_case
 from ..units import RAD2DEG
+from .allocation import ALLOCATION_STREAM, run_allocation
 from .reader import Study, StudyConfiguration
 from .results import ConfigurationResult, PoseSamples, StudyResult
 
@@ -89,6 +91,11 @@ def run_study(study: "Study | str | os.PathLike", *, rng: "None | int | np.rando
     timings = dict.fromkeys(("worstcase",) + study.outputs, 0.0)
     show = sys.stderr.isatty() if progress is None else progress
     steps = len(study.configurations) * len(timings)
+    allocation, allocation_seed = study.allocation, None
+    if allocation is not None:
+        allocation_seed = child_seed(seed, ALLOCATION_STREAM)
+        timings["allocation"] = 0.0
+        steps += sum(allocation.applies_to(c.name) for c in study.configurations)
     done = 0
 
     def stage(config: StudyConfiguration, what: str) -> None:
@@ -127,7 +134,12 @@ def run_study(study: "Study | str | os.PathLike", *, rng: "None | int | np.rando
             kw["sobol"] = s
             kw["ranking"] = {o: ranking(s, wc_s, output=o) for o in study.sobol_outputs}
             timings["sobol"] += time.perf_counter() - t
+        if allocation is not None and allocation.applies_to(config.name):
+            stage(config, "tolerance allocation" + (" and its Pareto front" if allocation.front else ""))
+            t = time.perf_counter()
+            kw.update(run_allocation(config, allocation, study.worstcase_grid, study.k_sigma, allocation_seed))
+            timings["allocation"] += time.perf_counter() - t
         results.append(ConfigurationResult(configuration=config, worst_case=wc, **kw))
     return StudyResult(study=study, seed=seed, montecarlo_seed=mc_seed, sobol_seed=sobol_seed,
                        configurations=tuple(results), timings_s=timings,
-                       wall_time_s=time.perf_counter() - t0)
+                       wall_time_s=time.perf_counter() - t0, allocation_seed=allocation_seed)

@@ -16,8 +16,21 @@ Layout (µm and arcsec)::
          "sobol": {"position": {"theta_1": {"kind": "input", "S1": {"value": ..., "se": ...},
                                             "ST": {...}, "worst_case_share": 0.31}, ...}, ...}},
                                             # worst_case_share null where undefined (rho_i, zeta_i alone)
+         "allocation": {"cost": 26.0, "choice": {"rho_1": "CN", ...}, "worst_case_position_um": 77.6,
+                        "worst_case_phi_arcsec": 88.2, "feasible": true,
+                        "spec": {"position_um": 80.0, "phi_arcsec": 120.0, "percentile": null},
+                        "binding": "position", "binding_poses": [{"x_mm": ..., "y_mm": ..., "phi_deg": ...}],
+                        "front": [{"cost": 12.0, "worst_case_position_um": ..., "worst_case_phi_arcsec": ...}, ...]}},
+                                            # with [allocation]; layout in prp3mc.study.allocation
        "delta-shape": {...}},
-     "metadata": {"prp3mc_version": ..., "seed": ..., "montecarlo_samples": ..., "wall_time_s": ...}}
+     "metadata": {"prp3mc_version": ..., "seed": ..., "montecarlo_samples": ..., "wall_time_s": ...},
+     "inputs": {"study": {"name": "quick", "file": "/abs/quick.toml", "sha256": "..."},
+                "budget": {"name": "paper", "preset": "paper"},     # or "file" and "sha256"
+                "configurations": {"u-shape": {"geometry": {"name": "u-shape", "preset": "u-shape"},
+                                               "region": {"x_mm": [-40, 40], "y_mm": [60, 140], "phi_deg": 0}}},
+                "seed": 7, "montecarlo_seed": ..., "sobol_seed": ..., "worstcase_grid": [41, 41],
+                "montecarlo_samples": 32768, ...},
+     "versions": {"prp3mc": ..., "python": ..., "numpy": ..., "scipy": ..., "pandas": ..., "SALib": ...}}
 
 A plain number is **exact** (the worst case is a deterministic function of
 geometry, budget and grid); a ``{"value", "se"}`` pair is a **statistic** with
@@ -27,17 +40,31 @@ from its distribution-free 95 % interval (half-width / 1.96), at the pose
 that gives the min or max; a mean over the grid carries the mean of the
 pose-wise standard errors (an upper bound under the common random numbers
 all poses share); a Sobol index's is its bootstrap half-width / 1.96.
-:func:`prp3mc.testing.assert_summary_close` compares two summaries.
+A Sobol entry's ``worst_case_share`` is taken at the grid pose where the
+worst case is largest (the report's figures use the mean over the grid, as
+for the indices). ``inputs`` and ``versions`` say what the run was made
+from: the study file, the budget and each geometry (preset name, or file
+and sha256), seeds and sizes, and the package versions.
+:func:`prp3mc.testing.assert_summary_close` compares two summaries and
+skips ``metadata``, ``inputs`` and ``versions``.
 """
 
 from __future__ import annotations
 
+import tomllib
+from pathlib import Path
+
 import numpy as np
 
+from ..errors import Prp3mcError
+from ..kinematics.geometry import Geometry
+from ..provenance import file_record, spec_record, versions
+from ..uncertainty.budget import Budget
 from ..units import DEG2ARCSEC, MM2UM, Z95
+from .allocation import allocation_summary
 from .results import ConfigurationResult, StudyResult, over_grid, pct_se
 
-__all__ = ["build_summary"]
+__all__ = ["build_summary", "study_inputs"]
 
 
 def _stat(value, se) -> dict:
@@ -85,6 +112,61 @@ def _sobol(c: ConfigurationResult) -> dict:
     return out
 
 
+def _file_specs(source: str) -> tuple[Path, list[str], list[str]]:
+    """The study file's folder and the budget and geometry specs it names (empty if it cannot be read)."""
+    path = Path(source)
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return path.parent, [], []
+    configs = doc.get("configuration", [])
+    geometries = [c["geometry"] for c in configs if isinstance(c, dict) and isinstance(c.get("geometry"), str)]
+    budget = doc.get("budget", "paper")
+    return path.parent, [budget] if isinstance(budget, str) else [], geometries
+
+
+def _record(used, specs: list[str], base: Path, loader) -> dict:
+    """How ``used`` (a Budget or Geometry) was named in the study file: preset, or file and sha256.
+
+    The first spec of the file that loads to ``used`` is recorded; a budget
+    or geometry that none gives (replaced in code, or varied by a sweep) is
+    recorded by name only.
+    """
+    for spec in specs:
+        target = base / spec if spec.endswith(".toml") else spec
+        try:
+            if loader(target) == used:
+                return spec_record(target, used)
+        except Prp3mcError:
+            continue
+    return {"name": used.name, "note": "not as the study file names it (replaced in code, or varied)"}
+
+
+def study_inputs(result: StudyResult) -> dict:
+    """What a study run was made from (the ``inputs`` of ``summary.json``; layout in the module docstring)."""
+    study = result.study
+    base, budgets, geometries = _file_specs(study.source)
+    record = {"name": study.name}
+    if Path(study.source).is_file():
+        record.update(file_record(study.source))
+    configs = {}
+    for c in study.configurations:
+        region = c.region
+        configs[c.name] = {"geometry": _record(c.geometry, geometries, base, Geometry.load),
+                           "region": {"x_mm": [float(v) for v in region.x_mm],
+                                      "y_mm": [float(v) for v in region.y_mm], "phi_deg": float(region.phi_deg)}}
+    out = {"study": record, "budget": _record(study.budget, budgets, base, Budget.load),
+           "configurations": configs, "seed": result.seed, "montecarlo_seed": result.montecarlo_seed,
+           "sobol_seed": result.sobol_seed, **study.sizes()}
+    if getattr(study, "allocation", None) is not None:
+        source = study.allocation.classes_source
+        out["allocation_classes"] = spec_record(base / source if source.endswith(".toml") else source,
+                                                study.allocation.classes)
+        if getattr(result, "allocation_seed", None) is not None:
+            out["allocation_seed"] = result.allocation_seed
+    return out
+
+
 def build_summary(result: StudyResult) -> dict:
     """The summary of a study run as a JSON-ready dict (layout in the module docstring)."""
     configs = {}
@@ -96,5 +178,8 @@ def build_summary(result: StudyResult) -> dict:
             doc["montecarlo"] = _montecarlo(c)
         if c.sobol is not None:
             doc["sobol"] = _sobol(c)
+        if c.allocation is not None:
+            doc["allocation"] = allocation_summary(c.allocation, c.allocation_front)
         configs[c.name] = doc
-    return {"study": result.study.name, "configurations": configs, "metadata": result.metadata()}
+    return {"study": result.study.name, "configurations": configs, "metadata": result.metadata(),
+            "inputs": study_inputs(result), "versions": versions()}

@@ -35,7 +35,7 @@ from .budget import Budget
 from .montecarlo import monte_carlo
 from .worstcase import worst_case
 
-__all__ = ["AllocationResult", "allocate", "allocation_front"]
+__all__ = ["AllocationResult", "allocate", "allocation_front", "front_records"]
 
 _CONFIRM_ROUNDS = 3
 
@@ -134,7 +134,7 @@ class AllocationResult:
         return pd.concat(frames, ignore_index=True)
 
     def to_dict(self) -> dict:
-        """The SPEC §7 JSON object (µm, arcsec) with the binding poses, the spec and the search."""
+        """The ``prp3mc allocate --json`` object (µm, arcsec) with the binding poses, the spec and the search."""
         spec = {"position_um": _scaled(self.spec["position_mm"], MM2UM),
                 "phi_arcsec": _scaled(self.spec["phi_deg"], DEG2ARCSEC), "percentile": self.spec["percentile"]}
         doc = {"cost": self.cost, "choice": dict(self.choice),
@@ -341,4 +341,15 @@ def allocation_front(geometry, classes, region, *, output: str = "position",
     rows = [{"point": k, "cost": cost, "output": q, "statistic": "worst_case", "value": env[q],
              "unit": "mm" if q == "position" else "deg", **choice}
             for k, (cost, env, choice) in enumerate(points) for q in ("position", "phi")]
-    return pd.DataFrame(rows)
+    return pd.DataFrame(rows, columns=["point", "cost", "output", "statistic", "value", "unit", *problem.inputs])
+
+
+def front_records(front: pd.DataFrame) -> list[dict]:
+    """The points of a tidy front as JSON-ready dicts: ``cost``, ``worst_case_position_um``, ``worst_case_phi_arcsec``.
+
+    Cheapest first; empty when no choice meets the side spec.
+    """
+    wide = front.pivot(index="point", columns="output", values="value")
+    cost = front.groupby("point")["cost"].first()
+    return [{"cost": float(cost[k]), "worst_case_position_um": MM2UM * float(row["position"]),
+             "worst_case_phi_arcsec": DEG2ARCSEC * float(row["phi"])} for k, row in wide.iterrows()]

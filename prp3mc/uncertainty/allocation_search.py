@@ -24,7 +24,7 @@ first d inputs; for the rest it evaluates
 Inputs whose classes share no common interval are branched first and get no
 bound until they are fixed, so the search stays exact for any menu.
 
-The statistical screen (SPEC §7 extension) uses the closed-form mean and
+The statistical screen (for a percentile spec) uses the closed-form mean and
 covariance of the position error: a normal-approximation bound
 ``|mu| + sqrt(lambda_max(Sigma) chi2_2(q))`` on its q-quantile (under
 normality the ellipse of probability q lies in that disc), capped by the

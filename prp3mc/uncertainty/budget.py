@@ -1,9 +1,10 @@
 """Error budgets: named error inputs, each with a law, plus Sobol groups.
 
-Inputs are named ``<family>_<leg>`` with the families of SPEC §1
+Inputs are named ``<family>_<leg>`` with the ten error families of the model
 (``a, alpha, b, beta, rho, c, gamma, theta, e, psi``) and ``zeta_<leg>``, the
 contact angle of clearance ``rho_<leg>``. Lengths are in mm and angles in
-degrees. The preset ``paper`` is SPEC §3.
+degrees. The preset ``paper`` is the source paper's non-compensable budget
+(clearances, guide play, encoder least counts; README, *File formats*).
 """
 
 from __future__ import annotations
@@ -248,7 +249,7 @@ class Budget:
     # ------------------------------------------------------------ I/O
     @classmethod
     def from_preset(cls, name: str) -> "Budget":
-        """A bundled budget: ``paper`` (SPEC §3)."""
+        """A bundled budget: ``paper`` (the source paper's non-compensable budget)."""
         if name not in BUDGET_PRESETS:
             raise UnknownPresetError(f"unknown budget preset {name!r} (known: {', '.join(BUDGET_PRESETS)})")
         return cls.from_dict(BUDGET_PRESETS[name], source=f"preset {name}")
@@ -355,5 +356,5 @@ def _paper_budget() -> dict[str, Any]:
     return {"name": "paper", "inputs": inputs}
 
 
-#: Bundled budgets; ``paper`` is the non-compensable budget of SPEC §3.
+#: Bundled budgets; ``paper`` is the source paper's non-compensable budget.
 BUDGET_PRESETS: dict[str, dict[str, Any]] = {"paper": _paper_budget()}

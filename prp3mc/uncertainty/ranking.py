@@ -75,7 +75,9 @@ def ranking(sobol_result: SobolResult, worst_case_result: WorstCase, output: str
         range of ST; the worst-case contribution and share are those at the
         pose where the worst case of ``output`` is largest (the pose that
         sets the region's guarantee; its pose is in ``df.attrs["worst_pose"]``),
-        worst_case_share_max the largest share over the poses.
+        worst_case_share_max the largest share over the poses and
+        worst_case_share_mean the mean share over the poses (the same basis
+        as S1 and ST; ``df.attrs["n_poses"]`` poses).
     """
     r, wc = sobol_result, worst_case_result
     if output not in r.outputs:
@@ -106,8 +108,10 @@ def ranking(sobol_result: SobolResult, worst_case_result: WorstCase, output: str
                      ST_conf=flat["ST_conf"].max(0), ST_min=flat["ST"].min(0), ST_max=flat["ST"].max(0),
                      worst_case_contribution=contrib.reshape(-1, K)[worst],
                      worst_case_share=share.reshape(-1, K)[worst],
-                     worst_case_share_max=share.reshape(-1, K).max(0))
+                     worst_case_share_max=share.reshape(-1, K).max(0),
+                     worst_case_share_mean=share.reshape(-1, K).mean(0))
         df = pd.DataFrame(frame)
         df.attrs["worst_pose"] = r.poses.reshape(-1, 3)[worst].tolist()
+        df.attrs["n_poses"] = len(flat["ST"])
     df.attrs["unit"] = OUTPUT_UNITS[output]
     return df.sort_values("ST", ascending=False, kind="stable").reset_index(drop=True)

@@ -118,7 +118,7 @@ class SobolResult:
 
         Columns ``x_mm, y_mm, phi_deg, output, name, kind, S1, S1_conf, ST,
         ST_conf`` (indices and half-widths are dimensionless). The indices
-        stay side by side, as SALib and the CLI JSON (SPEC §6) report them;
+        stay side by side, as SALib and ``prp3mc sobol --json`` report them;
         :meth:`conf_int` gives the same numbers in the long form
         (``statistic``, ``value``, ``se``, ``ci_low``, ``ci_high``, ``level``).
         """

@@ -1,0 +1,155 @@
+"""Rates of the discrepancy workflow on campaigns as a real instrument delivers them.
+
+Over many seeds per case, on both reference geometries (49 poses x 8 visits,
+phi in {-4, 0, 4} deg, both approach directions, 20 -> 28 degC, instrument
+noise 2 µm / 0.0005 deg), it measures
+
+- **false names**: campaigns that name an effect that was not hidden (nor is
+  an alias of one that was), in null campaigns carrying a registration
+  error, a drift, errors that repeat, or gross outliers;
+- **found**: campaigns in which every hidden effect is named or listed as an
+  alias of a named one, and **exact**: named set = hidden set;
+- **unexplained**: campaigns the workflow flags as unexplained;
+- **outliers found / false alarms**: share of the gross errors listed under
+  ``outliers``, and listed rows that were not gross errors (per campaign),
+  when the workflow looks for outliers.
+
+It runs against whatever the workflow offers: a field the result does not
+have is reported as ``n/a``.
+
+Usage: ``python benchmarks/bench_discrepancy.py [--seeds N] [--quick] [--json]
+[--cases NAME ...] [--geometries u-shape delta-shape]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+
+import numpy as np
+
+import prp3mc
+from prp3mc import Budget, Geometry, Region
+from prp3mc.measurement.simulate import simulate_campaign
+from prp3mc.measurement.workflow import discrepancy
+
+SIGMA = {"instrument_sigma_mm": 0.002, "instrument_sigma_deg": 0.0005}
+#: name -> (simulate_campaign keyword arguments, hidden effects)
+CASES = {
+    "null, registration 20 µm / 0.005 deg": ({"registration": (0.020, -0.010, 0.005)}, ()),
+    "null, drift 15 µm in x": ({"drift": (0.015, 0.0, 0.0)}, ()),
+    "null, repeats r = 0.7": ({"repeatable_fraction": 0.7}, ()),
+    "null, outliers 1 % x 0.5 mm": ({"outliers": (0.01, 0.5)}, ()),
+    "scale_2 hidden, registration": ({"effects": {"scale_2": 2e-4}, "registration": (0.020, -0.010, 0.005)},
+                                     ("scale_2",)),
+    "scale_2 + beta_1 hidden": ({"effects": {"scale_2": 2e-4, "beta_1": 0.03}}, ("scale_2", "beta_1")),
+}
+
+
+def campaign_poses(preset: str) -> np.ndarray:
+    poses = Region.from_preset(preset).grid(7).reshape(-1, 3)
+    poses[:, 2] = np.tile([-4.0, 0.0, 4.0], 17)[:49]
+    return poses
+
+
+def score(result, hidden: tuple, outlier_rows: list) -> dict:
+    """One campaign's outcome: a named effect is false when neither it nor any of its aliases was hidden."""
+    hidden = set(hidden)
+    named = {e.name for e in result.named_effects}
+    covered = named | {a for e in result.named_effects for a in e.aliases}
+    row = {"false_name": any(e.name not in hidden and not set(e.aliases) & hidden for e in result.named_effects),
+           "found": hidden <= covered if hidden else None,
+           "exact": named == hidden if hidden else None,
+           "unexplained": bool(result.unexplained)}
+    listed = getattr(result, "outliers", None)
+    if listed is not None:
+        rows = {int(o["row"]) for o in listed}
+        row["outliers_found"] = len(rows & set(outlier_rows)) / len(outlier_rows) if outlier_rows else None
+        row["outlier_false_alarms"] = len(rows - set(outlier_rows))
+    return row
+
+
+def wilson(k: int, n: int) -> tuple[float, float]:
+    """95 % Wilson interval of a proportion k / n."""
+    if n == 0:
+        return (math.nan, math.nan)
+    z, p = 1.959963984540054, k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+def run_case(preset: str, name: str, seeds: range) -> dict:
+    kwargs, hidden = CASES[name]
+    geometry, budget = Geometry.from_preset(preset), Budget.from_preset("paper")
+    poses = campaign_poses(preset)
+    rows, seconds = [], []
+    for seed in seeds:
+        c = simulate_campaign(geometry, budget, poses, 8, rng=seed, **SIGMA, **kwargs)
+        t0 = time.perf_counter()
+        result = discrepancy(geometry, budget, c, rng=seed, **SIGMA)
+        seconds.append(time.perf_counter() - t0)
+        rows.append(score(result, hidden, list(c.metadata["outlier_rows"])))
+    out = {"geometry": preset, "case": name, "hidden": list(hidden), "n": len(rows),
+           "seconds_per_campaign": float(np.mean(seconds))}
+    for key in ("false_name", "found", "exact", "unexplained"):
+        values = [r[key] for r in rows if r.get(key) is not None]
+        out[key] = None if not values else {"k": int(sum(values)), "n": len(values),
+                                             "rate": sum(values) / len(values),
+                                             "ci95": list(wilson(int(sum(values)), len(values)))}
+    found = [r["outliers_found"] for r in rows if r.get("outliers_found") is not None]
+    alarms = [r["outlier_false_alarms"] for r in rows if "outlier_false_alarms" in r]
+    out["outliers_found"] = float(np.mean(found)) if found else None
+    out["outlier_false_alarms_per_campaign"] = float(np.mean(alarms)) if alarms else None
+    return out
+
+
+def _cell(v) -> str:
+    if v is None:
+        return "n/a"
+    if isinstance(v, dict):
+        return f"{v['k']}/{v['n']} ({100 * v['rate']:.0f} %)"
+    return f"{v:.2f}"
+
+
+def table(results: list[dict]) -> str:
+    head = ["geometry", "case", "false names", "found", "exact", "unexplained", "outliers found",
+            "false alarms/campaign", "s/campaign"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in results:
+        cells = [r["geometry"], r["case"], _cell(r["false_name"]), _cell(r["found"]), _cell(r["exact"]),
+                 _cell(r["unexplained"]), _cell(r["outliers_found"]), _cell(r["outlier_false_alarms_per_campaign"]),
+                 f"{r['seconds_per_campaign']:.1f}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--seeds", type=int, default=40, help="campaigns per case and geometry (default 40)")
+    p.add_argument("--quick", action="store_true", help="8 seeds per case")
+    p.add_argument("--first-seed", type=int, default=0)
+    p.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES), metavar="CASE")
+    p.add_argument("--geometries", nargs="+", default=["u-shape", "delta-shape"])
+    p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    args = p.parse_args(argv)
+    n = 8 if args.quick else args.seeds
+    seeds = range(args.first_seed, args.first_seed + n)
+    t0 = time.perf_counter()
+    results = []
+    for preset in args.geometries:
+        for name in args.cases:
+            results.append(run_case(preset, name, seeds))
+            if not args.json:
+                print(table(results[-1:]).splitlines()[-1], file=sys.stderr, flush=True)
+    doc = {"prp3mc": prp3mc.__version__, "seeds": [seeds.start, seeds.stop], "results": results,
+           "wall_s": time.perf_counter() - t0}
+    print(json.dumps(doc, indent=2) if args.json else table(results))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
