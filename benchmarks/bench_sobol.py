@@ -7,6 +7,15 @@ case, and the ranking tables of every output next to the worst-case
 contributions. SALib's ``sobol.analyze`` (one call per pose, output and
 problem) is timed on a few poses and scaled to the same grids.
 
+At one pose (``bench_sobol_pose``) prp3mc's default path (Saltelli design,
+model, first and total indices of four outputs with 100 bootstrap
+resamples) is timed against OpenTURNS' ``SaltelliSensitivityAlgorithm`` on
+the same problem (the budget as :func:`~prp3mc.uncertainty.interop.openturns_distribution`,
+the same linear model, the same N and bootstrap size), when OpenTURNS is
+installed. OpenTURNS estimates the 12 inputs only; prp3mc adds the three
+clearance groups (15 columns of the design instead of 12). Wall and CPU
+times are both reported (the machine may be shared).
+
 Usage: ``python benchmarks/bench_sobol.py [--quick]`` prints one JSON object.
 """
 
@@ -17,7 +26,9 @@ import json
 import sys
 import time
 
-from prp3mc import Budget, Geometry, Region, worst_case
+import numpy as np
+
+from prp3mc import Budget, Geometry, Region, linear_model, worst_case
 from prp3mc.uncertainty.ranking import ranking
 from prp3mc.uncertainty.sobol import sobol_indices
 
@@ -63,11 +74,58 @@ def bench_sobol(quick: bool) -> dict:
     }
 
 
+def _timed(fn, repeat: int) -> tuple[float, float]:
+    """Smallest wall and CPU times of ``repeat`` calls, s."""
+    best = (np.inf, np.inf)
+    for _ in range(repeat):
+        t0, c0 = time.perf_counter(), time.process_time()
+        fn()
+        best = (min(best[0], time.perf_counter() - t0), min(best[1], time.process_time() - c0))
+    return best
+
+
+def bench_sobol_pose(quick: bool) -> dict:
+    """Sobol at one pose, prp3mc's default path against OpenTURNS' Saltelli estimator with bootstrap."""
+    n_samples, resamples = (1024 if quick else 8192), 100
+    geometry, budget, pose = Geometry.from_preset("u-shape"), Budget.from_preset("paper"), [0.0, 100.0, 0.0]
+    ours = lambda: sobol_indices(geometry, budget, pose, n_samples, rng=1, num_resamples=resamples)  # noqa: E731
+    ours()
+    result = {"sobol_pose_n_samples": n_samples}
+    result["sobol_pose_seconds"], result["sobol_pose_cpu_seconds"] = _timed(ours, 2 if quick else 3)
+    try:
+        import openturns as ot
+    except ImportError:
+        return result
+    from prp3mc.uncertainty.interop import openturns_distribution
+    model, dist = linear_model(geometry, budget, pose), openturns_distribution(budget)
+
+    def four_outputs(X):
+        E = model.evaluate(np.asarray(X))
+        return np.column_stack([E[:, 0], E[:, 1], E[:, 2], np.hypot(E[:, 0], E[:, 1])])
+
+    function = ot.PythonFunction(dist.getDimension(), 4, func_sample=four_outputs)
+
+    def theirs():
+        ot.RandomGenerator.SetSeed(1)
+        X = ot.SobolIndicesExperiment(dist, n_samples).generate()
+        algo = ot.SaltelliSensitivityAlgorithm(X, function(X), n_samples)
+        algo.setBootstrapSize(resamples)
+        for o in range(4):
+            algo.getFirstOrderIndices(o), algo.getTotalOrderIndices(o)
+        algo.getFirstOrderIndicesInterval(), algo.getTotalOrderIndicesInterval()
+
+    theirs()
+    result["ot_sobol_pose_seconds"], result["ot_sobol_pose_cpu_seconds"] = _timed(theirs, 2 if quick else 3)
+    result["sobol_pose_ratio_to_ot_wall"] = result["sobol_pose_seconds"] / result["ot_sobol_pose_seconds"]
+    result["sobol_pose_ratio_to_ot_cpu"] = result["sobol_pose_cpu_seconds"] / result["ot_sobol_pose_cpu_seconds"]
+    return result
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="N = 1024 instead of 8192")
     args = parser.parse_args(argv)
-    json.dump(bench_sobol(args.quick), sys.stdout, indent=2)
+    json.dump({**bench_sobol(args.quick), **bench_sobol_pose(args.quick)}, sys.stdout, indent=2)
     print()
     return 0
 

@@ -26,7 +26,7 @@ from .uncertainty.budget import Budget, Catalogue
 from .uncertainty.laws import Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
 from .uncertainty.model import LinearModel, linear_model
 from .uncertainty.montecarlo import MonteCarloResult, monte_carlo
-from .uncertainty.worstcase import WorstCase, worst_case
+from .uncertainty.worstcase import WorstCase, WorstCaseMaxima, worst_case, worst_case_maxima
 from .uncertainty.allocation import AllocationResult, allocate
 from .uncertainty.sobol import SobolResult, sobol_indices
 from .uncertainty.ranking import ranking as sobol_ranking
@@ -46,7 +46,7 @@ __all__ = [
     "sensitivity", "Sensitivity", "exact_pose_error",
     # budgets and their propagation
     "Budget", "Catalogue", "Uniform", "Normal", "TruncNormal", "Triangular", "Disc", "Discrete",
-    "linear_model", "LinearModel", "monte_carlo", "MonteCarloResult", "worst_case", "WorstCase",
+    "linear_model", "LinearModel", "monte_carlo", "MonteCarloResult", "worst_case", "WorstCase", "worst_case_maxima", "WorstCaseMaxima",
     "allocate", "AllocationResult",
     "sobol_indices", "SobolResult", "sobol_ranking",
     # studies

@@ -39,7 +39,8 @@ from typing import Any, Iterator
 from .errors import Prp3mcError
 
 __all__ = ["OutputError", "OutputExistsError", "OutputBusyError", "claim_output", "output_folder",
-           "check_output", "dumps_json", "write_json", "write_text", "save_figure", "figure_data_uri", "check_json"]
+           "check_output", "dumps_json", "write_json", "write_text", "check_json", "FigureFormatError",
+           "save_figure", "png_data_uri", "figure_formats", "FIGURE_FORMATS"]
 
 
 class OutputError(Prp3mcError, OSError):
@@ -253,18 +254,42 @@ def write_json(path: str | os.PathLike, obj) -> None:
     write_text(path, dumps_json(obj) + "\n")
 
 
-def save_figure(fig, folder: str | os.PathLike, name: str, formats=("png", "svg"), dpi: int = 150) -> list[Path]:
-    """Save a matplotlib figure as ``folder/name.png`` and ``.svg``; return the paths."""
-    paths = []
+class FigureFormatError(Prp3mcError, ValueError):
+    """A figure format that reports cannot write."""
+
+
+#: Figure formats a report can write.
+FIGURE_FORMATS = ("png", "svg")
+
+
+def figure_formats(spec) -> tuple[str, ...]:
+    """Figure formats from a comma-separated string such as ``"png,svg"`` or a sequence."""
+    text = spec if isinstance(spec, str) else ",".join(spec)
+    formats = tuple(dict.fromkeys(f.strip().lower() for f in text.split(",") if f.strip()))
+    bad = [f for f in formats if f not in FIGURE_FORMATS]
+    if bad or not formats:
+        raise FigureFormatError(f"figure formats must be among {', '.join(FIGURE_FORMATS)}, got {text!r}")
+    return formats
+
+
+def save_figure(fig, folder: str | os.PathLike, name: str, formats=("png",), dpi: int = 150) -> bytes:
+    """Save a figure as ``folder/name.<format>`` for every format; return its PNG bytes.
+
+    Each format is rendered once, without a tight bounding box (the figures
+    use a constrained layout); the PNG is rendered even if not written, so a
+    report embeds the very same bytes (:func:`png_data_uri`).
+    """
+    png = io.BytesIO()
+    fig.savefig(png, format="png", dpi=dpi)
     for fmt in formats:
-        p = Path(folder) / f"{name}.{fmt}"
-        fig.savefig(p, format=fmt, dpi=dpi, bbox_inches="tight")
-        paths.append(p)
-    return paths
+        path = Path(folder) / f"{name}.{fmt}"
+        if fmt == "png":
+            path.write_bytes(png.getvalue())
+        else:
+            fig.savefig(path, format=fmt, dpi=dpi)
+    return png.getvalue()
 
 
-def figure_data_uri(fig, dpi: int = 110) -> str:
-    """The figure as a base64 PNG ``data:`` URI, to embed in a self-contained HTML file."""
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
-    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+def png_data_uri(png: bytes) -> str:
+    """PNG bytes as a base64 ``data:`` URI, to embed in a self-contained HTML file."""
+    return "data:image/png;base64," + base64.b64encode(png).decode("ascii")

@@ -108,7 +108,7 @@ def test_screen_uses_the_closed_form_moments(geometry, preset):
 
 
 # ---------------------------------------------------------------- exactness
-@pytest.mark.parametrize("seed", [5, 6])
+@pytest.mark.parametrize("seed", [5, pytest.param(6, marks=pytest.mark.slow)])  # each seed ~10-20 s
 def test_least_cost_equals_brute_force(geometry, preset, seed):
     menu, poses = random_menu(seed), small_grid(preset)
     choices, costs, pos, phi = _brute_force(preset, seed)

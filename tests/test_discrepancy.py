@@ -155,6 +155,7 @@ def test_detectable_effect_planning():
     assert detectable_effect(g, BUDGET, c, "c_1", **SIGMA) == np.inf
 
 
+@pytest.mark.slow  # the whole discrepancy workflow through the CLI, three times
 def test_cli_and_report(tmp_path, capsys):
     g = Geometry.from_preset("u-shape")
     c = simulate_campaign(g, BUDGET, campaign_poses("u-shape", True), 4, effects={"backlash_2": 0.04}, rng=8, **SIGMA)

@@ -274,7 +274,7 @@ def test_cli_json_matches_closed_forms(capsys):
                          "--samples", "8192", "--seed", "1", "--json")
     assert code == 0 and err == ""
     doc = json.loads(out)
-    assert doc["method"] == "salib" and doc["seed"] == 1 and doc["n_samples"] == 8192
+    assert doc["method"] == "vectorised" and doc["seed"] == 1 and doc["n_samples"] == 8192
     names = set(PAPER.names) | {"clearance_1", "clearance_2", "clearance_3"}
     assert set(doc["outputs"]) == {"x", "y", "phi", "position"}
     for entry in doc["outputs"].values():

@@ -1,5 +1,6 @@
 """Studies: the file format and its errors, the report folder, the worst-case ranges, golden regression."""
 
+import base64
 import dataclasses
 import hashlib
 import importlib.util
@@ -135,7 +136,7 @@ def test_unknown_study_name():
 # ----------------------------------------------------------------- running and the report folder
 def test_cli_writes_report_folder(tmp_path, capsys):
     out = tmp_path / "out"
-    assert main(["study", str(study_file(tmp_path)), "--out", str(out), "--no-progress"]) == 0
+    assert main(["study", str(study_file(tmp_path)), "--out", str(out), "--no-progress", "--formats", "png,svg"]) == 0
     note = capsys.readouterr().out
     assert re.search(r"wrote .*report\.html in [\d.]+ s .*u-shape [\d.]+-[\d.]+ µm, delta [\d.]+-[\d.]+ µm", note)
     summary = json.loads((out / "summary.json").read_text())
@@ -158,12 +159,15 @@ def test_cli_writes_report_folder(tmp_path, capsys):
     assert set(summary["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib"}
     html = (out / "report.html").read_text()
     assert "<h2>7. Run</h2>" in html and inputs["study"]["sha256"] in html and "SALib" in html
-    assert not re.search(r"\d um\b|\(um\)", html) and "SPEC" not in html  # µm, and no internal references
+    text = re.sub(r"data:image/png;base64,[A-Za-z0-9+/=]+", "", html)  # base64 may spell anything
+    assert not re.search(r"\d um\b|\(um\)", text) and "SPEC" not in text  # µm, and no internal references
     assert {"ecdf_position", "ecdf_phi"} <= {p.stem for p in (out / "figures").glob("*.png")}
     images = re.findall(r'<img src="([^"]+)"', html)
     pngs = sorted(p.stem for p in (out / "figures").glob("*.png"))
     assert sorted(p.stem for p in (out / "figures").glob("*.svg")) == pngs
     assert len(images) == len(pngs) >= 8 and all(src.startswith("data:image/png;base64,") for src in images)
+    first = base64.b64decode(images[0].split(",", 1)[1])      # the embedded PNG is the written file
+    assert first in [(out / "figures" / f"{p}.png").read_bytes() for p in pngs]
     assert "href=" not in html and "<script" not in html  # self-contained
     assert "holds by" in html or "does not hold" in html
     for table in ("summary", "budget", "worstcase_u-shape", "montecarlo_delta", "sobol_delta",
@@ -182,6 +186,11 @@ def test_cli_refuses_existing_folder_without_force(tmp_path, capsys):
     assert (out / "keep.txt").read_text() == "mine"
     assert main(["study", str(path), "--out", str(out), "--force", "--no-progress"]) == 0
     assert not (out / "keep.txt").exists() and (out / "report.html").is_file()
+    figures = {p.suffix for p in (out / "figures").iterdir()}
+    assert figures == {".png"}                                      # one format by default
+    assert main(["study", str(path), "--out", str(tmp_path / "o"), "--formats", "png,pdf"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "png, svg" in err and not (tmp_path / "o").exists()
 
 
 def test_cli_bad_study_one_line(tmp_path, capsys):

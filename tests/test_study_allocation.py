@@ -226,7 +226,7 @@ def test_init_study_template_allocation_runs_uncommented(tmp_path, capsys):
 def test_report_shows_allocation(tmp_path):
     text = STUDY.split("[[configuration]]\nname")[0]                  # u-shape only
     result = run_study(study_file(tmp_path, text), progress=False)
-    report = write_study(result, tmp_path / "out")
+    report = write_study(result, tmp_path / "out", formats="png,svg")
     html = report.read_text()
     section = html[html.index("Tolerance allocation"):html.index("Budget</h2>")]
     a = result["u-shape"].allocation

@@ -63,7 +63,7 @@ class SobolCommand:
                        help="a user group of inputs, e.g. leg_1=rho_1,zeta_1,theta_1,b_1 (repeatable)")
         p.add_argument("--method", choices=("auto", "salib", "vectorised"), default="auto",
                        help="salib: SALib's analyze per output; vectorised: the same estimators for all "
-                            "outputs at once (equal to round-off); auto: salib for one pose (default)")
+                            "outputs at once (equal to round-off); auto: vectorised (default)")
         p.add_argument("--k-sigma", type=positive_float, default=None, metavar="K",
                        help="bound unbounded (normal) laws as mean ± K·sd for the worst case")
         add_progress(p)

@@ -5,6 +5,7 @@ import time
 
 from ..errors import Prp3mcError
 from ..limits import study_estimate
+from ..output import figure_formats
 from ..units import MM2UM
 from ..reports.study_report import write_study
 from ..study.distributed import parse_scheduler
@@ -32,6 +33,9 @@ class StudyCommand:
                        help="run the configurations on Dask: local:N (N local worker processes) or "
                             "tcp://HOST:PORT (an existing scheduler); needs pip install 'prp3mc[dask]'. "
                             "Default: in this process. The numbers do not depend on it")
+        p.add_argument("--formats", default="png", metavar="LIST",
+                       help="figure files to write, comma-separated among png, svg (default png; "
+                            "the report embeds the PNG either way)")
         add_progress(p)
 
     @staticmethod
@@ -42,6 +46,7 @@ class StudyCommand:
         study = Study.load(args.study)
         if args.quick:
             study = study.reduced()
+        formats = figure_formats(args.formats)
         within_limits(args, study_estimate(study))
         if not study.sweep:  # a sweep's base configuration need not be feasible: its combinations are checked
             for c in study.configurations:
@@ -51,7 +56,7 @@ class StudyCommand:
             first = result.skipped[0]
             raise Prp3mcError(f"study {study.name}: none of its {len(result.skipped)} configurations ran; "
                               f"{first.name}: {first.reason}")
-        report = write_study(result, args.out, force=args.force)
+        report = write_study(result, args.out, force=args.force, formats=formats)
         worst = result.to_frame().query("output == 'position' and statistic == 'worst_case'")
         span = worst.pivot(index="configuration", columns="aggregate", values="value") * MM2UM
         names = (list(span.sort_values("max").index[:_NAMED]) if study.sweep

@@ -286,25 +286,34 @@ def validated_frame(geometry: Geometry, poses: np.ndarray, limits: Limits = DEFA
     with np.errstate(all="ignore"):
         fr = frame(geometry, poses)
     for reason, mask in _reasons(geometry, fr, limits).items():
-        if not np.any(mask):
-            continue
-        idx = tuple(int(v) for v in np.argwhere(mask)[0])
-        pidx, leg = idx[:-1], idx[-1]
-        at_leg = (leg,) + pidx
-        x, y, phi = poses[pidx]
-        at = f"pose ({x:g} mm, {y:g} mm, {phi:g} deg) {_where(pidx)}"
-        lo, hi = geometry.stroke_mm[leg]
-        msg = {
-            "below": f"leaves leg {leg + 1}'s stroke: b_{leg + 1} = {fr.b[at_leg]:.6g} mm < {lo:g} mm",
-            "above": f"leaves leg {leg + 1}'s stroke: b_{leg + 1} = {fr.b[at_leg]:.6g} mm > {hi:g} mm",
-            "d": f"has d_{leg + 1} = {fr.d[at_leg]:.6g} mm <= 0 on leg {leg + 1}",
-            "transmission": (f"is near a serial singularity of leg {leg + 1}: |B_{leg + 1}{leg + 1}| = "
-                             f"{abs(fr.transmission[at_leg]):.3g} < {limits.min_transmission:g}"),
-            "condition": (f"is near a parallel singularity: cond(A) = {fr.condition[pidx]:.3g} > "
-                          f"{limits.max_condition:g}"),
-        }[reason]
-        raise InfeasiblePoseError(f"{at}{msg}")
+        if np.any(mask):
+            idx = tuple(int(v) for v in np.argwhere(mask)[0])
+            raise InfeasiblePoseError(refusal(geometry, poses[idx[:-1]], idx[:-1], reason, idx[-1], limits))
     return fr
+
+
+def refusal(geometry: Geometry, pose: np.ndarray, index: tuple, reason: str, leg: int,
+            limits: Limits = DEFAULT_LIMITS) -> str:
+    """The one-line message refusing ``pose`` (3,) found at ``index`` of its batch.
+
+    ``reason`` is one of ``below, above, d, transmission, condition`` (the
+    order in which they are tested), ``leg`` the 0-based leg breaking it.
+    """
+    with np.errstate(all="ignore"):
+        fr = frame(geometry, np.asarray(pose, dtype=float))
+    x, y, phi = pose
+    at = f"pose ({x:g} mm, {y:g} mm, {phi:g} deg) {_where(index)}"
+    lo, hi = geometry.stroke_mm[leg]
+    msg = {
+        "below": f"leaves leg {leg + 1}'s stroke: b_{leg + 1} = {fr.b[leg]:.6g} mm < {lo:g} mm",
+        "above": f"leaves leg {leg + 1}'s stroke: b_{leg + 1} = {fr.b[leg]:.6g} mm > {hi:g} mm",
+        "d": f"has d_{leg + 1} = {fr.d[leg]:.6g} mm <= 0 on leg {leg + 1}",
+        "transmission": (f"is near a serial singularity of leg {leg + 1}: |B_{leg + 1}{leg + 1}| = "
+                         f"{abs(fr.transmission[leg]):.3g} < {limits.min_transmission:g}"),
+        "condition": (f"is near a parallel singularity: cond(A) = {fr.condition:.3g} > "
+                      f"{limits.max_condition:g}"),
+    }[reason]
+    return f"{at}{msg}"
 
 
 def check_poses(geometry: Geometry, poses, limits: Limits = DEFAULT_LIMITS) -> None:

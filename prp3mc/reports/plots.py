@@ -201,7 +201,7 @@ def error_histogram(samples, index: int, quantity: str = "position", *, ax=None,
     ax = _axes(ax)
     name, unit, values, worst = _at_pose(samples, index, quantity)
     label = samples.labels[index] if label is None else label
-    sns.histplot(values, bins=bins, stat="density", element="step", fill=True, alpha=0.25, ax=ax,
+    sns.histplot(x=values, bins=bins, stat="density", element="step", fill=True, alpha=0.25, ax=ax,
                  label=label, color=color)
     color = ax.get_lines()[-1].get_color() if ax.get_lines() and color is None else color
     p = float(np.percentile(values, percentile))

@@ -5,7 +5,7 @@
 
     report.html            self-contained (figures embedded as PNG data URIs)
     summary.json           summary statistics with standard errors (prp3mc.summary)
-    figures/*.png, *.svg   every figure of the report
+    figures/*.png          every figure of the report (and *.svg on request)
     tables/*.csv           summary, worst-case and Monte Carlo grids, Sobol indices and rankings,
                            worst-case contributions, the budget, allocated classes and fronts
 
@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..output import check_output, figure_data_uri, output_folder, save_figure, write_json, write_text
+from ..output import check_output, figure_formats, output_folder, png_data_uri, save_figure, write_json, write_text
 from ..study.results import StudyResult
 from ..study.summary import build_summary
 from ..study.sweep import best_configurations, design_frame
@@ -378,12 +378,16 @@ def _merit_name(analysis: str, output: str, statistic: str) -> str:
     return f"{stat} {what}, max ({DISPLAY[output][1]})"
 
 
-def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = False) -> Path:
+def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = False,
+                formats=("png",)) -> Path:
     """Write the report, figures, tables and summary.json of ``result`` into the folder ``out``.
 
     ``out`` must not exist unless ``force``; it is replaced atomically.
-    Returns the path of ``report.html``.
+    ``formats`` (``png``, ``svg`` or both, a sequence or ``"png,svg"``) are
+    the files written per figure; each is rendered once and the report
+    embeds the same PNG. Returns the path of ``report.html``.
     """
+    formats = figure_formats(formats)
     check_output(out, force)
     summary = build_summary(result)
     with output_folder(out, force) as tmp:
@@ -391,8 +395,7 @@ def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = Fa
         (tmp / "tables").mkdir()
         embedded = []
         for name, caption, fig in _figures(result):
-            save_figure(fig, tmp / "figures", name)
-            embedded.append((name, caption, figure_data_uri(fig)))
+            embedded.append((name, caption, png_data_uri(save_figure(fig, tmp / "figures", name, formats))))
         tables = _tables(result)
         for name, frame in tables.items():
             frame.to_csv(tmp / "tables" / f"{name}.csv", index=False)

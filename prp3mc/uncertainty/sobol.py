@@ -41,7 +41,6 @@ from .saltelli import (design_factors, feature_sums, linear_indices, model_outpu
 __all__ = ["SobolResult", "sobol_indices", "sobol_converge"]
 
 _METHODS = ("auto", "salib", "vectorised")
-_SALIB_MAX_POSES = 1      # method="auto" hands a single pose to SALib itself
 _U_EDGE = 2.0**-53        # unit samples are clipped into (0, 1): unbounded laws stay finite
 _STATISTICS = ("S1", "ST")
 
@@ -211,7 +210,7 @@ def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
         ``salib`` calls ``SALib.analyze.sobol.analyze`` per pose, output and
         problem; ``vectorised`` computes the same estimators with the same
         bootstrap resamples for all poses at once (equal to SALib's numbers
-        to round-off); ``auto`` uses SALib for a single pose.
+        to round-off); ``auto`` is ``vectorised``.
     progress : bool, optional
         Progress on stderr (default: when stderr is a terminal).
     max_chunk_bytes : int
@@ -251,8 +250,8 @@ def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     model = linear_model(geometry, budget, poses)                  # validates every pose
     shape = model.poses.shape[:-1]
     n_poses = int(np.prod(shape, dtype=int))
-    if method == "auto":
-        method = "salib" if n_poses <= _SALIB_MAX_POSES else "vectorised"
+    if method == "auto":   # the vectorised estimators, at one pose too: 10 times faster than SALib's analyze
+        method = "vectorised"
 
     U = saltelli_design(budget, factors, n_samples, seed)
     F = model.features(budget.ppf(np.clip(U.reshape(-1, len(budget)), _U_EDGE, 1.0 - _U_EDGE)))

@@ -31,20 +31,39 @@ from numba import njit
 
 from .._result import freeze, pose_columns, short_repr
 from .._version import __version__
+from ..errors import InfeasiblePoseError
 from ..units import OUTPUT_UNITS, RAD2DEG
 from .budget import Budget, parse_input
 from ..kinematics.geometry import Geometry
-from ..kinematics.chain import as_poses
+from ..kinematics.chain import DEFAULT_LIMITS, as_poses, refusal
 from .model import LinearModel, linear_model
+from ._envelope import REASONS, envelope_kernel, leg_constants, term_table, zonotope_max
 
-__all__ = ["WorstCase", "worst_case", "QUANTITIES"]
+__all__ = ["WorstCase", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "QUANTITIES"]
 
 #: Quantities maximised: the position-error norm, |dphi|, |dx| and |dy|.
 QUANTITIES = ("position", "phi", "x", "y")
 
 
+class _Maxima:
+    """The maxima's accessors shared by :class:`WorstCase` and :class:`WorstCaseMaxima`."""
+
+    __slots__ = ()
+
+    def value(self, quantity: str) -> np.ndarray:
+        """The maximum of ``quantity`` (one of :data:`QUANTITIES`)."""
+        return {"position": self.position_mm, "phi": self.phi_deg, "x": self.x_mm, "y": self.y_mm}[quantity]
+
+    def to_frame(self) -> pd.DataFrame:
+        """Tidy table of the maxima: x_mm, y_mm, phi_deg, output, statistic (``worst_case``), value, unit."""
+        cols = pose_columns(self.poses)
+        return pd.concat([pd.DataFrame({**cols, "output": q, "statistic": "worst_case",
+                                        "value": self.value(q).ravel(), "unit": OUTPUT_UNITS[q]})
+                          for q in QUANTITIES], ignore_index=True)
+
+
 @dataclass(frozen=True, slots=True, repr=False)
-class WorstCase:
+class WorstCase(_Maxima):
     """Exact worst case of the linear model at a batch of poses.
 
     Attributes
@@ -162,17 +181,6 @@ class WorstCase:
             out[q] = x
         return out
 
-    def value(self, quantity: str) -> np.ndarray:
-        """The maximum of ``quantity`` (one of :data:`QUANTITIES`)."""
-        return {"position": self.position_mm, "phi": self.phi_deg, "x": self.x_mm, "y": self.y_mm}[quantity]
-
-    def to_frame(self) -> pd.DataFrame:
-        """Tidy table of the maxima: x_mm, y_mm, phi_deg, output, statistic (``worst_case``), value, unit."""
-        cols = pose_columns(self.poses)
-        return pd.concat([pd.DataFrame({**cols, "output": q, "statistic": "worst_case",
-                                        "value": self.value(q).ravel(), "unit": OUTPUT_UNITS[q]})
-                          for q in QUANTITIES], ignore_index=True)
-
     def contributions_frame(self, quantity: str = "position") -> pd.DataFrame:
         """Per pose and term: the maximiser's term value, its contribution and share of the maximum.
 
@@ -247,40 +255,12 @@ def _term_bounds(model: LinearModel, bounds: np.ndarray) -> np.ndarray:
 
 @njit(nogil=True, cache=True)
 def _corner_maxima(Ai, u_mid, u_half, values, signs):
-    """Maxima over the zonotope of every pose (compiled; one pass, nothing per corner kept).
+    """:func:`~prp3mc.uncertainty._envelope.zonotope_max` of every pose (compiled).
 
-    Ai : (N, 3, 3) A^-1; u_mid, u_half : (N, 3) centre and half-width of u.
-    values : (4, N) out, position mm, |dphi| rad, |dx| mm, |dy| mm.
-    signs : (4, N, 3) out, the sign of each leg's u_i at the maximum. The
-    corners are visited in the order sx, sy, sz in (-1, +1), the first of
-    equal maxima kept.
+    Ai : (N, 3, 3) A^-1; u_mid, u_half : (N, 3); values (4, N) and signs (4, N, 3) out.
     """
     for n in range(Ai.shape[0]):
-        c = np.empty(3)
-        g = np.empty((3, 3))
-        for r in range(3):
-            c[r] = Ai[n, r, 0] * u_mid[n, 0] + Ai[n, r, 1] * u_mid[n, 1] + Ai[n, r, 2] * u_mid[n, 2]
-            for i in range(3):
-                g[r, i] = Ai[n, r, i] * u_half[n, i]
-        best, arg = -1.0, 0
-        for k in range(8):
-            vx, vy = c[0], c[1]
-            for i in range(3):
-                if (k >> (2 - i)) & 1:
-                    vx, vy = vx + g[0, i], vy + g[1, i]
-                else:
-                    vx, vy = vx - g[0, i], vy - g[1, i]
-            q = vx * vx + vy * vy
-            if q > best:
-                best, arg = q, k
-        values[0, n] = np.sqrt(best)
-        for i in range(3):
-            signs[0, n, i] = 1.0 if (arg >> (2 - i)) & 1 else -1.0
-        for j, r in ((1, 2), (2, 0), (3, 1)):
-            sc = 1.0 if c[r] >= 0 else -1.0
-            values[j, n] = abs(c[r]) + abs(g[r, 0]) + abs(g[r, 1]) + abs(g[r, 2])
-            for i in range(3):
-                signs[j, n, i] = sc * (1.0 if g[r, i] >= 0 else -1.0)
+        zonotope_max(Ai[n], u_mid[n], u_half[n], values, signs, n)
 
 
 def _maxima(model: LinearModel, tb: np.ndarray):
@@ -362,3 +342,87 @@ def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | No
         x_mm=join(lambda p: p[2]["x"]), y_mm=join(lambda p: p[2]["y"]),
         leg_signs={q: join(lambda p, q=q: p[3][q], (3,)) for q in QUANTITIES}, input_bounds=bounds,
         k_sigma=k_sigma)
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class WorstCaseMaxima(_Maxima):
+    """The maxima of :class:`WorstCase` alone, for grids too large to keep the model (see
+    :func:`worst_case_maxima`).
+
+    Attributes
+    ----------
+    poses : ndarray (..., 3)
+    position_mm, phi_deg, x_mm, y_mm : ndarray (...)
+        Largest position-error norm, |dphi|, |dx| and |dy|.
+    leg_signs : dict of str to ndarray (..., 3), int8
+        As :attr:`WorstCase.leg_signs`.
+    input_bounds : ndarray (d, 2)
+    k_sigma : float or None
+    """
+
+    poses: np.ndarray
+    position_mm: np.ndarray
+    phi_deg: np.ndarray
+    x_mm: np.ndarray
+    y_mm: np.ndarray
+    leg_signs: dict
+    input_bounds: np.ndarray
+    k_sigma: float | None = None
+    version: str = __version__
+
+    def __post_init__(self):
+        freeze(self)
+
+    def __repr__(self) -> str:
+        return short_repr(self, "poses", "k_sigma")
+
+
+def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | None = None,
+                      check: bool = True) -> WorstCaseMaxima:
+    """The maxima of :func:`worst_case` from one fused compiled pass over the poses.
+
+    Per pose the kernel computes the inverse kinematics, A^-1, the h entries
+    of the budget's terms, the clearance intervals and the 8-corner maxima
+    in scalars, on all cores; nothing per pose is kept but the maxima and
+    their signs (44 bytes), so memory is that of the poses and the result.
+    The values equal :func:`worst_case`'s to round-off (1e-12 relative).
+
+    Parameters
+    ----------
+    geometry, budget, poses, k_sigma, check
+        As :func:`worst_case`; a refused pose raises the same
+        :class:`~prp3mc.errors.InfeasiblePoseError`.
+
+    Returns
+    -------
+    WorstCaseMaxima
+
+    Examples
+    --------
+    >>> from prp3mc import Geometry, Budget, Region
+    >>> from prp3mc.uncertainty.worstcase import worst_case_maxima
+    >>> grid = Region.from_preset("u-shape").grid(11)
+    >>> worst_case_maxima(Geometry.from_preset("u-shape"), Budget.from_preset("paper"), grid).position_mm.shape
+    (11, 11)
+    """
+    bounds = budget.bounds(k_sigma)
+    poses = as_poses(poses)
+    shape = poses.shape[:-1]
+    flat = np.ascontiguousarray(poses.reshape(-1, 3))
+    n = flat.shape[0]
+    values, signs, bad = np.empty((4, n)), np.empty((4, n, 3), dtype=np.int8), np.empty(n, dtype=np.int64)
+    limits = np.array([DEFAULT_LIMITS.min_transmission, DEFAULT_LIMITS.max_condition, DEFAULT_LIMITS.stroke_tol_mm])
+    envelope_kernel(flat, leg_constants(geometry), *term_table(budget, bounds), limits, check, values, signs, bad)
+    if check and bad.any():
+        for r, reason in enumerate(REASONS):
+            hit = np.flatnonzero(bad & (0b111 << 3 * r))
+            if hit.size:
+                p = int(hit[0])
+                leg = next(i for i in range(3) if bad[p] >> (3 * r + i) & 1)
+                # the flat index, as worst_case reports it
+                raise InfeasiblePoseError(refusal(geometry, flat[p], (p,), reason, leg))
+    return WorstCaseMaxima(
+        poses=poses, position_mm=values[0].reshape(shape), phi_deg=values[1].reshape(shape) * RAD2DEG,
+        x_mm=values[2].reshape(shape), y_mm=values[3].reshape(shape),
+        leg_signs={q: signs[j].reshape(shape + (3,)) for j, q in enumerate(QUANTITIES)},
+        input_bounds=bounds, k_sigma=k_sigma)
