@@ -158,8 +158,8 @@ def test_missing_legs_warn_and_are_named(tmp_path):
     ({"inputs": {"b_1": {"a": 1}}}, r"\{a = 1\} is not a law"),
     ({"inputs": {"b_1": 0.01}}, "0.01 is not a law"),
     ({"inputs": {"b_1": {"law": "uniform", "lo": 0, "hi": 1e308}}}, r"beyond any error.*±1000 mm"),
-    ({"inputs": {"theta_1": {"law": "normal", "mu": 0, "sd": 1e200}}}, r"beyond any error.*±360 deg"),
-    ({"inputs": {"theta_1": {"law": "normal", "mu": 0, "sd": 100}}}, r"beyond any error"),
+    ({"inputs": {"theta_1": {"law": "normal", "mu": 0, "sd": 1e200}}}, r"beyond any error.*±720 deg"),
+    ({"inputs": {"theta_1": {"law": "normal", "mu": 0, "sd": 200}}}, r"beyond any error"),
     ({"inputs": {"b_1": {"law": "discrete", "values": [0, 1e300], "weights": [1, 1]}}}, "beyond any error"),
     ({"inputs": {"b_1": {"law": "truncnormal", "center": 0, "tol": 0.01, "cpk": 1e-300}}}, "cpk >= 0.01"),
 ])

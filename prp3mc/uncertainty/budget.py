@@ -31,8 +31,9 @@ __all__ = ["Budget", "Catalogue", "input_unit", "parse_input", "BUDGET_PRESETS",
 _NAME = re.compile(r"^(a|alpha|b|beta|rho|c|gamma|theta|e|psi|zeta)_([123])$")
 _FAMILY_ORDER = ("a", "alpha", "b", "beta", "rho", "zeta", "c", "gamma", "theta", "e", "psi")
 #: Largest magnitude an error input may take, per unit: an error beyond the machine's own size
-#: (links of 100-300 mm) or beyond a full turn is a mistake, and it would overflow the results.
-SANITY_LIMITS = {"mm": 1000.0, "deg": 360.0}
+#: (links of 100-300 mm) or beyond two turns is a mistake, and it would overflow the results.
+#: (A contact angle range may wrap through 0 deg, e.g. zeta from 300 to 400 deg.)
+SANITY_LIMITS = {"mm": 1000.0, "deg": 720.0}
 SAMPLE_BLOCK = 1 << 16  # samples drawn per block: results do not depend on chunking
 
 
