@@ -51,7 +51,9 @@ def test_percentiles_equal_brute_force_on_same_samples(geometry, region, seed):
     np.testing.assert_allclose(r.phi_pct, np.moveaxis(np.percentile(phi, r.percentiles, axis=-1), 0, -1), rtol=2e-6)
     np.testing.assert_allclose(r.position_max, pos.max(-1), rtol=2e-6)
     np.testing.assert_allclose(r.position_mean, pos.mean(-1), rtol=1e-6)
-    np.testing.assert_allclose(r.exceed_prob, np.count_nonzero(pos > 0.08, axis=-1) / 30_001, rtol=1e-12)
+    # the kernel evaluates in float32: samples within its rounding of the tolerance may fall either side
+    near = np.count_nonzero(np.abs(pos - 0.08) <= 1e-6 * 0.08, axis=-1)
+    assert np.all(np.abs(r.exceed_prob * 30_001 - np.count_nonzero(pos > 0.08, axis=-1)) <= near + 1e-9)
     np.testing.assert_allclose(r.mean[..., :2], E[..., :2].mean(-2), rtol=1e-9, atol=1e-15)
     lo, hi = r.position_pct_ci[..., 0], r.position_pct_ci[..., 1]
     assert np.all((lo <= r.position_pct) & (r.position_pct <= hi))
