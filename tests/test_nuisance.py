@@ -115,7 +115,7 @@ def test_drift_is_a_nuisance_listed_when_the_data_show_it(preset):
         assert r.drift_test["significant"] and r.drift_test["time"] == "time_s"
         assert covers(listed["drift_x"]["ci95"], 0.015) and covers(listed["drift_y"]["ci95"], 0.0)
         assert "drift" not in r.not_testable
-    still = analyse(g, c)                                 # no drift, no time_s: row order, not listed
+    still = analyse(g, c.to_frame().drop(columns=["time_s"]))   # no drift, no time_s: row order, not listed
     assert not any(n["name"].startswith("drift") for n in still.nuisance)
     assert still.drift_test["time"] == "row order" and "row order" in still.not_testable["drift"]
 
@@ -190,7 +190,7 @@ def test_exchange_replaces_an_early_wrong_pick():
 
 def test_one_verdict_and_what_could_not_be_tested(tmp_path, capsys):
     g, c = campaign("delta-shape", 20, temp_drift_C=None)
-    frame = c.to_frame().drop(columns=["dir_1", "dir_3"])
+    frame = c.to_frame().drop(columns=["dir_1", "dir_3", "time_s"])
     r = analyse(g, frame)
     assert r.not_testable["backlash_1"] == "needs dir_1" and r.not_testable["thermal"] == "needs temp_C"
     assert "backlash_2" not in r.not_testable and "row order" in r.not_testable["drift"]
