@@ -24,7 +24,7 @@ import time
 import numpy as np
 from scipy import optimize, stats
 
-from .._rng import resolve_rng
+from .._rng import child_seed, resolve_rng
 from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
 from ..uncertainty.budget import Budget
@@ -38,10 +38,7 @@ from .prediction import noise_cov, predict
 from .results import DiscrepancyResult
 from .selection import name_effects, names_in, select
 
-try:                                   # ISO 9283 figures land with the simulator realities (issue 10)
-    from .iso9283 import iso9283_figures
-except ImportError:                    # pragma: no cover - until then the figures are left out
-    iso9283_figures = None
+from .iso9283 import iso9283_figures
 
 __all__ = ["discrepancy", "detectable_effect"]
 
@@ -137,7 +134,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     systematic = {n: v for n, v in effects_after.items() if effect(n).systematic}
     prediction = predict(geometry, budget, campaign, effects=effects_after, instrument_sigma_mm=instrument_sigma_mm,
                          instrument_sigma_deg=instrument_sigma_deg, repeatable_fraction=fit.r)
-    iso, iso_poses = _iso9283(engine, fit)
+    iso, iso_poses = _iso9283(engine, fit, child_seed(seed, 9283))
     confounded = tuple(n for n, with_ in engine.confounded.items() if "registration" in with_)
     not_testable = dict(engine.not_testable)
     not_testable.update({n: f"confounded with {with_}" for n, with_ in engine.confounded.items()})
@@ -186,18 +183,21 @@ def _nuisance(engine: Engine, fit: Fit, alpha: float) -> tuple[tuple, dict]:
     return tuple(entries[n] for n in listed), drift_test
 
 
-def _iso9283(engine: Engine, fit: Fit):
-    """ISO 9283 figures of the kept rows in the machine frame (nuisances removed), measured and predicted."""
-    if iso9283_figures is None:
-        return None, None
+def _iso9283(engine: Engine, fit: Fit, seed: int):
+    """ISO 9283 figures of the kept rows in the machine frame (nuisances removed), measured and predicted.
+
+    Predicted by the fitted model: its mean per pose, visit-to-visit
+    covariance ``W`` and repeating covariance ``r Sigma``; the Monte Carlo
+    of :func:`~prp3mc.measurement.iso9283.iso9283_figures` draws from ``seed``.
+    """
     values = engine.values(fit)
     nuis = np.array([values[NUISANCE_NAMES[j]] for j in fit.nuis])
     corrected = engine.campaign.measured - engine.H[:, :, list(fit.nuis)] @ nuis
     campaign = dataclasses.replace(engine.campaign, measured=corrected)
-    mean, W, _ = engine.moments(fit.factors, fit.r)
+    mean, W, R = engine.moments(fit.factors, fit.r)
     sys = np.array([values[engine.systematic[j].name] for j in fit.sys])
     mean = mean + engine.pose_mean(engine.G[:, :, list(fit.sys)] @ sys)
-    figures = iso9283_figures(campaign, mean, W)
+    figures = iso9283_figures(campaign, mean, W, predicted_repeat_cov=R, rng=seed)
     return {"measured": dict(figures["measured"]), "predicted": dict(figures["predicted"])}, figures["per_pose"]
 
 
