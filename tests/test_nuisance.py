@@ -18,7 +18,8 @@ from prp3mc.measurement.likelihood import Engine
 from prp3mc.measurement.outliers import distances, threshold
 from prp3mc.measurement.prediction import noise_cov
 from prp3mc.measurement.simulate import simulate_campaign
-from prp3mc.measurement.workflow import discrepancy
+from prp3mc.measurement.workflow import STAGES, discrepancy
+from prp3mc.progress import Progress
 
 from .realities import BUDGET, SIGMA, campaign_poses
 
@@ -190,7 +191,9 @@ def test_exchange_replaces_an_early_wrong_pick():
 def test_one_verdict_and_what_could_not_be_tested(tmp_path, capsys):
     g, c = campaign("delta-shape", 20, temp_drift_C=None)
     frame = c.to_frame().drop(columns=["dir_1", "dir_3", "time_s"])
-    r = analyse(g, frame)
+    bar = Progress(len(STAGES), "discrepancy", enabled=True, delay=0.0, interval=0.0)
+    r = analyse(g, frame, progress=bar)
+    assert bar.done == len(STAGES) and f"discrepancy: {STAGES[-1]}" in capsys.readouterr().err
     assert r.not_testable["backlash_1"] == "needs dir_1" and r.not_testable["thermal"] == "needs temp_C"
     assert "backlash_2" not in r.not_testable and "row order" in r.not_testable["drift"]
     one_verdict(r)
