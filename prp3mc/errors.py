@@ -15,6 +15,10 @@ __all__ = [
     "StudyError",
     "CampaignError",
     "AllocationError",
+    "ResourceError",
+    "Prp3mcWarning",
+    "IncompleteBudgetWarning",
+    "LinearityWarning",
 ]
 
 
@@ -59,3 +63,19 @@ class CampaignError(Prp3mcError, ValueError):
 
 class AllocationError(Prp3mcError, ValueError):
     """A tolerance-allocation problem is malformed (classes file, costs, specs)."""
+
+
+class ResourceError(Prp3mcError, ValueError):
+    """A request needs more memory or time than this machine can give it."""
+
+
+class Prp3mcWarning(UserWarning):
+    """Base of the warnings prp3mc gives (an analysis runs, but a result needs care)."""
+
+
+class IncompleteBudgetWarning(Prp3mcWarning):
+    """A budget leaves out inputs that it names for other legs."""
+
+
+class LinearityWarning(Prp3mcWarning):
+    """The linear error model departs from the exact chain by more than its tolerance."""

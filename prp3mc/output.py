@@ -1,63 +1,214 @@
 """Writing results safely: output folders, atomic files, figures.
 
-Nothing the user had is lost: a run writes into a temporary sibling folder
-and renames it into place at the end, an existing folder is replaced only
-with ``force=True``, and single files are written through a temporary file
-and an atomic rename.
+Nothing the user had is lost and no two runs mix their results:
+
+- A run *claims* its output folder before it computes (:func:`claim_output`):
+  an advisory lock on the sibling file ``.NAME.lock`` (``flock``, released by
+  the kernel when the process dies, so a killed run leaves no live lock). Of
+  two runs on the same folder one holds the claim and the other stops at once
+  with one line naming the holder's PID. An existing folder is refused
+  unless ``force``.
+- The run writes into a hidden sibling ``.NAME.tmp-PID-XXXX`` and moves it
+  into place at the end (:func:`output_folder`) while it still holds the
+  claim: with ``renameat2`` (Linux) the move never replaces a folder that
+  appeared meanwhile, and ``force`` swaps old and new atomically.
+- Leftovers of a killed run (``.NAME.tmp-…`` and ``.NAME.old-…`` siblings, and
+  the unlocked lock file) are removed by the next run that claims the folder;
+  an ``.old`` folder whose replacement never arrived is put back.
+
+Single files are written through a temporary file and an atomic rename.
 """
 
 from __future__ import annotations
 
 import base64
+import ctypes
+import errno
+import fcntl
 import io
 import json
+import math
 import os
+import re
 import shutil
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Iterator
 
 from .errors import Prp3mcError
 
-__all__ = ["OutputExistsError", "output_folder", "write_json", "write_text", "save_figure", "figure_data_uri"]
+__all__ = ["OutputError", "OutputExistsError", "OutputBusyError", "claim_output", "output_folder",
+           "check_output", "dumps_json", "write_json", "write_text", "save_figure", "figure_data_uri", "check_json"]
 
 
-class OutputExistsError(Prp3mcError, FileExistsError):
+class OutputError(Prp3mcError, OSError):
+    """An output folder cannot be created, claimed or written."""
+
+
+class OutputExistsError(OutputError, FileExistsError):
     """The output folder exists and ``force`` was not given."""
+
+
+class OutputBusyError(OutputError):
+    """Another live run holds the claim on the output folder."""
+
+
+#: Folders claimed by this process (resolved path -> force), so that nested
+#: writers (a report inside a command that claimed its --out) share the claim.
+_HELD: dict[Path, bool] = {}
+
+_RENAME_NOREPLACE, _RENAME_EXCHANGE, _AT_FDCWD = 1, 2, -100
+_LIBC = ctypes.CDLL(None, use_errno=True)
+_renameat2 = getattr(_LIBC, "renameat2", None)
+
+
+def _rename(src: Path, dst: Path, flags: int) -> bool:
+    """``renameat2(src, dst, flags)``; False where the system lacks it (then the caller falls back)."""
+    if _renameat2 is None:
+        return False
+    if _renameat2(_AT_FDCWD, os.fsencode(src), _AT_FDCWD, os.fsencode(dst), flags) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.ENOSYS, errno.EINVAL, errno.ENOTSUP):  # kernel or file system without it
+        return False
+    raise OSError(err, os.strerror(err), str(dst))
 
 
 def check_output(path: str | os.PathLike, force: bool) -> Path:
     """Refuse an existing output folder unless ``force``; return it as a Path."""
     path = Path(path)
-    if path.exists() and not force:
-        raise OutputExistsError(f"{path} exists: choose another --out or pass --force to replace it")
     if path.exists() and not path.is_dir():
         raise OutputExistsError(f"{path} exists and is not a folder")
+    if path.exists() and not force:
+        raise OutputExistsError(f"{path} exists: choose another --out or pass --force to replace it")
     return path
+
+
+def _leftovers(path: Path) -> re.Pattern:
+    """Names of the temporary siblings a run on ``path`` makes (and older releases made)."""
+    name = re.escape(path.name)
+    return re.compile(rf"^\.{name}\.(?:(?P<tmp>tmp-\d+-[a-z0-9_]+|[a-z0-9_]{{8}})|(?P<old>old-\d+-[a-z0-9_]+|old\d+))$")
+
+
+def _clean_leftovers(path: Path) -> None:
+    """Remove what killed runs left beside ``path``; restore an ``.old`` folder if ``path`` is gone.
+
+    Called only while holding the claim, so no live run owns any of them.
+    """
+    pattern = _leftovers(path)
+    for entry in sorted(path.parent.iterdir()):
+        match = pattern.match(entry.name)
+        if not match or not entry.is_dir() or entry.is_symlink():
+            continue
+        if match["old"] and not path.exists():
+            os.rename(entry, path)  # killed between moving the old folder out and the new one in
+        else:
+            shutil.rmtree(entry, ignore_errors=True)
+
+
+def _lock(path: Path) -> int:
+    """Take the advisory lock of ``path`` (``.NAME.lock``); return its descriptor."""
+    lock = path.with_name(f".{path.name}.lock")
+    while True:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            owner = os.pread(fd, 64, 0).decode("ascii", "replace").strip() or "pid unknown"
+            os.close(fd)
+            raise OutputBusyError(f"{path} is being written by another prp3mc run ({owner}): "
+                                  "wait for it to finish or choose another --out") from None
+        try:  # the previous holder may have removed the file between our open and our lock
+            if os.stat(lock).st_ino == os.fstat(fd).st_ino:
+                break
+        except FileNotFoundError:
+            pass
+        os.close(fd)
+    os.ftruncate(fd, 0)
+    os.pwrite(fd, f"pid {os.getpid()}\n".encode("ascii"), 0)
+    return fd
+
+
+@contextmanager
+def claim_output(path: str | os.PathLike, force: bool = False) -> Iterator[Path]:
+    """Hold the output folder ``path`` for this run; refuse it if it exists (unless ``force``).
+
+    Commands enter this before they compute, so a second run on the same
+    folder, or one on an existing folder, stops before any work. Re-entrant
+    within a process: :func:`output_folder` inside the block shares the claim.
+
+    Raises
+    ------
+    OutputBusyError
+        Another live run holds the folder.
+    OutputExistsError
+        The folder exists and ``force`` is false, or it is not a folder.
+    OutputError
+        The parent folder cannot be created or written.
+    """
+    path = Path(os.path.abspath(path))
+    if path in _HELD:
+        check_output(path, force or _HELD[path])
+        yield path
+        return
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd = _lock(path)
+    except OSError as exc:
+        if isinstance(exc, Prp3mcError):
+            raise
+        raise OutputError(f"cannot claim {path}: {exc.strerror or exc}") from None
+    _HELD[path] = force
+    try:
+        _clean_leftovers(path)
+        check_output(path, force)
+        yield path
+    finally:
+        del _HELD[path]
+        path.with_name(f".{path.name}.lock").unlink(missing_ok=True)
+        os.close(fd)
+
+
+def _install(tmp: Path, path: Path, force: bool) -> None:
+    """Move the finished folder ``tmp`` to ``path``; replace an existing one only with ``force``."""
+    if force and path.exists():
+        if _rename(tmp, path, _RENAME_EXCHANGE):
+            shutil.rmtree(tmp, ignore_errors=True)  # tmp now holds the old folder
+            return
+        old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old-{os.getpid()}-", dir=path.parent))
+        os.replace(path, old)  # an empty folder is replaced by a rename
+        os.replace(tmp, path)
+        shutil.rmtree(old, ignore_errors=True)
+        return
+    try:
+        if not _rename(tmp, path, _RENAME_NOREPLACE):
+            if path.exists():
+                raise FileExistsError(errno.EEXIST, "exists", str(path))
+            os.rename(tmp, path)
+    except OSError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if exc.errno in (errno.EEXIST, errno.ENOTEMPTY):
+            raise OutputExistsError(f"{path} appeared while this run was writing it and was left as it is: "
+                                    "choose another --out or pass --force") from None
+        raise
 
 
 @contextmanager
 def output_folder(path: str | os.PathLike, force: bool = False) -> Iterator[Path]:
-    """Yield a temporary folder that replaces ``path`` when the block succeeds.
+    """Yield a temporary folder that becomes ``path`` when the block succeeds.
 
-    On an exception the temporary folder is removed and ``path`` is untouched.
+    The folder is claimed for the whole block (see :func:`claim_output`). On
+    an exception the temporary folder is removed and ``path`` is untouched.
     """
-    path = check_output(path, force)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
-    try:
-        yield tmp
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    old = None
-    if path.exists():
-        old = path.with_name(f".{path.name}.old{os.getpid()}")
-        os.replace(path, old)
-    os.replace(tmp, path)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
+    with claim_output(path, force) as path:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.tmp-{os.getpid()}-", dir=path.parent))
+        try:
+            yield tmp
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+        _install(tmp, path, force or _HELD[path])
 
 
 def write_text(path: str | os.PathLike, text: str) -> None:
@@ -68,9 +219,38 @@ def write_text(path: str | os.PathLike, text: str) -> None:
     os.replace(tmp, path)
 
 
+def check_json(obj: Any, where: str = "") -> Any:
+    """Return ``obj`` unchanged if it holds no NaN or infinity; else raise naming the first one.
+
+    Raises
+    ------
+    Prp3mcError
+        One line with the key path of the non-finite value (JSON has no NaN).
+    """
+    if isinstance(obj, float) and not math.isfinite(obj):
+        raise Prp3mcError(f"the result is not finite at {where or 'top level'} ({obj}): "
+                          "the inputs are out of the model's range")
+    if isinstance(obj, dict):
+        for key, value in obj.items():
+            check_json(value, f"{where}.{key}" if where else str(key))
+    elif isinstance(obj, (list, tuple)):
+        for k, value in enumerate(obj):
+            check_json(value, f"{where}[{k}]")
+    return obj
+
+
+def dumps_json(obj: Any) -> str:
+    """JSON text of ``obj``; a NaN or infinity is refused with one line (see :func:`check_json`)."""
+    try:
+        return json.dumps(obj, indent=2, allow_nan=False)
+    except ValueError:
+        check_json(obj)
+        raise
+
+
 def write_json(path: str | os.PathLike, obj) -> None:
     """Write JSON (no NaN allowed) atomically."""
-    write_text(path, json.dumps(obj, indent=2, allow_nan=False) + "\n")
+    write_text(path, dumps_json(obj) + "\n")
 
 
 def save_figure(fig, folder: str | os.PathLike, name: str, formats=("png", "svg"), dpi: int = 150) -> list[Path]:

@@ -3,7 +3,7 @@ import pytest
 from scipy import stats
 
 from prp3mc import Budget, Catalogue, Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
-from prp3mc.errors import BudgetError, InputFileError, UnknownPresetError
+from prp3mc.errors import BudgetError, IncompleteBudgetWarning, InputFileError, UnknownPresetError
 from prp3mc.uncertainty.laws import law_from_dict
 
 LAWS = [Uniform(-1.0, 3.0), Normal(0.5, 0.2), TruncNormal(0.0, 0.01, 1.33), Triangular(0.0, 0.2, 1.0),
@@ -72,7 +72,8 @@ def test_user_catalogue(tmp_path):
     (tmp_path / "parts.toml").write_text(
         '[guide.mine]\nlaw = "uniform"\nlo = -0.01\nhi = 0.01\napplies_to = "theta"\nsource = "our test rig"\n')
     (tmp_path / "b.toml").write_text(
-        'catalogues = ["parts.toml"]\n[inputs]\ntheta_1 = { catalogue = "guide.mine" }\n')
+        'catalogues = ["parts.toml"]\n[inputs]\n'
+        + "".join(f'theta_{i} = {{ catalogue = "guide.mine" }}\n' for i in (1, 2, 3)))
     b = Budget.from_toml(tmp_path / "b.toml")
     assert b.inputs["theta_1"] == Uniform(-0.01, 0.01)
     assert b.sources["theta_1"] == "guide.mine: our test rig"
@@ -137,3 +138,38 @@ def test_law_scaled():
     assert Discrete((0.0, 2.0), (1.0, 3.0)).scaled(2.0) == Discrete((0.0, 4.0), (0.25, 0.75))
     with pytest.raises(BudgetError, match="factor >= 0"):
         Uniform(0.0, 1.0).scaled(-1.0)
+
+
+def test_missing_legs_warn_and_are_named(tmp_path):
+    """A budget cut at a table boundary runs, but says which inputs it lacks (and records them)."""
+    full = Budget.from_preset("paper").to_dict()
+    path = tmp_path / "cut.toml"
+    Budget.from_preset("paper").to_toml(path)
+    text = path.read_text()
+    path.write_text(text[:text.index("[inputs.theta_3]")])  # the file ends before leg 3's theta and b
+    with pytest.warns(IncompleteBudgetWarning, match=r"no law for b_3, theta_3 \(other legs have one\)"):
+        b = Budget.from_toml(path)
+    assert b.missing_inputs == ("b_3", "theta_3")
+    assert Budget.from_dict(full).missing_inputs == ()  # the paper budget is complete: no warning
+
+
+@pytest.mark.parametrize("doc, message", [
+    ({"name": {"a": 1}, "inputs": {"b_1": {"law": "uniform", "lo": 0, "hi": 1}}}, "name must be a string"),
+    ({"inputs": {"b_1": {"a": 1}}}, r"\{a = 1\} is not a law"),
+    ({"inputs": {"b_1": 0.01}}, "0.01 is not a law"),
+    ({"inputs": {"b_1": {"law": "uniform", "lo": 0, "hi": 1e308}}}, r"beyond any error.*±1000 mm"),
+    ({"inputs": {"theta_1": {"law": "normal", "mu": 0, "sd": 1e200}}}, r"beyond any error.*±360 deg"),
+    ({"inputs": {"theta_1": {"law": "normal", "mu": 0, "sd": 100}}}, r"beyond any error"),
+    ({"inputs": {"b_1": {"law": "discrete", "values": [0, 1e300], "weights": [1, 1]}}}, "beyond any error"),
+    ({"inputs": {"b_1": {"law": "truncnormal", "center": 0, "tol": 0.01, "cpk": 1e-300}}}, "cpk >= 0.01"),
+])
+def test_values_that_are_not_laws_or_overflow_are_refused(doc, message):
+    with pytest.raises(BudgetError, match=message):
+        Budget.from_dict(doc)
+
+
+def test_k_sigma_is_bounded():
+    b = Budget.from_preset("paper").replace(theta_1=Normal(0.0, 0.01))
+    for k in (0.0, -1.0, 1e300, float("nan")):
+        with pytest.raises(BudgetError, match="k_sigma must lie in"):
+            b.bounds(k)

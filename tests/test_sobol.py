@@ -68,12 +68,18 @@ def test_vectorised_equals_salib(geometry, region, budget):
         np.testing.assert_allclose(getattr(vect, key), getattr(salib, key), rtol=0, atol=1e-10, err_msg=key)
 
 
-def test_constant_output_gives_zero_indices():
+def test_constant_inputs_have_undefined_indices():
+    """A zero-width input has no variance to share: its indices are NaN (undefined), not 0."""
     zero = Budget({name: Uniform(0.0, 0.0) for name in PAPER.names})
     g = Geometry.from_preset("u-shape")
     for method in ("salib", "vectorised"):
         r = sobol_indices(g, zero, [0, 100, 0], 64, rng=1, method=method)
-        assert np.all(r.S1 == 0) and np.all(r.ST_conf == 0)
+        assert r.constant == r.names and np.all(np.isnan(r.S1)) and np.all(np.isnan(r.ST_conf))
+    one = PAPER.replace(theta_2=Uniform(0.01, 0.01))
+    r = sobol_indices(g, one, [0, 100, 0], 64, rng=1, groups={"theta": ["theta_1", "theta_2", "theta_3"]})
+    k = r.names.index("theta_2")
+    assert r.constant == ("theta_2",) and np.all(np.isnan(r.ST[..., k]))
+    assert np.all(np.isfinite(np.delete(r.ST, k, axis=-1)))  # the group holding it is defined
 
 
 # ------------------------------------------------------------------ closed forms

@@ -8,19 +8,27 @@ message on stderr and exit status 1 (2 for usage errors), never a traceback.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
+import math
 import pkgutil
-import json
 import sys
+import warnings
+
 import numpy as np
 
+from .._rng import check_seed
 from .._version import __version__
-from ..errors import Prp3mcError
+from ..errors import Prp3mcError, Prp3mcWarning
+from ..limits import Estimate, check
+from ..output import claim_output, dumps_json
 from ..provenance import spec_record, versions
 
 __all__ = ["main"]
 
 COMMANDS: dict[str, tuple[str, type]] = {}
+#: Messages of the prp3mc warnings given during the current command (recorded in its JSON).
+WARNINGS: list[str] = []
 
 
 def command(name: str, help: str):
@@ -37,7 +45,7 @@ def add_geometry(p: argparse.ArgumentParser) -> None:
 
 
 def add_pose(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--pose", required=True, nargs=3, type=float, metavar=("X", "Y", "PHI"),
+    p.add_argument("--pose", required=True, nargs=3, type=finite_float, metavar=("X", "Y", "PHI"),
                    help="pose: x mm, y mm, phi deg")
 
 
@@ -48,8 +56,21 @@ def add_budget(p: argparse.ArgumentParser) -> None:
 def add_sampling(p: argparse.ArgumentParser, default_samples: int) -> None:
     p.add_argument("--samples", type=positive_int, default=default_samples, metavar="N",
                    help=f"number of samples (default {default_samples})")
-    p.add_argument("--seed", type=int, default=None, metavar="S",
-                   help="random seed (default: fresh, recorded in the output)")
+    add_seed(p)
+
+
+def add_seed(p: argparse.ArgumentParser, help: str = "random seed (default: fresh, recorded in the output)") -> None:
+    p.add_argument("--seed", type=seed_arg, default=None, metavar="S", help=help)
+
+
+def add_output(p: argparse.ArgumentParser, help: str = "output folder (must not exist)") -> None:
+    p.add_argument("--out", required=True, metavar="DIR", help=help)
+    p.add_argument("--force", action="store_true", help="replace DIR if it exists")
+
+
+def within_limits(args, estimate: Estimate) -> Estimate:
+    """Refuse a request that cannot finish on this machine (see :mod:`prp3mc.limits`)."""
+    return check(estimate, max_hours=args.max_hours)
 
 
 def add_progress(p: argparse.ArgumentParser) -> None:
@@ -69,13 +90,47 @@ def positive_int(text: str) -> int:
     return value
 
 
+def seed_arg(text: str) -> int:
+    """A seed: a non-negative integer below 2**63 (:func:`prp3mc._rng.check_seed`)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer seed, got {text!r}") from None
+    try:
+        return check_seed(value)
+    except Prp3mcError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def finite_float(text: str) -> float:
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if value != value or value in (float("inf"), float("-inf")):
+    if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def nonnegative_float(text: str) -> float:
+    value = finite_float(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    value = finite_float(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}")
+    return value
+
+
+def probability(text: str) -> float:
+    """A level or probability strictly between 0 and 1."""
+    value = finite_float(text)
+    if not 0 < value < 1:
+        raise argparse.ArgumentTypeError(f"expected a number between 0 and 1 (exclusive), got {text!r}")
     return value
 
 
@@ -95,14 +150,19 @@ def provenance(args, geometry=None, budget=None, **inputs) -> dict:
         record["geometry"] = spec_record(args.geometry, geometry)
     if budget is not None:
         record["budget"] = spec_record(args.budget, budget)
+        if budget.missing_inputs:
+            record["budget"]["missing_inputs"] = list(budget.missing_inputs)
     if getattr(args, "pose", None) is not None:
         record["pose"] = dict(zip(("x_mm", "y_mm", "phi_deg"), map(float, args.pose)))
-    return {"inputs": record | inputs, "versions": versions()}
+    out = {"inputs": record | inputs, "versions": versions()}
+    if WARNINGS:
+        out["warnings"] = list(WARNINGS)
+    return out
 
 
 def emit_json(obj: dict) -> None:
-    json.dump(obj, sys.stdout, indent=2, allow_nan=False)
-    sys.stdout.write("\n")
+    """Print ``obj`` as JSON; a NaN or infinity is refused with one line naming where it is."""
+    sys.stdout.write(dumps_json(obj) + "\n")
 
 
 LEGS = ("leg 1", "leg 2", "leg 3")
@@ -117,9 +177,13 @@ def matrix_table(M: np.ndarray, rows=("dx", "dy", "dphi"), cols=LEGS) -> str:
     return "\n".join(lines)
 
 
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line, exit 2
-        self.exit(2, f"{self.prog}: error: {message}\n")
+        self.exit(2, f"{self.prog}: error: {_one_line(message)}\n")
 
 
 def _load_commands() -> None:
@@ -132,6 +196,8 @@ def build_parser() -> argparse.ArgumentParser:
     _load_commands()
     parser = _Parser(prog="prp3mc", description="Error analysis of planar 3-PRP parallel manipulators.")
     parser.add_argument("--version", action="version", version=f"prp3mc {__version__}")
+    parser.add_argument("--max-hours", type=positive_float, default=None, metavar="H",
+                        help="refuse requests estimated to take longer (default 24)")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     for name, (help_text, cls) in COMMANDS.items():
         p = sub.add_parser(name, help=help_text, description=help_text)
@@ -146,16 +212,37 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # usage errors (exit 2, one line), --help and --version (exit 0)
         return int(exc.code or 0)
+    name = f"prp3mc {args.command}"
+    WARNINGS.clear()
+    show = warnings.showwarning
+
+    def one_line_warning(message, category, filename, lineno, file=None, line=None):
+        if not issubclass(category, Prp3mcWarning):
+            return show(message, category, filename, lineno, file, line)
+        WARNINGS.append(_one_line(message))
+        print(f"{name}: warning: {_one_line(message)}", file=sys.stderr)
+
     try:
-        args.run(args)
+        with warnings.catch_warnings(), contextlib.ExitStack() as stack:
+            warnings.simplefilter("always", Prp3mcWarning)
+            warnings.showwarning = one_line_warning
+            if getattr(args, "out", None) is not None:  # claimed before any work (see prp3mc.output)
+                stack.enter_context(claim_output(args.out, force=getattr(args, "force", False)))
+            args.run(args)
     except Prp3mcError as exc:
-        print(f"prp3mc {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
+        return 1
+    except MemoryError:
+        print(f"{name}: error: out of memory: use fewer samples or poses", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print(f"prp3mc {args.command}: interrupted", file=sys.stderr)
+        print(f"{name}: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:
         return 0
+    except OSError as exc:  # the file system or the machine, not the request: still one line
+        print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
+        return 1
     return 0
 
 

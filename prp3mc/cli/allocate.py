@@ -7,7 +7,9 @@ from ..kinematics.geometry import REGION_PRESETS
 from ..provenance import spec_record
 from ..uncertainty.allocation import allocate, allocation_front, front_records
 from ..units import DEG2ARCSEC, MM2UM
-from . import add_geometry, add_json, command, emit_json, finite_float, positive_int, provenance
+from ..limits import allocate_estimate
+from . import (add_geometry, add_json, add_seed, command, emit_json, finite_float, positive_float, positive_int,
+               provenance, within_limits)
 
 
 @command("allocate", "least-cost tolerance classes meeting an accuracy spec over a region")
@@ -29,11 +31,11 @@ class AllocateCommand:
         p.add_argument("--phi-deg", type=finite_float, default=0.0, metavar="P",
                        help="platform orientation of the region, deg (default 0)")
         p.add_argument("--grid", type=positive_int, default=41, metavar="N", help="N x N grid (default 41)")
-        p.add_argument("--k-sigma", type=finite_float, default=None, metavar="K",
+        p.add_argument("--k-sigma", type=positive_float, default=None, metavar="K",
                        help="bound unbounded (normal) laws as mean ± K·sd")
         p.add_argument("--samples", type=positive_int, default=20_000, metavar="N",
                        help="Monte Carlo samples confirming a percentile spec (default 20000)")
-        p.add_argument("--seed", type=int, default=None, metavar="S", help="random seed of the confirmation")
+        add_seed(p, help="random seed of the confirmation")
         p.add_argument("--front", action="store_true",
                        help="also sweep the cost-accuracy Pareto front of the worst-case position error "
                             "(of |dphi| with only a phi spec; the phi spec holds along a position front)")
@@ -41,6 +43,8 @@ class AllocateCommand:
 
     @staticmethod
     def run(args) -> None:
+        within_limits(args, allocate_estimate(args.grid ** 2, 12,  # rho, zeta, theta and b of each leg
+                                              args.samples if args.spec_percentile is not None else 0))
         r = allocate(args.geometry, args.classes, args.region, spec_position_um=args.spec_position_um,
                      spec_phi_arcsec=args.spec_phi_arcsec, spec_percentile=args.spec_percentile,
                      grid=args.grid, phi_deg=args.phi_deg, k_sigma=args.k_sigma, n_samples=args.samples,

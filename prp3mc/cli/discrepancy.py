@@ -5,7 +5,8 @@ from ..measurement.workflow import STAGES, discrepancy
 from ..progress import Progress
 from ..reports.discrepancy_report import write_report
 from ..kinematics.geometry import Geometry
-from . import add_budget, add_geometry, add_json, add_progress, command, emit_json, finite_float
+from . import (add_budget, add_geometry, add_json, add_progress, add_seed, command, emit_json, nonnegative_float,
+               probability)
 
 
 @command("discrepancy", "find where model and measurements disagree and name the missing effect")
@@ -17,20 +18,19 @@ class DiscrepancyCommand:
         p.add_argument("--data", required=True, metavar="CSV", help="measurement campaign CSV (README, File formats)")
         p.add_argument("--out", required=True, metavar="DIR", help="report folder (discrepancy.json, report.html)")
         p.add_argument("--force", action="store_true", help="replace an existing --out folder")
-        p.add_argument("--instrument-sigma-mm", type=finite_float, default=0.0, metavar="S",
+        p.add_argument("--instrument-sigma-mm", type=nonnegative_float, default=0.0, metavar="S",
                        help="instrument noise sd of x and y, mm (default 0)")
-        p.add_argument("--instrument-sigma-deg", type=finite_float, default=0.0, metavar="S",
+        p.add_argument("--instrument-sigma-deg", type=nonnegative_float, default=0.0, metavar="S",
                        help="instrument noise sd of phi, deg (default 0)")
-        p.add_argument("--alpha", type=finite_float, default=0.01, metavar="A",
+        p.add_argument("--alpha", type=probability, default=0.01, metavar="A",
                        help="family-wise level of the naming tests (default 0.01)")
-        p.add_argument("--alpha-unexplained", type=finite_float, default=0.05, metavar="A",
+        p.add_argument("--alpha-unexplained", type=probability, default=0.05, metavar="A",
                        help="family-wise level of the final test for unexplained disagreement (default 0.05)")
         p.add_argument("--no-registration", action="store_true",
                        help="the instrument is known to be registered to the machine: do not fit its registration")
-        p.add_argument("--outlier-rate", type=finite_float, default=0.01, metavar="A",
+        p.add_argument("--outlier-rate", type=probability, default=0.01, metavar="A",
                        help="family-wise false-alarm rate of the gross-error test over all rows (default 0.01)")
-        p.add_argument("--seed", type=int, default=None, metavar="S",
-                       help="seed of the bootstrap (default: fresh, recorded in the output)")
+        add_seed(p, help="seed of the bootstrap (default: fresh, recorded in the output)")
         add_progress(p)
         add_json(p)
 

@@ -3,9 +3,11 @@
 from .._version import __version__
 from ..uncertainty.budget import Budget
 from ..kinematics.geometry import Geometry
+from ..limits import montecarlo_estimate
 from ..uncertainty.montecarlo import monte_carlo
+from ..uncertainty.validity import check_linearity
 from . import (provenance, add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
-               emit_json, finite_float)
+               emit_json, nonnegative_float, within_limits)
 
 
 def _pkey(p: float) -> str:
@@ -20,7 +22,7 @@ class MonteCarloCommand:
         add_budget(p)
         add_pose(p)
         add_sampling(p, default_samples=100_000)
-        p.add_argument("--tolerance-mm", type=finite_float, default=None, metavar="T",
+        p.add_argument("--tolerance-mm", type=nonnegative_float, default=None, metavar="T",
                        help="also report P(position error > T)")
         p.add_argument("--exact-check", action="store_true",
                        help="compare 2000 samples with the exact nonlinear model")
@@ -30,6 +32,8 @@ class MonteCarloCommand:
     @staticmethod
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
+        within_limits(args, montecarlo_estimate(args.samples, 1, len(budget)))
+        check_linearity(geometry, budget, args.pose)
         r = monte_carlo(geometry, budget, args.pose, args.samples, rng=args.seed,
                         tolerance_mm=args.tolerance_mm, exact_check_poses=1 if args.exact_check else 0,
                         progress=args.progress)

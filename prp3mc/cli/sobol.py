@@ -8,10 +8,12 @@ from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
 from ..uncertainty.ranking import ranking
 from ..uncertainty.sobol import sobol_indices
+from ..uncertainty.validity import check_linearity
 from ..units import DISPLAY, OUTPUTS
 from ..uncertainty.worstcase import worst_case
+from ..limits import sobol_estimate
 from . import (provenance, add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
-               emit_json, finite_float, positive_int)
+               emit_json, positive_float, positive_int, probability, within_limits)
 
 _KEYS = ("S1", "S1_conf", "ST", "ST_conf")
 
@@ -29,6 +31,22 @@ def _number(value: float):
     return None if math.isnan(value) else float(value)
 
 
+_UNDEFINED = "undefined (constant input)"
+
+
+def _indices(r, i: int, k: int, name: str) -> dict:
+    """S1, S1_conf, ST, ST_conf of one output and name; null with a reason for a constant input."""
+    if name in r.constant:
+        return {**{key: None for key in _KEYS}, "reason": "constant input: no variance to share"}
+    return {key: float(getattr(r, key)[i, k]) for key in _KEYS}
+
+
+def _index_text(row) -> str:
+    if math.isnan(row.ST):
+        return f"{_UNDEFINED:>33s}"
+    return f"{row.S1:8.4f}{row.S1_conf:8.4f}{row.ST:9.4f}{row.ST_conf:8.4f}"
+
+
 @command("sobol", "Sobol indices of the pose error at one pose, next to the worst-case contributions")
 class SobolCommand:
     @staticmethod
@@ -39,14 +57,14 @@ class SobolCommand:
         add_sampling(p, default_samples=8192)
         p.add_argument("--resamples", type=positive_int, default=100, metavar="R",
                        help="bootstrap resamples for the confidence intervals (default 100)")
-        p.add_argument("--conf-level", type=finite_float, default=0.95, metavar="L",
+        p.add_argument("--conf-level", type=probability, default=0.95, metavar="L",
                        help="confidence level of the intervals (default 0.95)")
         p.add_argument("--group", action="append", default=[], metavar="NAME=IN,IN",
                        help="a user group of inputs, e.g. leg_1=rho_1,zeta_1,theta_1,b_1 (repeatable)")
         p.add_argument("--method", choices=("auto", "salib", "vectorised"), default="auto",
                        help="salib: SALib's analyze per output; vectorised: the same estimators for all "
                             "outputs at once (equal to round-off); auto: salib for one pose (default)")
-        p.add_argument("--k-sigma", type=finite_float, default=None, metavar="K",
+        p.add_argument("--k-sigma", type=positive_float, default=None, metavar="K",
                        help="bound unbounded (normal) laws as mean ± K·sd for the worst case")
         add_progress(p)
         add_json(p)
@@ -55,6 +73,9 @@ class SobolCommand:
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         groups = dict(_group(text) for text in args.group)
+        within_limits(args, sobol_estimate(args.samples, 1, len(budget), len(budget) + len(budget.groups) + len(groups),
+                                           len(OUTPUTS), args.resamples, salib=args.method != "vectorised"))
+        check_linearity(geometry, budget, args.pose)
         r = sobol_indices(geometry, budget, args.pose, args.samples, rng=args.seed, groups=groups,
                           num_resamples=args.resamples, conf_level=args.conf_level, method=args.method,
                           progress=args.progress)
@@ -62,8 +83,8 @@ class SobolCommand:
         tables = {o: ranking(r, wc, o) for o in OUTPUTS}
         if args.json:
             emit_json({
-                "outputs": {o: {name: {key: float(getattr(r, key)[i, k]) for key in _KEYS}
-                                for k, name in enumerate(r.names)} for i, o in enumerate(r.outputs)},
+                "outputs": {o: {name: _indices(r, i, k, name) for k, name in enumerate(r.names)}
+                            for i, o in enumerate(r.outputs)},
                 "ranking": {o: [{key: (_number(v) if isinstance(v, float) else v) for key, v in row.items()
                                  if key != "output"} for row in df.to_dict("records")]
                             for o, df in tables.items()},
@@ -89,8 +110,7 @@ class SobolCommand:
             for row in df.itertuples():
                 wc_text = (f"{'-':>18s}{'':8s}" if math.isnan(row.worst_case_contribution) else
                            f"{scale * row.worst_case_contribution:18.3f}{100 * row.worst_case_share:7.1f}%")
-                lines.append(f"  {row.name:13s}{row.S1:8.4f}{row.S1_conf:8.4f}{row.ST:9.4f}{row.ST_conf:8.4f}"
-                             f"{wc_text}")
+                lines.append(f"  {row.name:13s}{_index_text(row)}{wc_text}")
         lines += ["", "Worst case: each term's part of the maximum at the maximising vertex. A clearance "
                       "term rho_i cos(zeta_i - omega_i) needs rho_i and zeta_i together, so its part is "
                       "shown on clearance_i ('-' on rho_i and zeta_i)."]

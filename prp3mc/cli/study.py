@@ -1,14 +1,20 @@
-"""``prp3mc study``: run a study file and write its report, figures, tables and summary.json."""
+"""``prp3mc study``: run a study file and write its report, figures, tables and summary.json (optionally over a design sweep, on Dask)."""
 
 import sys
 import time
 
-from ..output import check_output
+from ..errors import Prp3mcError
+from ..limits import study_estimate
 from ..units import MM2UM
 from ..reports.study_report import write_study
+from ..study.distributed import parse_scheduler
 from ..study.reader import Study, bundled_studies
 from ..study.runner import run_study
-from . import add_progress, command
+from ..uncertainty.validity import check_linearity
+from . import add_progress, add_seed, command, within_limits
+
+#: Configurations named in the closing line; a sweep's best ones beyond that are in the report.
+_NAMED = 4
 
 
 @command("study", "run a study (TOML file or bundled name) and write its report to a folder")
@@ -19,24 +25,41 @@ class StudyCommand:
                        help=f"study file, or a bundled study: {', '.join(bundled_studies())}")
         p.add_argument("--out", required=True, metavar="DIR", help="output folder (must not exist)")
         p.add_argument("--force", action="store_true", help="replace DIR if it exists")
-        p.add_argument("--seed", type=int, default=None, metavar="S", help="override the study's seed")
+        add_seed(p, help="override the study's seed")
         p.add_argument("--quick", action="store_true",
                        help="reduced grids and sample sizes (a smoke test, as the golden regression files)")
+        p.add_argument("--scheduler", default=None, metavar="SPEC",
+                       help="run the configurations on Dask: local:N (N local worker processes) or "
+                            "tcp://HOST:PORT (an existing scheduler); needs pip install 'prp3mc[dask]'. "
+                            "Default: in this process. The numbers do not depend on it")
         add_progress(p)
 
     @staticmethod
     def run(args) -> None:
         t0 = time.perf_counter()
+        if args.scheduler is not None:
+            parse_scheduler(args.scheduler)  # a bad spec fails before the study runs
         study = Study.load(args.study)
         if args.quick:
             study = study.reduced()
-        check_output(args.out, args.force)
-        result = run_study(study, rng=args.seed, progress=args.progress)
+        within_limits(args, study_estimate(study))
+        if not study.sweep:  # a sweep's base configuration need not be feasible: its combinations are checked
+            for c in study.configurations:
+                check_linearity(c.geometry, study.budget, c.region.grid((3, 3)))
+        result = run_study(study, rng=args.seed, progress=args.progress, scheduler=args.scheduler)
+        if not result.configurations:
+            first = result.skipped[0]
+            raise Prp3mcError(f"study {study.name}: none of its {len(result.skipped)} configurations ran; "
+                              f"{first.name}: {first.reason}")
         report = write_study(result, args.out, force=args.force)
         worst = result.to_frame().query("output == 'position' and statistic == 'worst_case'")
         span = worst.pivot(index="configuration", columns="aggregate", values="value") * MM2UM
-        ranges = ", ".join(f"{c.name} {span.at[c.name, 'min']:.1f}-{span.at[c.name, 'max']:.1f} µm"
-                           for c in result.configurations)
+        names = (list(span.sort_values("max").index[:_NAMED]) if study.sweep
+                 else [c.name for c in result.configurations])
+        ranges = ", ".join(f"{n} {span.at[n, 'min']:.1f}-{span.at[n, 'max']:.1f} µm" for n in names)
+        if study.sweep:
+            ranges = (f"{len(result.configurations)} of {len(result.configurations) + len(result.skipped)} "
+                      f"configurations ran, best: {ranges}")
         print(f"prp3mc study {study.name}: wrote {report} in {time.perf_counter() - t0:.1f} s "
               f"(analyses {result.wall_time_s:.1f} s, seed {result.seed}); worst-case position error: {ranges}",
               file=sys.stdout)

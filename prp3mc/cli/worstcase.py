@@ -3,8 +3,9 @@
 from .._version import __version__
 from ..uncertainty.budget import Budget
 from ..kinematics.geometry import Geometry
+from ..uncertainty.validity import check_linearity
 from ..uncertainty.worstcase import worst_case
-from . import provenance, add_budget, add_geometry, add_json, add_pose, command, emit_json, finite_float
+from . import provenance, add_budget, add_geometry, add_json, add_pose, command, emit_json, positive_float
 
 
 @command("worstcase", "exact worst-case pose error of the linear model at one pose")
@@ -14,13 +15,14 @@ class WorstCaseCommand:
         add_geometry(p)
         add_budget(p)
         add_pose(p)
-        p.add_argument("--k-sigma", type=finite_float, default=None, metavar="K",
+        p.add_argument("--k-sigma", type=positive_float, default=None, metavar="K",
                        help="bound unbounded (normal) laws as mean ± K·sd")
         add_json(p)
 
     @staticmethod
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
+        check_linearity(geometry, budget, args.pose)
         wc = worst_case(geometry, budget, args.pose, k_sigma=args.k_sigma)
         frame = wc.contributions_frame("position")
         if args.json:

@@ -17,6 +17,7 @@ Simulated campaigns come from :mod:`~prp3mc.measurement.simulate`.
 
 from __future__ import annotations
 
+import csv
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,7 +31,7 @@ from ..kinematics.chain import check_poses, feasible
 from ..kinematics.geometry import Geometry
 
 __all__ = ["Campaign", "read_campaign", "REQUIRED_COLUMNS", "CMD_COLUMNS", "MEAS_COLUMNS", "DIR_COLUMNS",
-           "MAX_ERROR"]
+           "MAX_ERROR", "MIN_POSES", "require_testable"]
 
 #: Commanded and measured pose columns, ``[x mm, y mm, phi deg]``.
 CMD_COLUMNS, MEAS_COLUMNS = ("x_cmd", "y_cmd", "phi_cmd"), ("x_meas", "y_meas", "phi_meas")
@@ -41,6 +42,10 @@ DIR_COLUMNS = ("dir_1", "dir_2", "dir_3")
 #: Largest |measured - commanded| accepted (mm, mm, deg): beyond it a row is a unit or sign mistake.
 MAX_ERROR = (5.0, 5.0, 5.0)
 _SAME_CMD_TOL = 1e-6  # mm or deg: repeats of a pose must command the same pose
+#: Fewest distinct poses a campaign must visit for the discrepancy workflow to test anything: one pose
+#: is held out to cross-validate the others, and the instrument's registration (a pose-independent
+#: rigid offset) takes 3 of the 3 per pose degrees of freedom, so two fitted poses are the least that leave any.
+MIN_POSES = 3
 
 
 @dataclass(frozen=True, slots=True)
@@ -262,8 +267,44 @@ def read_campaign(data: "str | os.PathLike | pd.DataFrame | Campaign", geometry:
     path = Path(data)
     if not path.is_file():
         raise InputFileError(f"campaign file {path} does not exist")
+    _check_header(path)
     try:
         frame = pd.read_csv(path, dtype={"pose_id": str}, skipinitialspace=True, keep_default_na=True)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise InputFileError(f"{path}: not a readable CSV file ({str(exc).splitlines()[0]})") from None
     return Campaign.from_frame(frame, geometry, str(path), line_offset=1)
+
+
+def _check_header(path: Path) -> None:
+    """Refuse a header that names a column twice (pandas would rename the second ``x_meas.1``)."""
+    try:
+        with open(path, newline="", encoding="utf-8") as f:
+            header = next(csv.reader(f), [])
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise InputFileError(f"{path}: not a readable CSV file ({exc})") from None
+    names = [name.strip() for name in header]
+    for k, name in enumerate(names):
+        if name and name in names[:k]:
+            raise CampaignError(f"{path}: column {name!r} appears twice in the header (columns "
+                                f"{names.index(name) + 1} and {k + 1}): which one holds the data is ambiguous")
+
+
+def require_testable(campaign: Campaign) -> Campaign:
+    """Refuse a campaign too small for the discrepancy workflow to test anything.
+
+    It needs at least :data:`MIN_POSES` distinct poses and at least one pose
+    measured twice (the dispersion channel compares repeats).
+
+    Raises
+    ------
+    CampaignError
+        One line saying what the campaign has and what it would need.
+    """
+    repeated = int(np.sum(campaign.repeats >= 2))
+    if campaign.n_poses < MIN_POSES or repeated == 0:
+        raise CampaignError(
+            f"{campaign.source}: too small to test anything: {campaign.n_measurements} measurement(s) of "
+            f"{campaign.n_poses} pose(s), {repeated} of them repeated; the discrepancy workflow needs at least "
+            f"{MIN_POSES} distinct poses (one is held out, the registration takes 3 degrees of freedom) and at least "
+            "one pose measured twice (the dispersion test compares repeats)")
+    return campaign

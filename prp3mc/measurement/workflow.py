@@ -30,7 +30,7 @@ from ..kinematics.geometry import Geometry
 from ..progress import Progress
 from ..uncertainty.budget import Budget
 from . import outliers as gross
-from .campaign import Campaign, read_campaign
+from .campaign import Campaign, read_campaign, require_testable
 from .diagnostics import diagnose, gap, gap_value
 from .effects import effect
 from .likelihood import Engine, Fit
@@ -95,7 +95,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     for name, value in (("alpha", alpha), ("alpha_unexplained", alpha_unexplained), ("outlier_rate", outlier_rate)):
         if not 0 < value < 1:
             raise BudgetError(f"{name} must lie in (0, 1), got {value}")
-    campaign = read_campaign(campaign, geometry)
+    campaign = require_testable(read_campaign(campaign, geometry))
     noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
     full = Engine(geometry, budget, campaign, noise, registration=registration)
     bar = progress if isinstance(progress, Progress) else Progress(len(STAGES), "discrepancy", progress)

@@ -28,6 +28,7 @@ import pandas as pd
 from ..output import check_output, figure_data_uri, output_folder, save_figure, write_json, write_text
 from ..study.results import StudyResult
 from ..study.summary import build_summary
+from ..study.sweep import best_configurations, design_frame
 from ..units import DEG2ARCSEC, DISPLAY, MM2UM
 
 __all__ = ["write_study", "render_report", "comparison"]
@@ -153,13 +154,35 @@ def _canvas():
     return FigureCanvasAgg(Figure()).figure
 
 
+def _shown(result: StudyResult) -> list:
+    """Configurations drawn in the maps, histograms and Sobol figures: all, or a sweep's best three."""
+    if not result.study.sweep:
+        return list(result.configurations)
+    best = best_configurations(design_frame(result, _MC_PERCENTILE))
+    return [c for c in result.configurations if c.name in best]
+
+
+def _design_figures(result: StudyResult) -> list[tuple[str, str, object]]:
+    """The design-space view of a sweep (none without a sweep or a result)."""
+    if not result.study.sweep or not result.configurations:
+        return []
+    from .sweep_plots import design_space_figure
+    frame = design_frame(result, _MC_PERCENTILE)
+    best = best_configurations(frame)
+    return [("design_space", "Design space: each figure of merit (rows, maximum over the test region) against "
+             "each swept parameter (columns). Dots: configurations; line: the best value reachable at each value "
+             f"of the parameter; marked: the best configurations by exact worst case ({', '.join(best)}).",
+             design_space_figure(frame, best=best, fig=_canvas()))]
+
+
 def _figures(result: StudyResult) -> list[tuple[str, str, object]]:
     """(file name, caption, figure) of every figure of the report, in order."""
     from . import plots
-    res = list(result.configurations)
+    res = _shown(result)
     scale = ("Panels share one colour scale when that helps the comparison, else each has its own "
              "(the title says which); a field constant over a region is labelled so, without extrema.")
-    figs = [("worstcase_position", "Exact worst-case position error (µm) over each test region (the paper's "
+    figs = _design_figures(result)
+    figs += [("worstcase_position", "Exact worst-case position error (µm) over each test region (the paper's "
              f"Figs. 4-5, computed exactly). ✕ marks the maximum, ○ the minimum. {scale}",
              plots.compare_maps_figure(res, "worstcase", "position", fig=_canvas())),
             ("worstcase_phi", f"Exact worst-case orientation error |δφ| (arcsec). {scale}",
@@ -231,6 +254,8 @@ def _allocation_figures(result: StudyResult) -> list[tuple[str, str, object]]:
 def _tables(result: StudyResult) -> dict[str, pd.DataFrame]:
     tables = {"summary": result.to_frame(), "worstcase_families": _family_shares(result),
               "budget": result.study.budget.to_frame()}
+    if result.study.sweep:
+        tables["design_space"] = design_frame(result, _MC_PERCENTILE)
     for c in result.configurations:
         tables[f"worstcase_{c.name}"] = _grid_frame(c)
         tables[f"contributions_{c.name}"] = _contributions(c)
@@ -315,12 +340,42 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
     summary_table = _summary_display(tables["summary"])
     families = (tables["worstcase_families"].pivot(index="family", columns="configuration", values="share_pct")
                 .rename_axis(columns=None).reset_index())
+    meta.update(scheduler=result.scheduler)
     return env.get_template("study_report.html.j2").render(
-        study=study, result=result, meta=meta, configs=configs, figures=figures,
+        study=study, result=result, meta=meta, configs=configs, figures=figures, design=_design(result, tables),
         summary_table=_html_table(summary_table), families=_html_table(families, 3),
         budget_table=_html_table(tables["budget"]), cmp=comparison(result, summary),
         summary=summary, mc_percentile=f"p{_MC_PERCENTILE:g}", tables=sorted(tables),
         inputs=summary["inputs"], versions=summary["versions"], allocations=_allocations(result, tables))
+
+
+def _design(result: StudyResult, tables: dict) -> dict | None:
+    """The design-space section of a sweep: its best configurations and what did not run."""
+    if not result.study.sweep:
+        return None
+    frame = tables["design_space"]
+    keys = [k for k, _ in result.study.sweep]
+    wide = frame.assign(merit=lambda d: [_merit_name(*m) for m in zip(d.analysis, d.output, d.statistic)],
+                        shown=lambda d: [v * DISPLAY[o][0] if s != "ST_top" else v
+                                         for v, o, s in zip(d.value, d.output, d.statistic)])
+    table = wide.pivot_table(index=["configuration", *keys], columns="merit", values="shown", sort=False)
+    first = _merit_name("worstcase", "position", "worst_case")
+    table = table.sort_values(first).reset_index() if first in table else table.reset_index()
+    tops = frame[frame["statistic"] == "ST_top"].set_index("configuration")["input"]
+    if len(tops):
+        table["top Sobol input"] = table["configuration"].map(tops.groupby(level=0).first())
+    skipped = [{"name": s.name, "kind": s.kind, "reason": s.reason,
+                "parameters": ", ".join(f"{k} = {v}" for k, v in s.parameters)} for s in result.skipped]
+    return {"table": _html_table(table), "skipped": skipped, "keys": keys, "n_run": len(result.configurations),
+            "best": table["configuration"].iloc[0] if len(table) else None}
+
+
+def _merit_name(analysis: str, output: str, statistic: str) -> str:
+    if statistic == "ST_top":
+        return f"largest Sobol ST ({output})"
+    what = "position" if output == "position" else "|δφ|"
+    stat = "worst case" if statistic == "worst_case" else f"Monte Carlo {statistic}"
+    return f"{stat} {what}, max ({DISPLAY[output][1]})"
 
 
 def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = False) -> Path:

@@ -48,7 +48,11 @@ optional; paths are relative to the study file)::
     samples = 20000                   # Monte Carlo samples confirming it (only with spec_percentile)
     grid = 41                         # n or [nx, ny] (default: the [worstcase] grid)
     front = true                      # also the cost-accuracy Pareto front (default true)
-    configurations = ["u-shape"]      # default: every configuration
+    configurations = ["u-shape"]      # default: every configuration (a swept one: its base's name)
+
+    [sweep]                           # optional: expand every configuration over the cartesian
+    "leg.3.a_mm" = [200, 220, 240]    # product of geometry parameters (keys as in a geometry
+    "leg.*.e_mm" = [10, 20, 30]       # file, legs 1-3 or * for all; see prp3mc.study.sweep)
 
 The allocation runs for every configuration (or those listed), each over
 its own geometry and test region; its budget is the classes' laws alone, not
@@ -60,8 +64,8 @@ whose message reads ``FILE:LINE: reason``.
 
 Randomness: the study seed gives one Monte Carlo seed, one Sobol seed and
 one seed of the allocation's Monte Carlo confirmation, each shared by all
-configurations (common random numbers, so differences between configurations
-are not blurred by sampling noise).
+configurations, swept ones included (common random numbers, so differences
+between configurations are not blurred by sampling noise).
 """
 
 from __future__ import annotations
@@ -77,13 +81,15 @@ from typing import Any
 import numpy as np
 
 from .._toml import read_text_file
-from ..errors import Prp3mcError, StudyError, UnknownPresetError
+from ..errors import Prp3mcError, ResourceError, StudyError, UnknownPresetError
+from ..limits import check, worstcase_estimate
 from ..kinematics.chain import check_poses
 from ..kinematics.geometry import REGION_PRESETS, Geometry, Region
 from ..uncertainty.budget import Budget
 from ..uncertainty.montecarlo import PERCENTILES
 from ..units import OUTPUTS
 from .allocation import AllocationSpec, read_allocation
+from .sweep import is_number, read_sweep
 
 __all__ = ["Study", "StudyConfiguration", "bundled_studies", "STUDIES_DIR", "ANALYSES"]
 
@@ -121,6 +127,9 @@ class StudyConfiguration:
     reference_position_um : (lo, hi) or None
         A published worst-case position-error range to compare with, µm.
     reference : str
+    parameters : tuple of (key, value)
+        Sweep parameters of an expanded configuration, keys as written in the
+        ``[sweep]`` table; empty for a configuration of the file.
     """
 
     name: str
@@ -129,6 +138,7 @@ class StudyConfiguration:
     poses: tuple | None = None
     reference_position_um: tuple[float, float] | None = None
     reference: str = ""
+    parameters: tuple = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -154,6 +164,8 @@ class Study:
     sobol_groups : dict of str to tuple of str
     allocation : AllocationSpec or None
         The ``[allocation]`` table.
+    sweep : tuple of (key, tuple of values)
+        The ``[sweep]`` table in file order; empty without one.
     source : str
         The file it was read from.
     """
@@ -176,6 +188,7 @@ class Study:
     sobol_outputs: tuple = _DEFAULT["sobol_outputs"]
     sobol_groups: dict = field(default_factory=dict)
     allocation: AllocationSpec | None = None
+    sweep: tuple = ()
     source: str = "<study>"
 
     @classmethod
@@ -247,7 +260,7 @@ class _Reader:
     """Validation of a parsed study document, pointing errors at their lines."""
 
     _TOP = {"name", "title", "description", "seed", "budget", "outputs", "worstcase", "montecarlo",
-            "sobol", "configuration", "allocation"}
+            "sobol", "configuration", "allocation", "sweep"}
     _TABLES = {"worstcase": {"grid", "k_sigma"},
                "montecarlo": {"samples", "grid", "percentiles", "tolerance_mm"},
                "sobol": {"samples", "grid", "outputs", "groups"}}
@@ -275,7 +288,7 @@ class _Reader:
         checks = {
             "str": lambda v: isinstance(v, str),
             "int": lambda v: isinstance(v, int) and not isinstance(v, bool),
-            "number": lambda v: isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v),
+            "number": is_number,
             "table": lambda v: isinstance(v, dict),
             "list": lambda v: isinstance(v, list),
         }
@@ -297,8 +310,12 @@ class _Reader:
             return default
         ok_int = lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 2  # noqa: E731
         if ok_int(value):
-            return (value, value)
+            value = [value, value]
         if isinstance(value, list) and len(value) == 2 and all(ok_int(v) for v in value):
+            try:  # the configurations' grids are checked for feasibility below: refuse what cannot be built
+                check(worstcase_estimate(value[0] * value[1], 0), max_hours=math.inf)
+            except ResourceError as exc:
+                self.fail(path, f"{'.'.join(path)}: {exc}")
             return (value[0], value[1])
         self.fail(path, f"{'.'.join(path)} must be an integer n >= 2 (n x n poses) or [nx, ny], got {value!r}")
 
@@ -369,7 +386,10 @@ class _Reader:
         configs = doc.get("configuration")
         if not isinstance(configs, list) or not configs or not all(isinstance(c, dict) for c in configs):
             self.fail(("configuration",), "a study needs at least one [[configuration]] table")
-        parsed = tuple(self.configuration(c, k, kw["worstcase_grid"]) for k, c in enumerate(configs))
+        kw["sweep"] = read_sweep(self, self.get(doc, ("sweep",), "table", {}))
+        # a swept configuration is checked value by value when it runs (infeasible ones are reported)
+        check = None if kw["sweep"] else kw["worstcase_grid"]
+        parsed = tuple(self.configuration(c, k, check) for k, c in enumerate(configs))
         names = [c.name for c in parsed]
         for k, n in enumerate(names):
             if n in names[:k]:
@@ -387,7 +407,7 @@ class _Reader:
         except Prp3mcError as exc:
             self.fail(path, f"{what} {spec!r}: {exc}")
 
-    def configuration(self, c: dict, k: int, grid: tuple) -> StudyConfiguration:
+    def configuration(self, c: dict, k: int, grid: tuple | None) -> StudyConfiguration:
         p = ("configuration", k)
         self.unknown(c, self._CONFIG, p, f"configuration {k + 1}")
         if "geometry" not in c:
@@ -411,7 +431,8 @@ class _Reader:
         phi = self.get(c, p + ("phi_deg",), "number", region.phi_deg)
         region = Region(region.x_mm, region.y_mm, phi)
         try:
-            check_poses(geometry, region.grid(grid))
+            if grid is not None:
+                check_poses(geometry, region.grid(grid))
         except Prp3mcError as exc:
             self.fail(p + (("phi_deg",) if "phi_deg" in c else ("region",)),
                       f"configuration {name!r}: the test region leaves the workspace: {exc}")
@@ -425,7 +446,8 @@ class _Reader:
             if poses.ndim != 2 or poses.shape[1:] != (3,) or not len(poses) or not np.isfinite(poses).all():
                 self.fail(p + ("poses",), f"poses must be a non-empty array of [x_mm, y_mm, phi_deg], got {raw!r}")
             try:
-                check_poses(geometry, poses)
+                if grid is not None:
+                    check_poses(geometry, poses)
             except Prp3mcError as exc:
                 self.fail(p + ("poses",), f"configuration {name!r}: {exc}")
             poses = tuple(tuple(float(v) for v in pose) for pose in poses)

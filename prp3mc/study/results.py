@@ -21,7 +21,7 @@ from ..uncertainty.montecarlo import MonteCarloResult
 from ..uncertainty.worstcase import WorstCase
 from .reader import Study, StudyConfiguration
 
-__all__ = ["PoseSamples", "ConfigurationResult", "StudyResult", "pct_se", "over_grid"]
+__all__ = ["PoseSamples", "ConfigurationResult", "SkippedConfiguration", "StudyResult", "pct_se", "over_grid"]
 
 #: Columns of :meth:`ConfigurationResult.to_frame` and :meth:`StudyResult.to_frame`.
 SUMMARY_COLUMNS = ("configuration", "analysis", "output", "statistic", "aggregate", "value", "se", "unit")
@@ -177,6 +177,33 @@ class ConfigurationResult:
 
 
 @dataclass(frozen=True, slots=True)
+class SkippedConfiguration:
+    """A configuration that gave no result, and why.
+
+    Attributes
+    ----------
+    name : str
+    parameters : tuple of (key, value)
+        Its sweep parameters, keys as written in the study file.
+    kind : str
+        ``infeasible``: the combination does not assemble over its test region
+        or is malformed (InfeasiblePoseError, GeometryError); ``failed``: an
+        analysis raised another error.
+    reason : str
+        One line: the error's message (prefixed with its type for ``failed``).
+    """
+
+    name: str
+    parameters: tuple
+    kind: str
+    reason: str
+
+    def to_dict(self) -> dict:
+        """``{"name", "parameters": {key: value}, "reason"}`` for summary.json."""
+        return {"name": self.name, "parameters": dict(self.parameters), "reason": self.reason}
+
+
+@dataclass(frozen=True, slots=True)
 class StudyResult:
     """The results of a study run.
 
@@ -188,9 +215,15 @@ class StudyResult:
     montecarlo_seed, sobol_seed : int
         Seeds derived from it, shared by all configurations.
     configurations : tuple of ConfigurationResult
+        Those that ran, in the order of the study's (expanded) configurations.
     timings_s : mapping of str to float
-        Wall time per analysis.
+        Compute time per analysis, summed over the configurations (on
+        several workers it exceeds the wall time).
     wall_time_s : float
+    skipped : tuple of SkippedConfiguration
+        Configurations of a sweep that gave no result (infeasible or failed).
+    scheduler : str
+        What ran the configurations: ``serial``, ``local:N`` or a scheduler address.
     version : str
     allocation_seed : int or None
         Seed of the allocation's Monte Carlo confirmation (with an ``[allocation]`` table).
@@ -203,6 +236,8 @@ class StudyResult:
     configurations: tuple
     timings_s: dict
     wall_time_s: float
+    skipped: tuple = ()
+    scheduler: str = "serial"
     version: str = __version__
     allocation_seed: int | None = None
 

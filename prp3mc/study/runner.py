@@ -7,21 +7,32 @@ file, or the name of a bundled study) and returns a
 tables and ``summary.json`` (``prp3mc study FILE.toml --out DIR``).
 
 Randomness: the study seed gives one Monte Carlo seed and one Sobol seed,
-shared by all configurations (common random numbers, so differences between
-configurations are not blurred by sampling noise), and the seed of the
-allocation's Monte Carlo confirmation (stream 3, also shared).
+shared by all configurations, swept ones included (common random numbers, so
+differences between configurations are not blurred by sampling noise), and the
+seed of the allocation's Monte Carlo confirmation (stream 3, also shared). The
+streams are keyed by the study seed alone, never by the process that runs a
+configuration, so a study gives the same numbers serially or on a Dask
+cluster (:mod:`prp3mc.study.distributed`).
+
+Configurations are independent tasks, :func:`run_configuration`, run by an
+executor: in this process by default, on Dask workers with ``scheduler=``.
+A swept configuration that is infeasible or fails is reported
+(:class:`~prp3mc.study.results.SkippedConfiguration`) and the others are kept.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import time
-from typing import Any
+from dataclasses import dataclass, replace
+from typing import Any, Iterable, Iterator
 
 import numpy as np
 
 from .._rng import child_seed, resolve_rng
+from ..errors import GeometryError, InfeasiblePoseError
 from ..uncertainty.budget import Budget
 from ..uncertainty.model import linear_model
 from ..uncertainty.montecarlo import monte_carlo
@@ -31,9 +42,10 @@ from ..uncertainty.worstcase import WorstCase, worst_case
 from ..units import RAD2DEG
 from .allocation import ALLOCATION_STREAM, run_allocation
 from .reader import Study, StudyConfiguration
-from .results import ConfigurationResult, PoseSamples, StudyResult
+from .results import ConfigurationResult, PoseSamples, SkippedConfiguration, StudyResult
+from .sweep import Variant, expand
 
-__all__ = ["run_study"]
+__all__ = ["run_study", "run_configuration", "Plan", "Outcome", "SerialExecutor"]
 
 
 def _histogram_poses(config: StudyConfiguration, wc: WorstCase) -> tuple[np.ndarray, tuple]:
@@ -59,10 +71,150 @@ def _pose_samples(config: StudyConfiguration, budget: Budget, wc: WorstCase, n: 
                        worst_phi_deg=at.phi_deg, seed=seed, n_samples=n)
 
 
+@dataclass(frozen=True, slots=True)
+class Plan:
+    """What every configuration's task needs besides its own :class:`~prp3mc.study.sweep.Variant`.
+
+    Attributes
+    ----------
+    study : Study
+        Sizes, budget and analyses; its configurations are left out (each task
+        carries its own), so a task's inputs do not grow with the sweep.
+    montecarlo_seed, sobol_seed : int
+        Shared by every configuration (common random numbers).
+    allocation_seed : int or None
+        Seed of the allocation's Monte Carlo confirmation (with an ``[allocation]`` table), shared too.
+    n_tasks : int
+        Number of configurations, for progress messages.
+    progress : bool
+        Report each analysis on stderr (serial runs).
+    """
+
+    study: Study
+    montecarlo_seed: int
+    sobol_seed: int
+    allocation_seed: int | None = None
+    n_tasks: int = 1
+    progress: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class Outcome:
+    """What one configuration's task returns: a result or the reason there is none, and its timings."""
+
+    index: int
+    result: ConfigurationResult | None
+    skipped: SkippedConfiguration | None
+    timings_s: dict
+
+
+def _skip(variant: Variant, kind: str, exc: BaseException) -> Outcome:
+    reason = str(exc) if kind == "infeasible" else f"{type(exc).__name__}: {exc}"
+    return Outcome(variant.index, None, SkippedConfiguration(variant.name, variant.parameters, kind, reason), {})
+
+
+def run_configuration(plan: Plan, variant: Variant) -> Outcome:
+    """Every analysis of one configuration (a task: runs in this process or on a Dask worker).
+
+    A swept configuration (one with parameters) that is infeasible or whose
+    analyses raise is returned as skipped, with the reason; a configuration
+    of the study file raises as it always did.
+    """
+    try:
+        config = variant.build()
+    except (GeometryError, InfeasiblePoseError) as exc:
+        return _skip(variant, "infeasible", exc)
+    try:
+        result, timings = _analyses(plan, config, variant)
+    except InfeasiblePoseError as exc:
+        if not variant.parameters:
+            raise
+        return _skip(variant, "infeasible", exc)
+    except Exception as exc:  # noqa: BLE001 -- one failing combination must not cost the sweep
+        if not variant.parameters:
+            raise
+        return _skip(variant, "failed", exc)
+    return Outcome(variant.index, result, None, timings)
+
+
+def _timings(study: Study) -> dict[str, float]:
+    """Zero time for every analysis the study runs."""
+    return dict.fromkeys(("worstcase",) + study.outputs + (("allocation",) if study.allocation else ()), 0.0)
+
+
+def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple[ConfigurationResult, dict]:
+    study, progress, index = plan.study, plan.progress, variant.index
+    mc_seed, sobol_seed = plan.montecarlo_seed, plan.sobol_seed
+    timings = _timings(study)
+
+    def stage(what: str) -> None:
+        if progress:
+            print(f"study {study.name} [{index + 1}/{plan.n_tasks}] {config.name}: {what}", file=sys.stderr,
+                  flush=True)
+
+    g, b = config.geometry, study.budget
+    nx, ny = study.worstcase_grid
+    stage(f"exact worst case on {nx} x {ny} poses")
+    t = time.perf_counter()
+    wc = worst_case(g, b, config.region.grid(study.worstcase_grid), k_sigma=study.k_sigma)
+    timings["worstcase"] += time.perf_counter() - t
+    kw: dict[str, Any] = {}
+    if "montecarlo" in study.outputs:
+        nx, ny = study.mc_grid
+        stage(f"Monte Carlo, {study.mc_samples} samples on {nx} x {ny} poses")
+        t = time.perf_counter()
+        kw["montecarlo"] = monte_carlo(g, b, config.region.grid(study.mc_grid), study.mc_samples,
+                                       rng=mc_seed, percentiles=study.percentiles,
+                                       tolerance_mm=study.tolerance_mm, progress=progress)
+        kw["samples"] = _pose_samples(config, b, wc, study.mc_samples, mc_seed, study.k_sigma)
+        timings["montecarlo"] += time.perf_counter() - t
+    if "sobol" in study.outputs:
+        nx, ny = study.sobol_grid
+        stage(f"Sobol indices, N = {study.sobol_samples} on {nx} x {ny} poses")
+        t = time.perf_counter()
+        poses = config.region.grid(study.sobol_grid)
+        s = sobol_indices(g, b, poses, study.sobol_samples, rng=sobol_seed,
+                          groups=study.sobol_groups or None, outputs=study.sobol_outputs,
+                          progress=progress)
+        wc_s = worst_case(g, b, poses, k_sigma=study.k_sigma)
+        kw["sobol"] = s
+        kw["ranking"] = {o: ranking(s, wc_s, output=o) for o in study.sobol_outputs}
+        timings["sobol"] += time.perf_counter() - t
+    allocation = study.allocation
+    if allocation is not None and allocation.applies_to(variant.base.name):  # a swept one: by its base's name
+        stage("tolerance allocation" + (" and its Pareto front" if allocation.front else ""))
+        t = time.perf_counter()
+        kw.update(run_allocation(config, allocation, study.worstcase_grid, study.k_sigma, plan.allocation_seed))
+        timings["allocation"] += time.perf_counter() - t
+    return ConfigurationResult(configuration=config, worst_case=wc, **kw), timings
+
+
+class SerialExecutor:
+    """Runs the tasks one after the other in this process (the default)."""
+
+    name = "serial"
+    in_process = True
+
+    def map(self, fn, tasks: Iterable[tuple]) -> Iterator[tuple[int, Any]]:
+        """``(k, fn(*task_k))`` for every task, in order; errors propagate."""
+        for k, task in enumerate(tasks):
+            yield k, fn(*task)
+
+
+def _executor(scheduler) -> contextlib.AbstractContextManager:
+    """A context giving the executor: serial, a Dask scheduler spec, or an executor object as it is."""
+    if scheduler is None:
+        return contextlib.nullcontext(SerialExecutor())
+    if isinstance(scheduler, str):
+        from .distributed import DaskExecutor  # imports dask only when entered
+        return DaskExecutor(scheduler)
+    return contextlib.nullcontext(scheduler)
+
+
 def run_study(study: "Study | str | os.PathLike", *, rng: "None | int | np.random.Generator" = None,
-              progress: bool | None = None,
-              budget: Budget | None = None) -> StudyResult:
-    """Run every analysis of a study for every configuration.
+              progress: bool | None = None, budget: Budget | None = None,
+              scheduler: "str | Any | None" = None) -> StudyResult:
+    """Run every analysis of every configuration of a study (every combination of its sweep).
 
     Parameters
     ----------
@@ -77,10 +229,17 @@ def run_study(study: "Study | str | os.PathLike", *, rng: "None | int | np.rando
         (default: when stderr is a terminal).
     budget : Budget, optional
         Replace the study's budget (what-if runs).
+    scheduler : str or executor, optional
+        None: run in this process. ``"local:N"``: on a Dask LocalCluster of N
+        worker processes; ``"tcp://HOST:PORT"``: on that Dask scheduler (see
+        :mod:`prp3mc.study.distributed`; needs ``pip install 'prp3mc[dask]'``).
+        Or an object with ``map(fn, tasks)`` yielding ``(k, result or
+        exception)`` and a ``name``. The numbers do not depend on it.
 
     Returns
     -------
     StudyResult
+        Swept configurations that are infeasible or fail are in ``skipped``.
     """
     t0 = time.perf_counter()
     study = Study.load(study)
@@ -88,58 +247,32 @@ def run_study(study: "Study | str | os.PathLike", *, rng: "None | int | np.rando
         study = study.with_budget(budget)
     seed, _ = resolve_rng(rng if rng is not None else study.seed)
     mc_seed, sobol_seed = child_seed(seed, 1), child_seed(seed, 2)
-    timings = dict.fromkeys(("worstcase",) + study.outputs, 0.0)
     show = sys.stderr.isatty() if progress is None else progress
-    steps = len(study.configurations) * len(timings)
-    allocation, allocation_seed = study.allocation, None
-    if allocation is not None:
-        allocation_seed = child_seed(seed, ALLOCATION_STREAM)
-        timings["allocation"] = 0.0
-        steps += sum(allocation.applies_to(c.name) for c in study.configurations)
-    done = 0
-
-    def stage(config: StudyConfiguration, what: str) -> None:
-        nonlocal done
-        done += 1
-        if show:
-            print(f"study {study.name} [{done}/{steps}] {config.name}: {what}", file=sys.stderr, flush=True)
-
-    results = []
-    for config in study.configurations:  # a handful of configurations; each analysis is batched
-        g, b = config.geometry, study.budget
-        nx, ny = study.worstcase_grid
-        stage(config, f"exact worst case on {nx} x {ny} poses")
-        t = time.perf_counter()
-        wc = worst_case(g, b, config.region.grid(study.worstcase_grid), k_sigma=study.k_sigma)
-        timings["worstcase"] += time.perf_counter() - t
-        kw: dict[str, Any] = {}
-        if "montecarlo" in study.outputs:
-            nx, ny = study.mc_grid
-            stage(config, f"Monte Carlo, {study.mc_samples} samples on {nx} x {ny} poses")
-            t = time.perf_counter()
-            kw["montecarlo"] = monte_carlo(g, b, config.region.grid(study.mc_grid), study.mc_samples,
-                                           rng=mc_seed, percentiles=study.percentiles,
-                                           tolerance_mm=study.tolerance_mm, progress=progress)
-            kw["samples"] = _pose_samples(config, b, wc, study.mc_samples, mc_seed, study.k_sigma)
-            timings["montecarlo"] += time.perf_counter() - t
-        if "sobol" in study.outputs:
-            nx, ny = study.sobol_grid
-            stage(config, f"Sobol indices, N = {study.sobol_samples} on {nx} x {ny} poses")
-            t = time.perf_counter()
-            poses = config.region.grid(study.sobol_grid)
-            s = sobol_indices(g, b, poses, study.sobol_samples, rng=sobol_seed,
-                              groups=study.sobol_groups or None, outputs=study.sobol_outputs,
-                              progress=progress)
-            wc_s = worst_case(g, b, poses, k_sigma=study.k_sigma)
-            kw["sobol"] = s
-            kw["ranking"] = {o: ranking(s, wc_s, output=o) for o in study.sobol_outputs}
-            timings["sobol"] += time.perf_counter() - t
-        if allocation is not None and allocation.applies_to(config.name):
-            stage(config, "tolerance allocation" + (" and its Pareto front" if allocation.front else ""))
-            t = time.perf_counter()
-            kw.update(run_allocation(config, allocation, study.worstcase_grid, study.k_sigma, allocation_seed))
-            timings["allocation"] += time.perf_counter() - t
-        results.append(ConfigurationResult(configuration=config, worst_case=wc, **kw))
+    allocation_seed = child_seed(seed, ALLOCATION_STREAM) if study.allocation is not None else None
+    variants = expand(study)
+    outcomes: dict[int, Outcome] = {}
+    with _executor(scheduler) as executor:
+        in_process = getattr(executor, "in_process", False)
+        plan = Plan(replace(study, configurations=()), mc_seed, sobol_seed, allocation_seed, len(variants),
+                    progress=bool(show and in_process))
+        for k, value in executor.map(run_configuration, [(plan, v) for v in variants]):
+            if isinstance(value, BaseException):  # the task itself was lost (a worker died too often)
+                if not variants[k].parameters:
+                    raise value
+                value = _skip(variants[k], "failed", value)
+            outcomes[k] = value
+            if show and not in_process:
+                what = "done" if value.result is not None else f"{value.skipped.kind}: {value.skipped.reason}"
+                print(f"study {study.name} [{len(outcomes)}/{len(variants)}] {variants[k].name}: {what}",
+                      file=sys.stderr, flush=True)
+        name = executor.name
+    ordered = [outcomes[k] for k in range(len(variants))]
+    timings = _timings(study)
+    for o in ordered:
+        for key, v in o.timings_s.items():
+            timings[key] += v
     return StudyResult(study=study, seed=seed, montecarlo_seed=mc_seed, sobol_seed=sobol_seed,
-                       configurations=tuple(results), timings_s=timings,
-                       wall_time_s=time.perf_counter() - t0, allocation_seed=allocation_seed)
+                       configurations=tuple(o.result for o in ordered if o.result is not None),
+                       timings_s=timings, wall_time_s=time.perf_counter() - t0,
+                       skipped=tuple(o.skipped for o in ordered if o.skipped is not None), scheduler=name,
+                       allocation_seed=allocation_seed)

@@ -32,6 +32,18 @@ Layout (µm and arcsec)::
                 "montecarlo_samples": 32768, ...},
      "versions": {"prp3mc": ..., "python": ..., "numpy": ..., "scipy": ..., "pandas": ..., "SALib": ...}}
 
+A study with a ``[sweep]`` table (SPEC §8) names its expanded configurations
+``base.k``; each entry also carries ``"parameters": {key: value}`` with the
+sweep keys as written in the file, and a top-level ``"sweep"`` lists what did
+not run::
+
+     "sweep": {"parameters": {"leg.3.a_mm": [200, 220, 240], ...}, "configurations": 9,
+               "infeasible": [{"name": "u-shape.7", "parameters": {...}, "reason": "..."}],
+               "failed": [...]}
+
+The summary is the same whether the study ran serially or on a Dask cluster
+(only ``metadata.wall_time_s`` and ``metadata.timings_s`` differ).
+
 A plain number is **exact** (the worst case is a deterministic function of
 geometry, budget and grid); a ``{"value", "se"}`` pair is a **statistic** with
 its standard error. ``min``/``max``/``mean`` are taken over the analysis'
@@ -180,6 +192,13 @@ def build_summary(result: StudyResult) -> dict:
             doc["sobol"] = _sobol(c)
         if c.allocation is not None:
             doc["allocation"] = allocation_summary(c.allocation, c.allocation_front)
+        if result.study.sweep:
+            doc["parameters"] = dict(c.configuration.parameters)
         configs[c.name] = doc
-    return {"study": result.study.name, "configurations": configs, "metadata": result.metadata(),
-            "inputs": study_inputs(result), "versions": versions()}
+    out = {"study": result.study.name, "configurations": configs}
+    if result.study.sweep:
+        out["sweep"] = {"parameters": {k: list(v) for k, v in result.study.sweep},
+                        "configurations": len(result.configurations) + len(result.skipped),
+                        **{kind: [s.to_dict() for s in result.skipped if s.kind == kind]
+                           for kind in ("infeasible", "failed")}}
+    return out | {"metadata": result.metadata(), "inputs": study_inputs(result), "versions": versions()}

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import re
+import warnings
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -21,13 +22,17 @@ import numpy as np
 from .._toml import dumps_toml, load_spec, load_toml, loads_toml
 from ..output import write_text
 from .._result import FrozenDict
-from ..errors import BudgetError, UnknownPresetError
+from ..errors import BudgetError, IncompleteBudgetWarning, UnknownPresetError
 from .laws import Law, law_from_dict
 from ..kinematics.sensitivity import LENGTH_FAMILIES
 
-__all__ = ["Budget", "Catalogue", "input_unit", "parse_input", "BUDGET_PRESETS"]
+__all__ = ["Budget", "Catalogue", "input_unit", "parse_input", "BUDGET_PRESETS", "SANITY_LIMITS"]
 
 _NAME = re.compile(r"^(a|alpha|b|beta|rho|c|gamma|theta|e|psi|zeta)_([123])$")
+_FAMILY_ORDER = ("a", "alpha", "b", "beta", "rho", "zeta", "c", "gamma", "theta", "e", "psi")
+#: Largest magnitude an error input may take, per unit: an error beyond the machine's own size
+#: (links of 100-300 mm) or beyond a full turn is a mistake, and it would overflow the results.
+SANITY_LIMITS = {"mm": 1000.0, "deg": 360.0}
 SAMPLE_BLOCK = 1 << 16  # samples drawn per block: results do not depend on chunking
 
 
@@ -67,7 +72,7 @@ class Catalogue:
         return Catalogue({**self.entries, **_flatten(load_toml(path))})
 
     def law(self, key: str, where: str) -> tuple[Law, dict[str, Any]]:
-        if key not in self.entries:
+        if not isinstance(key, str) or key not in self.entries:
             raise BudgetError(f"{where}: no catalogue entry {key!r}")
         entry = dict(self.entries[key])
         meta = {k: entry.pop(k) for k in ("applies_to", "unit", "source") if k in entry}
@@ -126,6 +131,11 @@ class Budget:
                 raise BudgetError(f"input {key!r}: expected a law, got {law!r}")
             if family == "rho" and law.support[0] < 0:
                 raise BudgetError(f"input {key!r}: a clearance cannot be negative (law support {law.support})")
+            unit = input_unit(key)
+            lo, hi = law.span()
+            if not max(abs(lo), abs(hi)) <= SANITY_LIMITS[unit]:
+                raise BudgetError(f"input {key!r}: values up to {max(abs(lo), abs(hi)):.3g} {unit} are beyond "
+                                  f"any error of this machine (limit ±{SANITY_LIMITS[unit]:g} {unit})")
             inputs[key] = law
         for key in inputs:
             family, leg = parse_input(key)
@@ -155,6 +165,13 @@ class Budget:
 
     def __len__(self) -> int:
         return len(self.inputs)
+
+    @property
+    def missing_inputs(self) -> tuple[str, ...]:
+        """Inputs of a family the budget names for some legs but not for all (taken as exact)."""
+        present = {parse_input(name)[0] for name in self.inputs}
+        return tuple(f"{family}_{leg}" for family in _FAMILY_ORDER if family in present
+                     for leg in (1, 2, 3) if f"{family}_{leg}" not in self.inputs)
 
     def replace(self, name: str | None = None, **laws: Law) -> "Budget":
         """A copy with some inputs' laws replaced or added (``theta_1=Uniform(...)``)."""
@@ -267,7 +284,10 @@ class Budget:
         if unknown:
             raise BudgetError(f"{source}: unknown key(s) {', '.join(unknown)} (expected name, inputs, groups, catalogues)")
         catalogue = catalogue or Catalogue.bundled()
-        for extra in doc.get("catalogues", []):
+        extras = doc.get("catalogues", [])
+        if not isinstance(extras, list) or not all(isinstance(e, str) for e in extras):
+            raise BudgetError(f"{source}: catalogues must be a list of file names, got {extras!r}")
+        for extra in extras:
             catalogue = catalogue.extended((base or Path(".")) / extra)
         raw = doc.get("inputs")
         if not isinstance(raw, dict) or not raw:
@@ -277,7 +297,8 @@ class Budget:
             where = f"{source}: input {key!r}"
             family, _ = _parse_where(key, source)
             if not isinstance(spec, dict):
-                raise BudgetError(f"{where}: expected a table such as {{ law = \"uniform\", lo = 0, hi = 1 }}")
+                raise BudgetError(f"{where}: {spec!r} is not a law: expected a table such as "
+                                  "{ law = \"uniform\", lo = 0, hi = 1 }")
             if "catalogue" in spec:
                 if set(spec) != {"catalogue"}:
                     raise BudgetError(f"{where}: a catalogue reference takes no other keys")
@@ -293,12 +314,20 @@ class Budget:
                 law = law_from_dict(spec, where)
             inputs[key] = law
         groups = doc.get("groups", {})
-        if not isinstance(groups, dict):
+        if not isinstance(groups, dict) or not all(isinstance(m, list) and all(isinstance(x, str) for x in m)
+                                                   for m in groups.values()):
             raise BudgetError(f"{source}: [groups] must map names to lists of inputs")
+        name = doc.get("name", "custom")
+        if not isinstance(name, str):
+            raise BudgetError(f"{source}: name must be a string, got {name!r}")
         try:
-            return cls(inputs, groups=groups, sources=sources, name=str(doc.get("name", "custom")))
+            budget = cls(inputs, groups=groups, sources=sources, name=name)
         except BudgetError as exc:
             raise BudgetError(f"{source}: {exc}") from None
+        if budget.missing_inputs:
+            warnings.warn(f"{source}: no law for {', '.join(budget.missing_inputs)} (other legs have one): "
+                          "taken as exact; a budget cut short?", IncompleteBudgetWarning, stacklevel=2)
+        return budget
 
     @classmethod
     def from_toml(cls, path: str | os.PathLike) -> "Budget":

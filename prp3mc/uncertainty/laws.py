@@ -18,7 +18,13 @@ from scipy import integrate, special, stats
 from ..errors import BudgetError
 
 __all__ = ["Law", "Uniform", "Normal", "TruncNormal", "Triangular", "Disc", "Discrete", "law_from_dict", "LAWS",
-           "angle_moments"]
+           "angle_moments", "MAX_K_SIGMA", "MIN_CPK"]
+
+
+#: Largest k of a mean ± k·sd bound (beyond it the bound says nothing about a real part).
+MAX_K_SIGMA = 100.0
+#: Smallest process capability of a truncated normal (below it the parent sd overflows the tolerance).
+MIN_CPK = 0.01
 
 
 def _finite(law: str, **values: float) -> None:
@@ -87,8 +93,20 @@ class Law:
             return self.support
         if k_sigma is None:
             raise BudgetError(f"{self.kind} law is unbounded: give k_sigma to bound it as mean ± k·sd")
+        if not 0 < k_sigma <= MAX_K_SIGMA:
+            raise BudgetError(f"k_sigma must lie in (0, {MAX_K_SIGMA:g}], got {k_sigma}")
         sd = math.sqrt(self.var)
         return self.mean - k_sigma * sd, self.mean + k_sigma * sd
+
+    def span(self) -> tuple[float, float]:
+        """Where the law's values lie in practice: its support, or mean ± 6 sd if unbounded."""
+        if self.bounded:
+            return self.support
+        try:
+            sd = math.sqrt(self.var)
+        except OverflowError:  # sd**2 beyond float range
+            return -math.inf, math.inf
+        return self.mean - 6.0 * sd, self.mean + 6.0 * sd
 
     def to_dict(self) -> dict[str, Any]:
         return {"law": self.kind, **asdict(self)}
@@ -154,8 +172,9 @@ class TruncNormal(Law):
 
     def __post_init__(self):
         _finite("truncnormal", center=self.center, tol=self.tol, cpk=self.cpk)
-        if not self.tol > 0 or not self.cpk > 0:
-            raise BudgetError(f"truncnormal law: tol and cpk must be > 0, got tol={self.tol}, cpk={self.cpk}")
+        if not self.tol > 0 or not self.cpk >= MIN_CPK:
+            raise BudgetError(f"truncnormal law: need tol > 0 and cpk >= {MIN_CPK:g}, got tol={self.tol}, "
+                              f"cpk={self.cpk}")
 
     @property
     def sd_parent(self) -> float:
@@ -269,8 +288,11 @@ LAWS: dict[str, type[Law]] = {cls.kind: cls for cls in (Uniform, Normal, TruncNo
 def law_from_dict(spec: dict[str, Any], where: str) -> Law:
     """Build a law from ``{"law": kind, **parameters}``; errors name ``where``."""
     spec = dict(spec)
-    kind = spec.pop("law", None)
-    if kind not in LAWS:
+    if "law" not in spec:
+        raise BudgetError(f"{where}: {_inline(spec)} is not a law: give law = \"uniform\", lo = ..., hi = ... "
+                          f"(laws: {', '.join(LAWS)}) or catalogue = \"dotted.key\"")
+    kind = spec.pop("law")
+    if not isinstance(kind, str) or kind not in LAWS:
         raise BudgetError(f"{where}: unknown law {kind!r} (known: {', '.join(LAWS)})")
     cls = LAWS[kind]
     names = [f.name for f in fields(cls)]
@@ -286,3 +308,9 @@ def law_from_dict(spec: dict[str, Any], where: str) -> Law:
         raise BudgetError(f"{where}: {exc}") from None
     except TypeError as exc:
         raise BudgetError(f"{where}: {exc}") from None
+
+
+def _inline(spec: dict[str, Any]) -> str:
+    """``{a = 1, b = 2}``: a table as the user wrote it, shortened."""
+    text = "{" + ", ".join(f"{k if str(k).isidentifier() else repr(k)} = {v!r}" for k, v in spec.items()) + "}"
+    return text if len(text) <= 60 else text[:57] + "...}"

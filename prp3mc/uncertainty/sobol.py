@@ -71,7 +71,8 @@ class SobolResult:
         Members of every group.
     S1, S1_conf, ST, ST_conf : ndarray (..., O, K)
         Indices and the half-widths of their ``conf_level`` intervals (SALib's
-        ``z(conf_level)`` times the bootstrap standard deviation).
+        ``z(conf_level)`` times the bootstrap standard deviation). NaN for the
+        names in ``constant``.
     num_resamples : int
     conf_level : float
     bootstrap_seed : int
@@ -79,6 +80,10 @@ class SobolResult:
         because SALib ignores a seed of 0.
     method : str
         ``salib`` or ``vectorised`` (the path that ran).
+    constant : tuple of str
+        Names whose inputs are all constant (zero-width laws): a constant
+        input has no variance to share, so its indices are undefined (NaN),
+        not 0.
     version : str
     wall_time_s : float
     """
@@ -98,6 +103,7 @@ class SobolResult:
     conf_level: float
     bootstrap_seed: int
     method: str
+    constant: tuple = ()
     version: str = __version__
     wall_time_s: float = field(default=float("nan"), compare=False)
 
@@ -281,12 +287,15 @@ def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     with Progress(n_poses, "sobol", progress) as bar, ThreadPoolExecutor(max_workers=threads) as pool:
         for done in pool.map(work, range(0, n_poses, chunk)):     # chunks of poses, not poses
             bar.update(done)
+    constant = tuple(name for name, mask in zip(factors.names, factors.masks)
+                     if all(law.var == 0 for law, inside in zip(budget.inputs.values(), mask) if inside))
+    res[..., [factors.names.index(name) for name in constant]] = np.nan  # undefined, not 0
     S1, S1_conf, ST, ST_conf = (a.reshape(shape + (O, K)) for a in res)
     return SobolResult(poses=model.poses, n_samples=n_samples, seed=seed, outputs=outputs,
                        names=factors.names, kinds=factors.kinds, groups=factors.groups,
                        S1=S1, S1_conf=S1_conf, ST=ST, ST_conf=ST_conf, num_resamples=num_resamples,
                        conf_level=float(conf_level), bootstrap_seed=bootstrap_seed, method=method,
-                       wall_time_s=time.perf_counter() - t0)
+                       constant=constant, wall_time_s=time.perf_counter() - t0)
 
 
 

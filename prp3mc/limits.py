@@ -1,0 +1,200 @@
+"""What a request costs before it runs: memory and time estimates, and the refusal of what cannot finish.
+
+Every command sizes its request here first and calls :func:`check`, which
+refuses, in one line giving the estimate and the limit, a request that needs
+more memory than the machine has available (less a margin) or more time than
+``max_hours`` (default one day; ``prp3mc --max-hours H`` raises it).
+
+The figures are rough on purpose (within a factor of about two): they come
+from the memory layout of today's code and from rates measured on a 2-core
+machine. Each analysis' memory model lives in one
+function below, so a change of the code's layout is one line here.
+"""
+
+from __future__ import annotations
+
+import math
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from .errors import ResourceError
+
+__all__ = ["Estimate", "available_memory", "check", "montecarlo_estimate", "sobol_estimate",
+           "worstcase_estimate", "allocate_estimate", "study_estimate", "format_bytes", "format_seconds", "MAX_HOURS", "MEMORY_MARGIN"]
+
+#: Default time limit of one request, hours.
+MAX_HOURS = 24.0
+#: Share of the available memory a request may use.
+MEMORY_MARGIN = 0.8
+
+# Monte Carlo streams its samples in blocks of 65536 (prp3mc.uncertainty._stream): what still grows
+# with n is the float32 pilot (n / 1024 samples of f features), the per-segment feature sums
+# (S1, S2: f + f^2 float64 per block) and, per pose, one position sum per block; the order
+# statistics of a chunk of poses take at most _MC_CHUNK_BYTES, plus the blocks in flight.
+_MC_BYTES_PER_SAMPLE = lambda d, f: 4 * f / 1024 + 8 * f * (f + 1) / 65536  # noqa: E731
+_MC_BYTES_PER_SAMPLE_POSE = 8 / 65536
+_MC_CHUNK_BYTES = 256 << 20
+_MC_SECONDS_PER_SAMPLE = 2.5e-6         # blocks, features, moments (measured: 6.4e7 samples, 167 s)
+_MC_SECONDS_PER_SAMPLE_POSE = 1e-6      # streamed order statistics per pose (measured: 4e6 x 21 poses, 104 s)
+# Sobol: the design and its features for (K + 2) N model runs, SALib's bootstrap index
+# arrays (N x R, about ten of them alive), and per pose in flight the outputs of every run.
+_SOBOL_BOOTSTRAP_BYTES = 80
+_SOBOL_SECONDS_SALIB = 1e-6             # per N x R x K x output (measured: N 4096-65536, 17-615 s)
+_SOBOL_SECONDS_RUN_POSE = 3e-8          # per model run and pose, vectorised estimators
+# Exact worst case: the kept linear model and term bounds per pose (measured: 601^2 poses, 331 MiB, 1 s).
+_WC_BYTES_PER_POSE_TERM = 100
+_WC_BYTES_PER_POSE = 200
+_WC_SECONDS_PER_POSE = 3e-6
+# Tolerance allocation: the worst case of every candidate choice over the grid (measured: 301^2 poses, 56 s).
+_ALLOCATE_SECONDS_PER_POSE = 6e-4
+
+
+@dataclass(frozen=True, slots=True)
+class Estimate:
+    """What a request needs: peak memory in bytes and wall time in seconds."""
+
+    what: str
+    bytes: float
+    seconds: float
+
+    def then(self, other: "Estimate") -> "Estimate":
+        """This request followed by ``other``: the larger memory, the summed time."""
+        return Estimate(f"{self.what}, {other.what}", max(self.bytes, other.bytes), self.seconds + other.seconds)
+
+
+def format_bytes(n: float) -> str:
+    """``n`` bytes in binary units, e.g. ``87 TiB``."""
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"):
+        if n < 1024 or unit == "EiB":
+            return f"{n:.3g} {unit}"
+        n /= 1024
+    raise AssertionError("unreachable")
+
+
+def format_seconds(s: float) -> str:
+    """A duration in the largest fitting unit, e.g. ``3.2 days``."""
+    for unit, size in (("years", 365.25 * 86400), ("days", 86400), ("h", 3600), ("min", 60)):
+        if s >= size:
+            text = f"{s / size:.3g}"
+            return f"{text} {unit[:-1] if text == '1' and unit.endswith('s') else unit}"
+    return f"{s:.2g} s"
+
+
+def _meminfo_available() -> int | None:
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def _cgroup_available() -> int | None:
+    """Room left under a cgroup v2 memory limit (containers), if there is one."""
+    try:
+        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
+        used = int(Path("/sys/fs/cgroup/memory.current").read_text())
+    except (OSError, ValueError):
+        return None
+    return None if limit == "max" else max(0, int(limit) - used)
+
+
+def available_memory() -> int:
+    """Bytes of memory available to a new request (``MemAvailable``, a cgroup limit, or free pages)."""
+    candidates = [m for m in (_meminfo_available(), _cgroup_available()) if m is not None]
+    if not candidates:
+        try:
+            candidates.append(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+        except (ValueError, OSError, AttributeError):  # pragma: no cover - not POSIX
+            return 1 << 62
+    return min(candidates)
+
+
+def check(estimate: Estimate, *, max_hours: float | None = None, memory: int | None = None) -> Estimate:
+    """Refuse ``estimate`` if it needs more than the memory available or more than ``max_hours``.
+
+    Parameters
+    ----------
+    estimate : Estimate
+    max_hours : float, optional
+        Time limit (default :data:`MAX_HOURS`).
+    memory : int, optional
+        Available bytes (default :func:`available_memory`); the request may
+        use :data:`MEMORY_MARGIN` of it.
+
+    Raises
+    ------
+    ResourceError
+        One line with the estimate and the limit.
+    """
+    max_hours = MAX_HOURS if max_hours is None else max_hours
+    memory = available_memory() if memory is None else memory
+    if not estimate.bytes <= MEMORY_MARGIN * memory:
+        raise ResourceError(f"{estimate.what} needs ~{format_bytes(estimate.bytes)} of memory, this machine has "
+                            f"{format_bytes(memory)} available (limit {format_bytes(MEMORY_MARGIN * memory)}): "
+                            "use fewer samples or poses")
+    if not estimate.seconds <= 3600 * max_hours:
+        raise ResourceError(f"{estimate.what} would take ~{format_seconds(estimate.seconds)}, more than the "
+                            f"limit of {format_seconds(3600 * max_hours)}: use fewer samples or poses, or "
+                            "raise the limit with prp3mc --max-hours H")
+    return estimate
+
+
+def montecarlo_estimate(n_samples: int, n_poses: int, n_inputs: int, workers: int | None = None) -> Estimate:
+    """Memory and time of :func:`prp3mc.uncertainty.montecarlo.monte_carlo` (features ~ inputs)."""
+    n, d = float(n_samples), n_inputs
+    workers = workers or os.cpu_count() or 1
+    return Estimate(f"Monte Carlo of {n_samples} samples at {n_poses} pose(s)",
+                    n * _MC_BYTES_PER_SAMPLE(d, d) + n * n_poses * _MC_BYTES_PER_SAMPLE_POSE
+                    + _MC_CHUNK_BYTES + workers * 16 * d * 65536,
+                    n * _MC_SECONDS_PER_SAMPLE + n * n_poses * _MC_SECONDS_PER_SAMPLE_POSE)
+
+
+def sobol_estimate(n_samples: int, n_poses: int, n_inputs: int, n_factors: int, n_outputs: int,
+                   num_resamples: int, salib: bool) -> Estimate:
+    """Memory and time of :func:`prp3mc.uncertainty.sobol.sobol_indices` (N base samples, K factors)."""
+    n, runs = float(n_samples), float(n_samples) * (n_factors + 2)
+    per_pose = 8 * runs * 3 * (1 + n_outputs)
+    memory = runs * 16 * n_inputs + n * num_resamples * _SOBOL_BOOTSTRAP_BYTES + min(n_poses, 4) * per_pose
+    if salib:
+        seconds = _SOBOL_SECONDS_SALIB * n * num_resamples * n_factors * n_outputs * n_poses
+    else:
+        seconds = _SOBOL_SECONDS_RUN_POSE * runs * n_poses * n_outputs + _SOBOL_SECONDS_SALIB * n * num_resamples
+    return Estimate(f"Sobol indices of N = {n_samples} at {n_poses} pose(s)", memory, seconds)
+
+
+def worstcase_estimate(n_poses: int, n_inputs: int) -> Estimate:
+    """Memory and time of :func:`prp3mc.uncertainty.worstcase.worst_case` over ``n_poses`` poses."""
+    n = float(n_poses)
+    return Estimate(f"exact worst case at {n_poses} poses",
+                    n * (_WC_BYTES_PER_POSE + _WC_BYTES_PER_POSE_TERM * n_inputs), n * _WC_SECONDS_PER_POSE)
+
+
+
+def allocate_estimate(n_poses: int, n_inputs: int, n_samples: int = 0) -> Estimate:
+    """Memory and time of :func:`prp3mc.uncertainty.allocation.allocate` over ``n_poses`` poses.
+
+    ``n_samples`` > 0 adds the Monte Carlo confirmation of a percentile spec.
+    """
+    wc = worstcase_estimate(n_poses, n_inputs)
+    total = Estimate(f"tolerance allocation over {n_poses} poses", wc.bytes, n_poses * _ALLOCATE_SECONDS_PER_POSE)
+    return total.then(montecarlo_estimate(n_samples, 1, n_inputs)) if n_samples else total
+
+
+def study_estimate(study) -> Estimate:
+    """Memory and time of running a :class:`prp3mc.study.Study` (its analyses, one configuration after another)."""
+    d = len(study.budget)
+    n_conf = len(study.configurations) * math.prod(len(entry[-1]) for entry in getattr(study, "sweep", ()))
+    total = worstcase_estimate(n_conf * study.worstcase_grid[0] * study.worstcase_grid[1], d)
+    if "montecarlo" in study.outputs:
+        mc = montecarlo_estimate(study.mc_samples, study.mc_grid[0] * study.mc_grid[1], d)
+        total = total.then(Estimate(mc.what, mc.bytes, n_conf * mc.seconds))
+    if "sobol" in study.outputs:
+        n_poses = study.sobol_grid[0] * study.sobol_grid[1]
+        so = sobol_estimate(study.sobol_samples, n_poses, d, d + len(study.budget.groups) + len(study.sobol_groups),
+                            len(study.sobol_outputs), 100, salib=n_poses == 1)
+        total = total.then(Estimate(so.what, so.bytes, n_conf * so.seconds))
+    return Estimate(f"study {study.name!r} ({total.what})", total.bytes, total.seconds)

@@ -1,0 +1,405 @@
+"""Every bad input to every command ends in one line on stderr and a non-zero exit, never a traceback.
+
+Table-driven: each case is a command line (``{name}`` stands for a prepared
+file of :data:`FILES`), the exit status it must end with (2: argparse usage
+errors, 1: refused input) and a fragment of the one-line message. Most run
+in-process through :func:`prp3mc.cli.main`; a handful through a real
+``python -m prp3mc`` process. The readers of TOML and CSV files are fuzzed
+with hypothesis: whatever bytes or structures they get, they raise nothing
+but prp3mc's own errors.
+"""
+
+import os
+import subprocess
+import sys
+import warnings
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from prp3mc import Budget, Geometry
+from prp3mc._toml import loads_toml
+from prp3mc.cli import main
+from prp3mc.errors import Prp3mcError, Prp3mcWarning
+from prp3mc.measurement.campaign import read_campaign
+from prp3mc.study.reader import Study
+
+G, B, P = ["--geometry", "u-shape"], ["--budget", "paper"], ["--pose", "0", "100", "0"]
+PAPER_LEGS = "".join(f'theta_{i} = {{ law = "uniform", lo = -0.04, hi = 0.04 }}\n' for i in (1, 2, 3))
+
+
+def _budget(*lines: str) -> str:
+    return 'name = "bad"\n[inputs]\n' + "".join(f"{line}\n" for line in lines)
+
+
+def _legs(template: str) -> list[str]:
+    return [template.format(i=i) for i in (1, 2, 3)]
+
+
+_STUDY = ('name = "s"\nseed = 1\n{top}[worstcase]\ngrid = {grid}\n[montecarlo]\nsamples = {samples}\ngrid = {mc_grid}\n'
+          '[sobol]\nsamples = 256\ngrid = 2\n[[configuration]]\ngeometry = "u-shape"\nregion = "u-shape"\n')
+
+
+def _study(top: str = "", grid: int = 5, samples: int = 1024, mc_grid: int = 3) -> str:
+    return _STUDY.format(top=top, grid=grid, samples=samples, mc_grid=mc_grid)
+
+
+_HEADER = "pose_id,x_cmd,y_cmd,phi_cmd,x_meas,y_meas,phi_meas\n"
+
+#: Prepared input files: name -> text (str) or raw bytes.
+FILES = {
+    "bad_toml": "[inputs\n",
+    "empty": "",
+    "binary": b"\xff\xfe\x00\x81 not utf-8 \x00",
+    "geometry_nan": 'name = "g"\n' + "".join(f"[[leg]]\na_mm = nan\n" for _ in range(3)),
+    "budget_hi": _budget(*_legs('theta_{i} = {{ law = "uniform", lo = 0, hi = 1e308 }}')),
+    "budget_sd": _budget(*_legs('theta_{i} = {{ law = "normal", mu = 0, sd = 1e200 }}')),
+    "budget_name_table": 'name = { a = 1 }\n[inputs]\n' + PAPER_LEGS,
+    "budget_not_law": _budget(*_legs("theta_{i} = {{ a = 1 }}")),
+    "budget_scalar": _budget(*_legs("theta_{i} = 0.04")),
+    "budget_unknown_input": _budget('wobble_1 = { law = "uniform", lo = 0, hi = 1 }'),
+    "budget_lo_gt_hi": _budget(*_legs('theta_{i} = {{ law = "uniform", lo = 1, hi = 0 }}')),
+    "budget_no_inputs": 'name = "x"\n',
+    "budget_normal": _budget(*_legs('theta_{i} = {{ law = "normal", mu = 0, sd = 0.01 }}')),
+    "budget_rho_alone": _budget(*_legs('rho_{i} = {{ law = "uniform", lo = 0, hi = 0.01 }}')),
+    "budget_rho_negative": _budget(*_legs('rho_{i} = {{ law = "uniform", lo = -0.01, hi = 0.01 }}'),
+                                   *_legs('zeta_{i} = {{ law = "uniform", lo = 0, hi = 360 }}')),
+    "budget_catalogue": _budget(*_legs('theta_{i} = {{ catalogue = "no.such.entry" }}')),
+    "budget_wrong_catalogue": _budget(*_legs('theta_{i} = {{ catalogue = "encoder_least_count.paper" }}')),
+    "budget_unknown_key": 'name = "x"\nwobble = 1\n[inputs]\n' + PAPER_LEGS,
+    "budget_bad_group": 'name = "x"\n[groups]\ng = ["theta_9"]\n[inputs]\n' + PAPER_LEGS,
+    "budget_cpk": _budget(*_legs('theta_{i} = {{ law = "truncnormal", center = 0, tol = 0.01, cpk = 0 }}')),
+    "budget_discrete": _budget(*_legs('theta_{i} = {{ law = "discrete", values = [0, 1], weights = [1] }}')),
+    "budget_law_string": _budget(*_legs('theta_{i} = {{ law = "uniform", lo = "a", hi = 1 }}')),
+    "budget_inf": _budget(*_legs('theta_{i} = {{ law = "uniform", lo = -inf, hi = inf }}')),
+    "budget_unknown_law": _budget(*_legs('theta_{i} = {{ law = "gamma", k = 1 }}')),
+    "study_bad_toml": "name = \n",
+    "study_huge_samples": _study(samples=10**12),
+    "study_huge_grid": _study(grid=100_000),
+    "study_long": _study(mc_grid=3000, samples=100_000),
+    "study_unknown_key": _study(top="wobble = 1\n"),
+    "study_seed_negative": _study().replace("seed = 1", "seed = -1"),
+    "study_budget_hi": _study(top='budget = "budget_hi.toml"\n'),
+    "study_grid_float": _study().replace("grid = 5", "grid = 2.5"),
+    "study_samples_negative": _study(samples=-4),
+    "study_samples_power": _study().replace("samples = 256", "samples = 300"),
+    "csv_missing_column": "pose_id,x_cmd,y_cmd\n1,0,100\n",
+    "csv_nan": _HEADER + "".join(f"{k},0,100,0,nan,100,0\n" for k in range(8)),
+    "csv_text_value": _HEADER + "".join(f"{k},0,100,0,abc,100,0\n" for k in range(8)),
+    "csv_infeasible": _HEADER + "".join(f"{k},0,300,0,0,300,0\n" for k in range(8)),
+    "csv_header_only": _HEADER,
+    "csv_duplicate_header": _HEADER.replace("\n", ",x_meas\n") + "".join(f"{k % 4},0,100,0,0,100,0,5\n" for k in range(8)),
+    "csv_one_row": _HEADER + "1,0,100,0,0.001,100,0\n",
+    "csv_no_repeats": _HEADER + "".join(f"{k},{10 * k},100,0,{10 * k},100,0\n" for k in range(3)),
+    "csv_two_poses": _HEADER + "".join(f"{k % 2},{10 * (k % 2)},100,0,{10 * (k % 2)},100,0\n" for k in range(6)),
+    "existing_file": "x",
+}
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """Write :data:`FILES` once; a name maps to its path (``.toml`` or ``.csv`` by its prefix)."""
+    root = tmp_path_factory.mktemp("bad")
+    paths = {}
+    for name, content in FILES.items():
+        path = root / (f"{name}.csv" if name.startswith("csv") else f"{name}.toml")
+        path.write_bytes(content if isinstance(content, bytes) else content.encode())
+        paths[name] = path
+    (root / "existing_dir").mkdir()
+    paths["existing_dir"] = root / "existing_dir"
+    paths["root"] = root
+    return paths
+
+
+def _case(*argv, status: int = 1, message: str = ""):
+    return pytest.param(list(argv), status, message, id=" ".join(argv)[:80])
+
+
+CASES = [
+    # ----------------------------------------------------------- top level
+    _case(status=2, message="required: command"),
+    _case("wobble", status=2, message="invalid choice"),
+    _case("--max-hours", "0", "sensitivity", *G, *P, status=2, message="expected a number > 0"),
+    _case("--max-hours", "nan", "sensitivity", *G, *P, status=2, message="finite number"),
+    _case("--max-hours", "1e-9", "montecarlo", *G, *B, *P, "--samples", "1000000", message="would take"),
+    # ----------------------------------------------------------- sensitivity
+    _case("sensitivity", status=2, message="required"),
+    _case("sensitivity", *G, "--pose", "nan", "100", "0", status=2, message="finite number, got 'nan'"),
+    _case("sensitivity", *G, "--pose", "0", "inf", "0", status=2, message="finite number"),
+    _case("sensitivity", *G, "--pose", "0", "100", "1e309", status=2, message="finite number"),
+    _case("sensitivity", *G, "--pose", "0", "100", status=2, message="expected 3 arguments"),
+    _case("sensitivity", *G, "--pose", "a", "b", "c", status=2, message="expected a number"),
+    _case("sensitivity", *G, "--pose", "0", "300", "0", message="stroke"),
+    _case("sensitivity", *G, "--pose", "0", "1e300", "0", message="pose"),
+    _case("sensitivity", *G, "--pose", "0", "100", "170", message="pose"),
+    _case("sensitivity", "--geometry", "w-shape", *P, message="unknown geometry preset"),
+    _case("sensitivity", "--geometry", "missing.toml", *P, message="no such file"),
+    _case("sensitivity", "--geometry", "{bad_toml}", *P, message="malformed TOML"),
+    _case("sensitivity", "--geometry", "{empty}", *P, message="empty.toml"),
+    _case("sensitivity", "--geometry", "{binary}", *P, message="cannot read"),
+    _case("sensitivity", "--geometry", "{existing_dir}", *P, message="existing_dir"),
+    _case("sensitivity", "--geometry", "{geometry_nan}", *P, message="geometry_nan.toml"),
+    _case("sensitivity", *G, *P, "--wobble", status=2, message="unrecognized arguments"),
+    # ----------------------------------------------------------- worstcase
+    _case("worstcase", *G, *P, status=2, message="--budget"),
+    _case("worstcase", *G, "--budget", "nope", *P, message="unknown budget preset 'nope'"),
+    _case("worstcase", *G, "--budget", "{budget_hi}", *P, message="beyond any error"),
+    _case("worstcase", *G, "--budget", "{budget_sd}", *P, message="beyond any error"),
+    _case("worstcase", *G, "--budget", "{budget_name_table}", *P, message="name must be a string"),
+    _case("worstcase", *G, "--budget", "{budget_not_law}", *P, message="{a = 1} is not a law"),
+    _case("worstcase", *G, "--budget", "{budget_scalar}", *P, message="0.04 is not a law"),
+    _case("worstcase", *G, "--budget", "{budget_unknown_input}", *P, message="unknown input 'wobble_1'"),
+    _case("worstcase", *G, "--budget", "{budget_lo_gt_hi}", *P, message="must not exceed"),
+    _case("worstcase", *G, "--budget", "{budget_no_inputs}", *P, message="needs an [inputs] table"),
+    _case("worstcase", *G, "--budget", "{budget_normal}", *P, message="unbounded"),
+    _case("worstcase", *G, "--budget", "{budget_rho_alone}", *P, message="needs zeta_1"),
+    _case("worstcase", *G, "--budget", "{budget_rho_negative}", *P, message="cannot be negative"),
+    _case("worstcase", *G, "--budget", "{budget_catalogue}", *P, message="no catalogue entry"),
+    _case("worstcase", *G, "--budget", "{budget_wrong_catalogue}", *P, message="applies to b, not theta"),
+    _case("worstcase", *G, "--budget", "{budget_unknown_key}", *P, message="unknown key(s) wobble"),
+    _case("worstcase", *G, "--budget", "{budget_bad_group}", *P, message="group 'g'"),
+    _case("worstcase", *G, "--budget", "{budget_cpk}", *P, message="cpk >= 0.01"),
+    _case("worstcase", *G, "--budget", "{budget_discrete}", *P, message="equal length"),
+    _case("worstcase", *G, "--budget", "{budget_law_string}", *P, message="finite number"),
+    _case("worstcase", *G, "--budget", "{budget_inf}", *P, message="finite number"),
+    _case("worstcase", *G, "--budget", "{budget_unknown_law}", *P, message="unknown law 'gamma'"),
+    _case("worstcase", *G, "--budget", "{bad_toml}", *P, message="malformed TOML"),
+    _case("worstcase", *G, "--budget", "{binary}", *P, message="cannot read"),
+    _case("worstcase", *G, *B, *P, "--k-sigma", "0", status=2, message="> 0"),
+    _case("worstcase", *G, *B, *P, "--k-sigma", "-1", status=2, message="> 0"),
+    _case("worstcase", *G, *B, *P, "--k-sigma", "nan", status=2, message="finite"),
+    _case("worstcase", *G, "--budget", "{budget_normal}", *P, "--k-sigma", "1e300", message="k_sigma must lie in"),
+    _case("worstcase", *G, *B, "--pose", "0", "100", "-inf", status=2, message="expected 3 arguments"),
+    # ----------------------------------------------------------- montecarlo
+    _case("montecarlo", *G, *B, *P, "--seed", "-1", status=2, message="non-negative integer"),
+    _case("montecarlo", *G, *B, *P, "--seed", "1.5", status=2, message="integer seed"),
+    _case("montecarlo", *G, *B, *P, "--seed", "abc", status=2, message="integer seed"),
+    _case("montecarlo", *G, *B, *P, "--seed", str(2**63), status=2, message="below 2**63"),
+    _case("montecarlo", *G, *B, *P, "--seed", "1e3", status=2, message="integer seed"),
+    _case("montecarlo", *G, *B, *P, "--samples", "0", status=2, message="positive integer"),
+    _case("montecarlo", *G, *B, *P, "--samples", "-5", status=2, message="positive integer"),
+    _case("montecarlo", *G, *B, *P, "--samples", "1.5", status=2, message="positive integer"),
+    _case("montecarlo", *G, *B, *P, "--samples", "1", message="at least 2 samples"),
+    _case("montecarlo", *G, *B, *P, "--samples", "1000000000000", message="GiB of memory, this machine has"),
+    _case("montecarlo", *G, *B, *P, "--samples", "9" * 30, message="of memory, this machine has"),
+    _case("montecarlo", *G, *B, *P, "--tolerance-mm", "-1", status=2, message=">= 0"),
+    _case("montecarlo", *G, *B, *P, "--tolerance-mm", "nan", status=2, message="finite"),
+    _case("montecarlo", *G, *B, *P, "--tolerance-mm", "inf", status=2, message="finite"),
+    _case("montecarlo", *G, "--budget", "{budget_hi}", *P, "--json", message="beyond any error"),
+    _case("montecarlo", *G, "--budget", "{budget_sd}", *P, "--json", message="beyond any error"),
+    _case("montecarlo", *G, *B, *P, "--progress", "--no-progress", status=2, message="not allowed with"),
+    _case("montecarlo", *G, *B, "--pose", "0", "300", "0", "--json", message="stroke"),
+    # ----------------------------------------------------------- sobol
+    _case("sobol", *G, *B, *P, "--samples", "1000", message="power of two"),
+    _case("sobol", *G, *B, *P, "--samples", str(2**40), message="of memory, this machine has"),
+    _case("sobol", *G, *B, *P, "--samples", "256", "--resamples", "0", status=2, message="positive integer"),
+    _case("sobol", *G, *B, *P, "--samples", "256", "--resamples", "1", message="at least 2 resamples"),
+    _case("sobol", *G, *B, *P, "--samples", "1024", "--resamples", str(10**9), message="of memory"),
+    _case("sobol", *G, *B, *P, "--conf-level", "1", status=2, message="between 0 and 1"),
+    _case("sobol", *G, *B, *P, "--conf-level", "0", status=2, message="between 0 and 1"),
+    _case("sobol", *G, *B, *P, "--conf-level", "nan", status=2, message="finite"),
+    _case("sobol", *G, *B, *P, "--samples", "256", "--group", "bad", message="--group expects NAME="),
+    _case("sobol", *G, *B, *P, "--samples", "256", "--group", "g=nosuch_1", message="group 'g'"),
+    _case("sobol", *G, *B, *P, "--samples", "256", "--group", "g=", message="--group expects NAME="),
+    _case("sobol", *G, *B, *P, "--samples", "256", "--group", "theta_1=theta_2", message="name of an input"),
+    _case("sobol", *G, *B, *P, "--method", "fast", status=2, message="invalid choice"),
+    _case("sobol", *G, *B, *P, "--seed", "-3", status=2, message="non-negative integer"),
+    _case("sobol", *G, *B, *P, "--k-sigma", "-2", status=2, message="> 0"),
+    _case("sobol", *G, "--budget", "{budget_sd}", *P, "--json", message="beyond any error"),
+    # ----------------------------------------------------------- study
+    _case("study", "{root}/missing.toml", "--out", "{root}/o1", message="no such study file"),
+    _case("study", "no_such_bundled_study", "--out", "{root}/o2", message="unknown study"),
+    _case("study", "{study_bad_toml}", "--out", "{root}/o3", message="malformed TOML"),
+    _case("study", "{study_huge_samples}", "--out", "{root}/o4", message="of memory, this machine has"),
+    _case("study", "{study_huge_grid}", "--out", "{root}/o5", message="of memory, this machine has"),
+    _case("study", "{study_long}", "--out", "{root}/o6", message="would take"),
+    _case("study", "{study_unknown_key}", "--out", "{root}/o7", message="unknown key 'wobble'"),
+    _case("study", "{study_seed_negative}", "--out", "{root}/o8", message="seed must be a non-negative"),
+    _case("study", "{study_budget_hi}", "--out", "{root}/o9", message="beyond any error"),
+    _case("study", "{study_grid_float}", "--out", "{root}/o10", message="worstcase.grid must be"),
+    _case("study", "{study_samples_negative}", "--out", "{root}/o11", message="at least 2"),
+    _case("study", "{study_samples_power}", "--out", "{root}/o12", message="power of two"),
+    _case("study", "{binary}", "--out", "{root}/o13", message="cannot read"),
+    _case("study", "quick", "--out", "{root}/o14", "--seed", "-1", status=2, message="non-negative integer"),
+    _case("study", "quick", status=2, message="--out"),
+    _case("study", "quick", "--out", "{existing_dir}", message="exists: choose another --out"),
+    _case("study", "quick", "--out", "{existing_file}", message="is not a folder"),
+    _case("study", "quick", "--out", "{existing_file}/sub", message="cannot claim"),
+    # ----------------------------------------------------------- discrepancy
+    _case("discrepancy", *G, *B, "--data", "{root}/none.csv", "--out", "{root}/d1", message="none.csv"),
+    _case("discrepancy", *G, *B, "--data", "{csv_nan}", "--out", "{root}/d2", "--seed", "-1", status=2,
+          message="non-negative integer"),
+    _case("discrepancy", *G, *B, "--data", "{csv_nan}", "--out", "{root}/d3", "--alpha", "0", status=2,
+          message="between 0 and 1"),
+    _case("discrepancy", *G, *B, "--data", "{csv_nan}", "--out", "{root}/d4", "--alpha", "1.5", status=2,
+          message="between 0 and 1"),
+    _case("discrepancy", *G, *B, "--data", "{csv_nan}", "--out", "{root}/d5", "--alpha-unexplained", "nan",
+          status=2, message="finite"),
+    _case("discrepancy", *G, *B, "--data", "{csv_nan}", "--out", "{root}/d6", "--instrument-sigma-mm", "-1",
+          status=2, message=">= 0"),
+    _case("discrepancy", *G, *B, "--data", "{csv_nan}", "--out", "{root}/d7", "--instrument-sigma-deg", "inf",
+          status=2, message="finite"),
+    _case("discrepancy", *G, *B, "--data", "{csv_nan}", "--out", "{existing_dir}", message="exists"),
+    _case("discrepancy", *G, *B, "--data", "{empty}", "--out", "{root}/d8", message="empty"),
+    _case("discrepancy", *G, *B, "--data", "{binary}", "--out", "{root}/d9", message="binary.toml"),
+    _case("discrepancy", *G, *B, "--data", "{csv_missing_column}", "--out", "{root}/d10", message="x_meas"),
+    _case("discrepancy", *G, *B, "--data", "{csv_nan}", "--out", "{root}/d11", message="x_meas"),
+    _case("discrepancy", *G, *B, "--data", "{csv_text_value}", "--out", "{root}/d12", message="x_meas"),
+    _case("discrepancy", *G, *B, "--data", "{csv_infeasible}", "--out", "{root}/d13", message="stroke"),
+    _case("discrepancy", *G, *B, "--data", "{csv_header_only}", "--out", "{root}/d14", message="csv_header_only"),
+    _case("discrepancy", *G, "--budget", "{budget_hi}", "--data", "{csv_nan}", "--out", "{root}/d15",
+          message="beyond any error"),
+    _case("discrepancy", *G, *B, "--data", "{csv_duplicate_header}", "--out", "{root}/d16",
+          message="column 'x_meas' appears twice in the header (columns 5 and 8)"),
+    _case("discrepancy", *G, *B, "--data", "{csv_one_row}", "--out", "{root}/d17",
+          message="too small to test anything: 1 measurement(s) of 1 pose(s)"),
+    _case("discrepancy", *G, *B, "--data", "{csv_no_repeats}", "--out", "{root}/d18",
+          message="0 of them repeated; the discrepancy workflow needs at least 3 distinct poses"),
+    _case("discrepancy", *G, *B, "--data", "{csv_two_poses}", "--out", "{root}/d19", message="too small"),
+    # ----------------------------------------------------------- allocate
+    _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150", "--grid",
+          "100000", message="of memory, this machine has"),
+    _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150",
+          "--spec-percentile", "95", "--samples", "1000000000000", message="of memory, this machine has"),
+    _case("--max-hours", "0.01", "allocate", *G, "--region", "u-shape", "--classes", "example",
+          "--spec-position-um", "150", "--grid", "301", message="would take"),
+    _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150", "--seed",
+          "-1", status=2, message="non-negative integer"),
+    _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150",
+          "--k-sigma", "-1", status=2, message="> 0"),
+    _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "nan", status=2,
+          message="finite"),
+    _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "-5",
+          message="spec_position_um must be a finite number > 0"),
+    _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150",
+          "--spec-percentile", "150", message="spec_percentile must lie in"),
+    _case("allocate", *G, "--region", "nowhere", "--classes", "example", "--spec-position-um", "150", status=2,
+          message="invalid choice"),
+    _case("allocate", *G, "--region", "u-shape", "--classes", "{root}/none.toml", "--spec-position-um", "150",
+          message="none.toml"),
+    _case("allocate", *G, "--region", "u-shape", "--classes", "{bad_toml}", "--spec-position-um", "150",
+          message="malformed TOML"),
+    _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150", "--grid",
+          "0", status=2, message="positive integer"),
+    # ----------------------------------------------------------- init
+    _case("init", status=2, message="required"),
+    _case("init", "wobble", "{root}/x.toml", status=2, message="invalid choice"),
+    _case("init", "budget", "{existing_file}", message="exists"),
+    _case("init", "budget", "{existing_file}/sub/x.toml", message="existing_file"),
+]
+
+
+def _argv(argv: list[str], files) -> list[str]:
+    return [a.format(**{k: str(v) for k, v in files.items()}) for a in argv]
+
+
+@pytest.mark.parametrize("argv, status, message", CASES)
+def test_bad_input_is_one_line(argv, status, message, files, capsys):
+    code = main(_argv(argv, files))
+    out, err = capsys.readouterr()  # a warning would be a second line: none of these may merely warn
+    assert code == status, err
+    assert out == ""
+    assert err.count("\n") == 1 and err.endswith("\n"), err
+    assert "Traceback" not in err
+    assert message in err, err
+
+
+def test_enough_cases():
+    assert len(CASES) >= 80
+    commands = {a for argv, *_ in (c.values for c in CASES) for a in argv[:3] if not a.startswith("-")}
+    assert {"sensitivity", "worstcase", "montecarlo", "sobol", "study", "discrepancy", "init", "allocate"} <= commands
+
+
+@pytest.mark.parametrize("argv, status, message", [
+    (["montecarlo", *G, *B, *P, "--seed", "-1"], 2, "non-negative integer"),
+    (["montecarlo", *G, *B, *P, "--samples", "1000000000000"], 1, "of memory, this machine has"),
+    (["worstcase", *G, "--budget", "{budget_hi}", *P, "--json"], 1, "beyond any error"),
+    (["sobol", *G, *B, *P, "--samples", "1000"], 1, "power of two"),
+    (["study", "{study_huge_grid}", "--out", "{root}/p1"], 1, "of memory"),
+    (["discrepancy", *G, *B, "--data", "{csv_nan}", "--out", "{existing_dir}"], 1, "exists"),
+])
+def test_bad_input_in_a_real_process(argv, status, message, files):
+    """The console entry point behaves the same in a fresh interpreter (no pytest filters, real stderr)."""
+    run = subprocess.run([sys.executable, "-m", "prp3mc", *_argv(argv, files)], capture_output=True, text=True,
+                         timeout=120, env={**os.environ, "PYTHONWARNINGS": "error::UserWarning"})
+    assert run.returncode == status, run.stderr
+    assert run.stdout == "" and run.stderr.count("\n") == 1 and "Traceback" not in run.stderr
+    assert message in run.stderr
+
+
+# ------------------------------------------------------------------ fuzzing the readers
+_FUZZ = settings(max_examples=int(os.environ.get("PRP3MC_FUZZ_EXAMPLES", 150)), deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+_scalars = st.one_of(st.none(), st.booleans(), st.integers(), st.floats(), st.text(max_size=8))
+_values = st.recursive(_scalars, lambda inner: st.one_of(st.lists(inner, max_size=4),
+                                                        st.dictionaries(st.text(max_size=8), inner, max_size=4)),
+                       max_leaves=12)
+_input_names = st.sampled_from([f"{f}_{i}" for f in ("rho", "zeta", "theta", "b", "a", "psi") for i in (1, 2, 3)]
+                               + ["x_1", "theta_4", ""])
+_law_tables = st.dictionaries(st.sampled_from(["law", "lo", "hi", "mu", "sd", "mode", "radius", "center", "tol",
+                                               "cpk", "values", "weights", "catalogue", "source"]),
+                              st.one_of(_scalars, st.sampled_from(["uniform", "normal", "disc", "discrete",
+                                                                   "triangular", "truncnormal"]),
+                                        st.lists(st.floats(), max_size=3)), max_size=5)
+
+
+def _only_our_errors(fn, *args):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", Prp3mcWarning)
+        try:
+            fn(*args)
+        except Prp3mcError as exc:
+            assert "\n" not in str(exc).strip() or fn is loads_toml  # one-line messages
+        # anything else propagates and fails the test
+
+
+@_FUZZ
+@given(st.text(max_size=300))
+def test_toml_text_fuzz(text):
+    _only_our_errors(loads_toml, text)
+
+
+@_FUZZ
+@given(st.dictionaries(st.sampled_from(["name", "inputs", "groups", "catalogues", "other"]),
+                       st.one_of(_values, st.dictionaries(_input_names, st.one_of(_law_tables, _values), max_size=6)),
+                       max_size=4))
+def test_budget_structure_fuzz(doc):
+    _only_our_errors(Budget.from_dict, doc)
+
+
+@_FUZZ
+@given(st.dictionaries(st.sampled_from(["name", "leg", "base", "other"]),
+                       st.one_of(_values, st.lists(st.dictionaries(
+                           st.sampled_from(["a_mm", "alpha_deg", "beta_deg", "gamma_deg", "c_mm", "e_mm", "psi_deg",
+                                            "theta_deg", "stroke_mm", "x"]), _values, max_size=5), max_size=4)),
+                       max_size=3))
+def test_geometry_structure_fuzz(doc):
+    _only_our_errors(Geometry.from_dict, doc)
+
+
+@_FUZZ
+@given(st.text(max_size=400))
+def test_study_text_fuzz(text):
+    _only_our_errors(Study.from_text, text)
+
+
+_csv_cells = st.one_of(st.integers(-5, 300).map(str), st.floats().map(repr), st.sampled_from(["", "nan", "x", "1e309",
+                                                                                              '"', "1,2", "-"]))
+_columns = st.sampled_from(["pose_id", "x_cmd", "y_cmd", "phi_cmd", "x_meas", "y_meas", "phi_meas", "dir_1",
+                            "temp_C", "time_s", "x_meas", "other"])
+
+
+@_FUZZ
+@given(st.lists(_columns, min_size=1, max_size=9), st.lists(st.lists(_csv_cells, max_size=10), max_size=6))
+def test_campaign_csv_fuzz(tmp_path_factory, header, rows):
+    path = tmp_path_factory.mktemp("csv") / "c.csv"
+    path.write_text(",".join(header) + "\n" + "".join(",".join(r) + "\n" for r in rows))
+    _only_our_errors(read_campaign, path, Geometry.from_preset("u-shape"))
+
+
+@_FUZZ
+@given(st.binary(max_size=300))
+def test_campaign_bytes_fuzz(tmp_path_factory, data):
+    path = tmp_path_factory.mktemp("csv") / "c.csv"
+    path.write_bytes(data)
+    _only_our_errors(read_campaign, path, Geometry.from_preset("u-shape"))
