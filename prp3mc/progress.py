@@ -34,8 +34,11 @@ class Progress:
         self.done = 0
         self.shown = False
 
-    def update(self, n: int = 1) -> None:
+    def update(self, n: int = 1, label: str | None = None) -> None:
+        """Count ``n`` more done; ``label``, if given, replaces the label (e.g. the stage just finished)."""
         self.done += n
+        if label is not None:
+            self.label = label
         now = time.perf_counter()
         if not self.enabled or now - self.start < self.delay or now - self.last < self.interval:
             return

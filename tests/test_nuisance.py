@@ -18,9 +18,10 @@ from prp3mc.measurement.likelihood import Engine
 from prp3mc.measurement.outliers import distances, threshold
 from prp3mc.measurement.prediction import noise_cov
 from prp3mc.measurement.simulate import simulate_campaign
-from prp3mc.measurement.workflow import discrepancy
+from prp3mc.measurement.workflow import STAGES, discrepancy
+from prp3mc.progress import Progress
 
-from .realities import BUDGET, SIGMA, campaign_poses, drifted, registered, repeating, with_outliers
+from .realities import BUDGET, SIGMA, campaign_poses
 
 #: A hidden effect each reference geometry names with registration and drift profiled out (value, unit).
 HIDDEN = {"u-shape": ("backlash_3", 0.03), "delta-shape": ("theta_1", 0.03)}
@@ -74,8 +75,8 @@ def covers(ci, value, widen=2.0):
 @pytest.mark.parametrize("hidden", [False, True], ids=["null", "hidden"])
 def test_registration_is_a_nuisance_never_a_machine_effect(preset, hidden):
     name, value = HIDDEN[preset]
-    g, c = campaign(preset, 11, {name: value} if hidden else None)
-    r = analyse(g, registered(c, *REGISTRATION))
+    g, c = campaign(preset, 11, {name: value} if hidden else None, registration=REGISTRATION)
+    r = analyse(g, c)
     assert names_exactly(r, [name] if hidden else []), r.to_frame()
     one_verdict(r)
     assert r.gap["closed"]
@@ -107,23 +108,24 @@ def test_what_registration_hides_is_said_so_and_never_named():
 def test_drift_is_a_nuisance_listed_when_the_data_show_it(preset):
     name, value = HIDDEN[preset]
     for hidden in (False, True):
-        g, c = campaign(preset, 13, {name: value} if hidden else None)
-        r = analyse(g, drifted(c, 0.015, 0.0, 0.0))
+        g, c = campaign(preset, 13, {name: value} if hidden else None, drift=(0.015, 0.0, 0.0))
+        r = analyse(g, c)
         assert names_exactly(r, [name] if hidden else []), r.to_frame()
         one_verdict(r)
         listed = {n["name"]: n for n in r.nuisance}
         assert r.drift_test["significant"] and r.drift_test["time"] == "time_s"
         assert covers(listed["drift_x"]["ci95"], 0.015) and covers(listed["drift_y"]["ci95"], 0.0)
         assert "drift" not in r.not_testable
-    still = analyse(g, c)                                 # no drift, no time_s: row order, not listed
+    _, c = campaign(preset, 13, {name: value})
+    still = analyse(g, c.to_frame().drop(columns=["time_s"]))   # no drift, no time_s: row order, not listed
     assert not any(n["name"].startswith("drift") for n in still.nuisance)
     assert still.drift_test["time"] == "row order" and "row order" in still.not_testable["drift"]
 
 
 @pytest.mark.parametrize("preset", ["u-shape", "delta-shape"])
 def test_gross_errors_are_found_set_aside_and_never_inflate_a_spread(preset):
-    g, c = campaign(preset, 14)
-    dirty, rows = with_outliers(c, 0.01, 0.5, 14)
+    g, dirty = campaign(preset, 14, outliers=(0.01, 0.5))
+    rows = dirty.metadata["outlier_rows"]
     r = analyse(g, dirty)
     assert [o["row"] for o in r.outliers] == list(rows)
     assert all(o["z"] > r.outlier_rule["z_threshold"] for o in r.outliers)
@@ -131,10 +133,10 @@ def test_gross_errors_are_found_set_aside_and_never_inflate_a_spread(preset):
     one_verdict(r)
     kept = r.with_outliers                                # what keeping them would have said
     assert kept is not None and kept["gap_after"] > r.gap["after"]
-    assert not analyse(g, c).outliers                     # the clean campaign: nothing set aside
+    assert not analyse(*campaign(preset, 14)).outliers    # the same campaign clean: nothing set aside
     # a real spread among gross errors is named at its own size
-    g, c = campaign(preset, 15, {"spread_theta_2": 0.1})
-    dirty, rows = with_outliers(c, 0.01, 0.5, 15)
+    g, dirty = campaign(preset, 15, {"spread_theta_2": 0.1}, outliers=(0.01, 0.5))
+    rows = dirty.metadata["outlier_rows"]
     r = analyse(g, dirty)
     assert set(rows) <= {o["row"] for o in r.outliers}
     assert names_exactly(r, ["spread_theta_2"]) and covers(fit_of(r, "spread_theta_2"), 0.1)
@@ -155,10 +157,8 @@ def test_outlier_statistic_is_calibrated():
 def test_errors_that_repeat_name_nothing_they_should_not(preset):
     """r = 0.8 makes pose means 6 times noisier; a backlash, seen between visits, stays visible."""
     name, value = "backlash_3", 0.03
-    g = Geometry.from_preset(preset)
-    poses = campaign_poses(preset, preset == "u-shape")
     for hidden in (False, True):
-        c = repeating(g, poses, 8, 0.8, 17, effects={name: value} if hidden else None)
+        g, c = campaign(preset, 17, {name: value} if hidden else None, repeatable_fraction=0.8)
         r = analyse(g, c)
         assert names_exactly(r, [name] if hidden else []), r.to_frame()
         lo, hi = r.repeatability["ci95"]
@@ -190,15 +190,17 @@ def test_exchange_replaces_an_early_wrong_pick():
 
 def test_one_verdict_and_what_could_not_be_tested(tmp_path, capsys):
     g, c = campaign("delta-shape", 20, temp_drift_C=None)
-    frame = c.to_frame().drop(columns=["dir_1", "dir_3"])
-    r = analyse(g, frame)
+    frame = c.to_frame().drop(columns=["dir_1", "dir_3", "time_s"])
+    bar = Progress(len(STAGES), "discrepancy", enabled=True, delay=0.0, interval=0.0)
+    r = analyse(g, frame, progress=bar)
+    assert bar.done == len(STAGES) and f"discrepancy: {STAGES[-1]}" in capsys.readouterr().err
     assert r.not_testable["backlash_1"] == "needs dir_1" and r.not_testable["thermal"] == "needs temp_C"
     assert "backlash_2" not in r.not_testable and "row order" in r.not_testable["drift"]
     one_verdict(r)
     text = "\n".join(headline(r))
     assert ("UNEXPLAINED" in text) == (not r.gap["closed"])
     data = tmp_path / "c.csv"
-    registered(c, *REGISTRATION).to_csv(data)
+    campaign("delta-shape", 20, temp_drift_C=None, registration=REGISTRATION)[1].to_csv(data)
     args = ["discrepancy", "--geometry", "delta-shape", "--budget", "paper", "--data", str(data),
             "--instrument-sigma-mm", "0.002", "--instrument-sigma-deg", "0.0005", "--seed", "3"]
     assert main(args + ["--out", str(tmp_path / "a")]) == 0

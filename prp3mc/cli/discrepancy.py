@@ -1,10 +1,12 @@
 """``prp3mc discrepancy``: name what the model misses in a measurement campaign."""
 
 from ..uncertainty.budget import Budget
-from ..measurement.workflow import discrepancy
+from ..measurement.workflow import STAGES, discrepancy
+from ..progress import Progress
 from ..reports.discrepancy_report import write_report
 from ..kinematics.geometry import Geometry
-from . import add_budget, add_geometry, add_json, add_seed, command, emit_json, nonnegative_float, probability
+from . import (add_budget, add_geometry, add_json, add_progress, add_seed, command, emit_json, nonnegative_float,
+               probability)
 
 
 @command("discrepancy", "find where model and measurements disagree and name the missing effect")
@@ -29,16 +31,20 @@ class DiscrepancyCommand:
         p.add_argument("--outlier-rate", type=probability, default=0.01, metavar="A",
                        help="family-wise false-alarm rate of the gross-error test over all rows (default 0.01)")
         add_seed(p, help="seed of the bootstrap (default: fresh, recorded in the output)")
+        add_progress(p)
         add_json(p)
 
     @staticmethod
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
-        result = discrepancy(geometry, budget, args.data, instrument_sigma_mm=args.instrument_sigma_mm,
-                             instrument_sigma_deg=args.instrument_sigma_deg, registration=not args.no_registration,
-                             alpha=args.alpha, alpha_unexplained=args.alpha_unexplained,
-                             outlier_rate=args.outlier_rate, rng=args.seed)
-        folder = write_report(result, args.out, force=args.force)
+        with Progress(len(STAGES) + 1, "discrepancy", args.progress) as bar:
+            result = discrepancy(geometry, budget, args.data, instrument_sigma_mm=args.instrument_sigma_mm,
+                                 instrument_sigma_deg=args.instrument_sigma_deg,
+                                 registration=not args.no_registration, alpha=args.alpha,
+                                 alpha_unexplained=args.alpha_unexplained, outlier_rate=args.outlier_rate,
+                                 progress=bar, rng=args.seed)
+            folder = write_report(result, args.out, force=args.force)
+            bar.update(label="discrepancy: report")
         if args.json:
             emit_json(result.to_dict())
             return

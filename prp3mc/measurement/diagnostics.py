@@ -45,14 +45,12 @@ from ..units import DISPLAY, MM2UM, OUTPUT_UNITS, POSE_OUTPUTS
 from .effects import ROW_TO_DEG, spread_budget
 from .likelihood import Engine, Fit
 
-__all__ = ["Diagnosis", "diagnose", "gap", "gap_value", "CHANNELS", "GAP_CLOSED"]
+__all__ = ["Diagnosis", "diagnose", "gap", "gap_value", "CHANNELS"]
 
 #: ``[mm, mm, deg] -> [µm, µm, arcsec]``: the display scale of the pose error rows in tables.
 _DISPLAY = np.array([DISPLAY[o][0] for o in POSE_OUTPUTS])
 #: The channels of the verdict (their log p-values are ``log_p_<channel>`` in :attr:`Diagnosis.summary`).
 CHANNELS = ("library", "systematic", "dispersion", "systematic_pose", "dispersion_pose", "spatial", "lack_of_fit")
-#: Where the gap closes at the default ``alpha_unexplained`` of 5 %: ``-ln 0.05``.
-GAP_CLOSED = float(-np.log(0.05))
 #: Per-pose statistics of :meth:`Diagnosis.to_frame` besides the mean residual (all dimensionless).
 _POSE_STATISTICS = ("sys_stat", "sys_p", "sys_q", "disp_ratio", "disp_p", "disp_q")
 _LN2 = float(np.log(2.0))

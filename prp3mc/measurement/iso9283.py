@@ -32,10 +32,12 @@ from .._rng import child_seed, resolve_rng
 from ..errors import CampaignError
 from .campaign import Campaign
 
-__all__ = ["iso9283_figures", "ISO_STATISTICS", "pose_means"]
+__all__ = ["iso9283_figures", "ISO_STATISTICS", "N_MC", "pose_means"]
 
 #: The four ISO 9283 figures per pose and their units.
 ISO_STATISTICS = {"AP": "mm", "RP": "mm", "AP_phi": "deg", "RP_phi": "deg"}
+#: Simulated campaigns behind the predicted figures (default of :func:`iso9283_figures`).
+N_MC = 4000
 #: Key of each figure in the ``iso9283`` entry of ``discrepancy.json``.
 _KEYS = {"AP": "AP_mm", "RP": "RP_mm", "AP_phi": "AP_phi_deg", "RP_phi": "RP_phi_deg"}
 
@@ -113,7 +115,7 @@ def _largest(values: np.ndarray) -> dict:
 
 
 def iso9283_figures(campaign: Campaign, predicted_mean, predicted_scatter_cov, *, predicted_repeat_cov=None,
-                    keep=None, n_mc: int = 4000, rng: "None | int | np.random.Generator" = None) -> dict:
+                    keep=None, n_mc: int = N_MC, rng: "None | int | np.random.Generator" = None) -> dict:
     """ISO 9283 pose accuracy and repeatability per pose, measured and predicted (see the module notes).
 
     Parameters

@@ -24,9 +24,10 @@ import time
 import numpy as np
 from scipy import optimize, stats
 
-from .._rng import resolve_rng
+from .._rng import child_seed, resolve_rng
 from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
+from ..progress import Progress
 from ..uncertainty.budget import Budget
 from . import outliers as gross
 from .campaign import Campaign, read_campaign, require_testable
@@ -38,18 +39,18 @@ from .prediction import noise_cov, predict
 from .results import DiscrepancyResult
 from .selection import name_effects, names_in, select
 
-try:                                   # ISO 9283 figures land with the simulator realities (issue 10)
-    from .iso9283 import iso9283_figures
-except ImportError:                    # pragma: no cover - until then the figures are left out
-    iso9283_figures = None
+from .iso9283 import iso9283_figures
 
-__all__ = ["discrepancy", "detectable_effect"]
+__all__ = ["discrepancy", "detectable_effect", "STAGES"]
+
+#: The stages of :func:`discrepancy`, one progress step each.
+STAGES = ("fit and gross errors", "selection", "diagnoses", "with the gross errors", "ISO 9283")
 
 
 def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigma_mm: float = 0.0,
                 instrument_sigma_deg: float = 0.0, registration: bool = True, alpha: float = 0.01,
                 alpha_unexplained: float = 0.05, outlier_rate: float = 0.01, max_effects: int = 6,
-                n_bootstrap: int = 400,
+                n_bootstrap: int = 400, progress: "bool | None | Progress" = None,
                 rng: "None | int | np.random.Generator" = None) -> DiscrepancyResult:
     """Find where model and campaign disagree, name the missing effects, close the gap.
 
@@ -77,6 +78,10 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
         Most effects named.
     n_bootstrap : int
         Parametric-bootstrap replicates for the null variances of the tests.
+    progress : bool, None or Progress
+        Report the stages (:data:`STAGES`) on stderr: True, False, None
+        (when stderr is a terminal), or a :class:`~prp3mc.progress.Progress`
+        to advance by one per stage (left open, for a caller with more stages).
     rng : None, int or numpy.random.Generator
         Randomness of the bootstrap (Scientific Python SPEC 7); the integer
         seed used is recorded in the result.
@@ -93,6 +98,11 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     campaign = require_testable(read_campaign(campaign, geometry))
     noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
     full = Engine(geometry, budget, campaign, noise, registration=registration)
+    bar = progress if isinstance(progress, Progress) else Progress(len(STAGES), "discrepancy", progress)
+    stages = iter(STAGES)
+
+    def done():
+        bar.update(label=f"discrepancy: {next(stages)}")
 
     def engine_for(keep):
         return full if keep.all() else Engine(geometry, budget, campaign, noise, registration=registration,
@@ -107,6 +117,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
         return (engine, base, *select(engine, base, alpha, max_effects))
 
     keep, _ = gross.flag(full, base_fit, outlier_rate)
+    done()
     engine, base, fit, accepted, steps = named_model(keep)
     # every row tested again under the named model: rows set aside only for a missing spread come back
     limit = gross.threshold(campaign.n_measurements, outlier_rate)
@@ -116,9 +127,11 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
         engine, base, fit, accepted, steps = named_model(keep)
         d2 = gross.distances(full, keep, engine.values(fit), fit.factors, fit.r)
     named = name_effects(engine, fit, accepted)
+    done()
     before = diagnose(engine, base, n_bootstrap, rng)
     after = diagnose(engine, fit, n_bootstrap, rng)
     gap_doc = gap(before, after, alpha_unexplained)
+    done()
     outlier_rows = tuple({"row": int(m), "pose_id": str(campaign.pose_id[m]), "z": float(np.sqrt(d2[m]))}
                          for m in np.flatnonzero(~keep))
     with_outliers = None
@@ -131,13 +144,17 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
             "named_effects": [{"name": n, "value": float(v)} for n, v in _effect_values(engine_all, fit_all).items()],
             "gap_before": g_before, "gap_after": g_after, "unexplained": bool(g_after > gap_doc["closed_at"]),
             "repeatable_fraction": fit_all.r}
+    done()
     nuisance, drift_test = _nuisance(engine, fit, alpha)
     r_lo, r_hi = engine.r_interval(fit)
     effects_after = _effect_values(engine, fit)
     systematic = {n: v for n, v in effects_after.items() if effect(n).systematic}
     prediction = predict(geometry, budget, campaign, effects=effects_after, instrument_sigma_mm=instrument_sigma_mm,
                          instrument_sigma_deg=instrument_sigma_deg, repeatable_fraction=fit.r)
-    iso, iso_poses = _iso9283(engine, fit)
+    iso, iso_poses = _iso9283(engine, fit, child_seed(seed, 9283))
+    done()
+    if bar is not progress:
+        bar.close()
     confounded = tuple(n for n, with_ in engine.confounded.items() if "registration" in with_)
     not_testable = dict(engine.not_testable)
     not_testable.update({n: f"confounded with {with_}" for n, with_ in engine.confounded.items()})
@@ -186,18 +203,21 @@ def _nuisance(engine: Engine, fit: Fit, alpha: float) -> tuple[tuple, dict]:
     return tuple(entries[n] for n in listed), drift_test
 
 
-def _iso9283(engine: Engine, fit: Fit):
-    """ISO 9283 figures of the kept rows in the machine frame (nuisances removed), measured and predicted."""
-    if iso9283_figures is None:
-        return None, None
+def _iso9283(engine: Engine, fit: Fit, seed: int):
+    """ISO 9283 figures of the kept rows in the machine frame (nuisances removed), measured and predicted.
+
+    Predicted by the fitted model: its mean per pose, visit-to-visit
+    covariance ``W`` and repeating covariance ``r Sigma``; the Monte Carlo
+    of :func:`~prp3mc.measurement.iso9283.iso9283_figures` draws from ``seed``.
+    """
     values = engine.values(fit)
     nuis = np.array([values[NUISANCE_NAMES[j]] for j in fit.nuis])
     corrected = engine.campaign.measured - engine.H[:, :, list(fit.nuis)] @ nuis
     campaign = dataclasses.replace(engine.campaign, measured=corrected)
-    mean, W, _ = engine.moments(fit.factors, fit.r)
+    mean, W, R = engine.moments(fit.factors, fit.r)
     sys = np.array([values[engine.systematic[j].name] for j in fit.sys])
     mean = mean + engine.pose_mean(engine.G[:, :, list(fit.sys)] @ sys)
-    figures = iso9283_figures(campaign, mean, W)
+    figures = iso9283_figures(campaign, mean, W, predicted_repeat_cov=R, rng=seed)
     return {"measured": dict(figures["measured"]), "predicted": dict(figures["predicted"])}, figures["per_pose"]
 
 

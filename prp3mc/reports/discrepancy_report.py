@@ -1,7 +1,7 @@
 """Figures and the self-contained HTML report of a discrepancy analysis.
 
 Every plotting function takes a
-:class:`~prp3mc.measurement.selection.DiscrepancyResult` and ``fig=`` (each
+:class:`~prp3mc.measurement.results.DiscrepancyResult` and ``fig=`` (each
 figure has several panels; a new pyplot figure when None) and returns the
 Figure; none changes the matplotlib backend. :func:`write_report` writes
 ``discrepancy.json``, ``report.html`` with the figures embedded,
@@ -21,7 +21,6 @@ measured next to predicted (:mod:`~prp3mc.measurement.iso9283`).
 from __future__ import annotations
 
 import base64
-import dataclasses
 import io
 import os
 from importlib import resources
@@ -29,79 +28,22 @@ from pathlib import Path
 
 import numpy as np
 
-from .._rng import child_seed
-from ..measurement.diagnostics import GAP_CLOSED, Diagnosis
-from ..measurement.iso9283 import ISO_STATISTICS, iso9283_figures, pose_means
-from ..measurement.prediction import noise_cov
-from ..measurement.selection import DiscrepancyResult
+from ..measurement.diagnostics import Diagnosis
+from ..measurement.iso9283 import ISO_STATISTICS, N_MC
+from ..measurement.results import DiscrepancyResult
 from ..output import output_folder, write_json, write_text
-from ..units import DEG2ARCSEC, DEG2RAD, MM2UM
+from ..units import DEG2ARCSEC, MM2UM
 
 __all__ = ["plot_workspace", "plot_actuators", "plot_temperature", "plot_gap", "plot_candidates", "plot_iso9283",
-           "iso9283_of", "write_report", "render_html"]
+           "write_report", "render_html"]
 
 #: Resolution of the report's figures (dots per inch); one render per figure.
 DPI = 90
-#: Monte Carlo size of the predicted ISO 9283 figures in the report.
-ISO_N_MC = 2000
 
 
 def _outlier_rows(result: DiscrepancyResult) -> np.ndarray:
-    """0-based rows the analysis set aside as gross errors (none before the workflow finds any)."""
-    return np.array([int(o["row"]) for o in getattr(result, "outliers", ())], dtype=int)
-
-
-def _repeatable_fraction(result: DiscrepancyResult) -> float:
-    rep = getattr(result, "repeatability", None)
-    return float(rep["repeatable_fraction"]) if rep else 0.0
-
-
-def _elapsed(campaign) -> np.ndarray:
-    """Fraction of the campaign's time elapsed at each measurement (``time_s``, else row order)."""
-    t = campaign.extra["time_s"].to_numpy(dtype=float) if "time_s" in campaign.extra else \
-        np.arange(campaign.n_measurements, dtype=float)
-    span = t[-1] - t[0]
-    return (t - t[0]) / span if span > 0 else np.zeros_like(t)
-
-
-def _nuisance_offset(result: DiscrepancyResult) -> np.ndarray:
-    """What the fitted registration and drift add to every measured pose, shape (M, 3) ``[mm, mm, deg]``."""
-    c = result.campaign
-    v = {n["name"]: float(n["value"]) for n in getattr(result, "nuisance", ())}
-    x, y = c.commanded[:, 0], c.commanded[:, 1]
-    turn = v.get("registration_phi", 0.0)
-    out = np.stack([v.get("registration_x", 0.0) - turn * DEG2RAD * y,
-                    v.get("registration_y", 0.0) + turn * DEG2RAD * x, np.full_like(x, turn)], axis=-1)
-    drift = np.array([v.get("drift_x", 0.0), v.get("drift_y", 0.0), v.get("drift_phi", 0.0)])
-    return out + _elapsed(c)[:, None] * drift if drift.any() else out
-
-
-def iso9283_of(result: DiscrepancyResult, n_mc: int = ISO_N_MC) -> dict:
-    """ISO 9283 figures of a discrepancy analysis, measured and predicted by the corrected model.
-
-    Measured: from the campaign with the fitted registration and drift
-    removed and the outliers set aside. Predicted: the corrected model's
-    mean per pose, its visit-to-visit covariance ``(1 - r)`` times the
-    budget's plus instrument noise and its repeating part ``r`` times the
-    budget's, ``r`` the fitted repeatable fraction (0 when the analysis has
-    none). The Monte Carlo seed is ``child_seed(result.seed, 9283)``.
-
-    Returns
-    -------
-    dict
-        As :func:`~prp3mc.measurement.iso9283.iso9283_figures`.
-    """
-    c = result.campaign
-    keep = np.ones(c.n_measurements, bool)
-    keep[_outlier_rows(result)] = False
-    corrected = dataclasses.replace(c, measured=c.measured - _nuisance_offset(result))
-    pred = result.prediction_after
-    noise = noise_cov(result.instrument_sigma_mm, result.instrument_sigma_deg)
-    budget_cov = pred.cov - noise
-    r = _repeatable_fraction(result)
-    return iso9283_figures(corrected, pose_means(pred.mean, c.pose_index, c.n_poses), (1 - r) * budget_cov + noise,
-                           predicted_repeat_cov=r * budget_cov, keep=keep, n_mc=n_mc,
-                           rng=child_seed(result.seed, 9283))
+    """0-based rows the analysis set aside as gross errors."""
+    return np.array([int(o["row"]) for o in result.outliers], dtype=int)
 
 
 def _quiver(ax, d: Diagnosis, title: str, scale: float):
@@ -198,14 +140,15 @@ def _draw_gap(result: DiscrepancyResult, fig) -> None:
     ax = axes[1]
     ax.bar([0, 1], [max(g["before"], 0.05), max(g["after"], 0.05)], color=["tab:orange", "tab:green"])
     ax.axhline(1.0, color="k", lw=0.8)
-    ax.axhline(GAP_CLOSED, color="tab:red", ls="--", lw=0.8, label=f"closed below {GAP_CLOSED:g}")
+    ax.axhline(g["closed_at"], color="tab:red", ls="--", lw=0.8, label=f"closed at <= {g['closed_at']:.2g}")
     ax.set_xticks([0, 1], ["before", "after"])
-    ax.set(yscale="log", title="gap " + ("closed" if g["closed"] else "NOT closed") + " (null level 1)")
+    ax.set(yscale="log", title="gap " + ("closed" if g["closed"] else
+                                         f"NOT closed ({g['deciding_channel'].replace('_', ' ')})"))
     ax.legend(fontsize=8)
 
 
-def _draw_iso9283(result: DiscrepancyResult, fig, iso: dict | None = None) -> None:
-    per = (iso9283_of(result) if iso is None else iso)["per_pose"]
+def _draw_iso9283(result: DiscrepancyResult, fig) -> None:
+    per = result.iso9283_poses
     axes = fig.subplots(1, 4)
     for ax, (stat, unit) in zip(axes, ISO_STATISTICS.items()):
         f, shown = (MM2UM, "µm") if unit == "mm" else (DEG2ARCSEC, "arcsec")
@@ -249,7 +192,7 @@ _FIGURES = {
     "temperature": (_draw_temperature, lambda r: None if r.campaign.temp_C is None else (11.0, 3.8)),
     "gap": (_draw_gap, lambda r: (9.0, 3.8)),
     "candidates": (_draw_candidates, lambda r: (4.2 * _n_steps(r), 4.2)),
-    "iso9283": (_draw_iso9283, lambda r: (13.0, 3.9)),
+    "iso9283": (_draw_iso9283, lambda r: None if r.iso9283_poses is None else (13.0, 3.9)),
 }
 #: Figures of the report, in its order (the gap and the candidates are tables there: quicker to read and to write).
 _REPORT_FIGURES = ("workspace", "iso9283", "actuators", "temperature")
@@ -265,7 +208,7 @@ def _lighten(fig) -> None:
                 axis.set_major_locator(MaxNLocator(5))
 
 
-def _plot(name: str, result: DiscrepancyResult, fig, **extra):
+def _plot(name: str, result: DiscrepancyResult, fig):
     """Draw figure ``name`` into ``fig`` (a new pyplot figure of its size when None); None if it does not apply."""
     draw, size = _FIGURES[name]
     figsize = size(result)
@@ -274,7 +217,7 @@ def _plot(name: str, result: DiscrepancyResult, fig, **extra):
     if fig is None:
         import matplotlib.pyplot as plt
         fig = plt.figure(figsize=figsize, layout="constrained")
-    draw(result, fig, **extra)
+    draw(result, fig)
     _lighten(fig)
     return fig
 
@@ -328,15 +271,15 @@ def plot_candidates(result: DiscrepancyResult, *, fig=None):
     return _plot("candidates", result, fig)
 
 
-def plot_iso9283(result: DiscrepancyResult, *, fig=None, iso: dict | None = None):
+def plot_iso9283(result: DiscrepancyResult, *, fig=None):
     """ISO 9283 AP, RP, AP_phi and RP_phi per pose: measured against predicted, with the model's ± 2 sd band.
 
     Points above the diagonal are poses worse than the model predicts; the
     band is how far a campaign of this size strays when the model is right.
-    ``iso``: a result of :func:`iso9283_of` (computed when None). ``fig``
+    The figures are the analysis's own (``result.iso9283_poses``). ``fig``
     (1 x 4 panels) as in :func:`plot_workspace`; returns the Figure.
     """
-    return _plot("iso9283", result, fig, **({} if iso is None else {"iso": iso}))
+    return _plot("iso9283", result, fig)
 
 
 def _agg_figure(figsize):
@@ -357,10 +300,10 @@ _CAPTIONS = {
                  "and approach direction, against the slider position: a zero offset shows as a shift, a lead error as "
                  "a slope, backlash as a split between red and blue.",
     "temperature": "Equivalent slider errors against temperature: a thermal expansion shows as a trend.",
-    "gap": "Left: the two channels before and after the named effects, G_sys (whitened residual energy in the "
-           "span of the library's systematic signatures per degree of freedom) and G_disp (repeat scatter over "
-           "its predicted mean), both 1 when the model is right; grey: null level ± 2 sd. Right: the gap, "
-           "(z_sys^2 + z_disp^2)/2 of the standardised channels, 1 when the model is right.",
+    "gap": "Left: two of the verdict's channels before and after the named effects, G_sys (whitened residual "
+           "energy in the span of the library's systematic signatures per degree of freedom) and G_disp (repeat "
+           "scatter over its predicted mean), both 1 when the model is right; grey: null level ± 2 sd. Right: the "
+           "gap, the strongest of the seven channels (-ln p less ln 7, null level at most 1), and where it closes.",
     "candidates": "Evidence for each candidate effect at each step; green was accepted. Bars beyond the red "
                   "line pass the likelihood-ratio test corrected for the number of candidates.",
     "iso9283": "ISO 9283 pose accuracy (AP) and repeatability (RP) of every commanded pose, position and "
@@ -402,15 +345,14 @@ def _iso_summary(iso: dict) -> list[dict]:
     return rows
 
 
-def render_html(result: DiscrepancyResult, figures: dict, iso: dict | None = None) -> str:
-    """The HTML report; ``figures`` maps figure names to data URIs; ``iso`` from :func:`iso9283_of` (None: computed)."""
+def render_html(result: DiscrepancyResult, figures: dict) -> str:
+    """The HTML report; ``figures`` maps figure names to data URIs."""
     import jinja2
-    iso = iso9283_of(result) if iso is None else iso
     text = resources.files("prp3mc.reports").joinpath("templates/discrepancy.html.j2").read_text(encoding="utf-8")
     env = jinja2.Environment(autoescape=True, undefined=jinja2.StrictUndefined)
     top = result.before.poses.nlargest(8, "sys_stat")[
         ["pose_id", "x_mm", "y_mm", "phi_deg", "n", "dx_um", "dy_um", "dphi_arcsec", "sys_q", "disp_ratio"]]
-    per = iso["per_pose"]
+    per = result.iso9283_poses
     worst = per[per["statistic"] == "RP"].nlargest(8, "measured")[["pose_id", "x_mm", "y_mm", "phi_deg", "n"]]
     wide = per.pivot(index="pose_id", columns="statistic", values=["measured", "predicted"])
     for stat, unit in ISO_STATISTICS.items():
@@ -419,14 +361,12 @@ def render_html(result: DiscrepancyResult, figures: dict, iso: dict | None = Non
             worst[f"{stat} {which[:4]}. ({shown})"] = f * wide.loc[worst["pose_id"], (which, stat)].to_numpy()
     return env.from_string(text).render(
         r=result, doc=result.to_dict(), figures=figures, captions=_CAPTIONS, mm2um=MM2UM, deg2arcsec=DEG2ARCSEC,
-        top_poses=_table(top), steps=_table(_top_candidates(result.steps)), before=result.before.summary,
+        top_poses=_table(top), gap=result.gap, channel=result.gap["deciding_channel"].replace("_", " "), steps=_table(_top_candidates(result.steps)), before=result.before.summary,
         after=result.after.summary,
-        nuisance=list(getattr(result, "nuisance", ())), drift_test=getattr(result, "drift_test", None),
-        registration_fitted=bool(getattr(result, "registration", False)),
-        confounded=list(getattr(result, "confounded_with_registration", ())),
-        outliers=list(getattr(result, "outliers", ())), outlier_rule=getattr(result, "outlier_rule", None),
-        with_outliers=getattr(result, "with_outliers", None), repeatability=getattr(result, "repeatability", None),
-        iso=iso, iso_rows=_iso_summary(iso), iso_worst=_table(worst))
+        nuisance=list(result.nuisance), drift_test=result.drift_test, registration_fitted=result.registration,
+        confounded=list(result.confounded_with_registration), outliers=list(result.outliers),
+        outlier_rule=result.outlier_rule, with_outliers=result.with_outliers, repeatability=result.repeatability,
+        iso_n_mc=N_MC, iso_rows=_iso_summary(result.iso9283), iso_worst=_table(worst))
 
 
 def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bool = False,
@@ -448,9 +388,7 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
     Path
         The folder.
     """
-    iso = iso9283_of(result)
     doc = result.to_dict()
-    doc.setdefault("iso9283", {"measured": iso["measured"], "predicted": iso["predicted"]})
     with output_folder(folder, force) as tmp:
         write_json(tmp / "discrepancy.json", doc)
         uris = {}
@@ -460,7 +398,7 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
             if figsize is None:
                 continue
             fig = _agg_figure(figsize)
-            draw(result, fig, **({"iso": iso} if name == "iso9283" else {}))
+            draw(result, fig)
             _lighten(fig)
             png = _png(fig)
             uris[name] = "data:image/png;base64," + base64.b64encode(png).decode("ascii")
@@ -468,10 +406,10 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
                 (tmp / f"{name}.png").write_bytes(png)
             if "svg" in formats:
                 fig.savefig(tmp / f"{name}.svg", format="svg")
-        write_text(tmp / "report.html", render_html(result, uris, iso))
+        write_text(tmp / "report.html", render_html(result, uris))
         for label, d in (("before", result.before), ("after", result.after)):
             d.poses.to_csv(tmp / f"poses_{label}.csv", index=False)
             d.measurements.to_csv(tmp / f"measurements_{label}.csv", index=False)
         result.steps.to_csv(tmp / "selection_steps.csv", index=False)
-        iso["per_pose"].to_csv(tmp / "iso9283_per_pose.csv", index=False)
+        result.iso9283_poses.to_csv(tmp / "iso9283_per_pose.csv", index=False)
     return Path(folder)
