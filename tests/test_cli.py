@@ -108,3 +108,23 @@ def test_init_templates_run_as_written(tmp_path, capsys):
                  str(tmp_path / "classes.toml"), "--spec-position-um", "150", "--grid", "11", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["feasible"] and set(doc["choice"]) == {f"{q}_{i}" for q in ("rho", "theta", "b") for i in (1, 2, 3)}
+
+
+def test_discrepancy_json_describes_itself(tmp_path, capsys):
+    """discrepancy.json and --json name the data file with its sha256, the seed and the versions."""
+    import hashlib
+    from prp3mc import Budget, Region, simulate_campaign
+    g = Geometry.from_preset("u-shape")
+    data = tmp_path / "campaign.csv"
+    simulate_campaign(g, Budget.from_preset("paper"), Region.from_preset("u-shape").grid(4).reshape(-1, 3), 3,
+                      rng=2).to_csv(data)
+    argv = ["discrepancy", "--geometry", "u-shape", "--budget", "paper", "--data", str(data), "--out",
+            str(tmp_path / "out"), "--instrument-sigma-mm", "0.002", "--instrument-sigma-deg", "0.0005",
+            "--seed", "5", "--json"]
+    assert main(argv) == 0
+    printed = json.loads(capsys.readouterr().out)
+    written = json.loads((tmp_path / "out" / "discrepancy.json").read_text())
+    for doc in (printed, written):
+        assert doc["inputs"]["data"]["sha256"] == hashlib.sha256(data.read_bytes()).hexdigest()
+        assert doc["inputs"]["seed"] == 5 and doc["inputs"]["budget"] == {"name": "paper", "preset": "paper"}
+        assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib"}

@@ -5,7 +5,7 @@ from ..measurement.workflow import STAGES, discrepancy
 from ..progress import Progress
 from ..reports.discrepancy_report import write_report
 from ..kinematics.geometry import Geometry
-from . import (add_budget, add_geometry, add_json, add_progress, add_seed, command, emit_json, nonnegative_float,
+from . import (provenance, add_budget, add_geometry, add_json, add_progress, add_seed, command, emit_json, nonnegative_float,
                probability)
 
 
@@ -43,10 +43,12 @@ class DiscrepancyCommand:
                                  registration=not args.no_registration, alpha=args.alpha,
                                  alpha_unexplained=args.alpha_unexplained, outlier_rate=args.outlier_rate,
                                  progress=bar, rng=args.seed)
-            folder = write_report(result, args.out, force=args.force)
+            record = provenance(args, geometry, budget)["inputs"]
+            folder = write_report(result, args.out, force=args.force, inputs=record)
             bar.update(label="discrepancy: report")
         if args.json:
-            emit_json(result.to_dict())
+            doc = result.to_dict()
+            emit_json(doc | {"inputs": doc["inputs"] | record})
             return
         print("\n".join(headline(result) + [f"report: {folder / 'report.html'}"]))
 

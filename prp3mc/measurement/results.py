@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from types import MappingProxyType
 
 import numpy as np
 import pandas as pd
 
+from ..provenance import file_record, versions
 from .._result import freeze, interval_frame
 from .._version import __version__
 from ..kinematics.geometry import Geometry
@@ -241,9 +243,18 @@ class DiscrepancyResult:
                               "unit": [e.unit for e in effects]}, columns=["name", "value", "unit"])
         return interval_frame(frame, [ci[0] for ci in cis], [ci[1] for ci in cis], level)
 
+    def inputs(self) -> dict:
+        """What the analysis ran on: geometry and budget names, the data (file and sha256), seed, sizes."""
+        source = self.campaign.source
+        data = file_record(source) if Path(source).is_file() else {"source": source}
+        return {"geometry": {"name": self.geometry.name}, "budget": {"name": self.budget.name}, "data": data,
+                "n_measurements": int(self.campaign.n_measurements), "n_poses": int(self.campaign.n_poses),
+                "seed": int(self.seed), "n_bootstrap": int(self.n_bootstrap)}
+
     def to_dict(self) -> dict:
-        """The ``discrepancy.json`` document (plus diagnostics)."""
+        """The ``discrepancy.json`` document (plus diagnostics), with ``inputs`` and ``versions``."""
         return {
+            "inputs": self.inputs(), "versions": versions(),
             "named_effects": [e.to_dict() for e in self.named_effects],
             "unexplained": bool(self.unexplained),
             "gap": _thawed(self.gap),

@@ -370,7 +370,7 @@ def render_html(result: DiscrepancyResult, figures: dict) -> str:
 
 
 def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bool = False,
-                 formats: tuple = ("png",)) -> Path:
+                 formats: tuple = ("png",), inputs: dict | None = None) -> Path:
     """Write ``discrepancy.json``, ``report.html``, figures and tables into ``folder`` (atomically).
 
     Parameters
@@ -382,6 +382,9 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
     formats : tuple of str
         Figure files written besides the embedded PNG: ``"png"`` and/or
         ``"svg"`` (an SVG costs another render of every figure).
+    inputs : dict, optional
+        More of what the analysis ran on, merged into ``discrepancy.json``'s
+        ``inputs`` (the command line adds the geometry and budget files' sha256).
 
     Returns
     -------
@@ -389,6 +392,7 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
         The folder.
     """
     doc = result.to_dict()
+    doc["inputs"] = doc["inputs"] | dict(inputs or {})
     with output_folder(folder, force) as tmp:
         write_json(tmp / "discrepancy.json", doc)
         uris = {}
