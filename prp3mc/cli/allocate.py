@@ -8,7 +8,7 @@ from ..provenance import spec_record
 from ..uncertainty.allocation import allocate, allocation_front, front_records
 from ..units import DEG2ARCSEC, MM2UM
 from ..limits import allocate_estimate
-from . import (add_geometry, add_json, add_seed, command, emit_json, finite_float, positive_float, positive_int,
+from . import (add_geometry, add_json, add_progress, add_seed, command, emit_json, finite_float, positive_float, positive_int,
                provenance, within_limits)
 
 
@@ -39,6 +39,7 @@ class AllocateCommand:
         p.add_argument("--front", action="store_true",
                        help="also sweep the cost-accuracy Pareto front of the worst-case position error "
                             "(of |dphi| with only a phi spec; the phi spec holds along a position front)")
+        add_progress(p)
         add_json(p)
 
     @staticmethod
@@ -54,7 +55,7 @@ class AllocateCommand:
             output = "position" if args.spec_position_um is not None else "phi"
             side = {"spec_phi_arcsec": args.spec_phi_arcsec} if output == "position" else {}
             front = allocation_front(r.geometry, r.menu, args.region, output=output, grid=args.grid,
-                                     phi_deg=args.phi_deg, k_sigma=args.k_sigma, **side)
+                                     phi_deg=args.phi_deg, k_sigma=args.k_sigma, progress=args.progress, **side)
         if args.json:
             doc = r.to_dict()
             if front is not None:

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from ..progress import Progress
 from .._result import freeze, pose_columns, short_repr
 from .._rng import child_seed, resolve_rng
 from .._version import __version__
@@ -306,12 +307,14 @@ def _confirm(geometry, menu, problem, limits, idx, percentile, n_samples, seed):
 def allocation_front(geometry, classes, region, *, output: str = "position",
                      spec_position_um: float | None = None, spec_phi_arcsec: float | None = None,
                      grid: int = 41, phi_deg: float | None = None, k_sigma: float | None = None,
-                     max_points: int = 100) -> pd.DataFrame:
+                     max_points: int = 100, progress: bool | None = None) -> pd.DataFrame:
     """The cost-accuracy Pareto front: the least cost of every reachable worst case of ``output``.
 
     Swept by repeated exact allocation, each asking for a worst case strictly
     below the last one found (the epsilon-constraint method); the spec of the
-    other output, if given, holds at every point.
+    other output, if given, holds at every point. ``progress`` reports each
+    point found on stderr (default: when stderr is a terminal); the count of
+    points is not known in advance, so the bar runs against ``max_points``.
 
     Returns
     -------
@@ -327,10 +330,12 @@ def allocation_front(geometry, classes, region, *, output: str = "position",
     side = {"position": _scaled(spec_position_um, 1 / MM2UM), "phi": _scaled(spec_phi_arcsec, 1 / DEG2ARCSEC)}
     side[output] = None
     points, limit = [], None
+    bar = Progress(max_points, "allocate: Pareto front", progress)
     while len(points) < max_points:
         idx, _ = least_cost(problem, {**side, output: limit})
         if idx is None:
             break
+        bar.update()
         env = {q: float(v.max()) for q, v in problem.envelopes(idx).items()}
         point = (_cost(problem, idx), env, _choice(problem, idx))
         if points and point[0] <= points[-1][0]:
@@ -338,6 +343,8 @@ def allocation_front(geometry, classes, region, *, output: str = "position",
         else:
             points.append(point)
         limit = env[output] * (1 - 1e-9)
+    bar.total = max(len(points), 1)
+    bar.close()
     rows = [{"point": k, "cost": cost, "output": q, "statistic": "worst_case", "value": env[q],
              "unit": "mm" if q == "position" else "deg", **choice}
             for k, (cost, env, choice) in enumerate(points) for q in ("position", "phi")]
