@@ -128,3 +128,5 @@ def test_discrepancy_json_describes_itself(tmp_path, capsys):
         assert doc["inputs"]["data"]["sha256"] == hashlib.sha256(data.read_bytes()).hexdigest()
         assert doc["inputs"]["seed"] == 5 and doc["inputs"]["budget"] == {"name": "paper", "preset": "paper"}
         assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib"}
+    report = (tmp_path / "out" / "report.html").read_text()
+    assert "<h2>Run</h2>" in report and written["inputs"]["data"]["sha256"] in report

@@ -345,8 +345,8 @@ def _iso_summary(iso: dict) -> list[dict]:
     return rows
 
 
-def render_html(result: DiscrepancyResult, figures: dict) -> str:
-    """The HTML report; ``figures`` maps figure names to data URIs."""
+def render_html(result: DiscrepancyResult, figures: dict, doc: dict | None = None) -> str:
+    """The HTML report; ``figures`` maps figure names to data URIs, ``doc`` is discrepancy.json (default: the result's)."""
     import jinja2
     text = resources.files("prp3mc.reports").joinpath("templates/discrepancy.html.j2").read_text(encoding="utf-8")
     env = jinja2.Environment(autoescape=True, undefined=jinja2.StrictUndefined)
@@ -360,7 +360,7 @@ def render_html(result: DiscrepancyResult, figures: dict) -> str:
         for which in ("measured", "predicted"):
             worst[f"{stat} {which[:4]}. ({shown})"] = f * wide.loc[worst["pose_id"], (which, stat)].to_numpy()
     return env.from_string(text).render(
-        r=result, doc=result.to_dict(), figures=figures, captions=_CAPTIONS, mm2um=MM2UM, deg2arcsec=DEG2ARCSEC,
+        r=result, doc=doc if doc is not None else result.to_dict(), figures=figures, captions=_CAPTIONS, mm2um=MM2UM, deg2arcsec=DEG2ARCSEC,
         top_poses=_table(top), gap=result.gap, channel=result.gap["deciding_channel"].replace("_", " "), steps=_table(_top_candidates(result.steps)), before=result.before.summary,
         after=result.after.summary,
         nuisance=list(result.nuisance), drift_test=result.drift_test, registration_fitted=result.registration,
@@ -410,7 +410,7 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
                 (tmp / f"{name}.png").write_bytes(png)
             if "svg" in formats:
                 fig.savefig(tmp / f"{name}.svg", format="svg")
-        write_text(tmp / "report.html", render_html(result, uris))
+        write_text(tmp / "report.html", render_html(result, uris, doc))
         for label, d in (("before", result.before), ("after", result.after)):
             d.poses.to_csv(tmp / f"poses_{label}.csv", index=False)
             d.measurements.to_csv(tmp / f"measurements_{label}.csv", index=False)
