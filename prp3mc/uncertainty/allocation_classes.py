@@ -128,12 +128,8 @@ class ClassMenu:
     def from_dict(cls, doc: dict[str, Any], source: str = "classes", catalogue: Catalogue | None = None,
                   base: Path | None = None) -> "ClassMenu":
         """Build from the classes-file layout (see the module docstring)."""
-        catalogue = catalogue or Catalogue.bundled()
-        extra = doc.get("catalogues", [])
-        if not isinstance(extra, list) or not all(isinstance(p, str) for p in extra):
-            raise AllocationError(f"{source}: catalogues must be a list of file paths")
-        for path in extra:
-            catalogue = catalogue.extended((base or Path(".")) / path)
+        catalogue = (catalogue or Catalogue.bundled()).with_files(doc.get("catalogues", []), base, source,
+                                                                  AllocationError)
         families = {}
         for family, table in doc.items():
             if family in ("name", "catalogues"):

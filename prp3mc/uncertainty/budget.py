@@ -72,6 +72,18 @@ class Catalogue:
         """A catalogue with the entries of the file at ``path`` added (or overriding)."""
         return Catalogue({**self.entries, **_flatten(load_toml(path))})
 
+    def with_files(self, paths, base: Path | None, source: str, error: type[Exception] = BudgetError) -> "Catalogue":
+        """This catalogue extended by a file's ``catalogues = [paths]`` (relative to ``base``).
+
+        Raises ``error`` naming ``source`` when ``paths`` is not a list of strings.
+        """
+        if not isinstance(paths, list) or not all(isinstance(q, str) for q in paths):
+            raise error(f"{source}: catalogues must be a list of file paths, got {paths!r}")
+        catalogue = self
+        for path in paths:
+            catalogue = catalogue.extended((base or Path(".")) / path)
+        return catalogue
+
     def law(self, key: str, where: str) -> tuple[Law, dict[str, Any]]:
         if not isinstance(key, str) or key not in self.entries:
             raise BudgetError(f"{where}: no catalogue entry {key!r}")
@@ -284,12 +296,7 @@ class Budget:
         unknown = sorted(set(doc) - {"name", "inputs", "groups", "catalogues"})
         if unknown:
             raise BudgetError(f"{source}: unknown key(s) {', '.join(unknown)} (expected name, inputs, groups, catalogues)")
-        catalogue = catalogue or Catalogue.bundled()
-        extras = doc.get("catalogues", [])
-        if not isinstance(extras, list) or not all(isinstance(e, str) for e in extras):
-            raise BudgetError(f"{source}: catalogues must be a list of file names, got {extras!r}")
-        for extra in extras:
-            catalogue = catalogue.extended((base or Path(".")) / extra)
+        catalogue = (catalogue or Catalogue.bundled()).with_files(doc.get("catalogues", []), base, source)
         raw = doc.get("inputs")
         if not isinstance(raw, dict) or not raw:
             raise BudgetError(f"{source}: needs an [inputs] table with at least one input")
