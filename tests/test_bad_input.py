@@ -74,6 +74,7 @@ FILES = {
     "budget_law_string": _budget(*_legs('theta_{i} = {{ law = "uniform", lo = "a", hi = 1 }}')),
     "budget_inf": _budget(*_legs('theta_{i} = {{ law = "uniform", lo = -inf, hi = inf }}')),
     "budget_unknown_law": _budget(*_legs('theta_{i} = {{ law = "gamma", k = 1 }}')),
+    "budget_zero": _budget(*_legs('theta_{i} = {{ law = "uniform", lo = 0, hi = 0 }}')),
     "study_bad_toml": "name = \n",
     "study_huge_samples": _study(samples=10**12),
     "study_huge_grid": _study(grid=100_000),
@@ -93,6 +94,8 @@ FILES = {
     "csv_one_row": _HEADER + "1,0,100,0,0.001,100,0\n",
     "csv_no_repeats": _HEADER + "".join(f"{k},{10 * k},100,0,{10 * k},100,0\n" for k in range(3)),
     "csv_two_poses": _HEADER + "".join(f"{k % 2},{10 * (k % 2)},100,0,{10 * (k % 2)},100,0\n" for k in range(6)),
+    "csv_small": _HEADER + "".join(f"{k % 4},{10 * (k % 2)},{100 + 10 * (k % 4 // 2)},0,{10 * (k % 2) + 0.001 * k},"
+                                   f"{100 + 10 * (k % 4 // 2)},0\n" for k in range(8)),
     "existing_file": "x",
 }
 
@@ -257,6 +260,8 @@ CASES = [
     _case("discrepancy", *G, *B, "--data", "{csv_no_repeats}", "--out", "{root}/d18",
           message="0 of them repeated; the discrepancy workflow needs at least 3 distinct poses"),
     _case("discrepancy", *G, *B, "--data", "{csv_two_poses}", "--out", "{root}/d19", message="too small"),
+    _case("--max-hours", "1e-6", "discrepancy", *G, *B, "--data", "{csv_nan}", "--out", "{root}/d20",
+          message="discrepancy analysis of 8 measurements would take"),   # sized before the file is read
     # ----------------------------------------------------------- allocate
     _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150", "--grid",
           "100000", message="of memory, this machine has"),

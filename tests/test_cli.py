@@ -130,3 +130,47 @@ def test_discrepancy_json_describes_itself(tmp_path, capsys):
         assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib"}
     report = (tmp_path / "out" / "report.html").read_text()
     assert "<h2>Run</h2>" in report and written["inputs"]["data"]["sha256"] in report
+
+
+def _cut_budget(path):
+    """The paper budget cut before leg 3's theta and b, as a file ending at a table boundary would be."""
+    from prp3mc import Budget
+    Budget.from_preset("paper").to_toml(path)
+    text = path.read_text()
+    path.write_text(text[:text.index("[inputs.theta_3]")])
+    return path
+
+
+def _campaign(path, n: int = 4, visits: int = 3):
+    from prp3mc import Budget, Region, simulate_campaign
+    simulate_campaign(Geometry.from_preset("u-shape"), Budget.from_preset("paper"),
+                      Region.from_preset("u-shape").grid(n).reshape(-1, 3), visits, rng=2).to_csv(path)
+    return path
+
+
+def test_discrepancy_refuses_what_cannot_finish(tmp_path, capsys, monkeypatch):
+    """Sized before it starts: one line with the estimate and the limit, exit 1, nothing written."""
+    import prp3mc.cli.discrepancy as command
+    import prp3mc.limits as limits
+    data, out = _campaign(tmp_path / "campaign.csv"), tmp_path / "out"
+    argv = ["discrepancy", "--geometry", "u-shape", "--budget", "paper", "--data", str(data), "--out", str(out)]
+    assert main(["--max-hours", "1e-6", *argv]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "discrepancy analysis of 48 measurements would take ~" in err[0]
+    assert "more than the limit of 0.0036 s" in err[0] and not out.exists()
+    # memory, from the row count alone: the file is not even read
+    monkeypatch.setattr(limits, "available_memory", lambda: 1 << 20)
+    monkeypatch.setattr(command, "read_campaign", lambda *a, **k: pytest.fail("read before it was sized"))
+    assert main(argv) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "needs ~" in err[0] and "available (limit 819 KiB)" in err[0] and not out.exists()
+    # memory, once the file is read: its poses and visits are counted too
+    monkeypatch.undo()
+    rows_only = limits.discrepancy_estimate(48).bytes
+    full = limits.discrepancy_estimate(48, 16, 3).bytes
+    assert rows_only < full
+    monkeypatch.setattr(limits, "available_memory", lambda: (rows_only + full) / 2 / limits.MEMORY_MARGIN)
+    assert main(argv) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "discrepancy analysis of 48 measurements of 16 poses needs ~" in err[0]
+    assert not out.exists()
