@@ -262,6 +262,8 @@ CASES = [
     _case("discrepancy", *G, *B, "--data", "{csv_two_poses}", "--out", "{root}/d19", message="too small"),
     _case("--max-hours", "1e-6", "discrepancy", *G, *B, "--data", "{csv_nan}", "--out", "{root}/d20",
           message="discrepancy analysis of 8 measurements would take"),   # sized before the file is read
+    _case("discrepancy", *G, "--budget", "{budget_zero}", "--data", "{csv_small}", "--out", "{root}/d21",
+          message="has a zero law"),
     # ----------------------------------------------------------- allocate
     _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150", "--grid",
           "100000", message="of memory, this machine has"),

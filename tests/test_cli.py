@@ -148,6 +148,49 @@ def _campaign(path, n: int = 4, visits: int = 3):
     return path
 
 
+@pytest.mark.parametrize("argv", [
+    ["worstcase", "--geometry", "u-shape", "--pose", "0", "100", "0"],
+    ["montecarlo", "--geometry", "u-shape", "--pose", "0", "100", "0", "--samples", "500", "--seed", "4"],
+    ["sobol", "--geometry", "u-shape", "--pose", "0", "100", "0", "--samples", "64", "--seed", "4"],
+], ids=lambda a: a[0])
+def test_json_outputs_record_an_incomplete_budget(argv, tmp_path, capsys):
+    """A budget with inputs missing for some legs: the warning is given once and the JSON records it."""
+    budget = _cut_budget(tmp_path / "cut.toml")
+    assert main(argv + ["--budget", str(budget), "--json"]) == 0
+    out = capsys.readouterr()
+    doc = json.loads(out.out)
+    assert doc["inputs"]["budget"]["missing_inputs"] == ["b_3", "theta_3"]
+    assert len(doc["warnings"]) == 1 and "no law for b_3, theta_3 (other legs have one)" in doc["warnings"][0]
+    assert out.err.count("warning:") == 1
+
+
+def test_discrepancy_records_an_incomplete_budget(tmp_path, capsys):
+    """discrepancy.json, --json and the report say that the budget lacks inputs; so does a result made in Python."""
+    import warnings
+    from prp3mc import Budget, discrepancy
+    from prp3mc.errors import IncompleteBudgetWarning
+    from prp3mc.reports.discrepancy_report import report_document
+    budget, data = _cut_budget(tmp_path / "cut.toml"), _campaign(tmp_path / "campaign.csv")
+    assert main(["discrepancy", "--geometry", "u-shape", "--budget", str(budget), "--data", str(data),
+                 "--out", str(tmp_path / "out"), "--seed", "5", "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    written = json.loads((tmp_path / "out" / "discrepancy.json").read_text())
+    for doc in (printed, written):
+        assert doc["inputs"]["budget"]["missing_inputs"] == ["b_3", "theta_3"]
+        assert len(doc["warnings"]) == 1 and doc["warnings"][0].startswith(f"{budget}: no law for b_3, theta_3")
+    report = (tmp_path / "out" / "report.html").read_text()
+    assert "<b>Warnings</b>" in report and "no law for b_3, theta_3" in report
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", IncompleteBudgetWarning)
+        cut = Budget.load(budget)
+    doc = report_document(discrepancy(Geometry.from_preset("u-shape"), cut, data, rng=5))
+    assert doc["warnings"] == ["budget 'paper': no law for b_3, theta_3 (other legs have one): taken as exact; "
+                               "a budget cut short?"]
+    assert doc["inputs"]["budget"]["missing_inputs"] == ["b_3", "theta_3"]
+    assert "warnings" not in report_document(discrepancy(Geometry.from_preset("u-shape"), Budget.from_preset("paper"),
+                                                         data, rng=5))
+
+
 def test_discrepancy_refuses_what_cannot_finish(tmp_path, capsys, monkeypatch):
     """Sized before it starts: one line with the estimate and the limit, exit 1, nothing written."""
     import prp3mc.cli.discrepancy as command

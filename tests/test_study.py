@@ -14,7 +14,7 @@ import pytest
 
 from prp3mc import Budget, Geometry, Region, sensitivity
 from prp3mc.cli import main
-from prp3mc.errors import StudyError, UnknownPresetError
+from prp3mc.errors import IncompleteBudgetWarning, StudyError, UnknownPresetError
 from prp3mc.reports import plots
 from prp3mc.study.summary import build_summary
 from prp3mc.uncertainty.ranking import ranking
@@ -312,6 +312,55 @@ def test_inputs_name_files_and_their_hashes(tmp_path):
     golden = {k: v for k, v in summary.items() if k not in ("inputs", "versions", "metadata")}
     assert_summary_close(summary, golden)
     assert_summary_close(golden, summary)
+
+
+def test_constant_input_has_undefined_sobol_indices_in_the_summary(tmp_path):
+    """A zero-width input: S1 and ST are null with the reason, never NaN, and summary.json is written."""
+    from prp3mc import Uniform
+    from prp3mc.output import dumps_json
+    constant = Budget.from_preset("paper").replace(theta_2=Uniform(0.0, 0.0))
+    study = dataclasses.replace(Study.load(study_file(tmp_path)), budget=constant)
+    summary = build_summary(run_study(study, progress=False))
+    entry = summary["configurations"]["u-shape"]["sobol"]["position"]["theta_2"]
+    assert entry["S1"] is None and entry["ST"] is None and "constant input" in entry["reason"]
+    assert set(summary["configurations"]["u-shape"]["sobol"]["position"]["theta_1"]["S1"]) == {"value", "se"}
+    assert "reason" not in summary["configurations"]["u-shape"]["sobol"]["position"]["theta_1"]
+    assert json.loads(dumps_json(summary))["configurations"]["delta"]["sobol"]["position"]["theta_2"]["S1"] is None
+
+
+def test_incomplete_budget_is_recorded_in_summary_and_report(tmp_path, capsys):
+    """A budget with inputs missing for some legs: warned once, recorded in summary.json, shown in the report."""
+    Budget.from_preset("paper").to_toml(tmp_path / "cut.toml")
+    text = (tmp_path / "cut.toml").read_text()
+    (tmp_path / "cut.toml").write_text(text[:text.index("[inputs.theta_3]")])
+    path = study_file(tmp_path, _replace('budget = "paper"', 'budget = "cut.toml"\noutputs = []'))
+    out = tmp_path / "out"
+    assert main(["study", str(path), "--out", str(out), "--no-progress"]) == 0
+    assert capsys.readouterr().err.count("warning: ") == 1
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["inputs"]["budget"]["missing_inputs"] == ["b_3", "theta_3"]
+    assert len(summary["warnings"]) == 1 and "no law for b_3, theta_3 (other legs have one)" in summary["warnings"][0]
+    html = (out / "report.html").read_text()
+    assert "<b>Warnings</b>" in html and "no law for b_3, theta_3" in html
+    # a summary built in Python records its budget's own warning; a complete budget has none
+    with pytest.warns(IncompleteBudgetWarning):
+        study = Study.load(path)
+    assert build_summary(run_study(study, progress=False))["warnings"] == list(study.budget.warnings)
+    assert "warnings" not in build_summary(run_study(Study.load(study_file(tmp_path, _replace(
+        "seed = 3", "seed = 3\noutputs = []"), name="complete.toml")), progress=False))
+
+
+def test_budget_of_constant_inputs_runs_to_a_report(tmp_path, capsys):
+    """Every input zero-width: worst case 0 everywhere, no family share of it, Sobol undefined, said so."""
+    (tmp_path / "zero.toml").write_text('name = "zero"\n[inputs]\n' + "".join(
+        f'theta_{i} = {{ law = "uniform", lo = 0, hi = 0 }}\n' for i in (1, 2, 3)))
+    text = _replace('budget = "paper"', 'budget = "zero.toml"').replace("grid = 9", "grid = 3", 1)
+    out = tmp_path / "out"
+    assert main(["study", str(study_file(tmp_path, text)), "--out", str(out), "--no-progress"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["configurations"]["u-shape"]["worst_case_position_um"]["max"] == 0.0
+    assert summary["configurations"]["u-shape"]["sobol"]["position"]["theta_1"]["S1"] is None
+    assert "Undefined, so not drawn, for theta_1, theta_2, theta_3" in (out / "report.html").read_text()
 
 
 # ----------------------------------------------------------------- honest pictures

@@ -5,10 +5,10 @@ from ..limits import discrepancy_estimate
 from ..measurement.campaign import count_rows, read_campaign
 from ..measurement.workflow import STAGES, discrepancy
 from ..progress import Progress
-from ..reports.discrepancy_report import write_report
+from ..reports.discrepancy_report import report_document, write_report
 from ..uncertainty.budget import Budget
-from . import (add_budget, add_geometry, add_json, add_progress, add_seed, command, emit_json, nonnegative_float,
-               probability, provenance, within_limits)
+from . import (WARNINGS, add_budget, add_geometry, add_json, add_progress, add_seed, command, emit_json,
+               nonnegative_float, probability, provenance, within_limits)
 
 
 @command("discrepancy", "find where model and measurements disagree and name the missing effect")
@@ -51,11 +51,10 @@ class DiscrepancyCommand:
                                  alpha_unexplained=args.alpha_unexplained, outlier_rate=args.outlier_rate,
                                  progress=bar, rng=args.seed)
             record = provenance(args, geometry, budget)["inputs"]
-            folder = write_report(result, args.out, force=args.force, inputs=record)
+            folder = write_report(result, args.out, force=args.force, inputs=record, warnings=WARNINGS)
             bar.update(label="discrepancy: report")
         if args.json:
-            doc = result.to_dict()
-            emit_json(doc | {"inputs": doc["inputs"] | record})
+            emit_json(report_document(result, record, WARNINGS))
             return
         print("\n".join(headline(result) + [f"report: {folder / 'report.html'}"]))
 

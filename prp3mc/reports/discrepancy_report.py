@@ -35,7 +35,7 @@ from ..output import output_folder, write_json, write_text
 from ..units import DEG2ARCSEC, MM2UM
 
 __all__ = ["plot_workspace", "plot_actuators", "plot_temperature", "plot_gap", "plot_candidates", "plot_iso9283",
-           "write_report", "render_html"]
+           "write_report", "report_document", "render_html"]
 
 #: Resolution of the report's figures (dots per inch); one render per figure.
 DPI = 90
@@ -384,8 +384,22 @@ def render_html(result: DiscrepancyResult, figures: dict, doc: dict | None = Non
         iso_n_mc=N_MC, iso_rows=_iso_summary(result.iso9283), iso_worst=_table(worst))
 
 
+def report_document(result: DiscrepancyResult, inputs: dict | None = None, warnings=None) -> dict:
+    """``discrepancy.json``: the result's document with more ``inputs`` and the ``warnings`` given.
+
+    ``inputs`` is merged into the document's; ``warnings`` (the messages a
+    command gave while it ran, which include the budget's) replace the
+    result's own when given and not empty.
+    """
+    doc = result.to_dict()
+    doc["inputs"] = doc["inputs"] | dict(inputs or {})
+    if warnings:
+        doc["warnings"] = list(warnings)
+    return doc
+
+
 def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bool = False,
-                 formats: tuple = ("png",), inputs: dict | None = None) -> Path:
+                 formats: tuple = ("png",), inputs: dict | None = None, warnings=None) -> Path:
     """Write ``discrepancy.json``, ``report.html``, figures and tables into ``folder`` (atomically).
 
     Parameters
@@ -400,14 +414,15 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
     inputs : dict, optional
         More of what the analysis ran on, merged into ``discrepancy.json``'s
         ``inputs`` (the command line adds the geometry and budget files' sha256).
+    warnings : list of str, optional
+        The warnings a command gave (see :func:`report_document`); the report shows them.
 
     Returns
     -------
     Path
         The folder.
     """
-    doc = result.to_dict()
-    doc["inputs"] = doc["inputs"] | dict(inputs or {})
+    doc = report_document(result, inputs, warnings)
     with output_folder(folder, force) as tmp:
         write_json(tmp / "discrepancy.json", doc)
         uris = {}

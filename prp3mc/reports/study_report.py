@@ -47,7 +47,8 @@ def comparison(result: StudyResult, summary: dict | None = None) -> dict:
         references rank best (lowest upper bound) or None; ``ranges``: per
         configuration our worst-case range, the reference range (µm) and
         their ratio; ``max_ratio``: for two configurations, the worse one's
-        maximum over the better one's, ours and the reference's.
+        maximum over the better one's, ours and the reference's (None when
+        ours is zero: a budget of constant inputs).
     """
     summary = summary or build_summary(result)
     configs = summary["configurations"]
@@ -81,7 +82,7 @@ def comparison(result: StudyResult, summary: dict | None = None) -> dict:
     for r in ranges.values():
         r["ratio"] = None if r["reference"] is None else tuple(o / p for o, p in zip(r["ours"], r["reference"]))
     max_ratio = None
-    if reference_best is not None and len(configs) == 2:
+    if reference_best is not None and len(configs) == 2 and ranges[reference_best]["ours"][1] > 0:
         other = next(n for n in configs if n != reference_best)
         max_ratio = {"ours": ranges[other]["ours"][1] / ranges[reference_best]["ours"][1],
                      "reference": refs[other][1] / refs[reference_best][1], "worse": other}
@@ -96,9 +97,10 @@ def _family_shares(result: StudyResult) -> pd.DataFrame:
         k = np.unravel_index(np.argmax(wc.position_mm), wc.position_mm.shape)
         contrib = wc.contribution["position"][k]
         fam = pd.Series(contrib, index=[t.rsplit("_", 1)[0] for t in wc.terms]).groupby(level=0).sum()
-        for f, v in fam.items():
+        worst = float(wc.position_mm[k])
+        for f, v in fam.items():  # no share of a zero worst case (a budget of constant inputs)
             rows.append({"configuration": c.name, "family": f, "contribution_um": MM2UM * v,
-                         "share_pct": 100 * v / float(wc.position_mm[k])})
+                         "share_pct": 100 * v / worst if worst > 0 else float("nan")})
     return pd.DataFrame(rows)
 
 
@@ -204,12 +206,15 @@ def _figures(result: StudyResult) -> list[tuple[str, str, object]]:
                  ("ecdf_phi", "ECDF of |δφ| at the same poses, worst case dashed.",
                   plots.ecdf_figure(res, "phi", pct, fig=_canvas()))]
     for r in res:
+        constant = tuple(getattr(r.sobol, "constant", ()))
+        undefined = (f" Undefined, so not drawn, for {', '.join(constant)}: a constant input (zero-width law) has "
+                     "no variance to share." if constant else "")
         for output, frame in r.ranking.items():
             basis = plots.ranking_basis(frame)[0]
             figs.append((f"sobol_{r.name}_{output}",
                          f"{r.name}, output {output}: Sobol indices with 95 % bootstrap intervals (left, ranked "
                          f"by ST) and each input's share of the exact worst case (right, ranked by share); "
-                         f"both the {basis} of the Sobol grid.",
+                         f"both the {basis} of the Sobol grid.{undefined}",
                          plots.ranking_figure(frame, f"{r.name}: {output}", fig=_canvas())))
     return figs + _allocation_figures(result)
 
@@ -379,17 +384,21 @@ def _merit_name(analysis: str, output: str, statistic: str) -> str:
 
 
 def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = False,
-                formats=("png",)) -> Path:
+                formats=("png",), warnings=None) -> Path:
     """Write the report, figures, tables and summary.json of ``result`` into the folder ``out``.
 
     ``out`` must not exist unless ``force``; it is replaced atomically.
     ``formats`` (``png``, ``svg`` or both, a sequence or ``"png,svg"``) are
     the files written per figure; each is rendered once and the report
-    embeds the same PNG. Returns the path of ``report.html``.
+    embeds the same PNG. ``warnings`` (the messages a command gave while it
+    ran, which include the budget's) replace the summary's own when given
+    and not empty; the report shows them. Returns the path of ``report.html``.
     """
     formats = figure_formats(formats)
     check_output(out, force)
     summary = build_summary(result)
+    if warnings:
+        summary["warnings"] = list(warnings)
     with output_folder(out, force) as tmp:
         (tmp / "figures").mkdir()
         (tmp / "tables").mkdir()
