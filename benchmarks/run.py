@@ -13,6 +13,7 @@ import sys
 import time
 
 import numpy as np
+from bench_discrepancy import bench_discrepancy_cli, speed_table
 from bench_montecarlo import bench_montecarlo
 from bench_sobol import bench_sobol, bench_sobol_pose
 
@@ -97,7 +98,8 @@ def bench_envelope(quick: bool) -> dict:
     return out
 
 
-BENCHES = [bench_sensitivity, bench_worstcase, bench_envelope, bench_montecarlo, bench_sobol, bench_sobol_pose]
+BENCHES = [bench_sensitivity, bench_worstcase, bench_envelope, bench_montecarlo, bench_sobol, bench_sobol_pose,
+           bench_discrepancy_cli]
 
 
 def main(argv=None) -> int:
@@ -152,6 +154,8 @@ def table(r: dict) -> str:
     lines = ["| figure | prp3mc | alternative | alternative's figure | ratio | limit |", "|---|---|---|---|---|---|"]
     lines += ["| " + " | ".join(row) + " |" for row in rows]
     lines.append(f"\n1-minute load average during the run: {r['load_average_1min']:.1f} (2 cores)")
+    if "discrepancy_cli_wall_s_best" in r:
+        lines.append("\n" + speed_table(r))
     extra = {k: v for k, v in r.items() if k.startswith(("sobol", "salib")) and not k.startswith("sobol_pose")}
     lines += [f"{k:45s} {v:.4g}" if isinstance(v, float) else f"{k:45s} {v}" for k, v in extra.items()]
     return "\n".join(lines)
