@@ -24,6 +24,7 @@ from ..output import write_text
 from .._result import FrozenDict
 from ..errors import BudgetError, IncompleteBudgetWarning, UnknownPresetError
 from .laws import Law, law_from_dict
+from .systematic import SystematicEffect, effects_from_dict
 from ..kinematics.sensitivity import LENGTH_FAMILIES
 
 __all__ = ["Budget", "Catalogue", "input_unit", "parse_input", "BUDGET_PRESETS", "SANITY_LIMITS"]
@@ -132,12 +133,16 @@ class Budget:
     sources : dict of str to str
         Where an input's law comes from (catalogue entries record theirs).
     name : str
+    effects : dict of str to SystematicEffect
+        Fitted systematic effects (the ``[effects]`` table: backlash, lead
+        scale, thermal expansion, offsets), keyed by their library name.
     """
 
     inputs: dict
     groups: dict = field(default_factory=dict)
     sources: dict = field(default_factory=dict)
     name: str = "custom"
+    effects: dict = field(default_factory=dict)
 
     def __post_init__(self):
         if not self.inputs:
@@ -174,6 +179,10 @@ class Budget:
         object.__setattr__(self, "inputs", FrozenDict(inputs))
         object.__setattr__(self, "groups", FrozenDict(groups))
         object.__setattr__(self, "sources", FrozenDict(self.sources))
+        for key, eff in dict(self.effects).items():
+            if not isinstance(eff, SystematicEffect) or eff.name != key:
+                raise BudgetError(f"effect {key!r}: expected a SystematicEffect named {key!r}, got {eff!r}")
+        object.__setattr__(self, "effects", FrozenDict(self.effects))
 
     # ------------------------------------------------------------ access
     @property
@@ -205,7 +214,12 @@ class Budget:
         return Budget({**self.inputs, **laws}, groups={k: v for k, v in self.groups.items()
                                                      if not k.startswith("clearance_")},
                       sources={k: v for k, v in self.sources.items() if k not in laws},
-                      name=name or self.name)
+                      name=name or self.name, effects=self.effects)
+
+    def with_effects(self, effects: dict, name: str | None = None) -> "Budget":
+        """A copy with systematic effects added or replaced (``{name: SystematicEffect}``)."""
+        return Budget(self.inputs, groups={k: v for k, v in self.groups.items() if not k.startswith("clearance_")},
+                      sources=self.sources, name=name or self.name, effects={**self.effects, **effects})
 
     def scaled(self, factor: float, family: str | None = None) -> "Budget":
         """A copy with the laws of ``family`` (all but zeta if None) scaled about 0 by ``factor``."""
@@ -305,11 +319,14 @@ class Budget:
 
         ``name``; optional ``catalogues = [paths]`` (relative to the file);
         ``[inputs]`` mapping each input to ``{law = ..., params}`` or
-        ``{catalogue = "dotted.key"}``; optional ``[groups]`` name = [inputs].
+        ``{catalogue = "dotted.key"}``; optional ``[groups]`` name = [inputs];
+        optional ``[effects]`` of fitted systematic effects
+        (:func:`~prp3mc.uncertainty.systematic.effects_from_dict`).
         """
-        unknown = sorted(set(doc) - {"name", "inputs", "groups", "catalogues"})
+        unknown = sorted(set(doc) - {"name", "inputs", "groups", "catalogues", "effects"})
         if unknown:
-            raise BudgetError(f"{source}: unknown key(s) {', '.join(unknown)} (expected name, inputs, groups, catalogues)")
+            raise BudgetError(f"{source}: unknown key(s) {', '.join(unknown)} "
+                              "(expected name, inputs, groups, catalogues, effects)")
         catalogue = (catalogue or Catalogue.bundled()).with_files(doc.get("catalogues", []), base, source)
         raw = doc.get("inputs")
         if not isinstance(raw, dict) or not raw:
@@ -342,8 +359,9 @@ class Budget:
         name = doc.get("name", "custom")
         if not isinstance(name, str):
             raise BudgetError(f"{source}: name must be a string, got {name!r}")
+        effects = effects_from_dict(doc.get("effects", {}), source)
         try:
-            budget = cls(inputs, groups=groups, sources=sources, name=name)
+            budget = cls(inputs, groups=groups, sources=sources, name=name, effects=effects)
         except BudgetError as exc:
             raise BudgetError(f"{source}: {exc}") from None
         if budget.missing_inputs:
@@ -371,6 +389,8 @@ class Budget:
         doc: dict[str, Any] = {"name": self.name, "inputs": inputs}
         if groups:
             doc["groups"] = groups
+        if self.effects:
+            doc["effects"] = {k: eff.to_dict() for k, eff in self.effects.items()}
         return doc
 
     def to_toml(self, path: str | os.PathLike) -> None:
