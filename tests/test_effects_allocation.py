@@ -15,7 +15,7 @@ from prp3mc.uncertainty.allocation import allocation_front, region_poses
 from prp3mc.uncertainty.allocation_search import Problem
 from prp3mc.uncertainty.systematic import SystematicEffect
 
-from .test_allocation import random_menu
+from .test_allocation import assert_pareto_front, random_menu
 
 EFFECTS = {"backlash_1": 0.012, "backlash_3": 0.006, "thermal": 1.5e-5, "scale_2": 3e-4, "beta_1": 0.01}
 
@@ -85,18 +85,7 @@ def test_least_cost_with_effects_equals_brute_force(geometry, preset):
 def test_front_with_effects_is_the_brute_force_pareto_set(geometry, preset):
     menu, poses, fixed = random_menu(5), region_poses(preset, grid=4), fixed_budget(geometry)
     _, costs, pos, _ = brute_force(preset, 5)
-    front = allocation_front(geometry, menu, poses, budget=fixed)
-    rows = front[front["output"] == "position"].sort_values("point")
-    best = np.inf
-    expected = []
-    for k in np.lexsort((pos, costs)):
-        if pos[k] < best * (1 - 1e-9):
-            if expected and np.isclose(expected[-1][0], costs[k], rtol=1e-12):
-                expected.pop()
-            expected.append((costs[k], pos[k]))
-            best = pos[k]
-    np.testing.assert_allclose(rows["cost"], [c for c, _ in expected], rtol=1e-12)
-    np.testing.assert_allclose(1e3 * rows["value"], [p for _, p in expected], rtol=1e-9)
+    assert_pareto_front(allocation_front(geometry, menu, poses, budget=fixed), costs, pos)
 
 
 def test_percentile_spec_is_confirmed_with_the_effects(geometry, preset):
