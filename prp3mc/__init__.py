@@ -31,7 +31,7 @@ _API = {
     "inverse_kinematics": "kinematics.chain", "exact_pose_error": "kinematics.exact",
     "Geometry": "kinematics.geometry", "Region": "kinematics.geometry",
     "Sensitivity": "kinematics.sensitivity", "sensitivity": "kinematics.sensitivity",
-    "Budget": "uncertainty.budget", "Catalogue": "uncertainty.budget",
+    "Budget": "uncertainty.budget", "Catalogue": "uncertainty.catalogue",
     **dict.fromkeys(("Disc", "Discrete", "Normal", "Triangular", "TruncNormal", "Uniform"), "uncertainty.laws"),
     "LinearModel": "uncertainty.model", "linear_model": "uncertainty.model",
     "MonteCarloResult": "uncertainty.montecarlo", "monte_carlo": "uncertainty.montecarlo",

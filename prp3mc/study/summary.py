@@ -16,7 +16,8 @@ Layout (µm and arcsec)::
          "sobol": {"position": {"theta_1": {"kind": "input", "S1": {"value": ..., "se": ...},
                                             "ST": {...}, "worst_case_share": 0.31}, ...}, ...}},
                                             # worst_case_share null where undefined (rho_i, zeta_i alone);
-                                            # S1 and ST null, with a "reason", for a constant input
+                                            # S1, ST null, with a "reason", for a known shift (kind "shift")
+                                            # or a constant input
          "allocation": {"cost": 26.0, "choice": {"rho_1": "CN", ...}, "worst_case_position_um": 77.6,
                         "worst_case_phi_arcsec": 88.2, "feasible": true,
                         "spec": {"position_um": 80.0, "phi_arcsec": 120.0, "percentile": null},
@@ -26,7 +27,8 @@ Layout (µm and arcsec)::
        "delta-shape": {...}},
      "metadata": {"prp3mc_version": ..., "seed": ..., "montecarlo_samples": ..., "wall_time_s": ...},
      "inputs": {"study": {"name": "quick", "file": "/abs/quick.toml", "sha256": "..."},
-                "budget": {"name": "paper", "preset": "paper"},     # or "file" and "sha256"
+                "budget": {"name": "paper", "preset": "paper"},     # or "file" and "sha256"; with
+                                   # [effects]: "effects" {name: table} and "fitted_on" (geometry name)
                 "configurations": {"u-shape": {"geometry": {"name": "u-shape", "preset": "u-shape"},
                                                "region": {"x_mm": [-40, 40], "y_mm": [60, 140], "phi_deg": 0}}},
                 "seed": 7, "montecarlo_seed": ..., "sobol_seed": ..., "worstcase_grid": [41, 41],
@@ -82,7 +84,14 @@ from .results import ConfigurationResult, StudyResult, over_grid, pct_se
 
 __all__ = ["build_summary", "study_inputs"]
 
-_UNDEFINED_CONSTANT = "undefined: a constant input (zero-width law) has no variance to share"
+
+def _undefined(name: str, kind: str, constant: set) -> str:
+    """Why a Sobol index is undefined (it is NaN in the result, null in summary.json)."""
+    if kind == "shift":
+        return "undefined: a known shift (an offset or lead scale of the budget's effects) has no variance to share"
+    if name in constant:
+        return "undefined: a constant input (zero-width law) has no variance to share"
+    return "undefined: the output does not vary over the budget"
 
 
 def _stat(value, se) -> dict:
@@ -120,7 +129,7 @@ def _montecarlo(c: ConfigurationResult) -> dict:
 
 
 def _sobol(c: ConfigurationResult) -> dict:
-    """Indices of every input and group; null with a ``reason`` where undefined (JSON has no NaN)."""
+    """Indices of every factor and group; S1 and ST null, with the ``reason``, where undefined (JSON has no NaN)."""
     out = {}
     constant = set(getattr(c.sobol, "constant", ()))
     for output, frame in c.ranking.items():
@@ -128,9 +137,8 @@ def _sobol(c: ConfigurationResult) -> dict:
         for row in frame.itertuples(index=False):
             entry = {"kind": row.kind, "S1": _stat(row.S1, row.S1_conf / Z95), "ST": _stat(row.ST, row.ST_conf / Z95),
                      "worst_case_share": _exact_or_none(row.worst_case_share)}
-            if row.name in constant or not np.isfinite([row.S1, row.ST, row.S1_conf, row.ST_conf]).all():
-                entry.update(S1=None, ST=None, reason=_UNDEFINED_CONSTANT if row.name in constant else
-                             "undefined: the output does not vary over the budget")
+            if not np.isfinite([row.S1, row.ST, row.S1_conf, row.ST_conf]).all():
+                entry.update(S1=None, ST=None, reason=_undefined(row.name, row.kind, constant))
             entries[row.name] = entry
         out[output] = entries
     return out
@@ -181,7 +189,7 @@ def study_inputs(result: StudyResult) -> dict:
         configs[c.name] = {"geometry": _record(c.geometry, geometries, base, Geometry.load),
                            "region": {"x_mm": [float(v) for v in region.x_mm],
                                       "y_mm": [float(v) for v in region.y_mm], "phi_deg": float(region.phi_deg)}}
-    budget = _record(study.budget, budgets, base, Budget.load)
+    budget = _record(study.budget, budgets, base, Budget.load) | study.budget.effects_record()
     if study.budget.missing_inputs:
         budget["missing_inputs"] = list(study.budget.missing_inputs)
     out = {"study": record, "budget": budget,
