@@ -50,7 +50,9 @@ class DiscrepancyCommand:
             doc = result.to_dict()
             emit_json(doc | {"inputs": doc["inputs"] | record})
             return
-        print("\n".join(headline(result) + [f"report: {folder / 'report.html'}"]))
+        print("\n".join(headline(result) + [f"report: {folder / 'report.html'}",
+                                             f"updated model: {folder / 'model'} (geometry.toml, budget.toml, "
+                                             "budget_compensated.toml)"]))
 
 
 def headline(result) -> list[str]:
@@ -79,4 +81,7 @@ def headline(result) -> list[str]:
                f"not closed: UNEXPLAINED disagreement remains ({g['deciding_channel'].replace('_', ' ')})")
     lines.append(f"gap {g['before']:.3g} -> {g['after']:.3g} (null level <= 1, closed at <= {g['closed_at']:.2g}): "
                  f"{verdict}")
+    h = g["held_out"]
+    lines.append(f"held-out gap (cross-validation by pose, {h['folds']} folds; trust this one) "
+                 f"{h['before']:.3g} -> {h['after']:.3g}")
     return lines

@@ -31,13 +31,15 @@ from ..progress import Progress
 from ..uncertainty.budget import Budget
 from . import outliers as gross
 from .campaign import Campaign, read_campaign, require_testable
-from .diagnostics import diagnose, gap, gap_value
+from .diagnostics import diagnose, gap, gap_value, null_variances
 from .effects import effect
+from .holdout import held_out_gap
 from .likelihood import Engine, Fit
 from .nuisance import DRIFT, NUISANCE_NAMES, NUISANCE_UNITS, REGISTRATION
 from .prediction import noise_cov, predict
 from .results import DiscrepancyResult
 from .selection import name_effects, names_in, select
+from .updated import updated_model
 
 from .iso9283 import iso9283_figures
 
@@ -128,9 +130,12 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
         d2 = gross.distances(full, keep, engine.values(fit), fit.factors, fit.r)
     named = name_effects(engine, fit, accepted)
     done()
-    before = diagnose(engine, base, n_bootstrap, rng)
-    after = diagnose(engine, fit, n_bootstrap, rng)
+    null_before = null_variances(engine, base, n_bootstrap, rng)
+    before = diagnose(engine, base, null=null_before)
+    null_after = null_variances(engine, fit, n_bootstrap, rng)
+    after = diagnose(engine, fit, null=null_after)
     gap_doc = gap(before, after, alpha_unexplained)
+    gap_doc["held_out"] = held_out_gap(engine, {"before": (base, null_before), "after": (fit, null_after)}, seed)
     done()
     outlier_rows = tuple({"row": int(m), "pose_id": str(campaign.pose_id[m]), "z": float(np.sqrt(d2[m]))}
                          for m in np.flatnonzero(~keep))
@@ -174,6 +179,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
         iso9283=iso, iso9283_poses=iso_poses, invisible=engine.invisible,
         confounded_with_registration=confounded,
         structural_aliases=tuple(tuple(g) for g in engine.structural_aliases()), not_testable=not_testable,
+        model=updated_model(geometry, budget, named, campaign),
         campaign=campaign, geometry=geometry, budget=budget, seed=seed, n_bootstrap=n_bootstrap, alpha=alpha,
         alpha_unexplained=alpha_unexplained, instrument_sigma_mm=instrument_sigma_mm,
         instrument_sigma_deg=instrument_sigma_deg, wall_time_s=time.perf_counter() - t0)
@@ -216,7 +222,7 @@ def _iso9283(engine: Engine, fit: Fit, seed: int):
     campaign = dataclasses.replace(engine.campaign, measured=corrected)
     mean, W, R = engine.moments(fit.factors, fit.r)
     sys = np.array([values[engine.systematic[j].name] for j in fit.sys])
-    mean = mean + engine.pose_mean(engine.G[:, :, list(fit.sys)] @ sys)
+    mean = mean + engine.pose_mean(engine.known + engine.G[:, :, list(fit.sys)] @ sys)
     figures = iso9283_figures(campaign, mean, W, predicted_repeat_cov=R, rng=seed)
     return {"measured": dict(figures["measured"]), "predicted": dict(figures["predicted"])}, figures["per_pose"]
 
