@@ -29,7 +29,7 @@ from .._rng import child_seed
 from .diagnostics import diagnose, gap_value
 from .likelihood import Engine, Fit
 
-__all__ = ["held_out_gap", "N_FOLDS"]
+__all__ = ["held_out_gap", "held_out_fits", "N_FOLDS"]
 
 #: Folds of the cross-validation (fewer when the campaign has fewer poses).
 N_FOLDS = 5
@@ -91,6 +91,50 @@ def _predicted(engine: Engine, trained: Fit, names: list, rows: np.ndarray, pose
     Lw[poses], Lb[poses] = state.Lw[poses], state.Lb[poses]
 
 
+def held_out_fits(engine: Engine, states: dict, seed: int) -> tuple[dict, int]:
+    """The held-out residuals of each model state, as model states with nothing fitted.
+
+    Parameters
+    ----------
+    engine : Engine
+        The campaign's kept rows (gross errors set aside).
+    states : dict
+        Label -> the model state (:class:`~prp3mc.measurement.likelihood.Fit`)
+        fitted on the whole campaign.
+    seed : int
+        The analysis seed (the folds are dealt from a child stream of it).
+
+    Returns
+    -------
+    fits : dict
+        Label -> a :class:`~prp3mc.measurement.likelihood.Fit` whose ``z``
+        are the whitened held-out residuals of every pose (standard normal
+        when the model is right), ``resid`` the residuals, ``Lw, Lb`` each
+        pose's whitening; its spread factors and ``r`` are the whole
+        campaign's, and it has no fitted values.
+    folds : int
+    """
+    fold = _folds(engine.P, seed)
+    k = int(fold.max()) + 1
+    fold_rows = fold[engine.idx]
+    pieces = {label: (np.zeros(3 * engine.M + 3 * engine.P), np.zeros((engine.M, 3)),
+                      np.zeros((engine.P, 3, 3)), np.zeros((engine.P, 3, 3))) for label in states}
+    for f in range(k):
+        train_keep = engine.keep.copy()
+        train_keep[engine.rows[fold_rows == f]] = False
+        train = Engine(engine.geometry, engine.budget, engine.full_campaign, engine.noise,
+                       registration=engine.registration, keep=train_keep)
+        rows, poses = np.flatnonzero(fold_rows == f), np.flatnonzero(fold == f)
+        for label, fit in states.items():
+            trained, names = _train_fit(train, fit, engine)
+            _predicted(engine, trained, names, rows, poses, *pieces[label])
+    fits = {label: Fit(sys=(), factors=dict(fit.factors), r=fit.r, nuis=(), theta=np.zeros(0),
+                       theta_cov=np.zeros((0, 0)), loglik=float("nan"), z=pieces[label][0], resid=pieces[label][1],
+                       Lw=pieces[label][2], Lb=pieces[label][3], k_between=0.0)
+            for label, fit in states.items()}
+    return fits, k
+
+
 def held_out_gap(engine: Engine, states: dict, seed: int) -> dict:
     """The gap of each model state measured on poses left out of its fit (see the module notes).
 
@@ -111,28 +155,11 @@ def held_out_gap(engine: Engine, states: dict, seed: int) -> dict:
         ``{label: gap}`` for every state, ``deciding_channel`` of the last,
         ``folds`` and ``method``.
     """
-    fold = _folds(engine.P, seed)
-    k = int(fold.max()) + 1
-    fold_rows = fold[engine.idx]
+    fits, k = held_out_fits(engine, {label: fit for label, (fit, _) in states.items()}, seed)
     out: dict = {}
-    pieces = {label: (np.zeros(3 * engine.M + 3 * engine.P), np.zeros((engine.M, 3)),
-                      np.zeros((engine.P, 3, 3)), np.zeros((engine.P, 3, 3))) for label in states}
-    for f in range(k):
-        train_keep = engine.keep.copy()
-        train_keep[engine.rows[fold_rows == f]] = False
-        train = Engine(engine.geometry, engine.budget, engine.full_campaign, engine.noise,
-                       registration=engine.registration, keep=train_keep)
-        rows, poses = np.flatnonzero(fold_rows == f), np.flatnonzero(fold == f)
-        for label, (fit, _) in states.items():
-            trained, names = _train_fit(train, fit, engine)
-            _predicted(engine, trained, names, rows, poses, *pieces[label])
     channel = None
-    for label, (fit, null) in states.items():
-        z, resid, Lw, Lb = pieces[label]
-        pseudo = Fit(sys=(), factors=dict(fit.factors), r=fit.r, nuis=(), theta=np.zeros(0),
-                     theta_cov=np.zeros((0, 0)), loglik=float("nan"), z=z, resid=resid, Lw=Lw, Lb=Lb,
-                     k_between=0.0)
-        out[label], channel = gap_value(diagnose(engine, pseudo, null=null, fitted=False))
+    for label, (_, null) in states.items():
+        out[label], channel = gap_value(diagnose(engine, fits[label], null=null, fitted=False))
     out.update(deciding_channel=channel, folds=k,
                method=f"cross-validation by pose: the poses dealt at random into {k} folds; each fold's poses "
                       "predicted by the model (nuisances, repeatable fraction, the named effects' values and "
