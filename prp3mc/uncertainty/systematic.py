@@ -24,6 +24,16 @@ where it came from (the campaign file and its sha256). Spreads are not
 effects of that table: a fitted spread is written as the input's new law.
 Thermal expansion needs the operating temperature range ``temp_range_C`` the
 analyses bound it over.
+
+At an analysis pose (README, *File formats*), offsets and lead scales are
+known shifts of the pose error; a backlash and the thermal expansion have a
+driver that is not known there (the approach direction, the temperature), so
+they enter as bounded random *factors* (:func:`effect_factors`): backlash_i is
+``delta b_i = s h_i / 2`` with s = -1 or +1 equally likely, thermal is the
+temperature T uniform over ``temp_range_C``, one T for all three legs.
+
+Fitted effects belong to the machine they were measured on: a budget records
+the geometry they were fitted on (:class:`FittedOn`) and refuses another.
 """
 
 from __future__ import annotations
@@ -36,11 +46,14 @@ from typing import Any
 import numpy as np
 
 from ..errors import BudgetError
+from ..kinematics.geometry import Geometry
 from ..kinematics.sensitivity import LENGTH_FAMILIES
 from .._result import FrozenDict
+from .laws import Discrete, Law, Uniform
 
 __all__ = ["Effect", "EFFECT_NAMES", "OFFSET_FAMILIES", "SPREAD_FAMILIES", "T_REF_C", "effect",
-           "slider_error", "offset_errors", "SystematicEffect", "effects_from_dict", "EFFECT_LIMITS"]
+           "slider_error", "offset_errors", "SystematicEffect", "effects_from_dict", "EFFECT_LIMITS",
+           "effect_factors", "FittedOn", "FIT_TOLERANCE"]
 
 #: Parameters whose constant offset is a library effect (``b``: encoder zero offset).
 OFFSET_FAMILIES = ("a", "alpha", "beta", "gamma", "theta", "c", "e", "psi", "b")
@@ -308,3 +321,99 @@ def effects_from_dict(doc, source: str) -> FrozenDict:
         except BudgetError as exc:
             raise BudgetError(f"{source}: {exc}") from None
     return FrozenDict(out)
+
+
+def effect_factors(effects: dict) -> dict[str, Law]:
+    """The random factors of a budget's effects, in library order: name -> law.
+
+    ``backlash_i``: the slider error delta b_i itself, -h_i/2 or +h_i/2 with
+    probability 1/2 each (mm); ``thermal``: the temperature T, uniform over
+    ``temp_range_C`` (degrees C). Offsets and scales have no random factor.
+    """
+    out: dict[str, Law] = {}
+    for name in EFFECT_NAMES:
+        eff = effects.get(name)
+        if eff is None:
+            continue
+        if eff.effect.kind == "backlash":
+            out[name] = Discrete((-0.5 * eff.value, 0.5 * eff.value), (0.5, 0.5))
+        elif eff.effect.kind == "thermal":
+            out[name] = Uniform(*eff.temp_range_C)
+    return out
+
+
+#: Largest difference of a leg parameter between the geometry a budget's effects were fitted on and
+#: the geometry the budget is used with: more than fitted offsets of that machine could explain.
+FIT_TOLERANCE = {"mm": 1.0, "deg": 1.0}
+_FIT_KEYS = tuple(f"{k}_{'mm' if k in LENGTH_FAMILIES else 'deg'}"
+                  for k in ("a", "alpha", "beta", "gamma", "theta", "c", "e", "psi"))
+
+
+@dataclass(frozen=True, slots=True)
+class FittedOn:
+    """The geometry a budget's effects were fitted on: its name and leg parameters (the fingerprint).
+
+    The TOML table ``[fitted_on]`` holds ``name`` and one list of three
+    values (legs 1-3) per parameter: ``a_mm, alpha_deg, beta_deg, gamma_deg,
+    theta_deg, c_mm, e_mm, psi_deg`` (strokes do not change the model).
+
+    Attributes
+    ----------
+    name : str
+    legs : dict of str to tuple of 3 float
+        Parameter key (as above) to its values for legs 1-3, mm or deg.
+    """
+
+    name: str
+    legs: dict
+
+    def __post_init__(self):
+        if not isinstance(self.name, str):
+            raise BudgetError(f"fitted_on: name must be a string, got {self.name!r}")
+        if set(self.legs) != set(_FIT_KEYS):
+            missing = [k for k in _FIT_KEYS if k not in self.legs]
+            extra = sorted(set(self.legs) - set(_FIT_KEYS))
+            raise BudgetError("fitted_on needs " + ", ".join(_FIT_KEYS)
+                              + (f"; missing {', '.join(missing)}" if missing else "")
+                              + (f"; unknown {', '.join(extra)}" if extra else ""))
+        legs = {}
+        for key in _FIT_KEYS:
+            values = self.legs[key]
+            if not isinstance(values, (list, tuple)) or len(values) != 3:
+                raise BudgetError(f"fitted_on: {key} must list three values (legs 1-3), got {values!r}")
+            legs[key] = tuple(_number(v, f"fitted_on: {key}") for v in values)
+        object.__setattr__(self, "legs", FrozenDict(legs))
+
+    @classmethod
+    def of(cls, geometry: Geometry) -> "FittedOn":
+        """The fingerprint of ``geometry``."""
+        return cls(geometry.name, {key: getattr(geometry, key.rsplit("_", 1)[0]) for key in _FIT_KEYS})
+
+    @classmethod
+    def from_dict(cls, doc, source: str) -> "FittedOn":
+        """Parse a ``[fitted_on]`` table (errors name ``source``)."""
+        if not isinstance(doc, dict):
+            raise BudgetError(f"{source}: [fitted_on] must be a table (name and the legs' parameters), got {doc!r}")
+        try:
+            return cls(doc.get("name", "custom"), {k: v for k, v in doc.items() if k != "name"})
+        except BudgetError as exc:
+            raise BudgetError(f"{source}: {exc}") from None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, **{k: list(v) for k, v in self.legs.items()}}
+
+    def difference(self, geometry: Geometry) -> str | None:
+        """The largest departure of ``geometry`` beyond :data:`FIT_TOLERANCE`, as text, or None."""
+        worst, text = 0.0, None
+        for key in _FIT_KEYS:
+            unit = key.rsplit("_", 1)[1]
+            diff = np.abs(np.subtract(getattr(geometry, key.rsplit("_", 1)[0]), self.legs[key]))
+            if unit == "deg":
+                diff = np.abs((diff + 180.0) % 360.0 - 180.0)
+            leg = int(np.argmax(diff))
+            ratio = diff[leg] / FIT_TOLERANCE[unit]
+            if ratio > 1.0 and ratio > worst:
+                worst = ratio
+                text = (f"{key} of leg {leg + 1} is {getattr(geometry, key.rsplit('_', 1)[0])[leg]:g} "
+                        f"there and {self.legs[key][leg]:g} here (more than {FIT_TOLERANCE[unit]:g} {unit} apart)")
+        return text
