@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from prp3mc import Geometry
-from prp3mc.errors import CampaignError
+from prp3mc.errors import BudgetError, CampaignError
 from prp3mc.measurement.holdout import N_FOLDS, _folds, held_out_fits
 from prp3mc.measurement.likelihood import Engine
 from prp3mc.measurement.prediction import noise_cov, predict
@@ -118,8 +118,16 @@ def test_updated_model_files_compensation_and_report(tmp_path):
     blind = updated_model(g, BUDGET, r.named_effects, r.campaign, temperature_sensor=False, approach_known=False)
     assert set(blind.compensated.effects) == {"thermal", "backlash_1"}
     assert {e["name"] for e in blind.non_compensable} == {"thermal", "backlash_1"}
+    # predicted accuracy over the u-shape's region: compensation removes the systematic part
+    acc = r.to_dict()["predicted_accuracy"]
+    assert acc["region"]["source"] == "the region of preset u-shape" and acc["region"]["n_poses"] == 49
+    for key in ("worst_case_position_mm", "p95_position_mm", "p99_position_mm", "worst_case_phi_deg"):
+        assert acc["compensated"][key] < acc["updated"][key], key
+        assert acc["compensated"][key] == pytest.approx(acc["original"][key], rel=0.02), key
+    assert acc["updated"]["budget"] == "paper updated" and acc["compensated"]["geometry"] == "u-shape identified"
     html = (folder / "report.html").read_text()
     assert "Trust the held-out gap" in html and "Compensable" in html and "Non-compensable" in html
+    assert "Predicted accuracy of this machine" in html
 
 
 @pytest.mark.parametrize("preset", ["u-shape", "delta-shape"])
@@ -139,6 +147,11 @@ def test_round_trip_names_nothing_on_a_new_campaign(preset, tmp_path):
     assert r2.named_effects == ()
     assert r2.gap["after"] <= r2.gap["closed_at"] and r2.gap["held_out"]["after"] <= r2.gap["closed_at"]
     assert covered(discrepancy(g, BUDGET, c2, rng=1, **SIGMA), HIDDEN)
+    # the model files belong to this machine: another geometry is refused in one line
+    other = Geometry.from_preset("delta-shape" if preset == "u-shape" else "u-shape")
+    with pytest.raises(BudgetError, match=f"fitted on geometry '{preset} identified', not on geometry") as info:
+        discrepancy(other, model_budget, c2, rng=1, **SIGMA)
+    assert "\n" not in str(info.value)
 
 
 def test_folds_deal_every_pose_once(seed):

@@ -161,7 +161,7 @@ def null_variances(engine: Engine, fit: Fit, n_boot: int, rng) -> tuple[np.ndarr
     The repeatable part is drawn once per pose and replicate, the rest at
     every visit: ``mu + sqrt(r) (e_pose - mu) + sqrt(1 - r) (e_visit - mu)``.
     """
-    bud = spread_budget(engine.budget, {n: f * engine.spread_ref[n] for n, f in fit.factors.items()})
+    bud = spread_budget(engine.budget.without_effects(), {n: f * engine.spread_ref[n] for n, f in fit.factors.items()})
     model = linear_model(engine.geometry, bud, engine.campaign.poses, check=False)
     mean = engine.moments(fit.factors, fit.r)[0]
     coef = model.coef[engine.idx]

@@ -116,10 +116,13 @@ def budget_effect_errors(geometry: Geometry, budget: Budget, campaign) -> np.nda
     ------
     CampaignError
         The budget has an effect whose driver column the campaign lacks.
+    BudgetError
+        The budget's effects were fitted on another geometry (its ``[fitted_on]``).
     """
     effects = dict(budget.effects)
     if not effects:
         return np.zeros((campaign.n_measurements, 3))
+    budget.check_geometry(geometry)
     columns = {f"dir_{i + 1}" for i in range(3) if campaign.has_dir[i]} | (
         {"temp_C"} if campaign.temp_C is not None else set())
     for name, eff in effects.items():

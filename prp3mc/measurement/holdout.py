@@ -4,8 +4,10 @@ An effect fitted to a campaign always shrinks the gap measured on that
 campaign; only measurements left out of the fit show whether the model
 improved. The campaign's poses are dealt at random into K folds (5, or one
 per pose when fewer). For each fold, the nuisances (registration, drift),
-the repeatable fraction, the named systematic values and spread factors are
-fitted again on the other folds, and the poses of the fold are *predicted*:
+the named systematic values and spread factors are fitted again on the
+other folds (the repeatable fraction, one number of the whole campaign,
+keeps its whole-campaign value: refitting it too doubled the cost), and the
+poses of the fold are *predicted*:
 their residuals under those fitted values, whitened by the covariance the
 training fit implies plus the uncertainty of its estimates (so that they are
 standard normal when the model is right). The seven channels of the verdict
@@ -47,7 +49,7 @@ def _folds(n_poses: int, seed: int) -> np.ndarray:
 
 
 def _train_fit(train: Engine, fit: Fit, engine: Engine) -> tuple[Fit, list]:
-    """``fit``'s model (nuisances, named systematic set, spreads) refitted on the training engine.
+    """``fit``'s model (nuisances, named systematic set, spreads; ``r`` kept) refitted on the training engine.
 
     Returns the fit and the names of its systematic columns (named effects the
     training poses cannot see are left out).
@@ -56,7 +58,7 @@ def _train_fit(train: Engine, fit: Fit, engine: Engine) -> tuple[Fit, list]:
     known = {e.name: j for j, e in enumerate(train.systematic)}
     names = [n for n in names if n in known]
     factors = {n: f for n, f in fit.factors.items() if n in train.spread_input}
-    return train.refit(tuple(known[n] for n in names), factors, start_r=fit.r, nuis=fit.nuis), names
+    return train.refit(tuple(known[n] for n in names), factors, r=fit.r, nuis=fit.nuis), names
 
 
 def _predicted(engine: Engine, trained: Fit, names: list, rows: np.ndarray, poses: np.ndarray,
@@ -162,7 +164,7 @@ def held_out_gap(engine: Engine, states: dict, seed: int) -> dict:
         out[label], channel = gap_value(diagnose(engine, fits[label], null=null, fitted=False))
     out.update(deciding_channel=channel, folds=k,
                method=f"cross-validation by pose: the poses dealt at random into {k} folds; each fold's poses "
-                      "predicted by the model (nuisances, repeatable fraction, the named effects' values and "
-                      "spreads) refitted on the other folds, the named set kept as selected on the whole "
+                      "predicted by the model (nuisances, the named effects' values and spreads) refitted on the "
+                      "other folds, the named set as selected and the repeatable fraction as fitted on the whole "
                       "campaign; the gap's seven channels on all held-out residuals")
     return out

@@ -137,12 +137,14 @@ def predict(geometry: Geometry, budget: Budget, campaign: Campaign, *, effects: 
     ------
     CampaignError
         The budget has an effect whose driver column the campaign lacks.
+    BudgetError
+        The budget's effects were fitted on another geometry.
     """
     effects = dict(effects or {})
     model_budget = spread_budget(budget, effects)
     if not 0.0 <= repeatable_fraction <= 1.0:
         raise BudgetError(f"repeatable_fraction must lie in [0, 1], got {repeatable_fraction}")
-    mean, sigma = linear_model(geometry, model_budget, campaign.poses, check=False).moments()
+    mean, sigma = linear_model(geometry, model_budget.without_effects(), campaign.poses, check=False).moments()
     noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
     systematic = {k: v for k, v in effects.items() if effect(k).systematic}
     m = mean[campaign.pose_index] + budget_effect_errors(geometry, budget, campaign)

@@ -153,6 +153,9 @@ class DiscrepancyResult:
     model : UpdatedModel
         The updated model: identified geometry, updated and compensated
         budgets, the compensable and non-compensable effects.
+    accuracy : mapping
+        Predicted accuracy over the region, original, updated and
+        compensated (:func:`~prp3mc.measurement.accuracy.predicted_accuracy`).
     campaign : Campaign
         The validated campaign (every row).
     geometry, budget
@@ -187,6 +190,7 @@ class DiscrepancyResult:
     structural_aliases: tuple
     not_testable: dict
     model: UpdatedModel
+    accuracy: dict
     campaign: Campaign
     geometry: Geometry
     budget: Budget
@@ -282,6 +286,7 @@ class DiscrepancyResult:
             "structural_aliases": [list(g) for g in self.structural_aliases],
             "not_testable": _thawed(self.not_testable),
             "model": _thawed(self.model.to_dict()),
+            "predicted_accuracy": _thawed(self.accuracy),
             "campaign": {"source": self.campaign.source, "n_measurements": self.campaign.n_measurements,
                          "n_poses": self.campaign.n_poses},
             "geometry": self.geometry.name, "budget": self.budget.name,

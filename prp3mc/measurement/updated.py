@@ -43,7 +43,7 @@ from ..uncertainty.systematic import SystematicEffect
 from .campaign import Campaign
 from .effects import effect, spread_budget
 
-__all__ = ["UpdatedModel", "updated_model", "MODEL_FILES", "COMPENSATION"]
+__all__ = ["UpdatedModel", "updated_model", "base_name", "MODEL_FILES", "COMPENSATION"]
 
 #: The files of the updated model, in ``DIR/model/``.
 MODEL_FILES = {"geometry": "geometry.toml", "budget": "budget.toml", "compensated": "budget_compensated.toml"}
@@ -54,7 +54,13 @@ COMPENSATION = {
     "thermal": "with a temperature sensor: correct every slider's lead by alpha_T (T - 20 degC)",
     "backlash": "with the approach direction known: add dir_i h_i / 2 to slider i's command",
 }
+#: Added to the name of an identified geometry (once).
 _SUFFIX = " identified"
+
+
+def base_name(name: str) -> str:
+    """A geometry's name without the suffix the updated model adds (``u-shape identified`` -> ``u-shape``)."""
+    return name.removesuffix(_SUFFIX)
 
 
 @dataclass(frozen=True, slots=True)
@@ -179,7 +185,7 @@ def updated_model(geometry: Geometry, budget: Budget, named_effects, campaign: C
             offsets.setdefault(eff.family, np.zeros(3))[eff.leg] += e.value
     name = geometry.name if geometry.name.endswith(_SUFFIX) else geometry.name + _SUFFIX
     new_geometry = geometry.replace(name=name, **{f: np.add(getattr(geometry, f), d) for f, d in offsets.items()})
-    updated = new_budget.with_effects(effects, name=f"{budget.name} updated")
+    updated = new_budget.with_effects(effects, name=f"{budget.name} updated", fitted_on=new_geometry)
     entries, kept = [], {}
     for e in named_effects:
         if not effect(e.name).systematic:
@@ -198,11 +204,7 @@ def updated_model(geometry: Geometry, budget: Budget, named_effects, campaign: C
             entry["why"] = text
             kept[key] = eff
         entries.append(entry)
-    compensated = _with_only(updated, kept, f"{budget.name} compensated")
+    compensated = updated.without_effects().with_effects(kept, name=f"{budget.name} compensated",
+                                                         fitted_on=new_geometry)
     return UpdatedModel(geometry=new_geometry, budget=updated, compensated=compensated, entries=tuple(entries))
 
-
-def _with_only(budget: Budget, effects: dict, name: str) -> Budget:
-    """``budget`` named ``name`` whose ``[effects]`` table is exactly ``effects``."""
-    return Budget(budget.inputs, groups={k: v for k, v in budget.groups.items() if not k.startswith("clearance_")},
-                  sources=budget.sources, name=name, effects=effects)

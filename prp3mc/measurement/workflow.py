@@ -40,6 +40,7 @@ from .prediction import noise_cov, predict
 from .results import DiscrepancyResult
 from .selection import name_effects, names_in, select
 from .updated import updated_model
+from .accuracy import predicted_accuracy
 
 from .iso9283 import iso9283_figures
 
@@ -60,7 +61,11 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     ----------
     geometry : Geometry
     budget : Budget
-        The model's random errors.
+        The model's random errors and, in its ``[effects]`` table, systematic
+        errors already known (part of every model, null and alternative,
+        driven by the campaign's ``dir_i``, ``temp_C`` and slider positions;
+        one named again is a correction to it). A budget whose effects were
+        fitted on another geometry is refused.
     campaign : Campaign, DataFrame or path
         A campaign (README, *File formats*), measured in the instrument's frame; validated against ``geometry``.
     instrument_sigma_mm, instrument_sigma_deg : float
@@ -97,6 +102,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     for name, value in (("alpha", alpha), ("alpha_unexplained", alpha_unexplained), ("outlier_rate", outlier_rate)):
         if not 0 < value < 1:
             raise BudgetError(f"{name} must lie in (0, 1), got {value}")
+    budget.check_geometry(geometry)
     campaign = require_testable(read_campaign(campaign, geometry))
     noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
     full = Engine(geometry, budget, campaign, noise, registration=registration)
@@ -160,6 +166,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     done()
     if bar is not progress:
         bar.close()
+    model = updated_model(geometry, budget, named, campaign)
     confounded = tuple(n for n, with_ in engine.confounded.items() if "registration" in with_)
     not_testable = dict(engine.not_testable)
     not_testable.update({n: f"confounded with {with_}" for n, with_ in engine.confounded.items()})
@@ -179,7 +186,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
         iso9283=iso, iso9283_poses=iso_poses, invisible=engine.invisible,
         confounded_with_registration=confounded,
         structural_aliases=tuple(tuple(g) for g in engine.structural_aliases()), not_testable=not_testable,
-        model=updated_model(geometry, budget, named, campaign),
+        model=model, accuracy=predicted_accuracy(geometry, budget, model, campaign, seed),
         campaign=campaign, geometry=geometry, budget=budget, seed=seed, n_bootstrap=n_bootstrap, alpha=alpha,
         alpha_unexplained=alpha_unexplained, instrument_sigma_mm=instrument_sigma_mm,
         instrument_sigma_deg=instrument_sigma_deg, wall_time_s=time.perf_counter() - t0)
