@@ -45,7 +45,7 @@ from ..kinematics.chain import DEFAULT_LIMITS, as_poses, refusal
 from .model import LinearModel, linear_model
 from ._envelope import REASONS, envelope_kernel, leg_constants, term_table, zonotope_max
 
-__all__ = ["WorstCase", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "QUANTITIES"]
+__all__ = ["WorstCase", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "term_bounds", "QUANTITIES"]
 
 #: Quantities maximised: the position-error norm, |dphi|, |dx| and |dy|.
 QUANTITIES = ("position", "phi", "x", "y")
@@ -253,7 +253,7 @@ def _clearance_interval(rho_bounds, zeta_bounds_deg, omega: np.ndarray):
     return ((rho_lo_end * cmin, rho_hi_end * cmax), (rho_lo_end, to_deg(amin)), (rho_hi_end, to_deg(amax)))
 
 
-def _term_bounds(model: LinearModel, bounds: np.ndarray) -> np.ndarray:
+def term_bounds(model: LinearModel, bounds: np.ndarray) -> np.ndarray:
     """Interval of every model term, shape (..., T, 2), mm or deg; ``bounds`` (D, 2) of the factors."""
     tb = np.empty(model.poses.shape[:-1] + (len(model.terms), 2))
     for t, (kind, *args) in enumerate(model._plan):
@@ -341,7 +341,7 @@ def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | No
 
     def run(sl: slice):
         model = linear_model(geometry, budget, flat[sl], check=check)
-        tb = _term_bounds(model, bounds)
+        tb = term_bounds(model, bounds)
         values, signs = _maxima(model, tb)
         return model, tb, values, signs
 
