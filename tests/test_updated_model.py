@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from prp3mc import Geometry
+from prp3mc.cli import main
 from prp3mc.errors import BudgetError, CampaignError
 from prp3mc.measurement.holdout import N_FOLDS, _folds, held_out_fits
 from prp3mc.measurement.likelihood import Engine
@@ -86,7 +87,7 @@ def test_an_effect_already_in_the_budget_is_corrected():
     assert model["scale_2"].value == pytest.approx(1e-4 + named["scale_2"].value, rel=1e-12)
 
 
-def test_updated_model_files_compensation_and_report(tmp_path):
+def test_updated_model_files_compensation_and_report(tmp_path, capsys):
     """The three model files load as --geometry and --budget; geometric offsets go into the geometry, every
     systematic effect into [effects] with its campaign file and sha256; the compensated budget keeps only what a
     controller cannot remove."""
@@ -128,6 +129,16 @@ def test_updated_model_files_compensation_and_report(tmp_path):
     html = (folder / "report.html").read_text()
     assert "Trust the held-out gap" in html and "Compensable" in html and "Non-compensable" in html
     assert "Predicted accuracy of this machine" in html
+    # every command reads the model files
+    geo = str(folder / "model" / "geometry.toml")
+    for name in ("budget.toml", "budget_compensated.toml"):
+        common = ["--geometry", geo, "--budget", str(folder / "model" / name), "--json"]
+        for argv in (["worstcase", "--pose", "0", "100", "0"], ["montecarlo", "--pose", "0", "100", "0", "--samples",
+                     "4096", "--seed", "1"], ["sobol", "--pose", "0", "100", "0", "--samples", "512", "--seed", "1"],
+                     ["allocate", "--region", "u-shape", "--classes", "example", "--spec-position-um", "300",
+                      "--grid", "3"]):
+            assert main(argv + common) == 0, (argv, name)
+    capsys.readouterr()
 
 
 @pytest.mark.parametrize("preset", ["u-shape", "delta-shape"])
