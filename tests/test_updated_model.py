@@ -2,6 +2,8 @@
 held-out gap, and the round trip: a second campaign of the same machine, checked against the model files,
 names nothing."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -184,3 +186,20 @@ def test_held_out_residuals_are_standard_when_the_model_is_right(seed):
     z2 = fits["after"].z ** 2
     assert k == 5 and z2.size == 3 * (c.n_measurements + c.n_poses)
     assert abs(z2.sum() - 3 * c.n_measurements) < 4.0 * z2.std() * np.sqrt(z2.size)
+
+
+@pytest.mark.slow  # two analyses and reports through the command line
+def test_round_trip_through_the_command_line(tmp_path, capsys):
+    sigma = ["--instrument-sigma-mm", "0.002", "--instrument-sigma-deg", "0.0005", "--seed", "1"]
+    for k, seed in enumerate((0, 10_000), start=1):
+        campaign("u-shape", seed).to_csv(tmp_path / f"c{k}.csv")
+    assert main(["discrepancy", "--geometry", "u-shape", "--budget", "paper", "--data", str(tmp_path / "c1.csv"),
+                 "--out", str(tmp_path / "r1"), *sigma]) == 0
+    model = tmp_path / "r1" / "model"
+    assert main(["discrepancy", "--geometry", str(model / "geometry.toml"), "--budget", str(model / "budget.toml"),
+                 "--data", str(tmp_path / "c2.csv"), "--out", str(tmp_path / "r2"), *sigma]) == 0
+    assert "named nothing" in capsys.readouterr().out
+    doc = json.loads((tmp_path / "r2" / "discrepancy.json").read_text())
+    assert doc["named_effects"] == [] and doc["gap"]["closed"]
+    assert doc["gap"]["held_out"]["after"] <= doc["gap"]["closed_at"]
+    assert doc["inputs"]["budget"]["sha256"] and doc["budget"] == "paper updated"
