@@ -216,3 +216,99 @@ def test_cli_refuses_a_budget_fitted_on_another_geometry(tmp_path, capsys):
         err = capsys.readouterr().err
         assert code == 1
         assert len(err.strip().splitlines()) == 1 and "fitted on geometry 'u-shape'" in err
+
+
+# ------------------------------------------------------------ the exact chain behind the other checks
+def test_linearity_guard_sees_the_effects(geometry, region):
+    from prp3mc.errors import LinearityWarning
+    from prp3mc.uncertainty.validity import check_linearity, linearity_departure
+    poses = random_poses(region, 3, np.random.default_rng(8), phi_deg=(0.0, 0.0))
+    small = small_budget(geometry)
+    assert linearity_departure(geometry, small, poses) < 0.01
+    large = small.with_effects(effects({"beta_2": 4.0, "thermal": 5e-4}, temps=(-50.0, 150.0)))
+    assert linearity_departure(geometry, large, poses) > 10 * linearity_departure(geometry, small, poses)
+    with pytest.warns(LinearityWarning, match="too large for the linear error model"):
+        check_linearity(geometry, large, poses)
+
+
+def test_monte_carlo_exact_check_includes_the_effects(geometry):
+    pose = [10.0, 100.0, 1.0] if geometry.name == "u-shape" else [10.0, 160.0, 1.0]
+    budget = small_budget(geometry)
+    r = monte_carlo(geometry, budget, pose, 2048, rng=1, exact_check_poses=1, exact_check_samples=500)
+    row = r.linearization.iloc[0]
+    assert row["position_max_um"] < 0.01 * row["position_p99_linear_um"]
+
+
+def test_optimizer_over_the_factors_does_not_beat_the_envelope(geometry):
+    from prp3mc.uncertainty.crosscheck import optimizer_worst_case
+    pose = [5.0, 100.0, 0.0] if geometry.name == "u-shape" else [5.0, 160.0, 0.0]
+    budget = small_budget(geometry)
+    r = optimizer_worst_case(geometry, budget, pose, rng=3, maxiter=60)
+    env = float(worst_case(geometry, budget, pose).position_mm)
+    assert 0.95 * env <= r.position_mm <= env * (1 + 1e-3)
+    assert set(r.inputs) == set(budget.factors)
+
+
+def test_interop_hands_over_the_factors():
+    from prp3mc.uncertainty.interop import openturns_distribution, salib_model, salib_problem
+    g = Geometry.from_preset("u-shape")
+    budget = small_budget(g)
+    problem = salib_problem(budget)
+    assert problem["names"] == list(budget.factors) and problem["num_vars"] == 9
+    U = np.random.default_rng(0).random((64, 9))
+    np.testing.assert_allclose(salib_model(g, budget, [0, 100, 0], "x")(U),
+                               linear_model(g, budget, [0, 100, 0]).evaluate(budget.ppf(U))[:, 0])
+    pytest.importorskip("openturns")
+    dist = openturns_distribution(budget)
+    assert list(dist.getDescription()) == list(budget.factors)
+    assert dist.getMarginal(budget.factors.index("thermal")).getMean()[0] == pytest.approx(25.0)
+    assert dist.getMarginal(budget.factors.index("backlash_1")).getStandardDeviation()[0] == pytest.approx(0.01)
+
+
+@pytest.mark.parametrize("table, message", [
+    ('[fitted_on]\nname = "u"\na_mm = [1, 2, 3]', "fitted_on needs a_mm, alpha_deg"),
+    ('fitted_on = 3', "[fitted_on] must be a table"),
+    ('[fitted_on]\nname = "u"\na_mm = [1, 2]\nalpha_deg = [0, 0, 0]\nbeta_deg = [0, 0, 0]\ngamma_deg = [0, 0, 0]\n'
+     'theta_deg = [0, 0, 0]\nc_mm = [0, 0, 0]\ne_mm = [0, 0, 0]\npsi_deg = [0, 0, 0]', "a_mm must list three"),
+    ('[fitted_on]\nname = "u"\na_mm = [1, 2, "x"]\nalpha_deg = [0, 0, 0]\nbeta_deg = [0, 0, 0]\ngamma_deg = [0, 0, 0]\n'
+     'theta_deg = [0, 0, 0]\nc_mm = [0, 0, 0]\ne_mm = [0, 0, 0]\npsi_deg = [0, 0, 0]', "finite number"),
+])
+def test_bad_fitted_on_is_refused_in_one_line(tmp_path, table, message):
+    path = tmp_path / "b.toml"
+    top = table.startswith("fitted_on =")
+    inputs = '[inputs]\nb_1 = {law = "uniform", lo = 0, hi = 0.01}\n'
+    path.write_text(table + "\n" + inputs if top else inputs + table + "\n")
+    with pytest.raises(BudgetError) as info:
+        Budget.from_toml(path)
+    assert message in str(info.value) and "\n" not in str(info.value) and str(info.value).startswith(str(path))
+
+
+def test_cli_json_records_and_uses_the_effects(tmp_path, capsys):
+    import json
+    g = Geometry.from_preset("u-shape")
+    budget = small_budget(g)
+    path = tmp_path / "b.toml"
+    budget.to_toml(path)
+    pose = ["0", "100", "0"]
+    assert main(["worstcase", "--geometry", "u-shape", "--budget", str(path), "--pose", *pose, "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    wc = worst_case(g, budget, [0.0, 100.0, 0.0])
+    assert doc["position_mm"] == float(wc.position_mm)
+    assert doc["maximizer"]["position"]["thermal"] in TEMPS and "offset_beta_2" in doc["position_contributions_mm"]
+    record = doc["inputs"]["budget"]
+    assert record["fitted_on"] == "u-shape" and record["effects"]["backlash_1"] == {"value": 0.02, "unit": "mm"}
+    assert main(["montecarlo", "--geometry", "u-shape", "--budget", str(path), "--pose", *pose, "--samples",
+                 "20000", "--seed", "2", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    mean = linear_model(g, budget, [0.0, 100.0, 0.0]).moments()[0]
+    for k, key in enumerate(("x_mm", "y_mm", "phi_deg")):
+        assert abs(doc["mean"][key] - mean[k]) < N_SE * doc["se"]["mean"][key]
+    assert "effects" in doc["inputs"]["budget"]
+    assert main(["sobol", "--geometry", "u-shape", "--budget", str(path), "--pose", *pose, "--samples", "256",
+                 "--seed", "2", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert {"backlash_1", "backlash_3", "thermal"} <= set(doc["outputs"]["position"])
+    shifts = [row for row in doc["ranking"]["position"] if row["kind"] == "shift"]
+    assert {row["name"] for row in shifts} == {"offset_a_1", "offset_beta_2", "offset_psi_3", "offset_b_3",
+                                                "offset_theta_1", "scale_2"}
+    assert all(row["ST"] is None for row in shifts)

@@ -117,3 +117,75 @@ def test_cli_allocate_with_a_budget(tmp_path, capsys):
                  "--spec-position-um", "60", "--grid", "3", "--budget", str(path)])
     err = capsys.readouterr().err
     assert code == 1 and len(err.strip().splitlines()) == 1 and "fitted on geometry 'u-shape'" in err
+
+
+# ---------------------------------------------------------------- a study with a budget's effects
+STUDY = """\
+name = "machine"
+seed = 4
+budget = "machine.toml"
+
+[worstcase]
+grid = 5
+
+[montecarlo]
+samples = 4096
+grid = 2
+percentiles = [50, 99]
+
+[sobol]
+samples = 256
+grid = 2
+outputs = ["position"]
+
+[allocation]
+classes = "example"
+spec_position_um = 140.0
+front = false
+
+[[configuration]]
+geometry = "u-shape"
+"""
+
+
+def test_study_runs_every_analysis_with_the_effects(tmp_path, capsys):
+    u = Geometry.from_preset("u-shape")
+    fixed = fixed_budget(u)
+    fixed.to_toml(tmp_path / "machine.toml")
+    (tmp_path / "machine_study.toml").write_text(STUDY)
+    out = tmp_path / "out"
+    assert main(["study", str(tmp_path / "machine_study.toml"), "--out", str(out), "--no-progress"]) == 0
+    capsys.readouterr()
+    summary = json.loads((out / "summary.json").read_text())
+    record = summary["inputs"]["budget"]
+    assert record["fitted_on"] == "u-shape" and record["effects"]["thermal"]["temp_range_C"] == [15.0, 35.0]
+    grid = __import__("prp3mc").Region.from_preset("u-shape").grid(5)
+    wc = worst_case(u, fixed, grid)
+    got = summary["configurations"]["u-shape"]
+    assert got["worst_case_position_um"]["max"] == pytest.approx(1e3 * wc.position_mm.max(), rel=1e-12)
+    assert {"backlash_1", "thermal", "offset_beta_1", "scale_2"} <= set(got["sobol"]["position"])
+    alloc = allocate(u, "example", grid.reshape(-1, 3), spec_position_um=140.0, budget=fixed)
+    assert got["allocation"]["cost"] == alloc.cost and got["allocation"]["choice"] == alloc.choice
+    html = (out / "report.html").read_text()
+    assert "Systematic effects of the machine" in html and (out / "tables" / "effects.csv").is_file()
+
+
+def test_study_refuses_effects_of_another_machine_in_one_line(tmp_path, capsys):
+    fixed_budget(Geometry.from_preset("u-shape")).to_toml(tmp_path / "machine.toml")
+    (tmp_path / "s.toml").write_text(STUDY + '\n[[configuration]]\ngeometry = "delta-shape"\n')
+    assert main(["study", str(tmp_path / "s.toml"), "--out", str(tmp_path / "out"), "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "s.toml:27: geometry 'delta-shape': budget 'machine'" in err
+
+
+def test_a_sweep_runs_only_the_machine_the_effects_were_fitted_on(tmp_path):
+    """A swept design past the tolerance is another machine: it is reported as failed, with the reason."""
+    from prp3mc.study.runner import run_study
+    from prp3mc.study.summary import build_summary
+    fixed_budget(Geometry.from_preset("u-shape")).to_toml(tmp_path / "machine.toml")
+    text = STUDY.replace("[allocation]", "[x]").split("[x]")[0] + '[[configuration]]\ngeometry = "u-shape"\n'
+    (tmp_path / "s.toml").write_text(text + '\n[sweep]\n"leg.3.a_mm" = [180.4, 200]\n')
+    summary = build_summary(run_study(tmp_path / "s.toml"))
+    assert len(summary["configurations"]) == 1
+    (failed,) = summary["sweep"]["failed"]
+    assert failed["parameters"] == {"leg.3.a_mm": 200} and "fitted on geometry 'u-shape'" in failed["reason"]

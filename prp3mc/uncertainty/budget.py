@@ -207,6 +207,29 @@ class Budget:
         return Budget(self.inputs, groups=self._user_groups(), sources=self.sources, name=name or self.name,
                       effects={**self.effects, **effects}, fitted_on=fitted_on or self.fitted_on)
 
+    def effects_frame(self):
+        """One row per effect: effect, kind, value, unit, ci95_low, ci95_high, temp_lo_C, temp_hi_C,
+        campaign, campaign_sha256, source, and how the analyses take it (``enters``)."""
+        import pandas as pd
+        enters = {"offset": "known shift", "scale": "known shift", "backlash": "±h/2, approach unknown",
+                  "thermal": "temperature over temp_range_C"}
+        rows = [{"effect": k, "kind": e.effect.kind, "value": e.value, "unit": e.unit,
+                 "ci95_low": (e.ci95 or (np.nan,) * 2)[0], "ci95_high": (e.ci95 or (np.nan,) * 2)[1],
+                 "temp_lo_C": (e.temp_range_C or (np.nan,) * 2)[0], "temp_hi_C": (e.temp_range_C or (np.nan,) * 2)[1],
+                 "campaign": e.campaign or "", "campaign_sha256": e.campaign_sha256 or "", "source": e.source or "",
+                 "enters": enters[e.effect.kind]} for k, e in self.effects.items()]
+        return pd.DataFrame(rows)
+
+    def effects_record(self) -> dict:
+        """What an output's ``inputs`` record of the effects: ``effects`` (each as in the
+        TOML table) and ``fitted_on`` (the geometry's name); empty without effects."""
+        if not self.effects:
+            return {}
+        record: dict[str, Any] = {"effects": {k: eff.to_dict() for k, eff in self.effects.items()}}
+        if self.fitted_on is not None:
+            record["fitted_on"] = self.fitted_on.name
+        return record
+
     def without_effects(self) -> "Budget":
         """A copy without the ``[effects]`` table (and its ``fitted_on``): the inputs' laws alone."""
         groups = {k: v for k, v in self._user_groups().items() if set(v) <= set(self.inputs)}

@@ -414,6 +414,7 @@ class FittedOn:
             ratio = diff[leg] / FIT_TOLERANCE[unit]
             if ratio > 1.0 and ratio > worst:
                 worst = ratio
-                text = (f"{key} of leg {leg + 1} is {getattr(geometry, key.rsplit('_', 1)[0])[leg]:g} "
-                        f"there and {self.legs[key][leg]:g} here (more than {FIT_TOLERANCE[unit]:g} {unit} apart)")
+                text = (f"{key} of leg {leg + 1} is {getattr(geometry, key.rsplit('_', 1)[0])[leg]:g} in "
+                        f"{geometry.name!r} and {self.legs[key][leg]:g} in {self.name!r} "
+                        f"(more than {FIT_TOLERANCE[unit]:g} {unit} apart)")
         return text
