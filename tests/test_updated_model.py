@@ -203,3 +203,10 @@ def test_round_trip_through_the_command_line(tmp_path, capsys):
     assert doc["named_effects"] == [] and doc["gap"]["closed"]
     assert doc["gap"]["held_out"]["after"] <= doc["gap"]["closed_at"]
     assert doc["inputs"]["budget"]["sha256"] and doc["budget"] == "paper updated"
+    # a study of the updated machine, from the model files
+    study = tmp_path / "study.toml"
+    study.write_text(f'name = "m"\nseed = 1\nbudget = "{model / "budget.toml"}"\n[worstcase]\ngrid = 5\n'
+                     f'[montecarlo]\nsamples = 1024\ngrid = 3\n[sobol]\nsamples = 256\ngrid = 2\n'
+                     f'[[configuration]]\ngeometry = "{model / "geometry.toml"}"\nregion = "u-shape"\n')
+    assert main(["study", str(study), "--out", str(tmp_path / "s")]) == 0
+    assert "u-shape identified" in capsys.readouterr().out
