@@ -84,6 +84,8 @@ def predicted_accuracy(geometry: Geometry, budget: Budget, model: UpdatedModel, 
     region, source = accuracy_region(geometry, campaign)
     poses = region.grid(grid).reshape(-1, 3)
     poses = poses[feasible(model.geometry, poses) & feasible(geometry, poses)]
+    if not poses.size:                       # a hull whose grid misses the workspace: the campaign's own poses
+        poses, source = campaign.poses, "the campaign's commanded poses"
     mc_seed = child_seed(seed, _STREAM_MC)
     out: dict = {"region": {"x_mm": list(region.x_mm), "y_mm": list(region.y_mm), "phi_deg": region.phi_deg,
                             "grid": grid, "n_poses": int(poses.shape[0]), "source": source},
