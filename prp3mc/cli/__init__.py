@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import gc
 import importlib
 import math
 import pkgutil
@@ -227,8 +228,24 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``prp3mc`` console script; returns the exit status."""
-    argv = sys.argv[1:] if argv is None else argv
+    """Entry point of the ``prp3mc`` console script; returns the exit status.
+
+    Without ``argv`` (the process's own command line, which ends when the
+    command does) every object alive is frozen out of the garbage collector
+    before returning: the interpreter's collections at exit would otherwise
+    walk all of numba's, scipy's and matplotlib's objects, about 0.4 s of a
+    command's time. Objects are still released, files closed and ``atexit``
+    handlers run as usual.
+    """
+    if argv is not None:
+        return _run(argv)
+    status = _run(sys.argv[1:])
+    gc.freeze()
+    return status
+
+
+def _run(argv: list[str]) -> int:
+    """Parse ``argv`` and run its command: one line on stderr for any refusal, and the exit status."""
     try:
         args = build_parser(_command_named(argv)).parse_args(argv)
     except SystemExit as exc:  # usage errors (exit 2, one line), --help and --version (exit 0)
