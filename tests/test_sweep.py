@@ -253,6 +253,7 @@ class _KillOnce(DaskExecutor):
         return super().map(functools.partial(_die_once, self.marker, fn), tasks)
 
 
+@pytest.mark.slow  # a worker process killed and restarted by the cluster
 def test_a_dead_worker_costs_a_retry_not_the_sweep(serial, cluster, tmp_path):
     s, result = serial
     executor = _KillOnce(cluster)
