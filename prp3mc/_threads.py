@@ -21,8 +21,10 @@ __all__ = ["single_threaded_blas"]
 def single_threaded_blas() -> Iterator[None]:
     """Run BLAS (numpy's and scipy's OpenBLAS or MKL) on one thread inside the block; restored after it.
 
-    The numbers do not change: BLAS splits a product between threads by rows
-    and columns, never inside one sum.
+    The numbers are those of any one-thread BLAS run: how BLAS splits a long
+    sum between its threads depends on the machine's cores and moves the last
+    bit of some results (the paper study's Sobol tables: at most 8e-16
+    relative, before this limit, between one and two BLAS threads).
     """
     from threadpoolctl import threadpool_limits
     with threadpool_limits(limits=1, user_api="blas"):
