@@ -193,6 +193,22 @@ def test_cli_refuses_existing_folder_without_force(tmp_path, capsys):
     assert err.count("\n") == 1 and "png, svg" in err and not (tmp_path / "o").exists()
 
 
+def test_figures_drawn_on_worker_processes_are_those_drawn_here(tmp_path):
+    """write_study's worker processes (where the system forks) and this process write the same files."""
+    from prp3mc.reports._render import default_workers
+    from prp3mc.reports.study_report import write_study
+    result = run_study(Study.load(study_file(tmp_path, _replace("seed = 3", "seed = 3\noutputs = []"))),
+                       progress=False)
+    here = write_study(result, tmp_path / "here", workers=1).parent
+    there = write_study(result, tmp_path / "there", workers=2).parent
+    names = sorted(p.name for p in (here / "figures").iterdir())
+    assert names == sorted(p.name for p in (there / "figures").iterdir()) and len(names) == 2
+    assert all((here / "figures" / n).read_bytes() == (there / "figures" / n).read_bytes() for n in names)
+    undated = [re.sub(r"\d{4}-\d\d-\d\dT[\d:+-]+", "", (d / "report.html").read_text()) for d in (here, there)]
+    assert undated[0] == undated[1]
+    assert 1 <= default_workers(12) <= 12 and default_workers(1) == 1
+
+
 def test_cli_bad_study_one_line(tmp_path, capsys):
     path = study_file(tmp_path, BAD[3][0])
     assert main(["study", str(path), "--out", str(tmp_path / "o")]) == 1
@@ -325,6 +341,21 @@ def _fake_config(name, values, x=(-40, 40), y=(60, 140)):
 def _figure():
     from matplotlib.figure import Figure
     return Figure()
+
+
+def test_ecdf_steps_follow_the_sample_ecdf_within_one_step(seed):
+    values = np.random.default_rng(seed).gamma(2.0, size=100_003)
+    n, steps = values.size, 1000
+    x, weights = plots.ecdf_steps(values, steps)
+    assert len(x) <= steps + 1 and weights.sum() == n and x[0] == values.min() and x[-1] == values.max()
+    drawn = np.cumsum(weights) / n
+    ordered = np.sort(values)
+    np.testing.assert_allclose(drawn, np.searchsorted(ordered, x, side="right") / n, rtol=1e-12)  # exact there
+    between = drawn[np.searchsorted(x, ordered, side="right") - 1]                 # the drawn step at each value
+    assert np.max(np.arange(1, n + 1) / n - between) <= 1.0 / steps + 1e-12
+    few, ones = plots.ecdf_steps(values[:50], steps)                                 # small samples: every value
+    np.testing.assert_array_equal(few, values[:50])
+    assert (ones == 1).all()
 
 
 def test_constant_field_says_so_without_extrema():
