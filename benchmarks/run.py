@@ -150,7 +150,7 @@ def table(r: dict) -> str:
         ("the study in process: analyses + report (s; CPU s)",
          f"{g(r['study_analyses_seconds'])} + {g(r['study_report_seconds'])}; "
          f"{g(r['study_analyses_cpu_seconds'])} + {g(r['study_report_cpu_seconds'])}",
-         "as before: BLAS threads inside the analyses' threads, figures drawn one after the other",
+         "BLAS threads free inside the analyses, figures drawn one after the other (the rest of this change kept)",
          f"{g(r['study_analyses_blas_free_seconds'])} + {g(r['study_report_serial_seconds'])}; "
          f"{g(r['study_analyses_blas_free_cpu_seconds'])} + {g(r['study_report_serial_cpu_seconds'])}",
          g(r["study_speedup_vs_before"]), "-"),
