@@ -9,6 +9,11 @@ A and A^-1 by cofactors, the feasibility tests of
 :func:`~prp3mc.kinematics.chain.validated_frame`, the h entries of the
 budget's terms, the clearance intervals and the zonotope maxima. Poses are
 spread over threads (``prange``); memory is the outputs only.
+
+A budget's effects are terms too: known shifts are terms of zero width, a
+backlash a term of its leg, a lead scale and thermal expansion are multiplied
+by the nominal slider position b_i; thermal expansion acts on all legs at
+once, so it adds a shared generator to the zonotope (16 corners).
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from ..kinematics.geometry import Geometry
 from ..kinematics.sensitivity import FAMILIES, LENGTH_FAMILIES
 from ..units import DEG2RAD
 from .budget import Budget, parse_input
+from .systematic import EFFECT_NAMES, T_REF_C
 
 __all__ = ["REASONS", "leg_constants", "term_table", "envelope_kernel", "zonotope_max"]
 
@@ -47,13 +53,15 @@ def leg_constants(geometry: Geometry) -> np.ndarray:
 def term_table(budget: Budget, bounds: np.ndarray):
     """The budget's terms as arrays for the kernel.
 
-    Returns ``family`` (T,) int (index in FAMILIES), ``leg`` (T,) int,
-    ``unit`` (T,) (1 for lengths, rad per deg for angles) and ``box`` (T, 4):
-    the term's interval, or for a clearance (rho_lo, rho_hi, zeta_lo rad,
-    zeta_hi rad) with zeta_hi = inf for a full circle.
+    Returns ``family`` (T,) int (index in FAMILIES), ``leg`` (T,) int (-1:
+    every leg), ``unit`` (T,) (1 for lengths, rad per deg for angles, alpha_T
+    for thermal), ``mode`` (T,) int (1: the term's u_i is also multiplied by
+    the nominal slider position b_i) and ``box`` (T, 4): the term's interval,
+    or for a clearance (rho_lo, rho_hi, zeta_lo rad, zeta_hi rad) with
+    zeta_hi = inf for a full circle. ``bounds`` (D, 2) are the factors' intervals.
     """
-    names = budget.names
-    fam, legs, unit, box = [], [], [], []
+    names, factors = budget.names, budget.factors
+    fam, legs, unit, mode, box = [], [], [], [], []
     for k, name in enumerate(names):
         family, leg = parse_input(name)
         if family == "zeta":
@@ -61,33 +69,60 @@ def term_table(budget: Budget, bounds: np.ndarray):
         fam.append(FAMILIES.index(family))
         legs.append(leg)
         unit.append(1.0 if family in LENGTH_FAMILIES else DEG2RAD)
+        mode.append(0)
         if family == "rho":
             zlo, zhi = bounds[names.index(f"zeta_{leg + 1}")]
             full = zhi - zlo >= 360.0
             box.append((bounds[k][0], bounds[k][1], np.deg2rad(zlo), math.inf if full else np.deg2rad(zhi)))
         else:
             box.append((bounds[k][0], bounds[k][1], 0.0, 0.0))
+    for name in (n for n in EFFECT_NAMES if n in budget.effects):
+        eff = budget.effects[name]
+        e = eff.effect
+        fam.append(FAMILIES.index(e.family if e.kind == "offset" else "b"))
+        legs.append(-1 if e.kind == "thermal" else e.leg)
+        mode.append(1 if e.kind in ("scale", "thermal") else 0)
+        if e.kind == "offset":
+            unit.append(1.0 if e.family in LENGTH_FAMILIES else DEG2RAD)
+        else:
+            unit.append(eff.value if e.kind == "thermal" else 1.0)
+        if e.kind in ("offset", "scale"):
+            box.append((eff.value, eff.value, 0.0, 0.0))
+        else:
+            lo, hi = bounds[factors.index(name)] - (T_REF_C if e.kind == "thermal" else 0.0)
+            box.append((lo, hi, 0.0, 0.0))
     return (np.array(fam, dtype=np.int64), np.array(legs, dtype=np.int64), np.array(unit),
-            np.array(box, dtype=float).reshape(-1, 4))
+            np.array(mode, dtype=np.int64), np.array(box, dtype=float).reshape(-1, 4))
 
 
 @njit(inline="always")
-def zonotope_max(a, u_mid, u_half, values, signs, n):
+def zonotope_max(a, u_mid, u_half, ext, values, signs, n):
     """Maxima over one pose's zonotope into ``values[:, n]`` and ``signs[:, n, :]``.
 
-    a : (3, 3) A^-1; u_mid, u_half : (3,) centre and half-width of u.
+    a : (3, 3) A^-1; u_mid, u_half : (3,) centre and half-width of u along
+    the legs' axes; ext : (G, 3) further generators of u (terms of all legs).
     values : (4, N) position mm, |dphi| rad, |dx| mm, |dy| mm.
-    signs : (4, N, 3) sign of each leg's u_i at the maximum. The corners are
-    visited in the order sx, sy, sz in (-1, +1), the first of equal maxima kept.
+    signs : (4, N, 3 + G) sign of each leg's u_i, then of each further
+    generator, at the maximum. The 2^(3 + G) corners are visited in the order
+    s1, s2, s3, then the further generators, in (-1, +1), the first of equal maxima kept.
     """
+    G = ext.shape[0]
+    m = 3 + G
     c0 = a[0, 0] * u_mid[0] + a[0, 1] * u_mid[1] + a[0, 2] * u_mid[2]
     c1 = a[1, 0] * u_mid[0] + a[1, 1] * u_mid[1] + a[1, 2] * u_mid[2]
     best, arg = -1.0, 0
-    for k in range(8):
+    for k in range(1 << m):
         vx, vy = c0, c1
         for i in range(3):
             gx, gy = a[0, i] * u_half[i], a[1, i] * u_half[i]
-            if (k >> (2 - i)) & 1:
+            if (k >> (m - 1 - i)) & 1:
+                vx, vy = vx + gx, vy + gy
+            else:
+                vx, vy = vx - gx, vy - gy
+        for g in range(G):
+            gx = a[0, 0] * ext[g, 0] + a[0, 1] * ext[g, 1] + a[0, 2] * ext[g, 2]
+            gy = a[1, 0] * ext[g, 0] + a[1, 1] * ext[g, 1] + a[1, 2] * ext[g, 2]
+            if (k >> (G - 1 - g)) & 1:
                 vx, vy = vx + gx, vy + gy
             else:
                 vx, vy = vx - gx, vy - gy
@@ -95,8 +130,8 @@ def zonotope_max(a, u_mid, u_half, values, signs, n):
         if q > best:
             best, arg = q, k
     values[0, n] = np.sqrt(best)
-    for i in range(3):
-        signs[0, n, i] = 1 if (arg >> (2 - i)) & 1 else -1
+    for i in range(m):
+        signs[0, n, i] = 1 if (arg >> (m - 1 - i)) & 1 else -1
     for j, r in ((1, 2), (2, 0), (3, 1)):
         c = a[r, 0] * u_mid[0] + a[r, 1] * u_mid[1] + a[r, 2] * u_mid[2]
         sc = 1 if c >= 0 else -1
@@ -105,6 +140,10 @@ def zonotope_max(a, u_mid, u_half, values, signs, n):
             g = a[r, i] * u_half[i]
             total += abs(g)
             signs[j, n, i] = sc * (1 if g >= 0 else -1)
+        for e in range(G):
+            g = a[r, 0] * ext[e, 0] + a[r, 1] * ext[e, 1] + a[r, 2] * ext[e, 2]
+            total += abs(g)
+            signs[j, n, 3 + e] = sc * (1 if g >= 0 else -1)
         values[j, n] = total
 
 
@@ -123,39 +162,44 @@ def _cos_range(lo, hi):
 BLOCK = 1024
 
 
-def envelope_kernel(poses, legc, family, leg, unit, box, limits, check, values, signs, bad):
+def envelope_kernel(poses, legc, family, leg, unit, mode, box, limits, check, values, signs, bad):
     """Maxima of the linear model over the budget's box at every pose (compiled).
 
     poses : (N, 3) x mm, y mm, phi deg. legc : (15, 3) :func:`leg_constants`.
-    family, leg, unit, box : :func:`term_table`. limits : (3,) min transmission,
+    family, leg, unit, mode, box : :func:`term_table`. limits : (3,) min transmission,
     max condition, stroke tolerance mm; check : test them.
-    values : (4, N) out, as :func:`zonotope_max`; signs : (4, N, 3) out.
+    values : (4, N) out, as :func:`zonotope_max`; signs : (4, N, 3 + G) out
+    (G: the terms of all legs).
     bad : (N,) int64 out, bit ``3 * reason + leg`` set for each refusal (see REASONS).
     Small batches run on the calling thread, larger ones in blocks on all cores.
     """
     run = _blocks_threaded if poses.shape[0] > 16 * BLOCK else _blocks_serial   # threads pay from ~128^2
-    run(poses, legc, family, leg, unit, box, limits, check, values, signs, bad)
+    run(poses, legc, family, leg, unit, mode, box, limits, check, values, signs, bad)
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _blocks_threaded(poses, legc, family, leg, unit, box, limits, check, values, signs, bad):
+def _blocks_threaded(poses, legc, family, leg, unit, mode, box, limits, check, values, signs, bad):
     """:func:`_block` over blocks of :data:`BLOCK` poses on all cores."""
     N = poses.shape[0]
     for k in prange((N + BLOCK - 1) // BLOCK):
-        _block(k * BLOCK, min(N, (k + 1) * BLOCK), poses, legc, family, leg, unit, box, limits, check,
-               values, signs, bad)
+        _block(k * BLOCK, min(N, (k + 1) * BLOCK), poses, legc, family, leg, unit, mode, box, limits,
+               check, values, signs, bad)
 
 
 @njit(cache=True, error_model="numpy")
-def _blocks_serial(poses, legc, family, leg, unit, box, limits, check, values, signs, bad):
+def _blocks_serial(poses, legc, family, leg, unit, mode, box, limits, check, values, signs, bad):
     """:func:`_block` over all poses on the calling thread."""
-    _block(0, poses.shape[0], poses, legc, family, leg, unit, box, limits, check, values, signs, bad)
+    _block(0, poses.shape[0], poses, legc, family, leg, unit, mode, box, limits, check, values, signs, bad)
 
 
 @njit(inline="always", error_model="numpy")
-def _block(start, stop, poses, legc, family, leg, unit, box, limits, check, values, signs, bad):
+def _block(start, stop, poses, legc, family, leg, unit, mode, box, limits, check, values, signs, bad):
     """The envelope at poses ``start:stop`` (see :func:`envelope_kernel`)."""
     T = family.shape[0]
+    G = 0
+    for k in range(T):
+        G += leg[k] < 0
+    ext = np.empty((G, 3))
     A = np.empty((3, 3))
     Ai = np.empty((3, 3))
     hb = np.empty((3, 14))          # per leg: b, d, the h entries of the ten families, cos, sin omega
@@ -221,10 +265,18 @@ def _block(start, stop, poses, legc, family, leg, unit, box, limits, check, valu
         bad[n] = word
         u_mid[:] = 0.0
         u_half[:] = 0.0
+        g = 0
         for k in range(T):
             i = leg[k]
-            scale = hb[i, 2 + family[k]] * unit[k]
             lo, hi = box[k, 0], box[k, 1]
+            if i < 0:           # a term of every leg: a further generator
+                for j in range(3):
+                    w = hb[j, 2 + family[k]] * unit[k] * (hb[j, 0] if mode[k] else 1.0)
+                    u_mid[j] += w * (0.5 * (lo + hi))
+                    ext[g, j] = w * (0.5 * (hi - lo))
+                g += 1
+                continue
+            scale = hb[i, 2 + family[k]] * unit[k] * (hb[i, 0] if mode[k] else 1.0)
             if family[k] == _RHO:
                 if box[k, 3] == math.inf:
                     lo, hi = -box[k, 1], box[k, 1]
@@ -235,4 +287,4 @@ def _block(start, stop, poses, legc, family, leg, unit, box, limits, check, valu
                     hi = (box[k, 1] if cmax >= 0 else box[k, 0]) * cmax
             u_mid[i] += scale * (0.5 * (lo + hi))
             u_half[i] += abs(scale) * (0.5 * (hi - lo))
-        zonotope_max(Ai, u_mid, u_half, values, signs, n)
+        zonotope_max(Ai, u_mid, u_half, ext, values, signs, n)

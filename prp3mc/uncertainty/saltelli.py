@@ -68,15 +68,19 @@ class Factors:
 
 
 def design_factors(budget: Budget, groups: dict | None) -> Factors:
-    """The budget's inputs, then its groups and the user's ``groups`` (validated by :class:`Budget`)."""
+    """The budget's factors, then its groups and the user's ``groups`` (validated by :class:`Budget`).
+
+    The factors are the inputs (kind ``input``) and the random factors of
+    the budget's effects, ``backlash_i`` and ``thermal`` (kind ``effect``).
+    """
     extra = {}
     for gname, members in (groups or {}).items():
         if isinstance(members, str):
             raise BudgetError(f"group {gname!r}: expected a list of inputs, got the string {members!r}")
         extra[str(gname)] = tuple(members)
     user = {k: v for k, v in budget.groups.items() if not k.startswith("clearance_")}
-    merged = Budget(budget.inputs, groups={**user, **extra}).groups  # validates the groups
-    inputs = budget.names
+    merged = Budget(budget.inputs, groups={**user, **extra}, effects=budget.effects).groups  # validates them
+    inputs = budget.factors
     d = len(inputs)
     names = inputs + tuple(merged)
     masks = np.zeros((len(names), d), dtype=bool)
@@ -88,7 +92,8 @@ def design_factors(budget: Budget, groups: dict | None) -> Factors:
     for k in range(d, len(names)):
         problem[k, k] = True
         problem[k, :d] = ~masks[k]
-    return Factors(names=names, kinds=("input",) * d + ("group",) * len(merged),
+    kinds = ("input",) * len(budget.names) + ("effect",) * (d - len(budget.names)) + ("group",) * len(merged)
+    return Factors(names=names, kinds=kinds,
                     groups={k: tuple(v) for k, v in merged.items()}, masks=masks, problem=problem)
 
 
@@ -113,7 +118,7 @@ def saltelli_design(budget: Budget, factors: Factors, n_samples: int, seed: int)
     one factor.
     """
     from scipy.stats import qmc
-    d = len(budget)
+    d = len(budget.factors)
     base = qmc.Sobol(d=2 * d, scramble=True, seed=seed).random(n_samples)
     A, B = base[:, :d], base[:, d:]
     AB = np.where(factors.masks[:, None, :], B, A)
