@@ -2,6 +2,7 @@
 
 import base64
 import dataclasses
+import functools
 import hashlib
 import importlib.util
 import json
@@ -136,7 +137,7 @@ def test_unknown_study_name():
 # ----------------------------------------------------------------- running and the report folder
 def test_cli_writes_report_folder(tmp_path, capsys):
     out = tmp_path / "out"
-    assert main(["study", str(study_file(tmp_path)), "--out", str(out), "--no-progress", "--formats", "png,svg"]) == 0
+    assert main(["study", str(study_file(tmp_path)), "--out", str(out), "--no-progress"]) == 0
     note = capsys.readouterr().out
     assert re.search(r"wrote .*report\.html in [\d.]+ s .*u-shape [\d.]+-[\d.]+ µm, delta [\d.]+-[\d.]+ µm", note)
     summary = json.loads((out / "summary.json").read_text())
@@ -164,7 +165,6 @@ def test_cli_writes_report_folder(tmp_path, capsys):
     assert {"ecdf_position", "ecdf_phi"} <= {p.stem for p in (out / "figures").glob("*.png")}
     images = re.findall(r'<img src="([^"]+)"', html)
     pngs = sorted(p.stem for p in (out / "figures").glob("*.png"))
-    assert sorted(p.stem for p in (out / "figures").glob("*.svg")) == pngs
     assert len(images) == len(pngs) >= 8 and all(src.startswith("data:image/png;base64,") for src in images)
     first = base64.b64decode(images[0].split(",", 1)[1])      # the embedded PNG is the written file
     assert first in [(out / "figures" / f"{p}.png").read_bytes() for p in pngs]
@@ -188,24 +188,36 @@ def test_cli_refuses_existing_folder_without_force(tmp_path, capsys):
     assert not (out / "keep.txt").exists() and (out / "report.html").is_file()
     figures = {p.suffix for p in (out / "figures").iterdir()}
     assert figures == {".png"}                                      # one format by default
+    both = tmp_path / "both"                                        # SVG on request, one per PNG
+    assert main(["study", str(path), "--out", str(both), "--no-progress", "--formats", "png,svg"]) == 0
+    pngs = sorted(p.stem for p in (both / "figures").glob("*.png"))
+    assert sorted(p.stem for p in (both / "figures").glob("*.svg")) == pngs and len(pngs) == 2
     assert main(["study", str(path), "--out", str(tmp_path / "o"), "--formats", "png,pdf"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "png, svg" in err and not (tmp_path / "o").exists()
 
 
+def _line_figure(k):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    fig = FigureCanvasAgg(Figure(figsize=(2, 1.5), layout="constrained")).figure
+    fig.subplots().plot(np.arange(5) ** k, label=f"power {k}")
+    return fig
+
+
 def test_figures_drawn_on_worker_processes_are_those_drawn_here(tmp_path):
-    """write_study's worker processes (where the system forks) and this process write the same files."""
-    from prp3mc.reports._render import default_workers
-    from prp3mc.reports.study_report import write_study
-    result = run_study(Study.load(study_file(tmp_path, _replace("seed = 3", "seed = 3\noutputs = []"))),
-                       progress=False)
-    here = write_study(result, tmp_path / "here", workers=1).parent
-    there = write_study(result, tmp_path / "there", workers=2).parent
-    names = sorted(p.name for p in (here / "figures").iterdir())
-    assert names == sorted(p.name for p in (there / "figures").iterdir()) and len(names) == 2
-    assert all((here / "figures" / n).read_bytes() == (there / "figures" / n).read_bytes() for n in names)
-    undated = [re.sub(r"\d{4}-\d\d-\d\dT[\d:+-]+", "", (d / "report.html").read_text()) for d in (here, there)]
-    assert undated[0] == undated[1]
+    """rendering() on worker processes (where the system forks) and in this process: the same files and bytes."""
+    from prp3mc.reports._render import default_workers, rendering
+    figures = [(f"f{k}", functools.partial(_line_figure, k)) for k in range(3)]
+    written = {}
+    for where, workers in (("here", 1), ("there", 2)):
+        (tmp_path / where).mkdir()
+        with rendering(figures, tmp_path / where, ("png", "svg"), workers) as pngs:
+            returned = list(pngs)
+        assert returned == [(tmp_path / where / f"f{k}.png").read_bytes() for k in range(3)]
+        written[where] = returned
+    assert written["here"] == written["there"]
+    assert {p.name for p in (tmp_path / "there").iterdir()} == {f"f{k}.{e}" for k in range(3) for e in ("png", "svg")}
     assert 1 <= default_workers(12) <= 12 and default_workers(1) == 1
 
 

@@ -233,6 +233,7 @@ def cluster():
         yield c.scheduler_address
 
 
+@pytest.mark.slow  # starts a LocalCluster of two worker processes (the module's Dask tests share it)
 def test_dask_gives_the_serial_summary(serial, cluster):
     s, result = serial
     on_dask = run_study(s, progress=False, scheduler=cluster)
