@@ -1,8 +1,8 @@
 """Drawing and saving a report's figures, on worker processes where that pays.
 
 Matplotlib draws on one core, and a report's figures are independent: where
-the operating system can fork (Linux), :func:`rendering` draws them on as
-many worker processes as the machine has cores, while the caller goes on
+the operating system can fork (Linux), :func:`rendering` draws them on one
+worker process per core while a core is idle, and the caller goes on
 (writing tables). Forked workers inherit the results in memory: nothing is
 pickled but each figure's index and its PNG bytes. Elsewhere, or with one
 core, the figures are drawn here, one after the other. The files and bytes
@@ -30,10 +30,19 @@ _TASKS: dict = {}  # in a worker process: what rendering() handed it at the fork
 
 
 def default_workers(n_figures: int) -> int:
-    """Worker processes for ``n_figures``: the cores this process may use, where it can fork; else 1."""
+    """Worker processes for ``n_figures``: one per core while some core is idle, where the system can fork; else 1.
+
+    A core is taken as idle while the 1-minute load average is below the
+    cores this process may use. On the 2-core development machine shared
+    with other jobs, two workers drew the paper study's figures 1.4 times
+    faster than one process at load 2.3, and slower at load 4.4
+    (``benchmarks/bench_study.py``): with every core busy they only add
+    processes competing for it. The files are the same either way.
+    """
     if not sys.platform.startswith("linux") or "fork" not in multiprocessing.get_all_start_methods():
         return 1
-    return max(1, min(n_figures, len(os.sched_getaffinity(0))))
+    cores = len(os.sched_getaffinity(0))
+    return max(1, min(n_figures, cores)) if os.getloadavg()[0] < cores else 1
 
 
 def _render(k: int) -> bytes:

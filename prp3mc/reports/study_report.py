@@ -12,8 +12,8 @@
 The report is built from a :class:`~prp3mc.study.results.StudyResult` only;
 it is readable without prp3mc installed. Figures are drawn on figures of
 their own with an Agg canvas: writing a report never touches pyplot or the
-matplotlib backend. They are drawn on worker processes, one per core, while
-the tables are written (:mod:`prp3mc.reports._render`).
+matplotlib backend. They are drawn on worker processes, one per core while a core
+is idle, while the tables are written (:mod:`prp3mc.reports._render`).
 """
 
 from __future__ import annotations
@@ -401,8 +401,8 @@ def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = Fa
     ``formats`` (``png``, ``svg`` or both, a sequence or ``"png,svg"``) are
     the files written per figure; each is rendered once and the report
     embeds the same PNG. ``workers``: processes drawing the figures
-    (:func:`prp3mc.reports._render.rendering`; default one per core where
-    the system can fork, 1 draws them here). Returns the path of ``report.html``.
+    (:func:`prp3mc.reports._render.rendering`; default one per core while a core
+    is idle, where the system can fork, 1 draws them here). Returns the path of ``report.html``.
     """
     formats = figure_formats(formats)
     check_output(out, force)
