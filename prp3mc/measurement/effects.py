@@ -23,14 +23,14 @@ import numpy as np
 from ..uncertainty.budget import Budget
 from ..uncertainty.systematic import (EFFECT_NAMES, OFFSET_FAMILIES, SPREAD_FAMILIES, T_REF_C, Effect, _as_effects,
                                       effect, offset_errors, slider_error)
-from ..errors import BudgetError
+from ..errors import BudgetError, CampaignError
 from ..kinematics.geometry import Geometry
 from ..kinematics.chain import inverse_kinematics
 from ..kinematics.sensitivity import LENGTH_FAMILIES, sensitivity
 from ..units import DEG2RAD, RAD2DEG
 
 __all__ = ["Effect", "EFFECT_NAMES", "OFFSET_FAMILIES", "SPREAD_FAMILIES", "effect", "library",
-           "signatures", "slider_error", "offset_errors", "spread_reference", "spread_budget",
+           "signatures", "budget_effect_errors", "slider_error", "offset_errors", "spread_reference", "spread_budget",
            "T_REF_C", "ROW_TO_DEG"]
 
 #: Scale of the rows of a pose error or of J_q, ``[mm, mm, rad] -> [mm, mm, deg]``.
@@ -94,6 +94,46 @@ def signatures(geometry: Geometry, poses: np.ndarray, pose_index: np.ndarray, ef
         unit_db = slider_error({eff.name: 1.0}, bm, direction, temp_C)     # (M, 3) mm per unit
         out[:, :, k] = np.einsum("mol,ml->mo", Jb[pose_index], unit_db)
     return out
+
+
+def budget_effect_errors(geometry: Geometry, budget: Budget, campaign) -> np.ndarray:
+    """Pose errors of the budget's ``[effects]`` at every measurement, their drivers taken from the campaign.
+
+    A backlash is driven by the campaign's ``dir_i``, thermal expansion by
+    its ``temp_C``, a lead-screw scale by the commanded slider positions.
+
+    Parameters
+    ----------
+    geometry, budget
+    campaign : Campaign
+
+    Returns
+    -------
+    ndarray, shape (M, 3)
+        ``[dx mm, dy mm, dphi deg]`` (zeros when the budget has no effects).
+
+    Raises
+    ------
+    CampaignError
+        The budget has an effect whose driver column the campaign lacks.
+    BudgetError
+        The budget's effects were fitted on another geometry (its ``[fitted_on]``).
+    """
+    effects = dict(budget.effects)
+    if not effects:
+        return np.zeros((campaign.n_measurements, 3))
+    budget.check_geometry(geometry)
+    columns = {f"dir_{i + 1}" for i in range(3) if campaign.has_dir[i]} | (
+        {"temp_C"} if campaign.temp_C is not None else set())
+    for name, eff in effects.items():
+        missing = [col for col in eff.effect.needs if col not in columns]
+        if missing:
+            fitted = f" (fitted on {eff.campaign})" if eff.campaign else ""
+            raise CampaignError(f"{campaign.source}: the budget's effect {name}{fitted} needs column {missing[0]}, "
+                                f"which the campaign lacks: record it, or remove {name} from the budget's [effects]")
+    G = signatures(geometry, campaign.poses, campaign.pose_index, list(effects), campaign.direction,
+                   campaign.temp_C)
+    return G @ np.array([eff.value for eff in effects.values()])
 
 
 def spread_reference(budget: Budget, eff: Effect | str) -> float:
