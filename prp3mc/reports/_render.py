@@ -15,6 +15,7 @@ import contextlib
 import multiprocessing
 import os
 import sys
+import threading
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
@@ -38,8 +39,14 @@ def default_workers(n_figures: int) -> int:
     faster than one process at load 2.3, and slower at load 4.4
     (``benchmarks/bench_study.py``): with every core busy they only add
     processes competing for it. The files are the same either way.
+
+    A process with other threads running (a notebook kernel, a Dask worker)
+    never forks: a fork copies only the calling thread, and a lock another
+    thread held stays held in the child.
     """
     if not sys.platform.startswith("linux") or "fork" not in multiprocessing.get_all_start_methods():
+        return 1
+    if threading.active_count() > 1:
         return 1
     cores = len(os.sched_getaffinity(0))
     return max(1, min(n_figures, cores)) if os.getloadavg()[0] < cores else 1
