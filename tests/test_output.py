@@ -202,6 +202,7 @@ def test_no_json_carries_nan(tmp_path):
     assert json.loads((tmp_path / "b.json").read_text()) == {"a": None}
 
 
+@pytest.mark.slow  # two fresh interpreters running a study (the race itself is tested above without the CLI)
 def test_cli_race_through_the_command_line(tmp_path):
     """Two real `prp3mc study` runs on one new --out: one report, one one-line refusal."""
     study = tmp_path / "s.toml"

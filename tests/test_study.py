@@ -2,6 +2,7 @@
 
 import base64
 import dataclasses
+import functools
 import hashlib
 import importlib.util
 import json
@@ -136,7 +137,7 @@ def test_unknown_study_name():
 # ----------------------------------------------------------------- running and the report folder
 def test_cli_writes_report_folder(tmp_path, capsys):
     out = tmp_path / "out"
-    assert main(["study", str(study_file(tmp_path)), "--out", str(out), "--no-progress", "--formats", "png,svg"]) == 0
+    assert main(["study", str(study_file(tmp_path)), "--out", str(out), "--no-progress"]) == 0
     note = capsys.readouterr().out
     assert re.search(r"wrote .*report\.html in [\d.]+ s .*u-shape [\d.]+-[\d.]+ µm, delta [\d.]+-[\d.]+ µm", note)
     summary = json.loads((out / "summary.json").read_text())
@@ -164,7 +165,6 @@ def test_cli_writes_report_folder(tmp_path, capsys):
     assert {"ecdf_position", "ecdf_phi"} <= {p.stem for p in (out / "figures").glob("*.png")}
     images = re.findall(r'<img src="([^"]+)"', html)
     pngs = sorted(p.stem for p in (out / "figures").glob("*.png"))
-    assert sorted(p.stem for p in (out / "figures").glob("*.svg")) == pngs
     assert len(images) == len(pngs) >= 8 and all(src.startswith("data:image/png;base64,") for src in images)
     first = base64.b64decode(images[0].split(",", 1)[1])      # the embedded PNG is the written file
     assert first in [(out / "figures" / f"{p}.png").read_bytes() for p in pngs]
@@ -188,9 +188,37 @@ def test_cli_refuses_existing_folder_without_force(tmp_path, capsys):
     assert not (out / "keep.txt").exists() and (out / "report.html").is_file()
     figures = {p.suffix for p in (out / "figures").iterdir()}
     assert figures == {".png"}                                      # one format by default
+    both = tmp_path / "both"                                        # SVG on request, one per PNG
+    assert main(["study", str(path), "--out", str(both), "--no-progress", "--formats", "png,svg"]) == 0
+    pngs = sorted(p.stem for p in (both / "figures").glob("*.png"))
+    assert sorted(p.stem for p in (both / "figures").glob("*.svg")) == pngs and len(pngs) == 2
     assert main(["study", str(path), "--out", str(tmp_path / "o"), "--formats", "png,pdf"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "png, svg" in err and not (tmp_path / "o").exists()
+
+
+def _line_figure(k):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    fig = FigureCanvasAgg(Figure(figsize=(2, 1.5), layout="constrained")).figure
+    fig.subplots().plot(np.arange(5) ** k, label=f"power {k}")
+    return fig
+
+
+def test_figures_drawn_on_worker_processes_are_those_drawn_here(tmp_path):
+    """rendering() on worker processes (where the system forks) and in this process: the same files and bytes."""
+    from prp3mc.reports._render import default_workers, rendering
+    figures = [(f"f{k}", functools.partial(_line_figure, k)) for k in range(3)]
+    written = {}
+    for where, workers in (("here", 1), ("there", 2)):
+        (tmp_path / where).mkdir()
+        with rendering(figures, tmp_path / where, ("png", "svg"), workers) as pngs:
+            returned = list(pngs)
+        assert returned == [(tmp_path / where / f"f{k}.png").read_bytes() for k in range(3)]
+        written[where] = returned
+    assert written["here"] == written["there"]
+    assert {p.name for p in (tmp_path / "there").iterdir()} == {f"f{k}.{e}" for k in range(3) for e in ("png", "svg")}
+    assert 1 <= default_workers(12) <= 12 and default_workers(1) == 1
 
 
 def test_cli_bad_study_one_line(tmp_path, capsys):
@@ -374,6 +402,21 @@ def _fake_config(name, values, x=(-40, 40), y=(60, 140)):
 def _figure():
     from matplotlib.figure import Figure
     return Figure()
+
+
+def test_ecdf_steps_follow_the_sample_ecdf_within_one_step(seed):
+    values = np.random.default_rng(seed).gamma(2.0, size=100_003)
+    n, steps = values.size, 1000
+    x, weights = plots.ecdf_steps(values, steps)
+    assert len(x) <= steps + 1 and weights.sum() == n and x[0] == values.min() and x[-1] == values.max()
+    drawn = np.cumsum(weights) / n
+    ordered = np.sort(values)
+    np.testing.assert_allclose(drawn, np.searchsorted(ordered, x, side="right") / n, rtol=1e-12)  # exact there
+    between = drawn[np.searchsorted(x, ordered, side="right") - 1]                 # the drawn step at each value
+    assert np.max(np.arange(1, n + 1) / n - between) <= 1.0 / steps + 1e-12
+    few, ones = plots.ecdf_steps(values[:50], steps)                                 # small samples: every value
+    np.testing.assert_array_equal(few, values[:50])
+    assert (ones == 1).all()
 
 
 def test_constant_field_says_so_without_extrema():
