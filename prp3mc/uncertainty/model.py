@@ -22,7 +22,10 @@ from ..kinematics.geometry import Geometry
 from ..kinematics.chain import as_poses, frame, validated_frame
 from ..kinematics.sensitivity import LENGTH_FAMILIES, h_entries
 
-__all__ = ["LinearModel", "linear_model"]
+__all__ = ["LinearModel", "linear_model", "FEATURE_VALUE", "FEATURE_COS", "FEATURE_SIN"]
+
+#: Feature codes of :meth:`LinearModel.feature_ops`: input a's value; X_a cos(X_b deg); X_a sin(X_b deg).
+FEATURE_VALUE, FEATURE_COS, FEATURE_SIN = range(3)
 
 
 @dataclass(frozen=True, slots=True, repr=False)
@@ -106,6 +109,24 @@ class LinearModel:
                 rho, zeta = X[:, idx[0]], np.deg2rad(X[:, idx[1]])
                 cols.extend([rho * np.cos(zeta), rho * np.sin(zeta)])
         return np.stack(cols, axis=1)
+
+    def feature_ops(self) -> np.ndarray:
+        """How :meth:`features` makes each feature from the inputs, for compiled samplers.
+
+        Returns
+        -------
+        ndarray, shape (F, 3), int64
+            Rows ``(op, a, b)``: ``FEATURE_VALUE`` is input a's value,
+            ``FEATURE_COS`` / ``FEATURE_SIN`` are X_a cos(X_b) / X_a sin(X_b)
+            with X_b in degrees (b unused for a value).
+        """
+        rows = []
+        for kind, idx in self._plan:
+            if kind == "value":
+                rows.append((FEATURE_VALUE, idx, idx))
+            else:
+                rows += [(FEATURE_COS, idx[0], idx[1]), (FEATURE_SIN, idx[0], idx[1])]
+        return np.array(rows, dtype=np.int64).reshape(-1, 3)
 
     def evaluate(self, X: np.ndarray, dtype=np.float64) -> np.ndarray:
         """Pose errors for every pose and sample, shape (..., n, 3): dx mm, dy mm, dphi rad."""

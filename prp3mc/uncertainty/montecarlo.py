@@ -269,7 +269,7 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     n_threads = workers or os.cpu_count() or 1
     stream = Stream(model, budget, seed, n_samples, _N_BATCHES, n_threads)
     n_seg = stream.seg_start.size
-    sums = {"S1": np.empty((n_seg, n_feat)), "S2": np.empty((n_seg, n_feat, n_feat))}
+    sums = {"S1": np.zeros((n_seg, n_feat)), "S2": np.zeros((n_seg, n_feat, n_feat))}
     C32 = C.astype(np.float32)
     stats = np.empty((n_poses, 2, len(ranks)))
     vmax = np.empty((n_poses, 2))
