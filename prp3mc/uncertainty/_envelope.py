@@ -161,9 +161,11 @@ def _block(start, stop, poses, legc, family, leg, unit, box, limits, check, valu
     hb = np.empty((3, 14))          # per leg: b, d, the h entries of the ten families, cos, sin omega
     u_mid = np.empty(3)
     u_half = np.empty(3)
+    phi_deg, cp, sp = math.nan, 1.0, 0.0
     for n in range(start, stop):
-        phi = poses[n, 2] * (math.pi / 180.0)
-        cp, sp = math.cos(phi), math.sin(phi)
+        if poses[n, 2] != phi_deg:  # a grid keeps phi: its cosine and sine once
+            phi_deg = poses[n, 2]
+            cp, sp = math.cos(phi_deg * (math.pi / 180.0)), math.sin(phi_deg * (math.pi / 180.0))
         for i in range(3):
             ci, si, cj, sj = legc[0, i], legc[1, i], legc[2, i], legc[3, i]
             ck, sk = legc[4, i] * cp - legc[5, i] * sp, legc[5, i] * cp + legc[4, i] * sp

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from numba.cpython.unsafe.numbers import trailing_zeros
 
 from ._sampler import draw_features
 from .budget import SAMPLE_BLOCK
@@ -140,36 +141,38 @@ def _moment_sums(F, nF, m, first, shift, seg_start, seg_stop, s0, s1, S1, S2):
 
 @njit(nogil=True, cache=True)
 def _windows(v, m, p, o, lo, hi, nwin, edges, off, cap, below, inside, sub, buf, flag):
-    """Fold the values v[:m] of pose p, output o into its selection windows (disjoint, by increasing lo)."""
+    """Fold the values v[:m] of pose p, output o into its selection windows (disjoint, by increasing lo).
+
+    ``flag[s]`` becomes 1 + the window holding v[s], or 0; the flagged values
+    are then visited eight flags (one 64-bit word) at a time.
+    """
     nw = nwin[p, o]
     if nw == 0:
         return
     for w in range(nw):
         a, h = lo[p, o, w], hi[p, o, w]
         k = 0
+        tag = np.uint8(w + 1)
         if w == 0:
             for s in range(m):
                 x = v[s]
                 k += x < a
-                flag[s] = (x >= a) & (x < h)
+                flag[s] = tag if (x >= a) & (x < h) else np.uint8(0)
         else:
             for s in range(m):
                 x = v[s]
                 k += x < a
-                flag[s] |= (x >= a) & (x < h)
+                flag[s] = tag if (x >= a) & (x < h) else flag[s]
         below[p, o, w] += k
     flag[m:] = 0
     words = flag.view(np.uint64)
     for q in range((m + 7) // 8):
-        if words[q] == 0:  # most samples lie outside every window: skip 8 at a time
-            continue
-        for s in range(8 * q, 8 * q + 8):
-            if not flag[s]:
-                continue
+        word = words[q]
+        while word:  # the set bytes of the word, lowest first
+            s = 8 * q + (trailing_zeros(word) >> 3)
+            word &= ~(np.uint64(0xFF) << np.uint64(8 * (s - 8 * q)))
+            w = flag[s] - 1
             x = v[s]
-            w = 0
-            while x >= hi[p, o, w]:
-                w += 1
             n_in = inside[p, o, w]
             if n_in < cap[p, o, w]:
                 buf[off[p, o, w] + n_in] = x

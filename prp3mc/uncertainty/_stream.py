@@ -227,16 +227,13 @@ def pilot_windows(vals: np.ndarray, ranks: np.ndarray, n: int, worker_n: np.ndar
     i_hi = np.minimum(np.ceil(f * (m - 1) + half).astype(np.int64), m)
     idx = np.unique(np.concatenate([i_lo, i_hi[i_hi < m], [m - 1]]))
     stat = order_statistics(vals, idx)  # the pilot's order statistics at idx
-    at = lambda i: stat[np.searchsorted(idx, i)]  # noqa: E731
-    wins = []
-    for r, (a, b) in enumerate(zip(i_lo, i_hi)):
-        lo = at(a) if a > 0 else np.float32(0.0)
-        if b < m:
-            hi = top = np.nextafter(at(b), _F32_INF)
-        else:
-            hi, top = _F32_INF, at(m - 1) * np.float32(2.0) + np.float32(1e-30)
-        wins.append((lo, hi, top, np.zeros_like(worker_n), [r]))
-    merged = _merge(wins)
+    lo = np.where(i_lo > 0, stat[np.searchsorted(idx, i_lo)], np.float32(0.0))
+    top_all = stat[-1] * np.float32(2.0) + np.float32(1e-30)
+    inner = np.nextafter(stat[np.minimum(np.searchsorted(idx, i_hi), idx.size - 1)], _F32_INF)
+    hi = np.where(i_hi < m, inner, _F32_INF)
+    top = np.where(i_hi < m, inner, top_all)
+    none = np.zeros_like(worker_n)
+    merged = _merge([(lo[r], hi[r], top[r], none, [r]) for r in range(len(ranks))])
     k = count_below(vals, np.array([b for w in merged for b in w[:2]], np.float32)).reshape(-1, 2)
     out = []
     for (lo, hi, top, _, rs), (k_lo, k_hi) in zip(merged, k):  # capacity from the merged window's pilot count
