@@ -1,10 +1,13 @@
 """Streamed Monte Carlo: sample blocks, moments by segments, exact order statistics in bounded memory.
 
-Samples are drawn in blocks of :data:`~prp3mc.uncertainty.budget.SAMPLE_BLOCK`;
-block k is drawn alone (:meth:`Budget.sample_block`, a jump ahead in the
-seed's stream), so the samples are exactly those of ``budget.sample(n, seed)``
-whatever the number of threads or the memory limit, and no more than a few
-blocks are ever in memory.
+Samples are the rows of ``budget.sample(n, seed)``, in blocks of
+:data:`~prp3mc.uncertainty.budget.SAMPLE_BLOCK`; each thread takes a
+contiguous range of blocks and starts its generator where that range starts
+(a jump ahead in the seed's stream), so the samples do not depend on the
+number of threads or the memory limit. When every law and feature has a
+compiled form (:mod:`._sampler`) the samples are drawn tile by tile inside
+the kernel and never held; otherwise block k is drawn through numpy
+(:meth:`Budget.sample_block`) and handed to the same kernel.
 
 Moments: sums of the features and of their cross products (about their exact
 mean) per *segment*, the intersection of a sample block with one of the 64
@@ -15,7 +18,7 @@ first ``m`` samples, places a window ``[lo, hi)`` around each wanted rank
 (the pilot's order statistics at the rank's quantile +- 5 pilot standard
 errors). One streamed pass counts the values below each window and keeps the
 values inside it; a rank whose window turns out to hold it is read off the
-kept values by selection. Otherwise (a pilot off by more than 5 standard
+kept values by radix selection (:mod:`._select`). Otherwise (a pilot off by more than 5 standard
 errors, or a window holding more values than its buffer) the next pass uses
 a narrower window, known from that pass's exact counts and a 64-bin
 histogram inside every window; windows shrink to a single float32 value at

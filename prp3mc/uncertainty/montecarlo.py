@@ -1,16 +1,19 @@
 """Monte Carlo propagation of an error budget through the linear model.
 
-One sample matrix is shared by all poses (common random numbers); it is
-never held whole. Samples are streamed in blocks that are drawn
-independently (jumps in the seed's stream, :meth:`Budget.sample_block`), so
-memory is bounded whatever ``n_samples`` and the numbers do not depend on the
-chunking or the threads. Means and covariances of the pose error are linear
-images of the features' sample moments (:class:`prp3mc.uncertainty.model.LinearModel`),
-summed per block and batch, with standard errors from 64 batch means. The
-position-error norm and |dphi| are evaluated per pose and sample in float32
-by a compiled kernel and summarised by EXACT order statistics (the values a
-full sort would give), found in streamed passes (:mod:`._stream`), with
-distribution-free confidence intervals.
+One sample matrix, ``budget.sample(n_samples, seed)``, is shared by all
+poses (common random numbers); it is never held whole. Samples are streamed
+in blocks, drawn by a compiled kernel in small tiles where every law has a
+compiled inverse CDF (the same uniforms as numpy, see :mod:`._sampler`) or
+block by block through numpy otherwise; threads start at jumps in the
+seed's stream, so memory is bounded whatever ``n_samples`` (a few hundred MB
+at 1e9 samples) and the numbers do not depend on the chunking or the
+threads. Means and covariances of the pose error are linear images of the
+features' sample moments (:class:`prp3mc.uncertainty.model.LinearModel`),
+summed in float64 per block and batch, with standard errors from 64 batch
+means. The position-error norm and |dphi| are evaluated per pose and sample
+in float32 by the kernel and summarised by EXACT order statistics of those
+float32 values (the values a full sort would give), found in streamed passes
+(:mod:`._stream`), with distribution-free confidence intervals.
 """
 
 from __future__ import annotations
