@@ -27,7 +27,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from numba import njit
 
 from .._result import freeze, pose_columns, short_repr
 from .._version import __version__
@@ -37,7 +36,7 @@ from .budget import Budget, parse_input
 from ..kinematics.geometry import Geometry
 from ..kinematics.chain import DEFAULT_LIMITS, as_poses, refusal
 from .model import LinearModel, linear_model
-from ._envelope import REASONS, envelope_kernel, leg_constants, term_table, zonotope_max
+from ._envelope import REASONS, envelope_kernel, leg_constants, leg_signs, term_table, zonotope_maxima
 
 __all__ = ["WorstCase", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "QUANTITIES"]
 
@@ -253,16 +252,6 @@ def _term_bounds(model: LinearModel, bounds: np.ndarray) -> np.ndarray:
     return tb
 
 
-@njit(nogil=True, cache=True)
-def _corner_maxima(Ai, u_mid, u_half, values, signs):
-    """:func:`~prp3mc.uncertainty._envelope.zonotope_max` of every pose (compiled).
-
-    Ai : (N, 3, 3) A^-1; u_mid, u_half : (N, 3); values (4, N) and signs (4, N, 3) out.
-    """
-    for n in range(Ai.shape[0]):
-        zonotope_max(Ai[n], u_mid[n], u_half[n], values, signs, n)
-
-
 def _maxima(model: LinearModel, tb: np.ndarray):
     """Maxima and the sign (-1, +1) of each leg's u_i realising them, for flat poses (N,).
 
@@ -275,10 +264,11 @@ def _maxima(model: LinearModel, tb: np.ndarray):
     u_mid = (model.scale * mid) @ onehot                             # (N, 3)
     u_half = (np.abs(model.scale) * half) @ onehot
     N = u_mid.shape[0]
-    values, signs = np.empty((4, N)), np.empty((4, N, 3))
-    _corner_maxima(np.ascontiguousarray(model.Ainv), u_mid, u_half, values, signs)
+    values, codes = np.empty((4, N)), np.empty((4, N), dtype=np.int8)
+    Ai = np.ascontiguousarray(np.moveaxis(model.Ainv, 0, -1))          # (3, 3, N): poses last
+    zonotope_maxima(Ai, np.ascontiguousarray(u_mid.T), np.ascontiguousarray(u_half.T), values, codes, 0, N)
     order = ("position", "phi", "x", "y")
-    return dict(zip(order, values)), dict(zip(order, signs))
+    return dict(zip(order, values)), dict(zip(order, leg_signs(codes).astype(float)))
 
 
 def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | None = None,
@@ -383,7 +373,7 @@ def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: flo
 
     Per pose the kernel computes the inverse kinematics, A^-1, the h entries
     of the budget's terms, the clearance intervals and the 8-corner maxima
-    in scalars, on all cores; nothing per pose is kept but the maxima and
+    over blocks of poses, on all cores; nothing per pose is kept but the maxima and
     their signs (44 bytes), so memory is that of the poses and the result.
     The values equal :func:`worst_case`'s to round-off (1e-12 relative).
 
@@ -410,9 +400,9 @@ def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: flo
     shape = poses.shape[:-1]
     flat = np.ascontiguousarray(poses.reshape(-1, 3))
     n = flat.shape[0]
-    values, signs, bad = np.empty((4, n)), np.empty((4, n, 3), dtype=np.int8), np.empty(n, dtype=np.int64)
+    values, codes, bad = np.empty((4, n)), np.empty((4, n), dtype=np.int8), np.empty(n, dtype=np.int64)
     limits = np.array([DEFAULT_LIMITS.min_transmission, DEFAULT_LIMITS.max_condition, DEFAULT_LIMITS.stroke_tol_mm])
-    envelope_kernel(flat, leg_constants(geometry), *term_table(budget, bounds), limits, check, values, signs, bad)
+    envelope_kernel(flat, leg_constants(geometry), *term_table(budget, bounds), limits, check, values, codes, bad)
     if check and bad.any():
         for r, reason in enumerate(REASONS):
             hit = np.flatnonzero(bad & (0b111 << 3 * r))
@@ -424,5 +414,5 @@ def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: flo
     return WorstCaseMaxima(
         poses=poses, position_mm=values[0].reshape(shape), phi_deg=values[1].reshape(shape) * RAD2DEG,
         x_mm=values[2].reshape(shape), y_mm=values[3].reshape(shape),
-        leg_signs={q: signs[j].reshape(shape + (3,)) for j, q in enumerate(QUANTITIES)},
+        leg_signs={q: leg_signs(codes[j]).reshape(shape + (3,)) for j, q in enumerate(QUANTITIES)},
         input_bounds=bounds, k_sigma=k_sigma)
