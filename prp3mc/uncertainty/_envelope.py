@@ -15,6 +15,7 @@ Memory is the outputs only (44 bytes a pose) plus a few scratch rows per thread.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -25,7 +26,8 @@ from ..kinematics.sensitivity import FAMILIES, LENGTH_FAMILIES
 from ..units import DEG2RAD
 from .budget import Budget, parse_input
 
-__all__ = ["REASONS", "leg_constants", "term_table", "envelope_kernel", "zonotope_maxima", "leg_signs"]
+__all__ = ["REASONS", "leg_constants", "term_table", "kernel_tables", "envelope_kernel", "zonotope_maxima",
+           "leg_signs"]
 
 #: Refusal reasons in the order :func:`~prp3mc.kinematics.chain.validated_frame` tests them;
 #: bit ``3 * reason + leg`` of the kernel's ``bad`` word.
@@ -44,6 +46,19 @@ def leg_constants(geometry: Geometry) -> np.ndarray:
                      np.cos(tl), np.sin(tl), np.cos(ps), np.sin(ps),
                      *(geometry.rad(k) for k in ("a", "c", "e"))] + [geometry.stroke_mm[:, 0],
                                                                       geometry.stroke_mm[:, 1]])
+
+
+@functools.lru_cache(maxsize=16)
+def kernel_tables(geometry: Geometry, budget: Budget, k_sigma: float | None) -> tuple:
+    """``(bounds, legc, family, leg, unit, box)``: the budget's bounds and the kernel's tables, read-only.
+
+    Kept for the last few (geometry, budget, k_sigma), so that a small batch does not pay for them again.
+    """
+    bounds = budget.bounds(k_sigma)
+    out = (bounds, leg_constants(geometry), *term_table(budget, bounds))
+    for a in out:
+        a.flags.writeable = False
+    return out
 
 
 def term_table(budget: Budget, bounds: np.ndarray):
@@ -114,9 +129,13 @@ def zonotope_maxima(Ai, um, uh, values, codes, first, m):
             codes[o, first + j] = ((up == (g0 >= 0)) << 2) | ((up == (g1 >= 0)) << 1) | (up == (g2 >= 0))
 
 
+#: The signs of legs 1, 2, 3 for each code 0-7 of :func:`zonotope_maxima`.
+_SIGNS = np.array([[1 if (code >> (2 - i)) & 1 else -1 for i in range(3)] for code in range(8)], dtype=np.int8)
+
+
 def leg_signs(codes: np.ndarray) -> np.ndarray:
-    """The signs (-1, +1) of each leg, shape ``codes.shape + (3,)``, from :func:`zonotope_maxima`'s codes."""
-    return ((codes[..., None] >> np.array([2, 1, 0], dtype=np.int8)) & 1) * np.int8(2) - np.int8(1)
+    """The signs (-1, +1) of each leg, int8 of shape ``codes.shape + (3,)``, from :func:`zonotope_maxima`'s codes."""
+    return _SIGNS[codes]
 
 
 @njit(inline="always", error_model="numpy")

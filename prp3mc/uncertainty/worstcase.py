@@ -36,7 +36,7 @@ from .budget import Budget, parse_input
 from ..kinematics.geometry import Geometry
 from ..kinematics.chain import DEFAULT_LIMITS, as_poses, refusal
 from .model import LinearModel, linear_model
-from ._envelope import REASONS, envelope_kernel, leg_constants, leg_signs, term_table, zonotope_maxima
+from ._envelope import REASONS, envelope_kernel, kernel_tables, leg_signs, zonotope_maxima
 
 __all__ = ["WorstCase", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "QUANTITIES"]
 
@@ -367,6 +367,10 @@ class WorstCaseMaxima(_Maxima):
         return short_repr(self, "poses", "k_sigma")
 
 
+#: The feasibility limits of validated_frame, as the envelope kernel reads them.
+_LIMITS = np.array([DEFAULT_LIMITS.min_transmission, DEFAULT_LIMITS.max_condition, DEFAULT_LIMITS.stroke_tol_mm])
+
+
 def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | None = None,
                       check: bool = True) -> WorstCaseMaxima:
     """The maxima of :func:`worst_case` from one fused compiled pass over the poses.
@@ -395,14 +399,13 @@ def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: flo
     >>> worst_case_maxima(Geometry.from_preset("u-shape"), Budget.from_preset("paper"), grid).position_mm.shape
     (11, 11)
     """
-    bounds = budget.bounds(k_sigma)
+    bounds, *tables = kernel_tables(geometry, budget, k_sigma)
     poses = as_poses(poses)
     shape = poses.shape[:-1]
     flat = np.ascontiguousarray(poses.reshape(-1, 3))
     n = flat.shape[0]
     values, codes, bad = np.empty((4, n)), np.empty((4, n), dtype=np.int8), np.empty(n, dtype=np.int64)
-    limits = np.array([DEFAULT_LIMITS.min_transmission, DEFAULT_LIMITS.max_condition, DEFAULT_LIMITS.stroke_tol_mm])
-    envelope_kernel(flat, leg_constants(geometry), *term_table(budget, bounds), limits, check, values, codes, bad)
+    envelope_kernel(flat, *tables, _LIMITS, check, values, codes, bad)
     if check and bad.any():
         for r, reason in enumerate(REASONS):
             hit = np.flatnonzero(bad & (0b111 << 3 * r))
@@ -414,5 +417,5 @@ def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: flo
     return WorstCaseMaxima(
         poses=poses, position_mm=values[0].reshape(shape), phi_deg=values[1].reshape(shape) * RAD2DEG,
         x_mm=values[2].reshape(shape), y_mm=values[3].reshape(shape),
-        leg_signs={q: leg_signs(codes[j]).reshape(shape + (3,)) for j, q in enumerate(QUANTITIES)},
-        input_bounds=bounds, k_sigma=k_sigma)
+        leg_signs=dict(zip(QUANTITIES, leg_signs(codes).reshape((4,) + shape + (3,)))),
+        input_bounds=bounds.copy(), k_sigma=k_sigma)
