@@ -9,7 +9,7 @@ inverse kinematics, A and A^-1 by cofactors, the feasibility tests of
 :func:`~prp3mc.kinematics.chain.validated_frame`, the h entries of the
 budget's terms, the clearance intervals and the zonotope maxima. Poses go
 through in blocks of :data:`BLOCK`, each step a loop over the block's poses
-(it vectorises); larger batches are split in one contiguous range per core.
+(it vectorises); larger batches go in chunks to a pool of threads.
 Memory is the outputs only (44 bytes a pose) plus a few scratch rows per thread.
 """
 
@@ -17,9 +17,11 @@ from __future__ import annotations
 
 import functools
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-from numba import get_num_threads, literal_unroll, njit, prange
+from numba import literal_unroll, njit
 
 from ..kinematics.geometry import Geometry
 from ..kinematics.sensitivity import FAMILIES, LENGTH_FAMILIES
@@ -129,13 +131,18 @@ def zonotope_maxima(Ai, um, uh, values, codes, first, m):
             codes[o, first + j] = ((up == (g0 >= 0)) << 2) | ((up == (g1 >= 0)) << 1) | (up == (g2 >= 0))
 
 
-#: The signs of legs 1, 2, 3 for each code 0-7 of :func:`zonotope_maxima`.
-_SIGNS = np.array([[1 if (code >> (2 - i)) & 1 else -1 for i in range(3)] for code in range(8)], dtype=np.int8)
-
-
 def leg_signs(codes: np.ndarray) -> np.ndarray:
     """The signs (-1, +1) of each leg, int8 of shape ``codes.shape + (3,)``, from :func:`zonotope_maxima`'s codes."""
-    return _SIGNS[codes]
+    out = np.empty(codes.shape + (3,), dtype=np.int8)
+    _unpack(np.ascontiguousarray(codes).reshape(-1), out.reshape(-1, 3))
+    return out
+
+
+@njit(nogil=True, cache=True)
+def _unpack(codes, out):
+    for n in range(codes.size):
+        c = codes[n]
+        out[n, 0], out[n, 1], out[n, 2] = ((c >> 1) & 2) - 1, (c & 2) - 1, ((c << 1) & 2) - 1
 
 
 @njit(inline="always", error_model="numpy")
@@ -152,43 +159,35 @@ def _cos_range(lo, hi):
 #: Poses per block: the block's scratch rows (about 70 x BLOCK float64) stay in cache and every
 #: step is a loop over the block's poses, which vectorises.
 BLOCK = 128
-#: Fewest poses for which threads pay (below, the calling thread runs them).
-THREADS_FROM = 4096
+#: Fewest poses for which threads pay (below, the calling thread runs them) and the most poses per chunk
+#: of a thread: chunks are handed to whichever thread is free, so a core busy with other work slows its
+#: share only.
+THREADS_FROM = 1 << 16
+CHUNK = 1 << 15
 
 
-def envelope_kernel(poses, legc, family, leg, unit, box, limits, check, values, codes, bad):
+def envelope_kernel(poses, legc, family, leg, unit, box, limits, check, values, codes, bad, workers=None):
     """Maxima of the linear model over the budget's box at every pose (compiled).
 
     poses : (N, 3) x mm, y mm, phi deg. legc : (15, 3) :func:`leg_constants`.
     family, leg, unit, box : :func:`term_table`. limits : (3,) min transmission,
     max condition, stroke tolerance mm; check : test them.
     values, codes : (4, N) out, as :func:`zonotope_maxima`.
-    bad : (N,) int64 out, bit ``3 * reason + leg`` set for each refusal (see REASONS).
-    Small batches run on the calling thread, larger ones in one contiguous range per core.
+    bad : (N,) int16 out, bit ``3 * reason + leg`` set for each refusal (see REASONS).
+    workers : threads for large batches (default: CPU count); every pose's numbers are the same.
     """
-    if poses.shape[0] >= THREADS_FROM:
-        _ranges_threaded(get_num_threads(), poses, legc, family, leg, unit, box, limits, check, values, codes, bad)
-    else:
-        _ranges_serial(poses, legc, family, leg, unit, box, limits, check, values, codes, bad)
-
-
-@njit(parallel=True, cache=True, error_model="numpy")
-def _ranges_threaded(k, poses, legc, family, leg, unit, box, limits, check, values, codes, bad):
-    """:func:`_range` over one contiguous range of poses for each of k threads."""
     N = poses.shape[0]
-    per = (N + k - 1) // k
-    for t in prange(k):
-        _range(t * per, min(N, (t + 1) * per), poses, legc, family, leg, unit, box, limits, check, values, codes,
-               bad)
+    args = (poses, legc, family, leg, unit, box, limits, check, values, codes, bad)
+    workers = workers or os.cpu_count() or 1
+    if N < THREADS_FROM or workers == 1:
+        _range(0, N, *args)
+        return
+    chunk = min(CHUNK, -(-N // workers))
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        list(pool.map(lambda a: _range(a, min(N, a + chunk), *args), range(0, N, chunk)))
 
 
-@njit(cache=True, error_model="numpy")
-def _ranges_serial(poses, legc, family, leg, unit, box, limits, check, values, codes, bad):
-    """:func:`_range` over all poses on the calling thread."""
-    _range(0, poses.shape[0], poses, legc, family, leg, unit, box, limits, check, values, codes, bad)
-
-
-@njit(cache=True, error_model="numpy")
+@njit(nogil=True, cache=True, error_model="numpy")
 def _range(start, stop, poses, legc, family, leg, unit, box, limits, check, values, codes, bad):
     """The envelope at poses ``start:stop``, block by block, with scratch arrays allocated once.
 

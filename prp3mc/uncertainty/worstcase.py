@@ -404,7 +404,7 @@ def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: flo
     shape = poses.shape[:-1]
     flat = np.ascontiguousarray(poses.reshape(-1, 3))
     n = flat.shape[0]
-    values, codes, bad = np.empty((4, n)), np.empty((4, n), dtype=np.int8), np.empty(n, dtype=np.int64)
+    values, codes, bad = np.empty((4, n)), np.empty((4, n), dtype=np.int8), np.empty(n, dtype=np.int16)
     envelope_kernel(flat, *tables, _LIMITS, check, values, codes, bad)
     if check and bad.any():
         for r, reason in enumerate(REASONS):
@@ -414,8 +414,9 @@ def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: flo
                 leg = next(i for i in range(3) if bad[p] >> (3 * r + i) & 1)
                 # the flat index, as worst_case reports it
                 raise InfeasiblePoseError(refusal(geometry, flat[p], (p,), reason, leg))
+    values[1] *= RAD2DEG
     return WorstCaseMaxima(
-        poses=poses, position_mm=values[0].reshape(shape), phi_deg=values[1].reshape(shape) * RAD2DEG,
+        poses=poses, position_mm=values[0].reshape(shape), phi_deg=values[1].reshape(shape),
         x_mm=values[2].reshape(shape), y_mm=values[3].reshape(shape),
         leg_signs=dict(zip(QUANTITIES, leg_signs(codes).reshape((4,) + shape + (3,)))),
         input_bounds=bounds.copy(), k_sigma=k_sigma)
