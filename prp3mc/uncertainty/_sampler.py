@@ -35,7 +35,7 @@ from .budget import Budget
 from .laws import Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
 from .model import FEATURE_COS, FEATURE_SIN, FEATURE_VALUE
 
-__all__ = ["LANES", "sampler_tables", "pcg_lanes", "draw_features"]
+__all__ = ["LANES", "sampler_tables", "pcg_lanes", "draw_uniforms", "draw_features"]
 
 #: Interleaved PCG64 streams of a tile (a tile holds a multiple of LANES samples).
 LANES = 16
@@ -255,6 +255,27 @@ def _sincos_deg(t):
 
 # ---------------------------------------------------------------- one tile
 @njit(nogil=True, cache=True)
+def draw_uniforms(lanes, consts, U):
+    """The uniforms (d, T) of the next tile's T samples (T a multiple of LANES); the lanes move on.
+
+    Lane l draws the d uniforms of samples l, l + LANES, ... and then jumps the
+    other lanes' draws, so ``U[:, s]`` is sample s's row of numpy's ``random((n, d))``.
+    """
+    d, T = U.shape
+    ih, il, ah, al, ch, cl = consts[0], consts[1], consts[2], consts[3], consts[4], consts[5]
+    sh, sl = lanes[0], lanes[1]
+    for i in range(T // LANES):
+        base = i * LANES
+        for j in range(d):
+            for lane in range(LANES):
+                h, lo = _affine(_MH, _ML, ih, il, sh[lane], sl[lane])
+                sh[lane], sl[lane] = h, lo
+                U[j, base + lane] = _uniform(h, lo)
+        for lane in range(LANES):
+            sh[lane], sl[lane] = _affine(ah, al, ch, cl, sh[lane], sl[lane])
+
+
+@njit(nogil=True, cache=True)
 def draw_features(lanes, consts, codes, params, cdf, values, ops, m, U, X, F):
     """Features of the next tile of samples; the lanes move on to the tile after it.
 
@@ -273,18 +294,8 @@ def draw_features(lanes, consts, codes, params, cdf, values, ops, m, U, X, F):
     F : (nF, T) float64 out
         Features of the tile's first ``m`` samples.
     """
-    d, T = U.shape
-    ih, il, ah, al, ch, cl = consts[0], consts[1], consts[2], consts[3], consts[4], consts[5]
-    sh, sl = lanes[0], lanes[1]
-    for i in range(T // LANES):
-        base = i * LANES
-        for j in range(d):
-            for lane in range(LANES):
-                h, lo = _affine(_MH, _ML, ih, il, sh[lane], sl[lane])
-                sh[lane], sl[lane] = h, lo
-                U[j, base + lane] = _uniform(h, lo)
-        for lane in range(LANES):
-            sh[lane], sl[lane] = _affine(ah, al, ch, cl, sh[lane], sl[lane])
+    d = U.shape[0]
+    draw_uniforms(lanes, consts, U)
     for j in range(d):
         _ppf_row(codes[j], params[j], cdf, values, U[j], X[j], m)
     f = 0
