@@ -108,6 +108,15 @@ def bench_envelope(quick: bool) -> dict:
     out["worstcase_numpy_poses_per_s"], out["worstcase_numpy_poses_per_cpu_s"] = grid[..., 0].size / wall, grid[..., 0].size / cpu
     out["worstcase_numpy_load"] = load
     out["envelope_limit_poses_per_s"] = peak_flops(np.float64) / ENVELOPE_FLOPS_PER_POSE
+    # a machine's [effects]: thermal adds a shared generator (16 corners), backlash and a lead scale two terms
+    from prp3mc.uncertainty.systematic import SystematicEffect as Effect
+    machine = budget.with_effects({"backlash_1": Effect("backlash_1", 0.02), "scale_2": Effect("scale_2", 1e-4),
+                                   "thermal": Effect("thermal", 1.2e-5, temp_range_C=(15.0, 30.0))})
+    grid = region.grid(1001)
+    worst_case_maxima(g, machine, region.grid(11))
+    cpu = {name: timed(lambda: worst_case_maxima(g, b, grid), 3)[1] for name, b in (("paper", budget), ("effects", machine))}
+    out["envelope_1001_effects_poses_per_cpu_s"] = grid[..., 0].size / cpu["effects"]
+    out["envelope_effects_cost_ratio"] = cpu["effects"] / cpu["paper"]
     return out
 
 
@@ -169,6 +178,10 @@ def table(r: dict) -> str:
            "%s (%d flops a pose at the float64 matmul rate); target 1e7 wall"
            % (g(r["envelope_limit_poses_per_s"]), ENVELOPE_FLOPS_PER_POSE))
           for n in (11, 101, 1001, 2001) if f"envelope_{n}_poses_per_s" in r],
+        ("Exact envelope, fused kernel, 1001x1001, budget with [effects] (backlash, scale, thermal: 16 corners; "
+         "per CPU-second)", g(r["envelope_1001_effects_poses_per_cpu_s"]), "the same without effects (8 corners)",
+         g(r["envelope_1001_effects_poses_per_cpu_s"] * r["envelope_effects_cost_ratio"]),
+         g(r["envelope_effects_cost_ratio"]) + " (CPU time)", "-"),
         *([("Sobol at one pose, N = %d, 100 bootstrap (s; CPU s)" % r["sobol_pose_n_samples"],
             f"{g(r['sobol_pose_seconds'])}; {g(r['sobol_pose_cpu_seconds'])}",
             "OpenTURNS SaltelliSensitivityAlgorithm, same problem",

@@ -188,7 +188,7 @@ def allocate_estimate(n_poses: int, n_inputs: int, n_samples: int = 0) -> Estima
 
 def study_estimate(study) -> Estimate:
     """Memory and time of running a :class:`prp3mc.study.Study` (its analyses, one configuration after another)."""
-    d = len(study.budget)
+    d = len(study.budget.factors)
     n_conf = len(study.configurations) * math.prod(len(entry[-1]) for entry in getattr(study, "sweep", ()))
     total = worstcase_estimate(n_conf * study.worstcase_grid[0] * study.worstcase_grid[1], d)
     if "montecarlo" in study.outputs:

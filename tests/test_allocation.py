@@ -183,10 +183,15 @@ def test_front_is_the_brute_force_pareto_set(geometry, preset):
     menu, poses = random_menu(5), small_grid(preset)
     _, costs, pos, _ = _brute_force(preset, 5)
     front = allocation_front(geometry, menu, poses)
+    assert_pareto_front(front, costs, pos)
+    assert set(front["unit"]) == {"mm", "deg"}
+
+
+def assert_pareto_front(front, costs, pos):
+    """The front's position points are the brute-force Pareto set: cost up, worst case (µm) strictly down."""
     rows = front[front["output"] == "position"].sort_values("point")
-    order = np.lexsort((pos, costs))
     expected, best = [], np.inf
-    for k in order:                                  # brute-force Pareto set: cost up, worst case strictly down
+    for k in np.lexsort((pos, costs)):
         if pos[k] < best * (1 - 1e-9):
             if expected and np.isclose(expected[-1][0], costs[k], rtol=1e-12):
                 expected.pop()
@@ -194,7 +199,6 @@ def test_front_is_the_brute_force_pareto_set(geometry, preset):
             best = pos[k]
     np.testing.assert_allclose(rows["cost"], [c for c, _ in expected], rtol=1e-12)
     np.testing.assert_allclose(1e3 * rows["value"], [p for _, p in expected], rtol=1e-9)
-    assert set(front["unit"]) == {"mm", "deg"}
 
 
 def test_front_plot_returns_a_figure():

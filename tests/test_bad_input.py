@@ -19,11 +19,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from prp3mc import Budget, Geometry
-from prp3mc._toml import loads_toml
+from prp3mc._toml import dumps_toml, loads_toml
 from prp3mc.cli import main
 from prp3mc.errors import Prp3mcError, Prp3mcWarning
 from prp3mc.measurement.campaign import read_campaign
 from prp3mc.study.reader import Study
+from prp3mc.uncertainty.systematic import SystematicEffect
 
 G, B, P = ["--geometry", "u-shape"], ["--budget", "paper"], ["--pose", "0", "100", "0"]
 PAPER_LEGS = "".join(f'theta_{i} = {{ law = "uniform", lo = -0.04, hi = 0.04 }}\n' for i in (1, 2, 3))
@@ -46,6 +47,10 @@ def _study(top: str = "", grid: int = 5, samples: int = 1024, mc_grid: int = 3) 
 
 
 _HEADER = "pose_id,x_cmd,y_cmd,phi_cmd,x_meas,y_meas,phi_meas\n"
+#: A budget whose [effects] were fitted on the delta-shape (a model file of another machine).
+_DELTA_MODEL = dumps_toml(Budget.from_preset("paper").with_effects(
+    {"backlash_1": SystematicEffect("backlash_1", 0.02, campaign="c1.csv")},
+    fitted_on=Geometry.from_preset("delta-shape")).to_dict())
 
 #: Prepared input files: name -> text (str) or raw bytes.
 FILES = {
@@ -94,6 +99,10 @@ FILES = {
     "csv_no_repeats": _HEADER + "".join(f"{k},{10 * k},100,0,{10 * k},100,0\n" for k in range(3)),
     "csv_two_poses": _HEADER + "".join(f"{k % 2},{10 * (k % 2)},100,0,{10 * (k % 2)},100,0\n" for k in range(6)),
     "existing_file": "x",
+    "budget_backlash": _budget(*PAPER_LEGS.splitlines()) + '[effects.backlash_1]\nvalue = 0.02\ncampaign = "c1.csv"\n',
+    "budget_unknown_effect": _budget(*PAPER_LEGS.splitlines()) + "[effects.wobble_1]\nvalue = 0.02\n",
+    "budget_delta_model": _DELTA_MODEL,
+    "csv_no_dir": _HEADER + "".join(f"{k % 3},{10 * (k % 3)},100,0,{10 * (k % 3)},100,0\n" for k in range(6)),
 }
 
 
@@ -257,6 +266,12 @@ CASES = [
     _case("discrepancy", *G, *B, "--data", "{csv_no_repeats}", "--out", "{root}/d18",
           message="0 of them repeated; the discrepancy workflow needs at least 3 distinct poses"),
     _case("discrepancy", *G, *B, "--data", "{csv_two_poses}", "--out", "{root}/d19", message="too small"),
+    _case("discrepancy", *G, "--budget", "{budget_backlash}", "--data", "{csv_no_dir}", "--out", "{root}/d20",
+          message="effect backlash_1 (fitted on c1.csv) needs column dir_1, which the campaign lacks"),
+    _case("discrepancy", *G, "--budget", "{budget_unknown_effect}", "--data", "{csv_no_dir}", "--out", "{root}/d21",
+          message="unknown effect 'wobble_1'"),
+    _case("discrepancy", *G, "--budget", "{budget_delta_model}", "--data", "{csv_no_dir}", "--out", "{root}/d22",
+          message="holds effects fitted on geometry 'delta-shape', not on geometry 'u-shape'"),
     # ----------------------------------------------------------- allocate
     _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150", "--grid",
           "100000", message="of memory, this machine has"),

@@ -85,6 +85,9 @@ def test_measured_matches_predicted_on_a_simulated_campaign(r):
         diff = (rows["measured"] - rows["predicted"]).sum()
         se = np.sqrt((rows["predicted_sd"] ** 2).sum())
         assert abs(diff) < 4.5 * se, (stat, diff / se)
+    # the largest over the 49 poses, like for like: within its spread between campaigns
+    for key, measured in out["measured"].items():
+        assert abs(measured - out["predicted"][key]) < 4.5 * out["predicted_sd"][key], key
     # the figures are of the right size: RP of micrometres, AP of the budget's mean error
     assert 0.01 < out["measured"]["RP_mm"] < 1.0 and out["predicted"]["AP_mm"] > 0
 

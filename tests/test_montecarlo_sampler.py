@@ -11,11 +11,17 @@ from prp3mc.uncertainty import _sampler
 from prp3mc.uncertainty._sampler import LANES, draw_features, pcg_lanes, sampler_tables
 from prp3mc.uncertainty._select import count_below, order_statistics
 from prp3mc.uncertainty.budget import SAMPLE_BLOCK
+from prp3mc.uncertainty.model import FEATURE_COS, FEATURE_SIN
+from prp3mc.uncertainty.systematic import SystematicEffect
 
 PAPER = Budget.from_preset("paper")
 MIXED = PAPER.replace(rho_1=Disc(0.016), theta_2=Triangular(-0.01, 0.03, 0.04), zeta_2=Uniform(-400.0, 200.0),
                       b_3=Discrete((0.0, 0.01, 0.02), (0.6, 0.3, 0.1)), theta_3=TruncNormal(0.0, 0.04, 1.0),
                       b_1=Normal(0.01, 0.003), zeta_3=Uniform(30.0, 75.0))
+# effects: known shifts (an offset, a lead scale: the constant feature), backlash (+-h/2), thermal (T - 20 K)
+EFFECTS = PAPER.with_effects({"b_2": SystematicEffect("b_2", 0.004), "scale_2": SystematicEffect("scale_2", 1e-4),
+                              "backlash_1": SystematicEffect("backlash_1", 0.02),
+                              "thermal": SystematicEffect("thermal", 1.2e-5, temp_range_C=(15.0, 30.0))})
 POSE = np.array([0.0, 100.0, 0.0])
 
 
@@ -26,9 +32,10 @@ class OwnUniform(Uniform):
 def compiled_features(budget, model, seed, first, n, tile=4 * LANES * 8):
     """Features (n, F) of samples first to first + n drawn by the compiled sampler, tile by tile."""
     tables = sampler_tables(budget, model.feature_ops())
-    lanes, consts = pcg_lanes(seed, first, len(budget))
-    U, X = np.empty((len(budget), tile)), np.empty((len(budget), tile))
-    F = np.empty((model.feature_ops().shape[0], tile))
+    D = len(budget.factors)
+    lanes, consts = pcg_lanes(seed, first, D)
+    U, X = np.empty((D, tile)), np.empty((D, tile))
+    F = np.empty((model.feature_ops()[0].shape[0], tile))
     out = []
     for t0 in range(0, n, tile):
         m = min(tile, n - t0)
@@ -37,7 +44,7 @@ def compiled_features(budget, model, seed, first, n, tile=4 * LANES * 8):
     return np.concatenate(out)
 
 
-@pytest.mark.parametrize("budget", [PAPER, MIXED], ids=["paper", "every law"])
+@pytest.mark.parametrize("budget", [PAPER, MIXED, EFFECTS], ids=["paper", "every law", "effects"])
 def test_compiled_features_equal_numpy_sampling(budget, seed):
     """Same uniforms as Generator(PCG64(seed)).random, same laws, same features, from any first sample."""
     model = linear_model(Geometry.from_preset("u-shape"), budget, POSE)
@@ -47,9 +54,9 @@ def test_compiled_features_equal_numpy_sampling(budget, seed):
     scale = np.abs(ref).max(axis=0)
     err = np.abs(got - ref) / scale
     assert np.all(err <= 2e-15), err.max(axis=0)        # cos, sin and the normal quantile: round-off
-    ops = model.feature_ops()
-    values = ops[:, 0] == 0
-    exact = [k for k, law in enumerate(budget.inputs.values()) if not isinstance(law, (Normal, TruncNormal))]
+    ops, _ = model.feature_ops()
+    values = ~np.isin(ops[:, 0], [FEATURE_COS, FEATURE_SIN])   # values, T - 20, the constant 1: no trigonometry
+    exact = [k for k, law in enumerate(budget.factor_laws.values()) if not isinstance(law, (Normal, TruncNormal))]
     same = values & np.isin(ops[:, 1], exact)
     np.testing.assert_array_equal(got[:, same], ref[:, same])   # the other laws' values bit for bit
 

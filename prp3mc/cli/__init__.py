@@ -149,7 +149,7 @@ def provenance(args, geometry=None, budget=None, **inputs) -> dict:
     if geometry is not None:
         record["geometry"] = spec_record(args.geometry, geometry)
     if budget is not None:
-        record["budget"] = spec_record(args.budget, budget)
+        record["budget"] = spec_record(args.budget, budget) | budget.effects_record()
         if budget.missing_inputs:
             record["budget"]["missing_inputs"] = list(budget.missing_inputs)
     if getattr(args, "pose", None) is not None:
@@ -164,6 +164,12 @@ def emit_json(obj: dict) -> None:
     """Print ``obj`` as JSON; a NaN or infinity is refused with one line naming where it is."""
     sys.stdout.write(dumps_json(obj) + "\n")
 
+
+#: How Monte Carlo and Sobol take a budget's [effects] (README, File formats), said under their tables.
+EFFECTS_NOTE = ("Effects: backlash_i and thermal are factors (the approach direction is unknown: delta b_i = "
+                "±h_i/2 with probability 1/2 each; one temperature, uniform over temp_range_C); offsets "
+                "(offset_q_i) and lead scales (scale_i) are known shifts: no variance share, a systematic part "
+                "of the worst case.")
 
 LEGS = ("leg 1", "leg 2", "leg 3")
 

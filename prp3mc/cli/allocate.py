@@ -6,6 +6,7 @@ from .._version import __version__
 from ..kinematics.geometry import REGION_PRESETS
 from ..provenance import spec_record
 from ..uncertainty.allocation import allocate, allocation_front, front_records
+from ..uncertainty.budget import Budget
 from ..units import DEG2ARCSEC, MM2UM
 from ..limits import allocate_estimate
 from . import (add_geometry, add_json, add_progress, add_seed, command, emit_json, finite_float, positive_float, positive_int,
@@ -21,6 +22,9 @@ class AllocateCommand:
                        help=f"test region preset ({', '.join(REGION_PRESETS)})")
         p.add_argument("--classes", required=True, metavar="FILE.toml",
                        help="classes file (README, File formats), or the bundled example: example")
+        p.add_argument("--budget", default=None, metavar="B",
+                       help="a budget whose [effects] (fitted offsets, lead scales, backlash, thermal) stay fixed "
+                            "in every bound and check; its inputs play no part (the classes choose them)")
         p.add_argument("--spec-position-um", type=finite_float, default=None, metavar="X",
                        help="worst-case position error bound, µm (with --spec-percentile: that percentile's bound)")
         p.add_argument("--spec-phi-arcsec", type=finite_float, default=None, metavar="Z",
@@ -44,23 +48,25 @@ class AllocateCommand:
 
     @staticmethod
     def run(args) -> None:
+        budget = None if args.budget is None else Budget.load(args.budget)
         within_limits(args, allocate_estimate(args.grid ** 2, 12,  # rho, zeta, theta and b of each leg
                                               args.samples if args.spec_percentile is not None else 0))
         r = allocate(args.geometry, args.classes, args.region, spec_position_um=args.spec_position_um,
                      spec_phi_arcsec=args.spec_phi_arcsec, spec_percentile=args.spec_percentile,
                      grid=args.grid, phi_deg=args.phi_deg, k_sigma=args.k_sigma, n_samples=args.samples,
-                     rng=args.seed)
+                     rng=args.seed, budget=budget)
         front = None
         if args.front:
             output = "position" if args.spec_position_um is not None else "phi"
             side = {"spec_phi_arcsec": args.spec_phi_arcsec} if output == "position" else {}
             front = allocation_front(r.geometry, r.menu, args.region, output=output, grid=args.grid,
-                                     phi_deg=args.phi_deg, k_sigma=args.k_sigma, progress=args.progress, **side)
+                                     phi_deg=args.phi_deg, k_sigma=args.k_sigma, progress=args.progress,
+                                     budget=budget, **side)
         if args.json:
             doc = r.to_dict()
             if front is not None:
                 doc["front"] = front_records(front)
-            doc.update(provenance(args, r.geometry, classes=spec_record(args.classes, r.menu), region=args.region,
+            doc.update(provenance(args, r.geometry, budget, classes=spec_record(args.classes, r.menu), region=args.region,
                                   grid=args.grid, phi_deg=args.phi_deg, n_poses=int(r.poses.shape[0]),
                                   k_sigma=args.k_sigma, seed=r.seed,
                                   n_samples=args.samples if args.spec_percentile is not None else None))
@@ -82,6 +88,9 @@ def _text(r, args, front) -> str:
     frame = r.choice_frame()
     for row in frame.itertuples():
         lines.append(f"  {row.input:9s} {row._2:16s} cost {row.cost:8g}   {row.source}")
+    if r.fixed is not None:
+        lines += ["", f"held fixed (budget {r.fixed.name}): " + ", ".join(
+            f"{k} = {e.value:g} {e.unit}" for k, e in r.fixed.effects.items())]
     lines += ["", f"worst case over the region: position {MM2UM * r.worst_case_position_mm:.3f} µm, "
                   f"|dphi| {DEG2ARCSEC * r.worst_case_phi_deg:.3f} arcsec",
               f"binding: {r.binding} at " + "; ".join(

@@ -1,10 +1,12 @@
 """``prp3mc discrepancy``: name what the model misses in a measurement campaign."""
 
 from ..uncertainty.budget import Budget
+from ..measurement.accuracy import MODELS
 from ..measurement.workflow import STAGES, discrepancy
 from ..progress import Progress
 from ..reports.discrepancy_report import write_report
 from ..kinematics.geometry import Geometry
+from ..units import MM2UM
 from . import (provenance, add_budget, add_geometry, add_json, add_progress, add_seed, command, emit_json, nonnegative_float,
                probability)
 
@@ -50,7 +52,9 @@ class DiscrepancyCommand:
             doc = result.to_dict()
             emit_json(doc | {"inputs": doc["inputs"] | record})
             return
-        print("\n".join(headline(result) + [f"report: {folder / 'report.html'}"]))
+        print("\n".join(headline(result) + [f"report: {folder / 'report.html'}",
+                                             f"updated model: {folder / 'model'} (geometry.toml, budget.toml, "
+                                             "budget_compensated.toml)"]))
 
 
 def headline(result) -> list[str]:
@@ -79,4 +83,11 @@ def headline(result) -> list[str]:
                f"not closed: UNEXPLAINED disagreement remains ({g['deciding_channel'].replace('_', ' ')})")
     lines.append(f"gap {g['before']:.3g} -> {g['after']:.3g} (null level <= 1, closed at <= {g['closed_at']:.2g}): "
                  f"{verdict}")
+    h = g["held_out"]
+    lines.append(f"held-out gap (cross-validation by pose, {h['folds']} folds; trust this one) "
+                 f"{h['before']:.3g} -> {h['after']:.3g}")
+    acc = result.accuracy
+    lines.append("predicted worst case / p99 of the position error over the region: " + ", ".join(
+        f"{key} {MM2UM * acc[key]['worst_case_position_mm']:.1f} / {MM2UM * acc[key]['p99_position_mm']:.1f} µm"
+        for key in MODELS))
     return lines

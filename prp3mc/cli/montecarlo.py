@@ -6,7 +6,7 @@ from ..kinematics.geometry import Geometry
 from ..limits import montecarlo_estimate
 from ..uncertainty.montecarlo import monte_carlo
 from ..uncertainty.validity import check_linearity
-from . import (provenance, add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
+from . import (EFFECTS_NOTE, provenance, add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
                emit_json, nonnegative_float, within_limits)
 
 
@@ -32,7 +32,7 @@ class MonteCarloCommand:
     @staticmethod
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
-        within_limits(args, montecarlo_estimate(args.samples, 1, len(budget)))
+        within_limits(args, montecarlo_estimate(args.samples, 1, len(budget.factors) + 1))
         check_linearity(geometry, budget, args.pose)
         r = monte_carlo(geometry, budget, args.pose, args.samples, rng=args.seed,
                         tolerance_mm=args.tolerance_mm, exact_check_poses=1 if args.exact_check else 0,
@@ -83,6 +83,8 @@ class MonteCarloCommand:
             lo, hi = r.exceed_ci
             lines.append(f"\nP(position error > {args.tolerance_mm:g} mm) = {float(r.exceed_prob):.4g} "
                          f"[{lo:.4g}, {hi:.4g}]")
+        if budget.effects:
+            lines.append("\n" + EFFECTS_NOTE)
         if r.linearization is not None:
             row = r.linearization.iloc[0]
             lines.append(f"\nExact vs linear model ({int(row['n_samples'])} samples): max "

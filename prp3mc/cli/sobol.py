@@ -12,7 +12,7 @@ from ..uncertainty.validity import check_linearity
 from ..units import DISPLAY, OUTPUTS
 from ..uncertainty.worstcase import worst_case
 from ..limits import sobol_estimate
-from . import (provenance, add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
+from . import (EFFECTS_NOTE, provenance, add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
                emit_json, positive_float, positive_int, probability, within_limits)
 
 _KEYS = ("S1", "S1_conf", "ST", "ST_conf")
@@ -42,6 +42,8 @@ def _indices(r, i: int, k: int, name: str) -> dict:
 
 
 def _index_text(row) -> str:
+    if row.kind == "shift":
+        return f"{'known shift: no variance':>33s}"
     if math.isnan(row.ST):
         return f"{_UNDEFINED:>33s}"
     return f"{row.S1:8.4f}{row.S1_conf:8.4f}{row.ST:9.4f}{row.ST_conf:8.4f}"
@@ -73,7 +75,8 @@ class SobolCommand:
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         groups = dict(_group(text) for text in args.group)
-        within_limits(args, sobol_estimate(args.samples, 1, len(budget), len(budget) + len(budget.groups) + len(groups),
+        d = len(budget.factors)
+        within_limits(args, sobol_estimate(args.samples, 1, d, d + len(budget.groups) + len(groups),
                                            len(OUTPUTS), args.resamples, salib=args.method != "vectorised"))
         check_linearity(geometry, budget, args.pose)
         r = sobol_indices(geometry, budget, args.pose, args.samples, rng=args.seed, groups=groups,
@@ -98,22 +101,24 @@ class SobolCommand:
         x, y, phi = args.pose
         lines = [f"prp3mc {__version__}  geometry {geometry.name}  budget {budget.name}  "
                  f"pose x={x:g} mm  y={y:g} mm  phi={phi:g} deg",
-                 f"Sobol indices: N = {r.n_samples} (x {len(budget) + 2 + len(r.groups)} model runs), "
+                 f"Sobol indices: N = {r.n_samples} (x {d + 2 + len(r.groups)} model runs), "
                  f"seed {r.seed}, {100 * r.conf_level:g} % bootstrap intervals ({r.num_resamples} resamples), "
                  f"method {r.method}"]
         for o, df in tables.items():
             scale, unit = DISPLAY[o]
             total = wc.value(o) * scale
             lines += ["", f"{o}: worst case {float(total):.3f} {unit}; sorted by total index ST",
-                      f"  {'name':13s}{'S1':>8s}{'± conf':>8s}{'ST':>9s}{'± conf':>8s}"
+                      f"  {'name':15s}{'S1':>8s}{'± conf':>8s}{'ST':>9s}{'± conf':>8s}"
                       f"{'worst case ' + unit:>18s}{'share':>8s}"]
             for row in df.itertuples():
                 wc_text = (f"{'-':>18s}{'':8s}" if math.isnan(row.worst_case_contribution) else
                            f"{scale * row.worst_case_contribution:18.3f}{100 * row.worst_case_share:7.1f}%")
-                lines.append(f"  {row.name:13s}{_index_text(row)}{wc_text}")
+                lines.append(f"  {row.name:15s}{_index_text(row)}{wc_text}")
         lines += ["", "Worst case: each term's part of the maximum at the maximising vertex. A clearance "
                       "term rho_i cos(zeta_i - omega_i) needs rho_i and zeta_i together, so its part is "
                       "shown on clearance_i ('-' on rho_i and zeta_i)."]
+        if budget.effects:
+            lines.append(EFFECTS_NOTE)
         if args.k_sigma is not None:
             lines.append(f"Unbounded laws bounded at mean ± {args.k_sigma:g} sd for the worst case.")
         print("\n".join(lines))

@@ -47,10 +47,17 @@ class WorstCaseCommand:
         at = wc.maximizer("position")
         for _, row in frame.sort_values("contribution", ascending=False).iterrows():
             term = row["term"]
-            value = (f"rho={at[term]:.4g} mm at zeta={at['zeta_' + term[-1]]:.1f} deg"
-                     if term.startswith("rho_") else f"{at[term]:.4g}")
-            lines.append(f"  {term:10s} {value:34s} {1e3 * row['contribution']:9.3f} µm  "
+            if term.startswith("rho_"):
+                value = f"rho={at[term]:.4g} mm at zeta={at['zeta_' + term[-1]]:.1f} deg"
+            elif term == "thermal":
+                value = f"T={at[term]:.4g} deg C"
+            else:
+                value = f"{at[term]:.4g}" if term in at else f"{row['term_value']:.4g} (known shift)"
+            lines.append(f"  {term:15s} {value:34s} {1e3 * row['contribution']:9.3f} µm  "
                          f"({100 * row['share']:5.1f} %)")
         if args.k_sigma is not None:
             lines.append(f"Unbounded laws bounded at mean ± {args.k_sigma:g} sd.")
+        if budget.effects:
+            lines.append("Effects: backlash_i over ±h_i/2 and thermal over temp_range_C (their drivers are "
+                         "unknown at a pose); offsets (offset_q_i) and lead scales (scale_i) are known shifts.")
         print("\n".join(lines))

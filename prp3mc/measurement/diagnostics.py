@@ -45,7 +45,7 @@ from ..units import DISPLAY, MM2UM, OUTPUT_UNITS, POSE_OUTPUTS
 from .effects import ROW_TO_DEG, spread_budget
 from .likelihood import Engine, Fit
 
-__all__ = ["Diagnosis", "diagnose", "gap", "gap_value", "CHANNELS"]
+__all__ = ["Diagnosis", "diagnose", "null_variances", "gap", "gap_value", "CHANNELS"]
 
 #: ``[mm, mm, deg] -> [µm, µm, arcsec]``: the display scale of the pose error rows in tables.
 _DISPLAY = np.array([DISPLAY[o][0] for o in POSE_OUTPUTS])
@@ -155,13 +155,13 @@ def _holm_log_min(log_p: np.ndarray) -> float:
     return float(min(0.0, np.min(s + np.log(s.size - np.arange(s.size)))))
 
 
-def _null_variances(engine: Engine, fit: Fit, n_boot: int, rng) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def null_variances(engine: Engine, fit: Fit, n_boot: int, rng) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bootstrap variances (P,) of B_p, S_p and B_p + S_p under the fitted model.
 
     The repeatable part is drawn once per pose and replicate, the rest at
     every visit: ``mu + sqrt(r) (e_pose - mu) + sqrt(1 - r) (e_visit - mu)``.
     """
-    bud = spread_budget(engine.budget, {n: f * engine.spread_ref[n] for n, f in fit.factors.items()})
+    bud = spread_budget(engine.budget.without_effects(), {n: f * engine.spread_ref[n] for n, f in fit.factors.items()})
     model = linear_model(engine.geometry, bud, engine.campaign.poses, check=False)
     mean = engine.moments(fit.factors, fit.r)[0]
     coef = model.coef[engine.idx]
@@ -248,10 +248,27 @@ def _spatial_z(engine: Engine, fit: Fit, model_cols: np.ndarray) -> float:
     return float((u @ E @ u - np.trace(ER)) / np.sqrt(2.0 * np.trace(ER @ ER)))
 
 
-def diagnose(engine: Engine, fit: Fit, n_boot: int, rng) -> Diagnosis:
-    """Every test of the module notes for the model state ``fit`` (``n_boot`` bootstrap replicates)."""
+def diagnose(engine: Engine, fit: Fit, n_boot: int = 0, rng=None, *, null: tuple | None = None,
+             fitted: bool = True) -> Diagnosis:
+    """Every test of the module notes for the model state ``fit``.
+
+    Parameters
+    ----------
+    engine : Engine
+    fit : Fit
+    n_boot : int
+        Bootstrap replicates of the null variances (unless ``null`` is given).
+    rng : numpy.random.Generator
+        Randomness of the bootstrap.
+    null : tuple of 3 ndarray of shape (P,), optional
+        Null variances of B_p, S_p and B_p + S_p (:func:`null_variances`) computed before.
+    fitted : bool
+        Whether ``fit``'s values, spread factors and ``r`` were fitted to
+        these residuals (their degrees of freedom are then taken off);
+        False for residuals of measurements left out of the fit.
+    """
     c = engine.campaign
-    vB, vS, vT = _null_variances(engine, fit, n_boot, rng)
+    vB, vS, vT = null_variances(engine, fit, n_boot, rng) if null is None else null
     B, S = _pose_stats(engine, fit.zw, fit.zb)
     n = engine.n
     mB, mS = np.full(engine.P, 3.0), 3.0 * (n - 1)
@@ -261,9 +278,9 @@ def diagnose(engine: Engine, fit: Fit, n_boot: int, rng) -> Diagnosis:
     ratio = np.full(engine.P, np.nan)
     ratio[has_rep] = S[has_rep] / mS[has_rep]
     disp_logp[has_rep] = _two_sided(S[has_rep], mS[has_rep], vS[has_rep])
-    n_par = fit.theta.size + len(fit.factors) + 1            # values, spreads and r
+    n_par = fit.theta.size + (len(fit.factors) + 1) * fitted   # values, spreads and r
     gB_mean = 3.0 * engine.P - fit.k_between
-    gS_mean = mS.sum() - (fit.theta.size - fit.k_between) - len(fit.factors) - 1
+    gS_mean = mS.sum() - (fit.theta.size - fit.k_between) - (len(fit.factors) + 1) * fitted
     gB_var = vB.sum() * gB_mean / (3.0 * engine.P)
     gS_var = vS[has_rep].sum() * gS_mean / max(mS.sum(), 1.0) if has_rep.any() else 0.0
     dof = 3.0 * engine.M - n_par

@@ -1,22 +1,10 @@
 """The library of candidate model effects and their signatures.
 
-An *effect* is something the model may be missing. Systematic effects add a
-deterministic pose error that is linear in one parameter, its *signature*
-through the sensitivity matrices J_q; dispersion effects change the spread of
-one budget input.
-
-======================= ====================================== ===========
-effect                  what it changes                         unit
-======================= ====================================== ===========
-``q_i`` (q in a, alpha, constant offset of parameter q of leg i  mm or deg
-beta, gamma, theta, c,  (``b_i``: encoder zero offset)
-e, psi, b)
-``scale_i``             slider error delta b_i = kappa_i b_i    1
-``backlash_i``          delta b_i = dir_i h_i / 2, h_i >= 0     mm
-``thermal``             delta b_i = alpha_T (temp_C - 20) b_i   1/K
-``spread_q_i`` (q in    the law of budget input q_i, scaled      mm or deg
-rho, theta, b)          about 0 to a new bound
-======================= ====================================== ===========
+The effect names, their kinds and units live in
+:mod:`prp3mc.uncertainty.systematic` (re-exported here). This module adds
+what a campaign needs: which effects it can test, each systematic effect's
+*signature* (its linear pose error per unit of value, through the
+sensitivity matrices J_q) and the budgets of spread effects.
 
 A spread's value is the input's new *bound*: the largest ``|value|`` of the
 scaled law's support (the upper bound of a one-sided law such as U[0, 0.025],
@@ -30,102 +18,24 @@ between repeats of a pose.
 
 from __future__ import annotations
 
-import re
-from dataclasses import dataclass
-
 import numpy as np
 
 from ..uncertainty.budget import Budget
-from ..errors import BudgetError
+from ..uncertainty.systematic import (EFFECT_NAMES, OFFSET_FAMILIES, SPREAD_FAMILIES, T_REF_C, Effect, _as_effects,
+                                      effect, offset_errors, slider_error)
+from ..errors import BudgetError, CampaignError
 from ..kinematics.geometry import Geometry
 from ..kinematics.chain import inverse_kinematics
 from ..kinematics.sensitivity import LENGTH_FAMILIES, sensitivity
 from ..units import DEG2RAD, RAD2DEG
 
 __all__ = ["Effect", "EFFECT_NAMES", "OFFSET_FAMILIES", "SPREAD_FAMILIES", "effect", "library",
-           "signatures", "slider_error", "offset_errors", "spread_reference", "spread_budget",
+           "signatures", "budget_effect_errors", "slider_error", "offset_errors", "spread_reference", "spread_budget",
            "T_REF_C", "ROW_TO_DEG"]
 
-#: Parameters whose constant offset is a library effect (``b``: encoder zero offset).
-OFFSET_FAMILIES = ("a", "alpha", "beta", "gamma", "theta", "c", "e", "psi", "b")
-#: Budget inputs whose spread is a library effect.
-SPREAD_FAMILIES = ("rho", "theta", "b")
-#: Reference temperature of the thermal effect, degrees C.
-T_REF_C = 20.0
-_LEGS = (1, 2, 3)
 #: Scale of the rows of a pose error or of J_q, ``[mm, mm, rad] -> [mm, mm, deg]``.
 ROW_TO_DEG = np.array([1.0, 1.0, RAD2DEG])
 ROW_TO_DEG.flags.writeable = False
-
-#: Every effect name of the library, in library order.
-EFFECT_NAMES = (tuple(f"{q}_{i}" for q in OFFSET_FAMILIES for i in _LEGS)
-                + tuple(f"scale_{i}" for i in _LEGS) + tuple(f"backlash_{i}" for i in _LEGS)
-                + ("thermal",) + tuple(f"spread_{q}_{i}" for q in SPREAD_FAMILIES for i in _LEGS))
-
-_PATTERN = re.compile(r"^(?:(spread)_)?([a-z]+)_([123])$")
-
-
-@dataclass(frozen=True, slots=True)
-class Effect:
-    """One effect of the library.
-
-    Attributes
-    ----------
-    name : str
-        Library name, e.g. ``beta_2``, ``backlash_1``, ``spread_b_3``.
-    kind : str
-        ``offset``, ``scale``, ``backlash``, ``thermal`` or ``spread``.
-    family : str or None
-        Parameter family (``b`` for the slider effects, the input family of a
-        spread; None for ``thermal``).
-    leg : int or None
-        0-based leg (None for ``thermal``).
-    unit : str
-        Unit of the effect's value: ``mm``, ``deg``, ``1`` or ``1/K``.
-    """
-
-    name: str
-    kind: str
-    family: str | None
-    leg: int | None
-    unit: str
-
-    @property
-    def systematic(self) -> bool:
-        """True for effects that add a deterministic pose error (all but spreads)."""
-        return self.kind != "spread"
-
-    @property
-    def needs(self) -> tuple[str, ...]:
-        """Optional campaign columns the effect needs."""
-        if self.kind == "backlash":
-            return (f"dir_{self.leg + 1}",)
-        if self.kind == "thermal":
-            return ("temp_C",)
-        return ()
-
-    @property
-    def budget_input(self) -> str | None:
-        """The budget input a spread changes (None for systematic effects)."""
-        return f"{self.family}_{self.leg + 1}" if self.kind == "spread" else None
-
-
-def effect(name: str) -> Effect:
-    """Parse an effect name of the library; :class:`BudgetError` names the known ones otherwise."""
-    if name == "thermal":
-        return Effect("thermal", "thermal", None, None, "1/K")
-    m = _PATTERN.match(str(name))
-    if m and name in EFFECT_NAMES:
-        spread, family, leg = m.group(1), m.group(2), int(m.group(3)) - 1
-        if spread:
-            unit = "mm" if family in LENGTH_FAMILIES else "deg"
-            return Effect(name, "spread", family, leg, unit)
-        if family in ("scale", "backlash"):
-            return Effect(name, family, "b", leg, "1" if family == "scale" else "mm")
-        return Effect(name, "offset", family, leg, "mm" if family in LENGTH_FAMILIES else "deg")
-    raise BudgetError(f"unknown effect {name!r}: the library has "
-                      "q_i for q in a, alpha, beta, gamma, theta, c, e, psi, b; scale_i; backlash_i; "
-                      "thermal; spread_rho_i, spread_theta_i, spread_b_i (i = 1, 2, 3)")
 
 
 def library(budget: Budget | None = None, has_dir=(True, True, True), has_temp: bool = True) -> tuple[Effect, ...]:
@@ -145,57 +55,6 @@ def library(budget: Budget | None = None, has_dir=(True, True, True), has_temp: 
             continue
         out.append(eff)
     return tuple(out)
-
-
-def _as_effects(effects) -> list[Effect]:
-    return [e if isinstance(e, Effect) else effect(e) for e in effects]
-
-
-def slider_error(values: dict, b: np.ndarray, direction: np.ndarray | None = None,
-                 temp_C: np.ndarray | None = None) -> np.ndarray:
-    """Slider position errors delta b of the slider effects in ``values``.
-
-    Parameters
-    ----------
-    values : dict of str to float
-        Effect name to value; effects other than ``b_i``, ``scale_i``,
-        ``backlash_i`` and ``thermal`` are ignored.
-    b : ndarray, shape (M, 3)
-        Commanded slider positions, mm.
-    direction : ndarray, shape (M, 3), optional
-        Approach direction of each actuator, +-1 (needed by backlash).
-    temp_C : ndarray, shape (M,), optional
-        Temperature (needed by thermal).
-
-    Returns
-    -------
-    ndarray, shape (M, 3)
-        delta b, mm.
-    """
-    out = np.zeros(np.shape(b))
-    for eff, value in zip(_as_effects(values), values.values()):
-        if eff.kind == "offset" and eff.family == "b":
-            out[:, eff.leg] += value
-        elif eff.kind == "scale":
-            out[:, eff.leg] += value * b[:, eff.leg]
-        elif eff.kind == "backlash":
-            if direction is None:
-                raise BudgetError(f"{eff.name} needs approach directions dir_{eff.leg + 1}")
-            out[:, eff.leg] += 0.5 * value * direction[:, eff.leg]
-        elif eff.kind == "thermal":
-            if temp_C is None:
-                raise BudgetError("thermal needs temperatures temp_C")
-            out += value * (np.asarray(temp_C)[:, None] - T_REF_C) * b
-    return out
-
-
-def offset_errors(values: dict) -> dict[str, np.ndarray]:
-    """Constant geometric offsets of ``values`` (except ``b_i``) as ``exact_pose_error`` errors (3,) per family."""
-    out: dict[str, np.ndarray] = {}
-    for eff, value in zip(_as_effects(values), values.values()):
-        if eff.kind == "offset" and eff.family != "b":
-            out.setdefault(eff.family, np.zeros(3))[eff.leg] += value
-    return out
 
 
 def signatures(geometry: Geometry, poses: np.ndarray, pose_index: np.ndarray, effects,
@@ -235,6 +94,46 @@ def signatures(geometry: Geometry, poses: np.ndarray, pose_index: np.ndarray, ef
         unit_db = slider_error({eff.name: 1.0}, bm, direction, temp_C)     # (M, 3) mm per unit
         out[:, :, k] = np.einsum("mol,ml->mo", Jb[pose_index], unit_db)
     return out
+
+
+def budget_effect_errors(geometry: Geometry, budget: Budget, campaign) -> np.ndarray:
+    """Pose errors of the budget's ``[effects]`` at every measurement, their drivers taken from the campaign.
+
+    A backlash is driven by the campaign's ``dir_i``, thermal expansion by
+    its ``temp_C``, a lead-screw scale by the commanded slider positions.
+
+    Parameters
+    ----------
+    geometry, budget
+    campaign : Campaign
+
+    Returns
+    -------
+    ndarray, shape (M, 3)
+        ``[dx mm, dy mm, dphi deg]`` (zeros when the budget has no effects).
+
+    Raises
+    ------
+    CampaignError
+        The budget has an effect whose driver column the campaign lacks.
+    BudgetError
+        The budget's effects were fitted on another geometry (its ``[fitted_on]``).
+    """
+    effects = dict(budget.effects)
+    if not effects:
+        return np.zeros((campaign.n_measurements, 3))
+    budget.check_geometry(geometry)
+    columns = {f"dir_{i + 1}" for i in range(3) if campaign.has_dir[i]} | (
+        {"temp_C"} if campaign.temp_C is not None else set())
+    for name, eff in effects.items():
+        missing = [col for col in eff.effect.needs if col not in columns]
+        if missing:
+            fitted = f" (fitted on {eff.campaign})" if eff.campaign else ""
+            raise CampaignError(f"{campaign.source}: the budget's effect {name}{fitted} needs column {missing[0]}, "
+                                f"which the campaign lacks: record it, or remove {name} from the budget's [effects]")
+    G = signatures(geometry, campaign.poses, campaign.pose_index, list(effects), campaign.direction,
+                   campaign.temp_C)
+    return G @ np.array([eff.value for eff in effects.values()])
 
 
 def spread_reference(budget: Budget, eff: Effect | str) -> float:

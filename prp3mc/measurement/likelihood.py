@@ -35,7 +35,7 @@ from ..uncertainty.budget import Budget
 from ..uncertainty.model import linear_model
 from ..units import z_value
 from .campaign import Campaign
-from .effects import EFFECT_NAMES, ROW_TO_DEG, effect, library, signatures, spread_reference
+from .effects import EFFECT_NAMES, ROW_TO_DEG, budget_effect_errors, effect, library, signatures, spread_reference
 from .nuisance import DRIFT, NUISANCE_NAMES, REGISTRATION, campaign_time, nuisance_signatures
 
 __all__ = ["Engine", "Fit", "subset_campaign"]
@@ -120,7 +120,9 @@ class Engine:
         self.idx = campaign.pose_index
         self.P, self.M = campaign.n_poses, campaign.n_measurements
         self.n = campaign.repeats.astype(float)
-        self.err = campaign.error
+        #: (M, 3) pose errors of the budget's [effects] (their drivers from the campaign): part of every model
+        self.known = budget_effect_errors(geometry, budget, campaign)
+        self.err = campaign.error - self.known
         # per-input moment contributions: a spread scales them by (f, f^2)
         self.inputs = [k for k in budget.names if not k.startswith("zeta_")]
         mus, covs = [], []
@@ -145,6 +147,9 @@ class Engine:
         self.invisible = tuple(e.name for e, v in zip(sys_effects, visible) if not v)
         self.systematic = [e for e, v in zip(sys_effects, visible) if v]
         self.G = G[:, :, visible]
+        # least value of each candidate: a backlash width h >= 0, so its correction to a budget's h is >= -h
+        self.lower = np.array([(-budget.effects[e.name].value if e.name in budget.effects else 0.0)
+                               if e.kind == "backlash" else -np.inf for e in self.systematic])
         self.spreads = [e for e in lib if e.kind == "spread"]
         self.spread_input = {e.name: self.inputs.index(e.budget_input) for e in self.spreads}
         self.spread_ref = {e.name: spread_reference(budget, e) for e in self.spreads}
@@ -353,8 +358,9 @@ class Engine:
         ok &= np.array([e.name not in self.confounded for e in self.systematic], bool)
         est = np.where(ok, num / np.where(ok, den, 1.0), np.nan)
         lr = np.where(ok, num**2 / np.where(ok, den, 1.0), np.nan)
-        backlash = np.array([e.kind == "backlash" for e in self.systematic])
-        lr = np.where(backlash & (est < 0), 0.0, lr)       # h >= 0: constrained maximum at 0
+        # below its least value (h >= 0) the constrained maximum is at that value
+        low = np.where(np.isfinite(self.lower), self.lower, 0.0)
+        lr = np.where(est < self.lower, den * low * (2.0 * est - low), lr)
         return lr, est
 
     # -- intervals
@@ -396,16 +402,16 @@ class Engine:
         """Value and ``level`` confidence interval of effect ``name`` in ``fit``, in the effect's unit.
 
         Systematic values: Wald interval of the generalized least squares
-        estimate (backlash clipped at 0); spreads: profile likelihood.
+        estimate (a backlash clipped at its least value, :attr:`lower`); spreads: profile likelihood.
         """
         if name in fit.factors:
             ref = self.spread_ref[name]
             lo, hi = self.spread_interval(fit, name, level)
             return ref * fit.factors[name], (ref * lo, ref * hi)
-        value, (lo, hi) = self.wald(fit, len(fit.nuis) + list(fit.sys).index(self.sys_index(name)), level)
-        if effect(name).kind == "backlash":          # h >= 0
-            return max(value, 0.0), (max(lo, 0.0), max(hi, 0.0))
-        return value, (lo, hi)
+        j = self.sys_index(name)
+        value, (lo, hi) = self.wald(fit, len(fit.nuis) + list(fit.sys).index(j), level)
+        least = self.lower[j]
+        return max(value, least), (max(lo, least), max(hi, least))
 
     def values(self, fit: Fit) -> dict:
         """Fitted nuisance and systematic values of ``fit``, name -> value."""

@@ -12,7 +12,9 @@ Measurement m of commanded pose p is ``measured = commanded + e_m + s_m + n_m``:
   Sigma_p``, is drawn afresh at each visit.
 - ``s_m = sum_k theta_k g_k(m)`` are systematic effects of the library, each
   linear in its value through its signature
-  (:func:`prp3mc.measurement.effects.signatures`).
+  (:func:`prp3mc.measurement.effects.signatures`): those of the budget's
+  ``[effects]`` table, with their drivers (approach directions, temperature,
+  slider positions) from the campaign, and any added to the model.
 - ``n_m`` is instrument noise, N(0, diag(s_mm^2, s_mm^2, s_deg^2)).
 """
 
@@ -30,7 +32,7 @@ from ..uncertainty.budget import Budget
 from ..uncertainty.model import linear_model
 from ..units import OUTPUT_UNITS, POSE_OUTPUTS
 from .campaign import Campaign
-from .effects import effect, signatures, spread_budget
+from .effects import budget_effect_errors, effect, signatures, spread_budget
 
 __all__ = ["Prediction", "predict", "noise_cov"]
 
@@ -43,7 +45,8 @@ class Prediction:
     ----------
     mean : ndarray, shape (M, 3)
         Expected ``[dx mm, dy mm, dphi deg]`` per measurement (budget mean
-        plus systematic effects, which may differ between repeats).
+        plus systematic effects, the budget's and those added, which may
+        differ between repeats).
     cov : ndarray, shape (P, 3, 3)
         Covariance of one measurement per commanded pose: budget plus instrument noise.
     scatter_cov : ndarray, shape (P, 3, 3)
@@ -120,7 +123,8 @@ def predict(geometry: Geometry, budget: Budget, campaign: Campaign, *, effects: 
     geometry, budget
     campaign : Campaign
     effects : dict of str to float, optional
-        Library effects added to the model (systematic values and spreads).
+        Library effects added to the model (systematic values and spreads);
+        a systematic effect the budget's ``[effects]`` already holds adds to its value.
     instrument_sigma_mm, instrument_sigma_deg : float
     repeatable_fraction : float
         Share ``r`` in [0, 1] of the budget's covariance that repeats at every visit of a pose.
@@ -128,15 +132,22 @@ def predict(geometry: Geometry, budget: Budget, campaign: Campaign, *, effects: 
     Returns
     -------
     Prediction
+
+    Raises
+    ------
+    CampaignError
+        The budget has an effect whose driver column the campaign lacks.
+    BudgetError
+        The budget's effects were fitted on another geometry.
     """
     effects = dict(effects or {})
     model_budget = spread_budget(budget, effects)
     if not 0.0 <= repeatable_fraction <= 1.0:
         raise BudgetError(f"repeatable_fraction must lie in [0, 1], got {repeatable_fraction}")
-    mean, sigma = linear_model(geometry, model_budget, campaign.poses, check=False).moments()
+    mean, sigma = linear_model(geometry, model_budget.without_effects(), campaign.poses, check=False).moments()
     noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
     systematic = {k: v for k, v in effects.items() if effect(k).systematic}
-    m = mean[campaign.pose_index]
+    m = mean[campaign.pose_index] + budget_effect_errors(geometry, budget, campaign)
     if systematic:
         G = signatures(geometry, campaign.poses, campaign.pose_index, list(systematic),
                        campaign.direction, campaign.temp_C)

@@ -19,6 +19,7 @@ from .campaign import Campaign
 from .diagnostics import Diagnosis
 from .likelihood import Engine
 from .prediction import Prediction, noise_cov
+from .updated import UpdatedModel
 
 __all__ = ["NamedEffect", "DiscrepancyResult", "LEVEL"]
 
@@ -55,7 +56,10 @@ class NamedEffect:
         ``p_bonferroni``, ``n_candidates``, ``step``, ``delta_bic``,
         ``identified``, ``alias_fits`` (value and ci95 of each alias),
         ``alternative_sets`` (other sets of the same size that fit as well)
-        and, for spreads, ``budget_value`` and ``direction``.
+        and, for spreads, ``budget_value`` and ``direction``; for an effect
+        the budget's ``[effects]`` already holds, ``value`` is the correction
+        to it and the evidence has ``budget_effect`` (the budget's value)
+        and ``total``.
     """
 
     name: str
@@ -101,7 +105,9 @@ class DiscrepancyResult:
     gap : mapping
         ``metric, before, after, null_level, closed_at, closed,
         deciding_channel`` and every channel's evidence (see
-        :mod:`~prp3mc.measurement.diagnostics`).
+        :mod:`~prp3mc.measurement.diagnostics`), and ``held_out``: the gap
+        before and after on poses left out of the fit
+        (:mod:`~prp3mc.measurement.holdout`), the one to trust.
     before, after : Diagnosis
         Disagreement under the budget alone and with the named effects
         (nuisances in both, gross errors set aside).
@@ -144,6 +150,12 @@ class DiscrepancyResult:
         Groups of effects with collinear signatures over the campaign.
     not_testable : mapping
         Effects the campaign cannot test, with the reason.
+    model : UpdatedModel
+        The updated model: identified geometry, updated and compensated
+        budgets, the compensable and non-compensable effects.
+    accuracy : mapping
+        Predicted accuracy over the region, original, updated and
+        compensated (:func:`~prp3mc.measurement.accuracy.predicted_accuracy`).
     campaign : Campaign
         The validated campaign (every row).
     geometry, budget
@@ -177,6 +189,8 @@ class DiscrepancyResult:
     confounded_with_registration: tuple
     structural_aliases: tuple
     not_testable: dict
+    model: UpdatedModel
+    accuracy: dict
     campaign: Campaign
     geometry: Geometry
     budget: Budget
@@ -271,6 +285,8 @@ class DiscrepancyResult:
             "invisible": list(self.invisible),
             "structural_aliases": [list(g) for g in self.structural_aliases],
             "not_testable": _thawed(self.not_testable),
+            "model": _thawed(self.model.to_dict()),
+            "predicted_accuracy": _thawed(self.accuracy),
             "campaign": {"source": self.campaign.source, "n_measurements": self.campaign.n_measurements,
                          "n_poses": self.campaign.n_poses},
             "geometry": self.geometry.name, "budget": self.budget.name,

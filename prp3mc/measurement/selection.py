@@ -195,6 +195,9 @@ def name_effects(engine: Engine, fit: Fit, accepted: dict) -> tuple[NamedEffect,
         if name in fit.factors:
             ev.update(budget_value=engine.spread_ref[name],
                       direction="larger" if fit.factors[name] > 1 else "smaller")
+        elif name in engine.budget.effects:                # a correction to the budget's value
+            ev.update(budget_effect=engine.budget.effects[name].value,
+                      total=engine.budget.effects[name].value + float(value))
         named.append(NamedEffect(name, float(value), effect(name).unit, (float(ci[0]), float(ci[1])),
                                  tuple(aliases), ev))
     return tuple(named)

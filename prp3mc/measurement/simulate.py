@@ -181,14 +181,17 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     ----------
     geometry : Geometry
     budget : Budget
-        Random errors; spread effects in ``effects`` change its laws.
+        Random errors; spread effects in ``effects`` change its laws. The
+        systematic effects of its ``[effects]`` table are part of the
+        machine too (with the campaign's directions and temperatures).
     poses : array_like, shape (P, 3)
         Commanded poses ``[x_mm, y_mm, phi_deg]`` (any batch shape is flattened).
     n_repeats : int
         Measurements per pose.
     effects : dict of str to float, optional
         Hidden effects of the library (:data:`~prp3mc.measurement.effects.EFFECT_NAMES`, in their units); any number
-        at once, their pose errors add up through the exact chain.
+        at once, their pose errors add up through the exact chain (a hidden effect the budget's
+        ``[effects]`` also holds adds to its value).
     approach : {"both", "positive", "negative", "sequence"}
         Approach direction of each actuator: random +-1 per actuator and
         measurement; always +1; always -1; or the sign of the actuator's
@@ -259,11 +262,15 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         raise CampaignError(f"repeatable_fraction must lie in [0, 1], got {repeatable_fraction!r}")
     effects = dict(effects or {})
     parsed = [effect(name) for name in effects]          # raises on unknown names
-    if any(e.kind == "thermal" for e in parsed) and temp_drift_C is None:
-        raise CampaignError("a hidden thermal effect needs a temperature drift (temp_drift_C)")
     for e, v in zip(parsed, effects.values()):
         if e.kind == "backlash" and v < 0:
             raise CampaignError(f"{e.name}: backlash h must be >= 0, got {v}")
+    budget.check_geometry(geometry)
+    machine = {name: eff.value for name, eff in budget.effects.items()}      # the budget's effects, then the hidden
+    for name, value in effects.items():
+        machine[name] = machine.get(name, 0.0) + value
+    if "thermal" in machine and temp_drift_C is None:
+        raise CampaignError("a thermal effect (hidden or in the budget) needs a temperature drift (temp_drift_C)")
     P = poses.shape[0]
     order = np.concatenate([rng.permutation(P) for _ in range(n_repeats)])   # visiting order
     M = order.size
@@ -280,14 +287,14 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         direction = np.full((M, 3), 1.0 if approach == "positive" else -1.0)
     time_s = visit_times(b)
     temp = None if temp_drift_C is None else np.linspace(temp_drift_C[0], temp_drift_C[1], M)
-    sim_budget = spread_budget(budget, effects)
+    sim_budget = spread_budget(budget.without_effects(), effects)
     X = sim_budget.sample(M, rng)
     if r > 0.0:
         X = _repeat_errors(sim_budget, X, order, P, r, np.random.default_rng(child_seed(seed_used, _STREAM_REPEATS)))
     errors = sim_budget.errors(X)
-    for family, value in offset_errors(effects).items():
+    for family, value in offset_errors(machine).items():
         errors[family] = errors.get(family, 0.0) + value
-    db = slider_error(effects, b, direction, temp)
+    db = slider_error(machine, b, direction, temp)
     if slider_error_fn is not None:
         db = db + np.asarray(slider_error_fn(cmd, b, direction, temp), dtype=float)
     errors["b"] = errors.get("b", 0.0) + db
@@ -318,7 +325,7 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     if temp is not None:
         frame["temp_C"] = temp
     frame["time_s"] = time_s
-    metadata = {"seed": seed_used, "effects": effects, "n_repeats": n_repeats, "approach": approach,
+    metadata = {"seed": seed_used, "effects": effects, "machine_effects": machine, "n_repeats": n_repeats, "approach": approach,
                 "temp_drift_C": None if temp_drift_C is None else list(temp_drift_C),
                 "instrument_sigma_mm": instrument_sigma_mm, "instrument_sigma_deg": instrument_sigma_deg,
                 "registration": None if registration is None else list(registration),

@@ -43,13 +43,13 @@ class Gram:
         self.eligible = np.array([j for j, e in enumerate(engine.systematic) if e.name not in engine.confounded],
                                  dtype=int)
         self.K, self.b = A.T @ A, A.T @ z0
-        self.backlash = np.array([e.kind == "backlash" for e in engine.systematic], bool)
+        self.lower = engine.lower
 
     def gains(self, sets: np.ndarray) -> np.ndarray:
         """Twice the log-likelihood gain of each set (rows of ``sets``, shape (N, k)); -inf if not admissible.
 
         A set is not admissible when its signatures are (nearly) collinear or
-        a backlash in it fits negative (h >= 0).
+        a member fits below its least value (a backlash's h >= 0: ``engine.lower``).
         """
         sets = np.asarray(sets, dtype=int)
         if sets.shape[1] == 0:
@@ -63,7 +63,7 @@ class Gram:
         Ks = np.where(ok[:, None, None], Ks, np.eye(sets.shape[1]))
         theta = np.linalg.solve(Ks, bs[..., None])[..., 0]
         gain = np.sum(bs * theta, axis=1)
-        ok &= ~np.any(self.backlash[sets] & (theta < 0), axis=1)
+        ok &= ~np.any(theta < self.lower[sets], axis=1)
         return np.where(ok, gain, -np.inf)
 
     def gain(self, S) -> float:

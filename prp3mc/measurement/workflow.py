@@ -31,13 +31,16 @@ from ..progress import Progress
 from ..uncertainty.budget import Budget
 from . import outliers as gross
 from .campaign import Campaign, read_campaign, require_testable
-from .diagnostics import diagnose, gap, gap_value
+from .diagnostics import diagnose, gap, gap_value, null_variances
 from .effects import effect
+from .holdout import held_out_gap
 from .likelihood import Engine, Fit
 from .nuisance import DRIFT, NUISANCE_NAMES, NUISANCE_UNITS, REGISTRATION
 from .prediction import noise_cov, predict
 from .results import DiscrepancyResult
 from .selection import name_effects, names_in, select
+from .updated import updated_model
+from .accuracy import predicted_accuracy
 
 from .iso9283 import iso9283_figures
 
@@ -58,7 +61,11 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     ----------
     geometry : Geometry
     budget : Budget
-        The model's random errors.
+        The model's random errors and, in its ``[effects]`` table, systematic
+        errors already known (part of every model, null and alternative,
+        driven by the campaign's ``dir_i``, ``temp_C`` and slider positions;
+        one named again is a correction to it). A budget whose effects were
+        fitted on another geometry is refused.
     campaign : Campaign, DataFrame or path
         A campaign (README, *File formats*), measured in the instrument's frame; validated against ``geometry``.
     instrument_sigma_mm, instrument_sigma_deg : float
@@ -95,6 +102,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     for name, value in (("alpha", alpha), ("alpha_unexplained", alpha_unexplained), ("outlier_rate", outlier_rate)):
         if not 0 < value < 1:
             raise BudgetError(f"{name} must lie in (0, 1), got {value}")
+    budget.check_geometry(geometry)
     campaign = require_testable(read_campaign(campaign, geometry))
     noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
     full = Engine(geometry, budget, campaign, noise, registration=registration)
@@ -128,9 +136,12 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
         d2 = gross.distances(full, keep, engine.values(fit), fit.factors, fit.r)
     named = name_effects(engine, fit, accepted)
     done()
-    before = diagnose(engine, base, n_bootstrap, rng)
-    after = diagnose(engine, fit, n_bootstrap, rng)
+    null_before = null_variances(engine, base, n_bootstrap, rng)
+    before = diagnose(engine, base, null=null_before)
+    null_after = null_variances(engine, fit, n_bootstrap, rng)
+    after = diagnose(engine, fit, null=null_after)
     gap_doc = gap(before, after, alpha_unexplained)
+    gap_doc["held_out"] = held_out_gap(engine, {"before": (base, null_before), "after": (fit, null_after)}, seed)
     done()
     outlier_rows = tuple({"row": int(m), "pose_id": str(campaign.pose_id[m]), "z": float(np.sqrt(d2[m]))}
                          for m in np.flatnonzero(~keep))
@@ -155,6 +166,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     done()
     if bar is not progress:
         bar.close()
+    model = updated_model(geometry, budget, named, campaign)
     confounded = tuple(n for n, with_ in engine.confounded.items() if "registration" in with_)
     not_testable = dict(engine.not_testable)
     not_testable.update({n: f"confounded with {with_}" for n, with_ in engine.confounded.items()})
@@ -174,6 +186,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
         iso9283=iso, iso9283_poses=iso_poses, invisible=engine.invisible,
         confounded_with_registration=confounded,
         structural_aliases=tuple(tuple(g) for g in engine.structural_aliases()), not_testable=not_testable,
+        model=model, accuracy=predicted_accuracy(geometry, budget, model, campaign, seed),
         campaign=campaign, geometry=geometry, budget=budget, seed=seed, n_bootstrap=n_bootstrap, alpha=alpha,
         alpha_unexplained=alpha_unexplained, instrument_sigma_mm=instrument_sigma_mm,
         instrument_sigma_deg=instrument_sigma_deg, wall_time_s=time.perf_counter() - t0)
@@ -216,7 +229,7 @@ def _iso9283(engine: Engine, fit: Fit, seed: int):
     campaign = dataclasses.replace(engine.campaign, measured=corrected)
     mean, W, R = engine.moments(fit.factors, fit.r)
     sys = np.array([values[engine.systematic[j].name] for j in fit.sys])
-    mean = mean + engine.pose_mean(engine.G[:, :, list(fit.sys)] @ sys)
+    mean = mean + engine.pose_mean(engine.known + engine.G[:, :, list(fit.sys)] @ sys)
     figures = iso9283_figures(campaign, mean, W, predicted_repeat_cov=R, rng=seed)
     return {"measured": dict(figures["measured"]), "predicted": dict(figures["predicted"])}, figures["per_pose"]
 

@@ -5,8 +5,9 @@ Every plotting function takes a
 figure has several panels; a new pyplot figure when None) and returns the
 Figure; none changes the matplotlib backend. :func:`write_report` writes
 ``discrepancy.json``, ``report.html`` with the figures embedded,
-the figures as PNG (SVG too on request), and per-pose / per-measurement
-tables as CSV; it draws on its own Agg canvases, outside pyplot, and renders
+the figures as PNG (SVG too on request), per-pose / per-measurement
+tables as CSV and the updated model in ``model/``
+(:mod:`~prp3mc.measurement.updated`); it draws on its own Agg canvases, outside pyplot, and renders
 each figure once (constrained layout, no tight bounding box), which keeps a
 400-measurement report to about a second.
 
@@ -371,7 +372,7 @@ def render_html(result: DiscrepancyResult, figures: dict, doc: dict | None = Non
 
 def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bool = False,
                  formats: tuple = ("png",), inputs: dict | None = None) -> Path:
-    """Write ``discrepancy.json``, ``report.html``, figures and tables into ``folder`` (atomically).
+    """Write ``discrepancy.json``, ``report.html``, figures, tables and ``model/`` into ``folder`` (atomically).
 
     Parameters
     ----------
@@ -411,6 +412,7 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
             if "svg" in formats:
                 fig.savefig(tmp / f"{name}.svg", format="svg")
         write_text(tmp / "report.html", render_html(result, uris, doc))
+        result.model.write(tmp / "model")
         for label, d in (("before", result.before), ("after", result.after)):
             d.poses.to_csv(tmp / f"poses_{label}.csv", index=False)
             d.measurements.to_csv(tmp / f"measurements_{label}.csv", index=False)

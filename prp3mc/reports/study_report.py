@@ -254,6 +254,8 @@ def _allocation_figures(result: StudyResult) -> list[tuple[str, str, object]]:
 def _tables(result: StudyResult) -> dict[str, pd.DataFrame]:
     tables = {"summary": result.to_frame(), "worstcase_families": _family_shares(result),
               "budget": result.study.budget.to_frame()}
+    if result.study.budget.effects:
+        tables["effects"] = result.study.budget.effects_frame()
     if result.study.sweep:
         tables["design_space"] = design_frame(result, _MC_PERCENTILE)
     for c in result.configurations:
@@ -345,6 +347,7 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
         study=study, result=result, meta=meta, configs=configs, figures=figures, design=_design(result, tables),
         summary_table=_html_table(summary_table), families=_html_table(families, 3),
         budget_table=_html_table(tables["budget"]), cmp=comparison(result, summary),
+        effects_table=_html_table(tables["effects"].drop(columns=["campaign_sha256"])) if "effects" in tables else None,
         summary=summary, mc_percentile=f"p{_MC_PERCENTILE:g}", tables=sorted(tables),
         inputs=summary["inputs"], versions=summary["versions"], allocations=_allocations(result, tables))
 

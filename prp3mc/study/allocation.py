@@ -6,8 +6,9 @@ accuracy spec; for every configuration it applies to, the study runs
 (gridded like the worst case unless the table gives a grid, at the region's
 orientation, unbounded laws bounded by ``[worstcase] k_sigma``) and, with
 ``front = true``, :func:`~prp3mc.uncertainty.allocation.allocation_front`
-on the same poses. The allocation's budget is the classes' laws alone, as in
-``prp3mc allocate``: the study budget plays no part in it.
+on the same poses. The allocation's budget is the classes' laws, as in
+``prp3mc allocate``, with the study budget's ``[effects]`` held fixed (its
+inputs play no part).
 
 Randomness: the Monte Carlo confirmation of a percentile spec draws from
 ``child_seed(study seed, 3)`` (stream 3; Monte Carlo is 1, Sobol 2), the
@@ -173,20 +174,21 @@ def _configurations(reader, table: dict, known: tuple) -> tuple | None:
 
 # ----------------------------------------------------------------- running
 def run_allocation(config, spec: AllocationSpec, worstcase_grid: tuple, k_sigma: float | None,
-                   seed: int) -> dict:
+                   seed: int, budget=None) -> dict:
     """Allocate for one configuration: ``{"allocation": AllocationResult, "allocation_front": DataFrame or None}``.
 
-    ``seed`` confirms a percentile spec (the study's allocation seed).
+    ``seed`` confirms a percentile spec (the study's allocation seed);
+    ``budget``'s effects stay fixed (the study budget).
     """
     poses = config.region.grid(spec.grid or worstcase_grid).reshape(-1, 3)
     result = allocate(config.geometry, spec.classes, poses, spec_position_um=spec.spec_position_um,
                       spec_phi_arcsec=spec.spec_phi_arcsec, spec_percentile=spec.spec_percentile,
-                      k_sigma=k_sigma, n_samples=spec.samples, rng=seed)
+                      k_sigma=k_sigma, n_samples=spec.samples, rng=seed, budget=budget)
     front = None
     if spec.front:
         side = {"spec_phi_arcsec": spec.spec_phi_arcsec} if spec.front_output == "position" else {}
         front = allocation_front(config.geometry, spec.classes, poses, output=spec.front_output,
-                                 k_sigma=k_sigma, **side)
+                                 k_sigma=k_sigma, budget=budget, **side)
     return {"allocation": result, "allocation_front": front}
 
 

@@ -55,8 +55,8 @@ optional; paths are relative to the study file)::
     "leg.*.e_mm" = [10, 20, 30]       # file, legs 1-3 or * for all; see prp3mc.study.sweep)
 
 The allocation runs for every configuration (or those listed), each over
-its own geometry and test region; its budget is the classes' laws alone, not
-the study budget (see :mod:`prp3mc.study.allocation`).
+its own geometry and test region; its budget is the classes' laws, with the
+study budget's ``[effects]`` held fixed (see :mod:`prp3mc.study.allocation`).
 
 A mistake (unknown key, wrong type, unknown preset, impossible value, a pose
 or region outside the workspace) raises :class:`~prp3mc.errors.StudyError`
@@ -377,10 +377,10 @@ class _Reader:
         groups = self.get(so, ("sobol", "groups"), "table", {})
         for g, members in groups.items():
             if (not isinstance(members, list) or not members
-                    or any(m not in budget.names for m in members)):
+                    or any(m not in budget.factors for m in members)):
                 self.fail(("sobol", "groups", g), f"group {g!r} must list inputs of the budget "
-                          f"({', '.join(budget.names)}), got {members!r}")
-            if g in budget.names or g in budget.groups:
+                          f"({', '.join(budget.factors)}), got {members!r}")
+            if g in budget.factors or g in budget.groups:
                 self.fail(("sobol", "groups", g), f"group {g!r} clashes with an input or a budget group")
         kw["sobol_groups"] = {g: tuple(m) for g, m in groups.items()}
         configs = doc.get("configuration")
@@ -389,7 +389,7 @@ class _Reader:
         kw["sweep"] = read_sweep(self, self.get(doc, ("sweep",), "table", {}))
         # a swept configuration is checked value by value when it runs (infeasible ones are reported)
         check = None if kw["sweep"] else kw["worstcase_grid"]
-        parsed = tuple(self.configuration(c, k, check) for k, c in enumerate(configs))
+        parsed = tuple(self.configuration(c, k, check, budget) for k, c in enumerate(configs))
         names = [c.name for c in parsed]
         for k, n in enumerate(names):
             if n in names[:k]:
@@ -407,12 +407,13 @@ class _Reader:
         except Prp3mcError as exc:
             self.fail(path, f"{what} {spec!r}: {exc}")
 
-    def configuration(self, c: dict, k: int, grid: tuple | None) -> StudyConfiguration:
+    def configuration(self, c: dict, k: int, grid: tuple | None, budget: Budget) -> StudyConfiguration:
         p = ("configuration", k)
         self.unknown(c, self._CONFIG, p, f"configuration {k + 1}")
         if "geometry" not in c:
             self.fail(p, f"configuration {k + 1} needs a geometry (preset name or TOML file)")
         geometry = self.load(p + ("geometry",), "geometry", Geometry.load, self.get(c, p + ("geometry",), "str"))
+        self.load(p + ("geometry",), "geometry", lambda _: budget.check_geometry(geometry), geometry.name)
         name = self.get(c, p + ("name",), "str", geometry.name)
         region_spec = c.get("region", geometry.name)
         if isinstance(region_spec, str):

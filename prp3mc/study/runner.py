@@ -184,7 +184,7 @@ def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple
     if allocation is not None and allocation.applies_to(variant.base.name):  # a swept one: by its base's name
         stage("tolerance allocation" + (" and its Pareto front" if allocation.front else ""))
         t = time.perf_counter()
-        kw.update(run_allocation(config, allocation, study.worstcase_grid, study.k_sigma, plan.allocation_seed))
+        kw.update(run_allocation(config, allocation, study.worstcase_grid, study.k_sigma, plan.allocation_seed, b))
         timings["allocation"] += time.perf_counter() - t
     return ConfigurationResult(configuration=config, worst_case=wc, **kw), timings
 

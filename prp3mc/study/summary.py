@@ -15,7 +15,8 @@ Layout (µm and arcsec)::
            "exceed": {"tolerance_mm": 0.1, "probability": {"min": ..., "max": ..., "mean": ...}}},
          "sobol": {"position": {"theta_1": {"kind": "input", "S1": {"value": ..., "se": ...},
                                             "ST": {...}, "worst_case_share": 0.31}, ...}, ...}},
-                                            # worst_case_share null where undefined (rho_i, zeta_i alone)
+                                            # worst_case_share null where undefined (rho_i, zeta_i alone);
+                                            # S1, ST null for a known shift (kind "shift") or a constant input
          "allocation": {"cost": 26.0, "choice": {"rho_1": "CN", ...}, "worst_case_position_um": 77.6,
                         "worst_case_phi_arcsec": 88.2, "feasible": true,
                         "spec": {"position_um": 80.0, "phi_arcsec": 120.0, "percentile": null},
@@ -25,7 +26,8 @@ Layout (µm and arcsec)::
        "delta-shape": {...}},
      "metadata": {"prp3mc_version": ..., "seed": ..., "montecarlo_samples": ..., "wall_time_s": ...},
      "inputs": {"study": {"name": "quick", "file": "/abs/quick.toml", "sha256": "..."},
-                "budget": {"name": "paper", "preset": "paper"},     # or "file" and "sha256"
+                "budget": {"name": "paper", "preset": "paper"},     # or "file" and "sha256"; with
+                                   # [effects]: "effects" {name: table} and "fitted_on" (geometry name)
                 "configurations": {"u-shape": {"geometry": {"name": "u-shape", "preset": "u-shape"},
                                                "region": {"x_mm": [-40, 40], "y_mm": [60, 140], "phi_deg": 0}}},
                 "seed": 7, "montecarlo_seed": ..., "sobol_seed": ..., "worstcase_grid": [41, 41],
@@ -93,6 +95,11 @@ def _exact_or_none(value) -> float | None:
     return None if np.isnan(value) else float(value)
 
 
+def _stat_or_none(value, se) -> dict | None:
+    """A statistic, or None where it is undefined (a known shift, a constant input: no variance)."""
+    return None if np.isnan(value) else _stat(value, se)
+
+
 def _exact(values: np.ndarray) -> dict:
     return {"min": float(values.min()), "max": float(values.max()), "mean": float(values.mean())}
 
@@ -117,8 +124,8 @@ def _sobol(c: ConfigurationResult) -> dict:
     out = {}
     for output, frame in c.ranking.items():
         out[output] = {row.name: {"kind": row.kind,
-                                  "S1": _stat(row.S1, row.S1_conf / Z95),
-                                  "ST": _stat(row.ST, row.ST_conf / Z95),
+                                  "S1": _stat_or_none(row.S1, row.S1_conf / Z95),
+                                  "ST": _stat_or_none(row.ST, row.ST_conf / Z95),
                                   "worst_case_share": _exact_or_none(row.worst_case_share)}
                        for row in frame.itertuples(index=False)}
     return out
@@ -167,7 +174,8 @@ def study_inputs(result: StudyResult) -> dict:
         configs[c.name] = {"geometry": _record(c.geometry, geometries, base, Geometry.load),
                            "region": {"x_mm": [float(v) for v in region.x_mm],
                                       "y_mm": [float(v) for v in region.y_mm], "phi_deg": float(region.phi_deg)}}
-    out = {"study": record, "budget": _record(study.budget, budgets, base, Budget.load),
+    budget = _record(study.budget, budgets, base, Budget.load) | study.budget.effects_record()
+    out = {"study": record, "budget": budget,
            "configurations": configs, "seed": result.seed, "montecarlo_seed": result.montecarlo_seed,
            "sobol_seed": result.sobol_seed, **study.sizes()}
     if getattr(study, "allocation", None) is not None:

@@ -3,14 +3,19 @@
 Per pose it evaluates what :func:`~prp3mc.uncertainty.worstcase.worst_case`
 computes through the numpy frame (:func:`~prp3mc.kinematics.chain.frame`,
 :func:`~prp3mc.kinematics.sensitivity.h_entries`, the term intervals and the
-8-corner maxima), with the same arithmetic: the trigonometry of the chain
+corner maxima), with the same arithmetic: the trigonometry of the chain
 from cos and sin of phi alone (the per-leg angles enter as constants), the
 inverse kinematics, A and A^-1 by cofactors, the feasibility tests of
 :func:`~prp3mc.kinematics.chain.validated_frame`, the h entries of the
 budget's terms, the clearance intervals and the zonotope maxima. Poses go
 through in blocks of :data:`BLOCK`, each step a loop over the block's poses
 (it vectorises); larger batches go in chunks to a pool of threads.
-Memory is the outputs only (44 bytes a pose) plus a few scratch rows per thread.
+Memory is the outputs only (42 bytes a pose) plus a few scratch rows per thread.
+
+A budget's effects are terms too: known shifts are terms of zero width, a
+backlash a term of its leg, a lead scale and thermal expansion are multiplied
+by the nominal slider position b_i; thermal expansion acts on all legs at
+once, so it adds a shared generator to the zonotope (16 corners).
 """
 
 from __future__ import annotations
@@ -27,9 +32,10 @@ from ..kinematics.geometry import Geometry
 from ..kinematics.sensitivity import FAMILIES, LENGTH_FAMILIES
 from ..units import DEG2RAD
 from .budget import Budget, parse_input
+from .systematic import EFFECT_NAMES, T_REF_C
 
 __all__ = ["REASONS", "leg_constants", "term_table", "kernel_tables", "envelope_kernel", "zonotope_maxima",
-           "leg_signs"]
+           "zonotope_scratch", "generator_signs"]
 
 #: Refusal reasons in the order :func:`~prp3mc.kinematics.chain.validated_frame` tests them;
 #: bit ``3 * reason + leg`` of the kernel's ``bad`` word.
@@ -52,7 +58,7 @@ def leg_constants(geometry: Geometry) -> np.ndarray:
 
 @functools.lru_cache(maxsize=16)
 def kernel_tables(geometry: Geometry, budget: Budget, k_sigma: float | None) -> tuple:
-    """``(bounds, legc, family, leg, unit, box)``: the budget's bounds and the kernel's tables, read-only.
+    """``(bounds, legc, family, leg, unit, mode, box)``: the budget's bounds and the kernel's tables, read-only.
 
     Kept for the last few (geometry, budget, k_sigma), so that a small batch does not pay for them again.
     """
@@ -66,13 +72,15 @@ def kernel_tables(geometry: Geometry, budget: Budget, k_sigma: float | None) -> 
 def term_table(budget: Budget, bounds: np.ndarray):
     """The budget's terms as arrays for the kernel.
 
-    Returns ``family`` (T,) int (index in FAMILIES), ``leg`` (T,) int,
-    ``unit`` (T,) (1 for lengths, rad per deg for angles) and ``box`` (T, 4):
-    the term's interval, or for a clearance (rho_lo, rho_hi, zeta_lo rad,
-    zeta_hi rad) with zeta_hi = inf for a full circle.
+    Returns ``family`` (T,) int (index in FAMILIES), ``leg`` (T,) int (-1:
+    every leg), ``unit`` (T,) (1 for lengths, rad per deg for angles, alpha_T
+    for thermal), ``mode`` (T,) int (1: the term's u_i is also multiplied by
+    the nominal slider position b_i) and ``box`` (T, 4): the term's interval,
+    or for a clearance (rho_lo, rho_hi, zeta_lo rad, zeta_hi rad) with
+    zeta_hi = inf for a full circle. ``bounds`` (D, 2) are the factors' intervals.
     """
-    names = budget.names
-    fam, legs, unit, box = [], [], [], []
+    names, factors = budget.names, budget.factors
+    fam, legs, unit, mode, box = [], [], [], [], []
     for k, name in enumerate(names):
         family, leg = parse_input(name)
         if family == "zeta":
@@ -80,69 +88,119 @@ def term_table(budget: Budget, bounds: np.ndarray):
         fam.append(FAMILIES.index(family))
         legs.append(leg)
         unit.append(1.0 if family in LENGTH_FAMILIES else DEG2RAD)
+        mode.append(0)
         if family == "rho":
             zlo, zhi = bounds[names.index(f"zeta_{leg + 1}")]
             full = zhi - zlo >= 360.0
             box.append((bounds[k][0], bounds[k][1], np.deg2rad(zlo), math.inf if full else np.deg2rad(zhi)))
         else:
             box.append((bounds[k][0], bounds[k][1], 0.0, 0.0))
+    for name in (n for n in EFFECT_NAMES if n in budget.effects):
+        eff = budget.effects[name]
+        e = eff.effect
+        fam.append(FAMILIES.index(e.family if e.kind == "offset" else "b"))
+        legs.append(-1 if e.kind == "thermal" else e.leg)
+        mode.append(1 if e.kind in ("scale", "thermal") else 0)
+        if e.kind == "offset":
+            unit.append(1.0 if e.family in LENGTH_FAMILIES else DEG2RAD)
+        else:
+            unit.append(eff.value if e.kind == "thermal" else 1.0)
+        if e.kind in ("offset", "scale"):
+            box.append((eff.value, eff.value, 0.0, 0.0))
+        else:
+            lo, hi = bounds[factors.index(name)] - (T_REF_C if e.kind == "thermal" else 0.0)
+            box.append((lo, hi, 0.0, 0.0))
     return (np.array(fam, dtype=np.int64), np.array(legs, dtype=np.int64), np.array(unit),
-            np.array(box, dtype=float).reshape(-1, 4))
+            np.array(mode, dtype=np.int64), np.array(box, dtype=float).reshape(-1, 4))
+
+
+@njit(cache=True)
+def zonotope_scratch(n_gen, size):
+    """Scratch arrays of :func:`zonotope_maxima` for ``n_gen`` generators and ``size`` poses."""
+    return (np.empty(size), np.empty(size), np.empty(size), np.empty(size), np.empty(size),
+            np.empty(size, np.int64), np.empty((n_gen, size)), np.empty((n_gen, size)))
 
 
 @njit(cache=True, error_model="numpy")
-def zonotope_maxima(Ai, um, uh, values, codes, first, m):
+def zonotope_maxima(Ai, um, uh, ext, values, codes, first, m, scratch):
     """Maxima over the zonotopes of ``m`` poses into ``values`` and ``codes`` from column ``first`` on.
 
-    Ai : (3, 3, >= m) A^-1 of each pose (last axis the pose); um, uh : (3, >= m) centre and
-    half-width of each leg's u_i. values : (4, N) position mm, |dphi| rad, |dx| mm, |dy| mm.
-    codes : (4, N) int8, the sign of each leg's u_i at the maximum as bits: bit 2 - i is set
-    when leg i's is +1 (:func:`leg_signs` unpacks them). The corners are visited in the order
-    sx, sy, sz in (-1, +1), the first of equal maxima kept. Every quantity is a loop over the
-    poses (they vectorise); the corner sums are added leg by leg.
+    Ai : (3, 3, >= m) A^-1 of each pose (last axis the pose); um, uh : (3, >= m) centre
+    and half-width of u along the legs' axes; ext : (G, 3, >= m) further generators of u
+    (terms of all legs). values : (4, N) position mm, |dphi| rad, |dx| mm, |dy| mm.
+    codes : (4, N) int16, the end of each generator at the maximum as bits: with the
+    3 + G generators in the order legs 1-3, then ``ext``, bit 2 + G - k is set when
+    generator k is at +1 (:func:`generator_signs` unpacks them). The 2^(3 + G) corners
+    are visited in the order of their codes, the first of equal maxima kept; a corner's
+    sum adds the generators in order. Every step is a loop over the poses (they
+    vectorise). ``scratch`` : :func:`zonotope_scratch` for 3 + G generators.
     """
+    c0, c1, tx, ty, best, arg, gx, gy = scratch
+    G = ext.shape[0]
+    n_gen = 3 + G
     for j in range(m):
-        um0, um1, um2, uh0, uh1, uh2 = um[0, j], um[1, j], um[2, j], uh[0, j], uh[1, j], uh[2, j]
-        c0 = Ai[0, 0, j] * um0 + Ai[0, 1, j] * um1 + Ai[0, 2, j] * um2
-        c1 = Ai[1, 0, j] * um0 + Ai[1, 1, j] * um1 + Ai[1, 2, j] * um2
-        gx0, gy0 = Ai[0, 0, j] * uh0, Ai[1, 0, j] * uh0
-        gx1, gy1 = Ai[0, 1, j] * uh1, Ai[1, 1, j] * uh1
-        gx2, gy2 = Ai[0, 2, j] * uh2, Ai[1, 2, j] * uh2
-        best, arg = -1.0, 0
-        for k in range(8):  # corner k: bits 2, 1, 0 are the signs of legs 1, 2, 3
-            vx = c0 + gx0 if k & 4 else c0 - gx0
-            vy = c1 + gy0 if k & 4 else c1 - gy0
-            vx = vx + gx1 if k & 2 else vx - gx1
-            vy = vy + gy1 if k & 2 else vy - gy1
-            vx = vx + gx2 if k & 1 else vx - gx2
-            vy = vy + gy2 if k & 1 else vy - gy2
-            q = vx * vx + vy * vy
-            arg = k if q > best else arg
-            best = q if q > best else best
-        values[0, first + j] = np.sqrt(best)
-        codes[0, first + j] = arg
+        c0[j] = Ai[0, 0, j] * um[0, j] + Ai[0, 1, j] * um[1, j] + Ai[0, 2, j] * um[2, j]
+        c1[j] = Ai[1, 0, j] * um[0, j] + Ai[1, 1, j] * um[1, j] + Ai[1, 2, j] * um[2, j]
+        best[j], arg[j] = -1.0, 0
+    for i in range(3):
+        for j in range(m):
+            gx[i, j], gy[i, j] = Ai[0, i, j] * uh[i, j], Ai[1, i, j] * uh[i, j]
+    for g in range(G):
+        for j in range(m):
+            gx[3 + g, j] = Ai[0, 0, j] * ext[g, 0, j] + Ai[0, 1, j] * ext[g, 1, j] + Ai[0, 2, j] * ext[g, 2, j]
+            gy[3 + g, j] = Ai[1, 0, j] * ext[g, 0, j] + Ai[1, 1, j] * ext[g, 1, j] + Ai[1, 2, j] * ext[g, 2, j]
+    for k in range(1 << n_gen):
+        for j in range(m):
+            tx[j], ty[j] = c0[j], c1[j]
+        for i in range(n_gen):
+            gxi, gyi = gx[i], gy[i]
+            if (k >> (n_gen - 1 - i)) & 1:
+                for j in range(m):
+                    tx[j], ty[j] = tx[j] + gxi[j], ty[j] + gyi[j]
+            else:
+                for j in range(m):
+                    tx[j], ty[j] = tx[j] - gxi[j], ty[j] - gyi[j]
+        for j in range(m):
+            q = tx[j] * tx[j] + ty[j] * ty[j]
+            arg[j] = k if q > best[j] else arg[j]
+            best[j] = q if q > best[j] else best[j]
+    for j in range(m):
+        values[0, first + j] = np.sqrt(best[j])
+        codes[0, first + j] = arg[j]
     for o, r in ((1, 2), (2, 0), (3, 1)):  # |dphi|, |dx|, |dy|: every generator at its sign
         for j in range(m):
-            um0, um1, um2, uh0, uh1, uh2 = um[0, j], um[1, j], um[2, j], uh[0, j], uh[1, j], uh[2, j]
-            c = Ai[r, 0, j] * um0 + Ai[r, 1, j] * um1 + Ai[r, 2, j] * um2
-            g0, g1, g2 = Ai[r, 0, j] * uh0, Ai[r, 1, j] * uh1, Ai[r, 2, j] * uh2
-            values[o, first + j] = ((abs(c) + abs(g0)) + abs(g1)) + abs(g2)
-            up = c >= 0
-            codes[o, first + j] = ((up == (g0 >= 0)) << 2) | ((up == (g1 >= 0)) << 1) | (up == (g2 >= 0))
+            c0[j] = Ai[r, 0, j] * um[0, j] + Ai[r, 1, j] * um[1, j] + Ai[r, 2, j] * um[2, j]
+            tx[j], arg[j] = abs(c0[j]), 0
+        for i in range(3):
+            for j in range(m):
+                g = Ai[r, i, j] * uh[i, j]
+                tx[j] += abs(g)
+                arg[j] |= np.int64((c0[j] >= 0) == (g >= 0)) << (n_gen - 1 - i)
+        for e in range(G):
+            for j in range(m):
+                g = Ai[r, 0, j] * ext[e, 0, j] + Ai[r, 1, j] * ext[e, 1, j] + Ai[r, 2, j] * ext[e, 2, j]
+                tx[j] += abs(g)
+                arg[j] |= np.int64((c0[j] >= 0) == (g >= 0)) << (G - 1 - e)
+        for j in range(m):
+            values[o, first + j] = tx[j]
+            codes[o, first + j] = arg[j]
 
 
-def leg_signs(codes: np.ndarray) -> np.ndarray:
-    """The signs (-1, +1) of each leg, int8 of shape ``codes.shape + (3,)``, from :func:`zonotope_maxima`'s codes."""
-    out = np.empty(codes.shape + (3,), dtype=np.int8)
-    _unpack(np.ascontiguousarray(codes).reshape(-1), out.reshape(-1, 3))
+def generator_signs(codes: np.ndarray, n_gen: int) -> np.ndarray:
+    """The ends (-1, +1) of each generator, int8 of shape ``codes.shape + (n_gen,)``, from
+    :func:`zonotope_maxima`'s codes (legs 1-3, then the terms of all legs)."""
+    out = np.empty(codes.shape + (n_gen,), dtype=np.int8)
+    _unpack(np.ascontiguousarray(codes).reshape(-1), out.reshape(-1, n_gen))
     return out
 
 
 @njit(nogil=True, cache=True)
 def _unpack(codes, out):
+    n_gen = out.shape[1]
     for n in range(codes.size):
         c = codes[n]
-        out[n, 0], out[n, 1], out[n, 2] = ((c >> 1) & 2) - 1, (c & 2) - 1, ((c << 1) & 2) - 1
+        for k in range(n_gen):
+            out[n, k] = ((c >> (n_gen - 1 - k)) & 1) * 2 - 1
 
 
 @njit(inline="always", error_model="numpy")
@@ -166,18 +224,18 @@ THREADS_FROM = 1 << 16
 CHUNK = 1 << 15
 
 
-def envelope_kernel(poses, legc, family, leg, unit, box, limits, check, values, codes, bad, workers=None):
+def envelope_kernel(poses, legc, family, leg, unit, mode, box, limits, check, values, codes, bad, workers=None):
     """Maxima of the linear model over the budget's box at every pose (compiled).
 
     poses : (N, 3) x mm, y mm, phi deg. legc : (15, 3) :func:`leg_constants`.
-    family, leg, unit, box : :func:`term_table`. limits : (3,) min transmission,
+    family, leg, unit, mode, box : :func:`term_table`. limits : (3,) min transmission,
     max condition, stroke tolerance mm; check : test them.
-    values, codes : (4, N) out, as :func:`zonotope_maxima`.
+    values, codes : (4, N) out, as :func:`zonotope_maxima` (G: the terms of all legs, leg -1).
     bad : (N,) int16 out, bit ``3 * reason + leg`` set for each refusal (see REASONS).
     workers : threads for large batches (default: CPU count); every pose's numbers are the same.
     """
     N = poses.shape[0]
-    args = (poses, legc, family, leg, unit, box, limits, check, values, codes, bad)
+    args = (poses, legc, family, leg, unit, mode, box, limits, check, values, codes, bad)
     workers = workers or os.cpu_count() or 1
     if N < THREADS_FROM or workers == 1:
         _range(0, N, *args)
@@ -188,7 +246,7 @@ def envelope_kernel(poses, legc, family, leg, unit, box, limits, check, values, 
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
-def _range(start, stop, poses, legc, family, leg, unit, box, limits, check, values, codes, bad):
+def _range(start, stop, poses, legc, family, leg, unit, mode, box, limits, check, values, codes, bad):
     """The envelope at poses ``start:stop``, block by block, with scratch arrays allocated once.
 
     Scratch arrays are flat, one row of BLOCK values per quantity at a constant offset, so
@@ -198,15 +256,20 @@ def _range(start, stop, poses, legc, family, leg, unit, box, limits, check, valu
     A = np.empty(9 * BLOCK)         # A[i, c] in row 3 i + c
     hb = np.empty(42 * BLOCK)       # per leg i, rows 14 i + (b, d, the h entries of the ten families, cos, sin omega)
     Ai = np.empty(9 * BLOCK)        # A^-1[r, c] in row 3 r + c
-    um, uh = np.empty((3, BLOCK)), np.empty((3, BLOCK))  # centre and half-width of each leg's u_i
+    um, uh = np.empty((3, BLOCK)), np.empty((3, BLOCK))  # centre and half-width of u along the legs' axes
+    G = 0
+    for k in range(leg.size):
+        G += leg[k] < 0
+    ext = np.empty((G, 3, BLOCK))   # further generators of u: the terms of all legs
+    zs = zonotope_scratch(3 + G, BLOCK)
     for b0 in range(start, stop, BLOCK):
-        _block(b0, min(stop, b0 + BLOCK), poses, legc, family, leg, unit, box, limits, check, values, codes,
-               bad, cs, A, hb, Ai, um, uh)
+        _block(b0, min(stop, b0 + BLOCK), poses, legc, family, leg, unit, mode, box, limits, check, values, codes,
+               bad, cs, A, hb, Ai, um, uh, ext, zs)
 
 
 @njit(cache=True, error_model="numpy")
-def _block(start, stop, poses, legc, family, leg, unit, box, limits, check, values, codes, bad, cs, A, hb, Ai, um,
-           uh):
+def _block(start, stop, poses, legc, family, leg, unit, mode, box, limits, check, values, codes, bad, cs, A, hb, Ai,
+           um, uh, ext, zs):
     """The envelope at poses ``start:stop`` (at most BLOCK), one step at a time over all of them."""
     m, B = stop - start, BLOCK
     phi_deg, cp, sp = math.nan, 1.0, 0.0
@@ -275,23 +338,38 @@ def _block(start, stop, poses, legc, family, leg, unit, box, limits, check, valu
         bad[start:stop] = 0
     um[:] = 0.0
     uh[:] = 0.0
+    g = 0
     for k in range(family.shape[0]):
-        i, fam, un = leg[k], family[k], unit[k]
-        mid_i, half_i, hf = um[i, :m], uh[i, :m], hb[(14 * i + 2 + fam) * B:(14 * i + 3 + fam) * B]
+        i, fam, un, by_b = leg[k], family[k], unit[k], mode[k]
+        lo, hi = box[k, 0], box[k, 1]
+        if i < 0:  # a term of every leg: a further generator, w_l = h_l unit (b_l) on leg l
+            mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+            for l in range(3):
+                hf, bl = hb[(14 * l + 2 + fam) * B:(14 * l + 3 + fam) * B], hb[14 * l * B:(14 * l + 1) * B]
+                mid_l, gen = um[l, :m], ext[g, l, :m]
+                for j in range(m):
+                    w = hf[j] * un * (bl[j] if by_b else 1.0)
+                    mid_l[j] += w * mid
+                    gen[j] = w * half
+            g += 1
+            continue
+        mid_i, half_i = um[i, :m], uh[i, :m]
+        hf, bi = hb[(14 * i + 2 + fam) * B:(14 * i + 3 + fam) * B], hb[14 * i * B:(14 * i + 1) * B]
         if fam == _RHO and box[k, 3] != math.inf:  # part of a circle: the interval depends on omega
             for j in range(m):
                 omega = math.atan2(hb[(14 * i + 13) * B + j], hb[(14 * i + 12) * B + j])
                 cmin, cmax = _cos_range(box[k, 2] - omega, box[k, 3] - omega)
                 lo = (box[k, 1] if cmin <= 0 else box[k, 0]) * cmin
                 hi = (box[k, 1] if cmax >= 0 else box[k, 0]) * cmax
-                scale = hf[j] * un
+                scale = hf[j] * un * (bi[j] if by_b else 1.0)
                 mid_i[j] += scale * (0.5 * (lo + hi))
                 half_i[j] += abs(scale) * (0.5 * (hi - lo))
             continue
-        lo, hi = (-box[k, 1], box[k, 1]) if fam == _RHO else (box[k, 0], box[k, 1])
+        if fam == _RHO:
+            lo, hi = -box[k, 1], box[k, 1]
         mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
         for j in range(m):
-            scale = hf[j] * un
+            scale = hf[j] * un * (bi[j] if by_b else 1.0)
             mid_i[j] += scale * mid
             half_i[j] += abs(scale) * half
-    zonotope_maxima(Ai.reshape((3, 3, B)), um, uh, values, codes, start, m)
+    zonotope_maxima(Ai.reshape((3, 3, B)), um, uh, ext, values, codes, start, m, zs)

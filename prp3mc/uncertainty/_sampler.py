@@ -33,7 +33,7 @@ from scipy import special
 
 from .budget import Budget
 from .laws import Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
-from .model import FEATURE_COS, FEATURE_SIN, FEATURE_VALUE
+from .model import FEATURE_COS, FEATURE_ONE, FEATURE_SIN, FEATURE_VALUE
 
 __all__ = ["LANES", "sampler_tables", "pcg_lanes", "draw_uniforms", "draw_features"]
 
@@ -115,17 +115,15 @@ def pcg_lanes(seed: int, first_sample: int, d: int) -> tuple[np.ndarray, np.ndar
 
 
 # ---------------------------------------------------------------- tables
-def sampler_tables(budget: Budget, feature_ops) -> tuple | None:
+def sampler_tables(budget: Budget, feature_ops: tuple) -> tuple | None:
     """The budget's laws and the model's features as arrays for :func:`draw_features`, or None.
 
-    ``feature_ops`` is :meth:`LinearModel.feature_ops <prp3mc.uncertainty.model.LinearModel.feature_ops>`
-    (or None when the model has a feature this module does not know).
-    Returns ``(codes (d,) int64, params (d, 4) float64, cdf (K,), values (K,), ops (F, 3) int64)``
-    or None when a law has no compiled inverse CDF.
+    ``feature_ops`` is :meth:`LinearModel.feature_ops <prp3mc.uncertainty.model.LinearModel.feature_ops>`.
+    Returns ``(codes (D,) int64, params (D, 4) float64, cdf (K,), values (K,), ops (F, 3) int64,
+    refs (F,))`` over the budget's D factors (:attr:`Budget.factors`), or None when a law has
+    no compiled inverse CDF.
     """
-    if feature_ops is None:
-        return None
-    laws = list(budget.inputs.values())
+    laws = list(budget.factor_laws.values())
     codes = np.empty(len(laws), np.int64)
     params = np.zeros((len(laws), 4))
     cdf, values = [], []
@@ -149,7 +147,8 @@ def sampler_tables(budget: Budget, feature_ops) -> tuple | None:
             values += list(law.values)
         else:
             return None
-    return codes, params, np.array(cdf, float), np.array(values, float), np.asarray(feature_ops, np.int64)
+    ops, refs = feature_ops
+    return codes, params, np.array(cdf, float), np.array(values, float), ops, refs
 
 
 # ---------------------------------------------------------------- inverse CDFs
@@ -276,7 +275,7 @@ def draw_uniforms(lanes, consts, U):
 
 
 @njit(nogil=True, cache=True)
-def draw_features(lanes, consts, codes, params, cdf, values, ops, m, U, X, F):
+def draw_features(lanes, consts, codes, params, cdf, values, ops, refs, m, U, X, F):
     """Features of the next tile of samples; the lanes move on to the tile after it.
 
     Parameters
@@ -285,7 +284,7 @@ def draw_features(lanes, consts, codes, params, cdf, values, ops, m, U, X, F):
         :func:`pcg_lanes` states at the tile's first sample.
     consts : (6,) uint64
         :func:`pcg_lanes` constants.
-    codes, params, cdf, values, ops
+    codes, params, cdf, values, ops, refs
         :func:`sampler_tables`.
     m : int
         Samples of the tile that are used (the lanes draw the whole tile).
@@ -303,7 +302,11 @@ def draw_features(lanes, consts, codes, params, cdf, values, ops, m, U, X, F):
         op, a, b = ops[f, 0], ops[f, 1], ops[f, 2]
         xa, xb = X[a], X[b]
         if op == FEATURE_VALUE:
-            F[f, :m] = xa[:m]
+            out, ref = F[f], refs[f]
+            for s in range(m):
+                out[s] = xa[s] - ref
+        elif op == FEATURE_ONE:
+            F[f, :m] = 1.0
         elif op == FEATURE_COS and f + 1 < ops.shape[0] and ops[f + 1, 0] == FEATURE_SIN \
                 and ops[f + 1, 1] == a and ops[f + 1, 2] == b:  # a clearance: both in one loop
             fc, fs = F[f], F[f + 1]

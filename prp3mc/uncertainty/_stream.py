@@ -87,9 +87,11 @@ class Stream:
         self.fused = tables is not None
         if self.fused:  # compiled sampling: every worker's lanes start at its first block
             self.tables = tables
-            self.worker_lanes = [pcg_lanes(seed, r.start * SAMPLE_BLOCK, len(budget)) for r in self.worker_blocks]
+            self.worker_lanes = [pcg_lanes(seed, r.start * SAMPLE_BLOCK, len(budget.factor_laws))
+                                 for r in self.worker_blocks]
         else:  # numpy sampling, block by block
-            self.tables = (np.zeros(0, np.int64), np.zeros((0, 4)), np.zeros(0), np.zeros(0), np.zeros((0, 3), np.int64))
+            self.tables = (np.zeros(0, np.int64), np.zeros((0, 4)), np.zeros(0), np.zeros(0), np.zeros((0, 3), np.int64),
+                           np.zeros(0))
             self.worker_lanes = [(np.zeros((2, LANES), np.uint64), np.zeros(6, np.uint64))] * len(self.worker_blocks)
 
     def features(self, k: int) -> np.ndarray:
@@ -101,9 +103,9 @@ class Stream:
         if not self.fused:
             blocks = [self.features(k) for k in range(-(-m // SAMPLE_BLOCK))]
             return np.ascontiguousarray(np.concatenate(blocks)[:m].T, dtype=np.float32)
-        lanes, consts = pcg_lanes(self.seed, 0, len(self.budget))
-        nF = self.shift.size
-        U, X, F = np.empty((len(self.budget), TILE)), np.empty((len(self.budget), TILE)), np.empty((nF, TILE))
+        D, nF = len(self.budget.factor_laws), self.shift.size
+        lanes, consts = pcg_lanes(self.seed, 0, D)
+        U, X, F = np.empty((D, TILE)), np.empty((D, TILE)), np.empty((nF, TILE))
         out = np.empty((nF, m), np.float32)
         for t0 in range(0, m, TILE):
             k = min(TILE, m - t0)

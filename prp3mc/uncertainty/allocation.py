@@ -11,6 +11,11 @@ search screens choices with the closed-form moments (a normal-approximation
 bound, capped by the worst case) and Monte Carlo confirms the choice with a
 confidence interval at every pose. :func:`allocation_front` sweeps the
 cost-accuracy Pareto front.
+
+A budget's systematic effects (its ``[effects]`` table: fitted offsets,
+lead scales, backlash, thermal expansion) are properties of the machine, not
+classes to buy: given ``budget=``, they stay fixed in every candidate, every
+bound, the Monte Carlo confirmation and the reported worst case.
 """
 
 from __future__ import annotations
@@ -78,6 +83,8 @@ class AllocationResult:
     menu : ClassMenu
     geometry : Geometry
     seed : int or None
+    fixed : Budget or None
+        The budget whose ``[effects]`` stayed fixed (its inputs played no part).
     """
 
     choice: dict
@@ -95,6 +102,7 @@ class AllocationResult:
     menu: ClassMenu
     geometry: Geometry
     seed: int | None = None
+    fixed: Budget | None = None
     version: str = __version__
     wall_time_s: float = field(default=float("nan"), compare=False)
 
@@ -113,8 +121,8 @@ class AllocationResult:
         return float(self.phi_deg.max())
 
     def budget(self) -> Budget:
-        """The error budget of the chosen classes."""
-        return self.menu.budget(self.choice)
+        """The error budget of the chosen classes (with the fixed effects, if any)."""
+        return self.menu.budget(self.choice, self.fixed)
 
     def choice_frame(self) -> pd.DataFrame:
         """One row per input: input, class, cost, law, lo, hi, unit, source."""
@@ -144,6 +152,8 @@ class AllocationResult:
                "feasible": self.feasible, "spec": spec, "binding": self.binding,
                "binding_poses": [dict(zip(("x_mm", "y_mm", "phi_deg"), map(float, p))) for p in self.binding_poses],
                "search": {"nodes": self.nodes, "n_choices": self.n_choices, "wall_time_s": self.wall_time_s}}
+        if self.fixed is not None:
+            doc["fixed_effects"] = {k: {"value": e.value, "unit": e.unit} for k, e in self.fixed.effects.items()}
         if self.statistical is not None:
             st = self.statistical
             doc["statistical"] = {
@@ -197,7 +207,7 @@ def allocate(geometry, classes, region, *, spec_position_um: float | None = None
              spec_phi_arcsec: float | None = None, spec_percentile: float | None = None,
              grid: int = 41, phi_deg: float | None = None, k_sigma: float | None = None,
              n_samples: int = 20_000, rng: "None | int | np.random.Generator" = None,
-             binding_rtol: float = 1e-3) -> AllocationResult:
+             binding_rtol: float = 1e-3, budget=None) -> AllocationResult:
     """The least-cost class of every input that keeps the pose error within the spec over a region.
 
     Parameters
@@ -224,6 +234,10 @@ def allocate(geometry, classes, region, *, spec_position_um: float | None = None
         Randomness of the Monte Carlo confirmation (SPEC 7); its seed is recorded.
     binding_rtol : float
         Poses within this relative distance of the region maximum are binding.
+    budget : Budget or str, optional
+        A budget (or preset name or TOML path) whose ``[effects]`` stay fixed
+        in every bound and check (its inputs play no part: the classes
+        choose them). A budget fitted on another geometry is refused.
 
     Returns
     -------
@@ -238,9 +252,9 @@ def allocate(geometry, classes, region, *, spec_position_um: float | None = None
     """
     t0 = time.perf_counter()
     limits = _spec_limits(spec_position_um, spec_phi_arcsec, spec_percentile)
-    geometry, menu = Geometry.load(geometry), ClassMenu.load(classes)
+    geometry, menu, fixed = Geometry.load(geometry), ClassMenu.load(classes), _fixed(budget)
     poses = region_poses(region, grid, phi_deg)
-    problem = Problem(geometry, menu, poses, k_sigma=k_sigma, percentile=spec_percentile)
+    problem = Problem(geometry, menu, poses, k_sigma=k_sigma, percentile=spec_percentile, fixed=fixed)
     idx, nodes = least_cost(problem, limits)
     feasible, statistical, seed = idx is not None, None, None
     if spec_percentile is not None and feasible:
@@ -253,8 +267,7 @@ def allocate(geometry, classes, region, *, spec_position_um: float | None = None
         idx = nearest.closest()
         nodes += nearest.nodes
     choice = _choice(problem, idx)
-    budget = menu.budget(choice)
-    wc = worst_case(geometry, budget, poses, k_sigma=k_sigma)
+    wc = worst_case(geometry, problem.budget(choice), poses, k_sigma=k_sigma)
     values = {"position": wc.position_mm, "phi": wc.phi_deg}
     ratios = {q: float(values[q].max()) / limits[q] for q in ("position", "phi") if limits.get(q)}
     if statistical is not None:
@@ -274,7 +287,15 @@ def allocate(geometry, classes, region, *, spec_position_um: float | None = None
         poses=poses, position_mm=wc.position_mm, phi_deg=wc.phi_deg, binding=binding,
         binding_poses=binding_poses, statistical=statistical, nodes=nodes,
         n_choices=int(np.prod(problem.n_classes.astype(float))), menu=menu, geometry=geometry, seed=seed,
-        wall_time_s=time.perf_counter() - t0)
+        fixed=problem.fixed_budget, wall_time_s=time.perf_counter() - t0)
+
+
+def _fixed(budget) -> Budget | None:
+    """The budget whose effects stay fixed, or None (none given, or it has no effects)."""
+    if budget is None:
+        return None
+    budget = Budget.load(budget)
+    return budget if budget.effects else None
 
 
 def _confirm(geometry, menu, problem, limits, idx, percentile, n_samples, seed):
@@ -285,7 +306,7 @@ def _confirm(geometry, menu, problem, limits, idx, percentile, n_samples, seed):
     """
     spec, lim, nodes = limits["screen"], dict(limits), 0
     for rounds in range(1, _CONFIRM_ROUNDS + 1):
-        mc = monte_carlo(geometry, menu.budget(_choice(problem, idx)), problem.poses, n_samples,
+        mc = monte_carlo(geometry, problem.budget(_choice(problem, idx)), problem.poses, n_samples,
                          rng=child_seed(seed, rounds), percentiles=(percentile,))
         high = mc.position_pct_ci[:, 0, 1]
         worst = int(np.argmax(high))
@@ -307,7 +328,7 @@ def _confirm(geometry, menu, problem, limits, idx, percentile, n_samples, seed):
 def allocation_front(geometry, classes, region, *, output: str = "position",
                      spec_position_um: float | None = None, spec_phi_arcsec: float | None = None,
                      grid: int = 41, phi_deg: float | None = None, k_sigma: float | None = None,
-                     max_points: int = 100, progress: bool | None = None) -> pd.DataFrame:
+                     max_points: int = 100, progress: bool | None = None, budget=None) -> pd.DataFrame:
     """The cost-accuracy Pareto front: the least cost of every reachable worst case of ``output``.
 
     Swept by repeated exact allocation, each asking for a worst case strictly
@@ -315,6 +336,7 @@ def allocation_front(geometry, classes, region, *, output: str = "position",
     other output, if given, holds at every point. ``progress`` reports each
     point found on stderr (default: when stderr is a terminal); the count of
     points is not known in advance, so the bar runs against ``max_points``.
+    ``budget``: its ``[effects]`` stay fixed at every point, as in :func:`allocate`.
 
     Returns
     -------
@@ -326,7 +348,7 @@ def allocation_front(geometry, classes, region, *, output: str = "position",
     if output not in ("position", "phi"):
         raise AllocationError(f"output must be 'position' or 'phi', got {output!r}")
     geometry, menu = Geometry.load(geometry), ClassMenu.load(classes)
-    problem = Problem(geometry, menu, region_poses(region, grid, phi_deg), k_sigma=k_sigma)
+    problem = Problem(geometry, menu, region_poses(region, grid, phi_deg), k_sigma=k_sigma, fixed=_fixed(budget))
     side = {"position": _scaled(spec_position_um, 1 / MM2UM), "phi": _scaled(spec_phi_arcsec, 1 / DEG2ARCSEC)}
     side[output] = None
     points, limit = [], None

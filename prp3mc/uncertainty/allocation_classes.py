@@ -100,8 +100,11 @@ class ClassMenu:
         """The classes input ``name`` (e.g. ``theta_2``) may take."""
         return self.families[name.rsplit("_", 1)[0]]
 
-    def budget(self, choice: dict) -> Budget:
-        """The error budget of a choice ``{input: class name}`` (zeta_i uniform on 0-360 deg)."""
+    def budget(self, choice: dict, fixed: Budget | None = None) -> Budget:
+        """The error budget of a choice ``{input: class name}`` (zeta_i uniform on 0-360 deg).
+
+        ``fixed``: a budget whose ``[effects]`` (and ``fitted_on``) the choice's budget takes.
+        """
         inputs, sources = {}, {}
         for name in self.inputs:
             if name not in choice:
@@ -113,7 +116,8 @@ class ClassMenu:
             sources[name] = f"class {match[0].name}: {match[0].source}"
             if name.startswith("rho_"):
                 inputs[f"zeta_{name[-1]}"] = _FULL_TURN
-        return Budget(inputs, sources=sources, name=f"{self.name} allocation")
+        budget = Budget(inputs, sources=sources, name=f"{self.name} allocation")
+        return budget if fixed is None else budget.with_effects(fixed.effects, fitted_on=fixed.fitted_on)
 
     def to_frame(self):
         """One row per family and class: family, name, law, lo, hi, cost, source."""

@@ -24,6 +24,13 @@ first d inputs; for the rest it evaluates
 Inputs whose classes share no common interval are branched first and get no
 bound until they are fixed, so the search stays exact for any menu.
 
+A budget's systematic effects (its ``[effects]`` table) are not allocated:
+they stay fixed in every candidate, as a fixed centre (known shifts and the
+mean of the effects' factors), fixed widths of the legs' u_i (backlash) and
+a fixed shared generator (thermal, one temperature for all legs, so the
+maxima are over 16 corners); the envelope stays monotone in the classes'
+intervals, so the bounds stay exact.
+
 The statistical screen (for a percentile spec) uses the closed-form mean and
 covariance of the position error: a normal-approximation bound
 ``|mu| + sqrt(lambda_max(Sigma) chi2_2(q))`` on its q-quantile (under
@@ -44,13 +51,14 @@ from scipy import stats
 from ..units import RAD2DEG
 from ..kinematics.geometry import Geometry
 from .allocation_classes import ClassMenu
+from .budget import Budget
 from .model import linear_model
+from .worstcase import term_bounds
 
 __all__ = ["Problem", "Search", "least_cost", "QUANTITIES"]
 
 #: Constrained quantities: worst-case position (mm), worst-case |dphi| (deg), screened position quantile (mm).
 QUANTITIES = ("position", "phi", "screen")
-_CORNERS = np.array(list(itertools.product((-1.0, 1.0), repeat=3)))   # (8, 3)
 _CHUNK_ELEMENTS = 1 << 21   # K x N elements per evaluated block
 
 
@@ -67,6 +75,9 @@ class Problem:
         Bound unbounded laws as mean ± k_sigma·sd.
     percentile : float, optional
         q (in %) of the statistical screen.
+    fixed : Budget, optional
+        A budget whose ``[effects]`` stay fixed in every candidate (its
+        inputs play no part: the classes choose them).
 
     Attributes
     ----------
@@ -77,20 +88,28 @@ class Problem:
         class): term interval midpoint and half-width, term mean and
         variance (mm or deg and their squares), cost.
     n_classes : ndarray (J,)
+    fixed : dict of str to ndarray
+        The effects' fixed parts at the poses: ``center`` (N, 3) and, for the
+        screen, ``mean`` (N, 3) and ``cov`` (N, 3, 3) of the pose error (mm,
+        mm, rad), ``u_half`` (N, 3) widths of the legs' u_i, ``ext`` (N, G, 3)
+        shared generators of the pose error. All zero without effects (G = 0).
     """
 
     def __init__(self, geometry: Geometry, menu: ClassMenu, poses: np.ndarray, *,
-                 k_sigma: float | None = None, percentile: float | None = None):
+                 k_sigma: float | None = None, percentile: float | None = None, fixed: Budget | None = None):
         self.menu, self.poses = menu, np.asarray(poses, dtype=float).reshape(-1, 3)
         self.inputs = menu.inputs
+        self.fixed_budget = fixed if fixed is not None and fixed.effects else None
         first = {name: menu.classes_of(name)[0].name for name in self.inputs}
-        model = linear_model(geometry, menu.budget(first), self.poses)
-        assert model.terms == self.inputs
+        model = linear_model(geometry, self.budget(first), self.poses)
         N, J = self.poses.shape[0], len(self.inputs)
-        legs = np.array(model.legs)
-        self.P = np.ascontiguousarray(np.moveaxis(model.columns, -1, 0))     # (J, N, 3): mm, mm, rad per term unit
+        assert model.terms[:J] == self.inputs
+        legs = np.array(model.legs[:J])
+        columns = model.columns
+        self.P = np.ascontiguousarray(np.moveaxis(columns[..., :J], -1, 0))  # (J, N, 3): mm, mm, rad per term unit
         self.Ainv = model.Ainv                                                # (N, 3, 3)
-        self._absWu = np.abs(model.scale.T[:, :, None] * (legs[:, None] == np.arange(3))[:, None, :])  # (J, N, 3)
+        self._absWu = np.abs(model.scale[:, :J].T[:, :, None] * (legs[:, None] == np.arange(3))[:, None, :])  # (J, N, 3)
+        self.fixed = _fixed_parts(model, J, k_sigma)
         self.kq = None if percentile is None else float(np.sqrt(stats.chi2.ppf(percentile / 100.0, 2)))
         self.n_classes = np.array([len(menu.classes_of(n)) for n in self.inputs])
         M = int(self.n_classes.max())
@@ -104,6 +123,10 @@ class Problem:
 
     def class_name(self, j: int, m: int) -> str:
         return self.menu.classes_of(self.inputs[j])[m].name
+
+    def budget(self, choice: dict) -> Budget:
+        """The error budget of a choice ``{input: class name}``, with the fixed effects."""
+        return self.menu.budget(choice, self.fixed_budget)
 
     def evaluate(self, mid, half, mean=None, dmean=None, var=None, at=None) -> dict:
         """Per-pose envelopes of K candidates, each (K, n).
@@ -126,8 +149,9 @@ class Problem:
         """
         at = slice(None) if at is None else np.asarray(at)
         P, absWu, Ainv = self.P[:, at], self._absWu[:, at], self.Ainv[at]
+        fixed = {k: v[at] for k, v in self.fixed.items()}
         step = max(1, _CHUNK_ELEMENTS // P.shape[1])
-        parts = [_envelope(P, absWu, Ainv, self.kq,
+        parts = [_envelope(P, absWu, Ainv, self.kq, fixed,
                            *(None if a is None else a[s:s + step] for a in (mid, half, mean, dmean, var)))
                  for s in range(0, mid.shape[0], step)]
         return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
@@ -141,21 +165,60 @@ class Problem:
                              np.zeros(idx.shape) if stat else None, self.var[j, idx] if stat else None)
 
 
-def _envelope(P, absWu, Ainv, kq, mid, half, mean, dmean, var) -> dict:
+def _fixed_parts(model, J: int, k_sigma) -> dict:
+    """The fixed parts (see :attr:`Problem.fixed`) of the model's terms from J on (the effects)."""
+    N = model.poses.shape[0]
+    out = {"center": np.zeros((N, 3)), "mean": np.zeros((N, 3)), "cov": np.zeros((N, 3, 3)),
+           "u_half": np.zeros((N, 3)), "ext": np.zeros((N, 0, 3))}
+    if len(model.terms) == J:
+        return out
+    tb = term_bounds(model, model.budget.bounds(k_sigma))[:, J:]                # (N, E, 2)
+    cols, scale = model.columns[..., J:], model.scale[:, J:]                      # (N, 3, E), (N, E)
+    mid, half = tb.mean(-1), 0.5 * (tb[..., 1] - tb[..., 0])
+    out["center"] = np.einsum("noe,ne->no", cols, mid)
+    fmean, fcov = model.feature_moments()
+    coef = model.coef
+    F = coef.shape[-1]
+    own = np.zeros(F, dtype=bool)           # the features of the effects: those after the inputs' features
+    own[_n_input_features(model, J):] = True
+    out["mean"] = np.einsum("nof,f->no", coef[..., own], fmean[own])
+    out["cov"] = np.einsum("nof,fg,nqg->noq", coef[..., own], fcov[np.ix_(own, own)], coef[..., own])
+    legs = np.array(model.legs[J:])
+    out["u_half"] = (np.abs(scale) * half) @ (legs[:, None] == np.arange(3)).astype(float)
+    shared = [t - J for t in model.shared]
+    out["ext"] = np.moveaxis(cols[..., shared] * half[:, None, shared], -1, -2)    # (N, G, 3)
+    return out
+
+
+def _n_input_features(model, J: int) -> int:
+    """Features of the first J terms (a clearance has two)."""
+    return sum(2 if kind == "clearance" else 1 for kind, *_ in model._plan[:J])
+
+
+def _corners(m: int) -> np.ndarray:
+    """The 2^m sign patterns of m generators, (2^m, m)."""
+    return np.array(list(itertools.product((-1.0, 1.0), repeat=m)))
+
+
+def _envelope(P, absWu, Ainv, kq, fixed, mid, half, mean, dmean, var) -> dict:
     """The envelopes of :meth:`Problem.evaluate` for one block of candidates, at n poses."""
     J, n = P.shape[:2]
     K = mid.shape[0]
-    center = (mid @ P.reshape(J, n * 3)).reshape(K, n, 3)
-    g = Ainv[None] * (half @ absWu.reshape(J, n * 3)).reshape(K, n, 1, 3)   # (K, n, 3 rows, 3 legs)
-    vx = center[..., 0, None] + g[..., 0, :] @ _CORNERS.T                   # (K, n, 8)
-    vy = center[..., 1, None] + g[..., 1, :] @ _CORNERS.T
+    center = (mid @ P.reshape(J, n * 3)).reshape(K, n, 3) + fixed["center"]
+    legs_g = Ainv[None] * (half @ absWu.reshape(J, n * 3) + fixed["u_half"].reshape(-1)).reshape(K, n, 1, 3)
+    ext = np.broadcast_to(np.moveaxis(fixed["ext"], -1, -2), (K, n, 3, fixed["ext"].shape[1]))
+    G = np.concatenate([legs_g, ext], axis=-1)                              # (K, n, 3 rows, 3 + G generators)
+    corners = _corners(G.shape[-1])
+    vx = center[..., 0, None] + G[..., 0, :] @ corners.T                    # (K, n, 2^(3 + G))
+    vy = center[..., 1, None] + G[..., 1, :] @ corners.T
     out = {"position": np.sqrt((vx * vx + vy * vy).max(axis=-1)),
-           "phi": (np.abs(center[..., 2]) + np.abs(g[..., 2, :]).sum(-1)) * RAD2DEG}
+           "phi": (np.abs(center[..., 2]) + np.abs(G[..., 2, :]).sum(-1)) * RAD2DEG}
     if mean is not None:
         px, py = P[..., 0], P[..., 1]
-        mu = (mean @ P.reshape(J, n * 3)).reshape(K, n, 3)
+        mu = (mean @ P.reshape(J, n * 3)).reshape(K, n, 3) + fixed["mean"]
         mu_lb = np.maximum(0.0, np.hypot(mu[..., 0], mu[..., 1]) - dmean @ np.hypot(px, py))
-        a, b, c = var @ (px * px), var @ (px * py), var @ (py * py)
+        cov = fixed["cov"]
+        a, b, c = var @ (px * px) + cov[:, 0, 0], var @ (px * py) + cov[:, 0, 1], var @ (py * py) + cov[:, 1, 1]
         lam = 0.5 * (a + c) + np.sqrt(np.maximum(0.0, 0.25 * (a - c) ** 2 + b * b))
         out["screen"] = np.minimum(out["position"], mu_lb + kq * np.sqrt(np.maximum(lam, 0.0)))
     return out

@@ -13,17 +13,19 @@ import os
 import re
 import warnings
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .._toml import dumps_toml, load_spec, load_toml, loads_toml
+from .._toml import dumps_toml, load_spec, load_toml
 from ..output import write_text
 from .._result import FrozenDict
 from ..errors import BudgetError, IncompleteBudgetWarning, UnknownPresetError
+from .catalogue import Catalogue
 from .laws import Law, law_from_dict
+from .systematic import T_REF_C, FittedOn, SystematicEffect, effect_factors, effects_from_dict
+from ..kinematics.geometry import Geometry
 from ..kinematics.sensitivity import LENGTH_FAMILIES
 
 __all__ = ["Budget", "Catalogue", "input_unit", "parse_input", "BUDGET_PRESETS", "SANITY_LIMITS"]
@@ -52,65 +54,6 @@ def input_unit(name: str) -> str:
     return "mm" if family in LENGTH_FAMILIES else "deg"
 
 
-class Catalogue:
-    """Named laws with their sources, read from catalogue TOML files.
-
-    The bundled catalogue holds bearing clearance classes, guide angular
-    play and encoder least counts; entries are addressed by dotted keys such
-    as ``bearing_radial_clearance.bore_10_18.CN``.
-    """
-
-    def __init__(self, entries: dict[str, dict[str, Any]]):
-        self.entries = dict(entries)
-
-    @classmethod
-    def bundled(cls) -> "Catalogue":
-        text = resources.files("prp3mc").joinpath("data/catalogue.toml").read_text(encoding="utf-8")
-        return cls(_flatten(loads_toml(text, "bundled catalogue")))
-
-    def extended(self, path: str | os.PathLike) -> "Catalogue":
-        """A catalogue with the entries of the file at ``path`` added (or overriding)."""
-        return Catalogue({**self.entries, **_flatten(load_toml(path))})
-
-    def with_files(self, paths, base: Path | None, source: str, error: type[Exception] = BudgetError) -> "Catalogue":
-        """This catalogue extended by a file's ``catalogues = [paths]`` (relative to ``base``).
-
-        Raises ``error`` naming ``source`` when ``paths`` is not a list of strings.
-        """
-        if not isinstance(paths, list) or not all(isinstance(q, str) for q in paths):
-            raise error(f"{source}: catalogues must be a list of file paths, got {paths!r}")
-        catalogue = self
-        for path in paths:
-            catalogue = catalogue.extended((base or Path(".")) / path)
-        return catalogue
-
-    def law(self, key: str, where: str) -> tuple[Law, dict[str, Any]]:
-        if not isinstance(key, str) or key not in self.entries:
-            raise BudgetError(f"{where}: no catalogue entry {key!r}")
-        entry = dict(self.entries[key])
-        meta = {k: entry.pop(k) for k in ("applies_to", "unit", "source") if k in entry}
-        if "source" not in meta:
-            raise BudgetError(f"catalogue entry {key!r} states no source")
-        return law_from_dict(entry, f"catalogue entry {key!r}"), meta
-
-    def to_frame(self):
-        """The entries as a DataFrame: key, law, parameters, applies_to, unit, source."""
-        import pandas as pd
-        rows = [{"key": k, **v} for k, v in self.entries.items()]
-        return pd.DataFrame(rows)
-
-
-def _flatten(doc: dict[str, Any], prefix: str = "") -> dict[str, dict[str, Any]]:
-    out = {}
-    for key, value in doc.items():
-        name = f"{prefix}.{key}" if prefix else key
-        if isinstance(value, dict) and "law" in value:
-            out[name] = value
-        elif isinstance(value, dict):
-            out.update(_flatten(value, name))
-    return out
-
-
 @dataclass(frozen=True, slots=True)
 class Budget:
     """An error budget: independent inputs, each with a law, and Sobol groups.
@@ -127,12 +70,30 @@ class Budget:
     sources : dict of str to str
         Where an input's law comes from (catalogue entries record theirs).
     name : str
+    effects : dict of str to SystematicEffect
+        Fitted systematic effects (the ``[effects]`` table: backlash, lead
+        scale, thermal expansion, offsets), keyed by their library name.
+        Backlash and thermal add random *factors* (:attr:`factors`) drawn
+        with the inputs; offsets and scales are known shifts.
+    fitted_on : FittedOn, optional
+        The geometry the effects were fitted on; a budget that has one
+        refuses other geometries (:meth:`check_geometry`).
+
+    Notes
+    -----
+    Samples (:meth:`ppf`, :meth:`sample`, :meth:`sample_block`) and
+    :meth:`means`, :meth:`variances`, :meth:`bounds` run over the factors:
+    the inputs in budget order, then the effects' random factors
+    (``backlash_i`` as delta b_i in mm, ``thermal`` as the temperature in
+    degrees C). Without such effects the factors are the inputs.
     """
 
     inputs: dict
     groups: dict = field(default_factory=dict)
     sources: dict = field(default_factory=dict)
     name: str = "custom"
+    effects: dict = field(default_factory=dict)
+    fitted_on: FittedOn | None = None
 
     def __post_init__(self):
         if not self.inputs:
@@ -156,19 +117,26 @@ class Budget:
             if partner and f"{partner}_{leg + 1}" not in inputs:
                 raise BudgetError(f"input {key!r} needs {partner}_{leg + 1}: a clearance has a size rho "
                                   "and a contact angle zeta")
+        for key, eff in dict(self.effects).items():
+            if not isinstance(eff, SystematicEffect) or eff.name != key:
+                raise BudgetError(f"effect {key!r}: expected a SystematicEffect named {key!r}, got {eff!r}")
+        if self.fitted_on is not None and not isinstance(self.fitted_on, FittedOn):
+            raise BudgetError(f"fitted_on: expected a FittedOn, got {self.fitted_on!r}")
+        factors = tuple(inputs) + tuple(effect_factors(self.effects))
         groups = {f"clearance_{leg + 1}": (f"rho_{leg + 1}", f"zeta_{leg + 1}")
                   for key in inputs for family, leg in [parse_input(key)] if family == "rho"}
         for gname, members in dict(self.groups).items():
             members = tuple(members)
-            unknown = [m for m in members if m not in inputs]
+            unknown = [m for m in members if m not in factors]
             if unknown or not members:
                 raise BudgetError(f"group {gname!r}: unknown input(s) {', '.join(unknown) or '(empty group)'}")
-            if gname in inputs:
+            if gname in factors:
                 raise BudgetError(f"group {gname!r} has the name of an input")
             groups[gname] = members
         object.__setattr__(self, "inputs", FrozenDict(inputs))
         object.__setattr__(self, "groups", FrozenDict(groups))
         object.__setattr__(self, "sources", FrozenDict(self.sources))
+        object.__setattr__(self, "effects", FrozenDict(self.effects))
 
     # ------------------------------------------------------------ access
     @property
@@ -180,6 +148,30 @@ class Budget:
         return len(self.inputs)
 
     @property
+    def factor_laws(self) -> FrozenDict:
+        """Law of every random factor: the inputs, then the effects' factors (backlash_i, thermal)."""
+        extra = effect_factors(self.effects)
+        return FrozenDict({**self.inputs, **extra}) if extra else self.inputs
+
+    @property
+    def factors(self) -> tuple[str, ...]:
+        """Names of the random factors: the inputs, then ``backlash_i`` and ``thermal`` effects."""
+        return tuple(self.factor_laws)
+
+    def check_geometry(self, geometry: Geometry) -> None:
+        """Refuse a geometry other than the one this budget's effects were fitted on (one line).
+
+        Budgets without effects or without ``fitted_on`` apply to any geometry.
+        """
+        if self.fitted_on is None or not self.effects:
+            return
+        diff = self.fitted_on.difference(geometry)
+        if diff is not None:
+            raise BudgetError(f"budget {self.name!r} holds effects fitted on geometry {self.fitted_on.name!r}, "
+                              f"not on geometry {geometry.name!r}: {diff}; fitted effects belong to the "
+                              "machine they were measured on")
+
+    @property
     def missing_inputs(self) -> tuple[str, ...]:
         """Inputs of a family the budget names for some legs but not for all (taken as exact)."""
         present = {parse_input(name)[0] for name in self.inputs}
@@ -188,10 +180,60 @@ class Budget:
 
     def replace(self, name: str | None = None, **laws: Law) -> "Budget":
         """A copy with some inputs' laws replaced or added (``theta_1=Uniform(...)``)."""
-        return Budget({**self.inputs, **laws}, groups={k: v for k, v in self.groups.items()
-                                                     if not k.startswith("clearance_")},
+        return Budget({**self.inputs, **laws}, groups=self._user_groups(),
                       sources={k: v for k, v in self.sources.items() if k not in laws},
-                      name=name or self.name)
+                      name=name or self.name, effects=self.effects, fitted_on=self.fitted_on)
+
+    def _user_groups(self) -> dict:
+        return {k: v for k, v in self.groups.items() if not k.startswith("clearance_")}
+
+    def with_effects(self, effects: dict, name: str | None = None,
+                     fitted_on: "Geometry | FittedOn | None" = None) -> "Budget":
+        """A copy with systematic effects added or replaced (``{name: SystematicEffect}``).
+
+        Parameters
+        ----------
+        effects : dict of str to SystematicEffect
+        name : str, optional
+            The copy's name (default: this budget's).
+        fitted_on : Geometry or FittedOn, optional
+            The geometry the effects were fitted on (recorded as ``[fitted_on]``);
+            the copy then refuses any geometry that differs from it by more
+            than :data:`~prp3mc.uncertainty.systematic.FIT_TOLERANCE`. Default:
+            this budget's.
+        """
+        if isinstance(fitted_on, Geometry):
+            fitted_on = FittedOn.of(fitted_on)
+        return Budget(self.inputs, groups=self._user_groups(), sources=self.sources, name=name or self.name,
+                      effects={**self.effects, **effects}, fitted_on=fitted_on or self.fitted_on)
+
+    def effects_frame(self):
+        """One row per effect: effect, kind, value, unit, ci95_low, ci95_high, temp_lo_C, temp_hi_C,
+        campaign, campaign_sha256, source, and how the analyses take it (``enters``)."""
+        import pandas as pd
+        enters = {"offset": "known shift", "scale": "known shift", "backlash": "±h/2, approach unknown",
+                  "thermal": "temperature over temp_range_C"}
+        rows = [{"effect": k, "kind": e.effect.kind, "value": e.value, "unit": e.unit,
+                 "ci95_low": (e.ci95 or (np.nan,) * 2)[0], "ci95_high": (e.ci95 or (np.nan,) * 2)[1],
+                 "temp_lo_C": (e.temp_range_C or (np.nan,) * 2)[0], "temp_hi_C": (e.temp_range_C or (np.nan,) * 2)[1],
+                 "campaign": e.campaign or "", "campaign_sha256": e.campaign_sha256 or "", "source": e.source or "",
+                 "enters": enters[e.effect.kind]} for k, e in self.effects.items()]
+        return pd.DataFrame(rows)
+
+    def effects_record(self) -> dict:
+        """What an output's ``inputs`` record of the effects: ``effects`` (each as in the
+        TOML table) and ``fitted_on`` (the geometry's name); empty without effects."""
+        if not self.effects:
+            return {}
+        record: dict[str, Any] = {"effects": {k: eff.to_dict() for k, eff in self.effects.items()}}
+        if self.fitted_on is not None:
+            record["fitted_on"] = self.fitted_on.name
+        return record
+
+    def without_effects(self) -> "Budget":
+        """A copy without the ``[effects]`` table (and its ``fitted_on``): the inputs' laws alone."""
+        groups = {k: v for k, v in self._user_groups().items() if set(v) <= set(self.inputs)}
+        return Budget(self.inputs, groups=groups, sources=self.sources, name=self.name)
 
     def scaled(self, factor: float, family: str | None = None) -> "Budget":
         """A copy with the laws of ``family`` (all but zeta if None) scaled about 0 by ``factor``."""
@@ -205,18 +247,19 @@ class Budget:
 
     # ------------------------------------------------------------ sampling
     def ppf(self, u: np.ndarray) -> np.ndarray:
-        """Map uniforms of shape (n, d) to input values (n, d) in mm / deg."""
+        """Map uniforms of shape (n, D) to factor values (n, D) in mm / deg (D factors, see :attr:`factors`)."""
         u = np.asarray(u, dtype=float)
-        if u.ndim != 2 or u.shape[1] != len(self):
-            raise BudgetError(f"expected uniforms of shape (n, {len(self)}), got {u.shape}")
+        laws = self.factor_laws
+        if u.ndim != 2 or u.shape[1] != len(laws):
+            raise BudgetError(f"expected uniforms of shape (n, {len(laws)}), got {u.shape}")
         ut = np.ascontiguousarray(u.T)  # each law maps one contiguous row
         out = np.empty_like(ut)
-        for k, law in enumerate(self.inputs.values()):
+        for k, law in enumerate(laws.values()):
             out[k] = law.ppf(ut[k])
-        return out.T  # (n, d) whose columns are contiguous
+        return out.T  # (n, D) whose columns are contiguous
 
     def sample(self, n: int, rng: "None | int | np.random.Generator" = None) -> np.ndarray:
-        """``n`` independent draws of all inputs, shape (n, d), mm / deg.
+        """``n`` independent draws of all factors, shape (n, D), mm / deg (degrees C for thermal).
 
         Drawn in blocks of 65536 from one generator, so the same seed gives
         the same samples whatever the caller's chunking.
@@ -224,10 +267,11 @@ class Budget:
         rng = np.random.default_rng(rng)
         if n < 1:
             raise BudgetError(f"sample count must be positive, got {n}")
-        out = np.empty((n, len(self)))
+        D = len(self.factor_laws)
+        out = np.empty((n, D))
         for start in range(0, n, SAMPLE_BLOCK):
             stop = min(n, start + SAMPLE_BLOCK)
-            out[start:stop] = self.ppf(rng.random((stop - start, len(self))))
+            out[start:stop] = self.ppf(rng.random((stop - start, D)))
         return out
 
     def sample_block(self, seed: int, k: int, n: int) -> np.ndarray:
@@ -240,36 +284,67 @@ class Budget:
         start = k * SAMPLE_BLOCK
         if not 0 <= start < n:
             raise BudgetError(f"block {k} is outside a sample of {n}")
+        D = len(self.factor_laws)
         bits = np.random.PCG64(seed)
-        bits.advance(start * len(self))
-        return self.ppf(np.random.Generator(bits).random((min(n - start, SAMPLE_BLOCK), len(self))))
+        bits.advance(start * D)
+        return self.ppf(np.random.Generator(bits).random((min(n - start, SAMPLE_BLOCK), D)))
 
-    def errors(self, X: np.ndarray) -> dict[str, np.ndarray]:
-        """Input samples ``X`` (n, d) as per-family errors ``{family: (n, 3)}``, mm / deg.
+    def errors(self, X: np.ndarray, b: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Factor samples ``X`` (n, D) as per-family errors, mm / deg.
 
         The form :func:`~prp3mc.kinematics.exact.exact_pose_error` takes; a
         family the budget does not name is absent, a leg it does not name is 0.
+        Without effects each family's errors are (n, 3). The effects add
+        their errors: offsets to their family (``b_i`` to ``b``), backlash
+        and, given the nominal slider positions ``b`` (..., 3) (mm) of the
+        poses, lead scale and thermal expansion to ``b``, which is then
+        (..., n, 3).
         """
         X = np.asarray(X, dtype=float)
         errors: dict[str, np.ndarray] = {}
         for k, name in enumerate(self.names):
             family, leg = parse_input(name)
             errors.setdefault(family, np.zeros((X.shape[0], 3)))[:, leg] = X[:, k]
+        if not self.effects:
+            return errors
+        factors = self.factors
+        slider = np.zeros((X.shape[0], 3))
+        kinds = {eff.effect.kind for eff in self.effects.values()}
+        for name, eff in self.effects.items():
+            e = eff.effect
+            if e.kind == "offset":
+                errors.setdefault(e.family, np.zeros((X.shape[0], 3)))[:, e.leg] += eff.value
+            elif e.kind == "backlash":
+                slider[:, e.leg] += X[:, factors.index(name)]
+        if kinds & {"scale", "thermal"}:
+            if b is None:
+                raise BudgetError("lead scale and thermal effects need the nominal slider positions b")
+            strain = np.zeros((X.shape[0], 3))
+            for name, eff in self.effects.items():
+                if eff.effect.kind == "scale":
+                    strain[:, eff.effect.leg] += eff.value
+                elif eff.effect.kind == "thermal":
+                    strain += eff.value * (X[:, factors.index(name), None] - T_REF_C)
+            slider = slider + strain * np.asarray(b, dtype=float)[..., None, :]
+        if kinds & {"backlash", "scale", "thermal"}:
+            errors["b"] = errors.get("b", 0.0) + slider
         return errors
 
     def means(self) -> np.ndarray:
-        return np.array([law.mean for law in self.inputs.values()])
+        """Mean of every factor (D,)."""
+        return np.array([law.mean for law in self.factor_laws.values()])
 
     def variances(self) -> np.ndarray:
-        return np.array([law.var for law in self.inputs.values()])
+        """Variance of every factor (D,)."""
+        return np.array([law.var for law in self.factor_laws.values()])
 
     def bounds(self, k_sigma: float | None = None) -> np.ndarray:
-        """Worst-case interval of every input, shape (d, 2), mm / deg.
+        """Worst-case interval of every factor, shape (D, 2), mm / deg (degrees C for thermal).
 
         Unbounded laws need ``k_sigma`` (mean ± k·sd); otherwise BudgetError.
         """
         out = []
-        for key, law in self.inputs.items():
+        for key, law in self.factor_laws.items():
             try:
                 out.append(law.bounds(k_sigma))
             except BudgetError as exc:
@@ -291,11 +366,16 @@ class Budget:
 
         ``name``; optional ``catalogues = [paths]`` (relative to the file);
         ``[inputs]`` mapping each input to ``{law = ..., params}`` or
-        ``{catalogue = "dotted.key"}``; optional ``[groups]`` name = [inputs].
+        ``{catalogue = "dotted.key"}``; optional ``[groups]`` name = [inputs];
+        optional ``[effects]`` of fitted systematic effects
+        (:func:`~prp3mc.uncertainty.systematic.effects_from_dict`) and
+        ``[fitted_on]``, the geometry they were fitted on
+        (:class:`~prp3mc.uncertainty.systematic.FittedOn`).
         """
-        unknown = sorted(set(doc) - {"name", "inputs", "groups", "catalogues"})
+        unknown = sorted(set(doc) - {"name", "inputs", "groups", "catalogues", "effects", "fitted_on"})
         if unknown:
-            raise BudgetError(f"{source}: unknown key(s) {', '.join(unknown)} (expected name, inputs, groups, catalogues)")
+            raise BudgetError(f"{source}: unknown key(s) {', '.join(unknown)} "
+                              "(expected name, inputs, groups, catalogues, effects, fitted_on)")
         catalogue = (catalogue or Catalogue.bundled()).with_files(doc.get("catalogues", []), base, source)
         raw = doc.get("inputs")
         if not isinstance(raw, dict) or not raw:
@@ -328,8 +408,10 @@ class Budget:
         name = doc.get("name", "custom")
         if not isinstance(name, str):
             raise BudgetError(f"{source}: name must be a string, got {name!r}")
+        effects = effects_from_dict(doc.get("effects", {}), source)
+        fitted_on = FittedOn.from_dict(doc["fitted_on"], source) if "fitted_on" in doc else None
         try:
-            budget = cls(inputs, groups=groups, sources=sources, name=name)
+            budget = cls(inputs, groups=groups, sources=sources, name=name, effects=effects, fitted_on=fitted_on)
         except BudgetError as exc:
             raise BudgetError(f"{source}: {exc}") from None
         if budget.missing_inputs:
@@ -358,6 +440,10 @@ class Budget:
         doc: dict[str, Any] = {"name": self.name, "inputs": inputs}
         if groups:
             doc["groups"] = groups
+        if self.effects:
+            doc["effects"] = {k: eff.to_dict() for k, eff in self.effects.items()}
+        if self.fitted_on is not None:
+            doc["fitted_on"] = self.fitted_on.to_dict()
         return doc
 
     def to_toml(self, path: str | os.PathLike) -> None:

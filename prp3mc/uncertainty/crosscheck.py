@@ -18,7 +18,7 @@ from scipy.optimize import differential_evolution
 from .budget import Budget
 from ..kinematics.exact import exact_pose_error
 from ..kinematics.geometry import Geometry
-from ..kinematics.chain import as_poses, check_poses
+from ..kinematics.chain import as_poses, check_poses, inverse_kinematics
 from .._rng import resolve_rng
 
 __all__ = ["OptimizerResult", "optimizer_worst_case"]
@@ -34,7 +34,7 @@ class OptimizerResult:
     position_mm : float
         Largest exact position error found, mm.
     inputs : dict of str to float
-        The inputs (mm, deg) that gave it.
+        The factors (mm, deg; degrees C for thermal) that gave it.
     n_evaluations : int
         Exact-model evaluations used.
     seconds : float
@@ -77,16 +77,18 @@ def optimizer_worst_case(geometry: Geometry, budget: Budget, pose, *,
     if pose.shape != (3,):
         raise ValueError("optimizer_worst_case works on one pose of shape (3,)")
     check_poses(geometry, pose)
+    budget.check_geometry(geometry)
     seed, _ = resolve_rng(rng)
     bounds = budget.bounds(k_sigma)
+    b, _ = inverse_kinematics(geometry, pose)           # the commanded sliders (lead scale, thermal)
     evaluations = 0
 
-    def negative_error(X):  # X: (d,) or (d, S) with vectorized=True
+    def negative_error(X):  # X: (D,) or (D, S) with vectorized=True
         nonlocal evaluations
-        X2 = np.atleast_2d(np.asarray(X).T)                          # (S, d)
+        X2 = np.atleast_2d(np.asarray(X).T)                          # (S, D)
         evaluations += X2.shape[0]
         err = exact_pose_error(geometry, np.broadcast_to(pose, X2.shape[:1] + (3,)),
-                               budget.errors(X2), check=False)
+                               budget.errors(X2, b=b), check=False)
         value = -np.hypot(err[:, 0], err[:, 1])
         return value if np.ndim(X) > 1 else value[0]
 
@@ -96,5 +98,5 @@ def optimizer_worst_case(geometry: Geometry, budget: Budget, pose, *,
                                  polish=True)
     seconds = time.perf_counter() - t0
     return OptimizerResult(pose=pose, position_mm=float(-res.fun),
-                           inputs=dict(zip(budget.names, map(float, res.x))),
+                           inputs=dict(zip(budget.factors, map(float, res.x))),
                            n_evaluations=evaluations, seconds=seconds, seed=seed)

@@ -29,7 +29,7 @@ __all__ = ["salib_problem", "salib_model", "openturns_distribution", "to_xarray"
 
 
 def salib_problem(budget: Budget) -> dict:
-    """A SALib problem for ``budget``: its inputs on the unit hypercube.
+    """A SALib problem for ``budget``: its factors (inputs, then backlash_i and thermal effects) on the unit hypercube.
 
     Returns
     -------
@@ -37,8 +37,8 @@ def salib_problem(budget: Budget) -> dict:
         ``{"num_vars": d, "names": [...], "bounds": [[0, 1]] * d}``; sample it
         with any SALib sampler and evaluate with :func:`salib_model`.
     """
-    d = len(budget)
-    return {"num_vars": d, "names": list(budget.names), "bounds": [[0.0, 1.0]] * d}
+    d = len(budget.factors)
+    return {"num_vars": d, "names": list(budget.factors), "bounds": [[0.0, 1.0]] * d}
 
 
 def salib_model(geometry, budget: Budget, poses, output: str = "position"):
@@ -91,23 +91,24 @@ def _openturns_marginal(ot, law):
 
 
 def openturns_distribution(budget: Budget):
-    """The budget as an OpenTURNS joint distribution of independent marginals, in budget order.
+    """The budget as an OpenTURNS joint distribution of independent marginals, in factor order.
 
-    Each marginal carries the input's name as its description. Requires the
-    optional ``openturns`` package.
+    Each marginal carries the factor's name as its description (the inputs,
+    then the backlash_i and thermal effects). Requires the optional
+    ``openturns`` package.
     """
     try:
         import openturns as ot
     except ImportError:
         raise BudgetError("openturns is not installed: pip install openturns") from None
     marginals = []
-    for name, law in budget.inputs.items():
+    for name, law in budget.factor_laws.items():
         m = _openturns_marginal(ot, law)
         m.setDescription([name])
         marginals.append(m)
     joint = getattr(ot, "JointDistribution", None) or ot.ComposedDistribution
     dist = joint(marginals)
-    dist.setDescription(list(budget.names))
+    dist.setDescription(list(budget.factors))
     return dist
 
 

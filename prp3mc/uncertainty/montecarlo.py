@@ -33,6 +33,7 @@ from ..units import OUTPUT_UNITS, POSE_OUTPUTS, RAD2DEG, Z95, z_value
 from .._version import __version__
 from .budget import Budget
 from ..errors import BudgetError
+from ..kinematics.chain import inverse_kinematics
 from ..kinematics.exact import exact_pose_error
 from ..kinematics.geometry import Geometry
 from ._stream import Stream, pilot_fraction, select_order_statistics
@@ -340,7 +341,7 @@ def _linearization(model: LinearModel, budget: Budget, seed: int, n_poses: int, 
     flat = model.poses.reshape(-1, 3)
     idx = np.unique(np.linspace(0, flat.shape[0] - 1, min(n_poses, flat.shape[0])).round().astype(int))
     X = budget.sample(n_samples, seed)
-    errors = budget.errors(X)
+    errors = budget.errors(X, b=inverse_kinematics(model.geometry, flat[idx], check=False)[0])
     poses = np.broadcast_to(flat[idx, None, :], (len(idx), X.shape[0], 3))
     exact = exact_pose_error(model.geometry, poses, errors, check=False)
     sub = linear_model(model.geometry, budget, flat[idx], check=False)

@@ -16,33 +16,42 @@ import pandas as pd
 
 from ..errors import BudgetError
 from ..units import OUTPUT_UNITS
-from .budget import parse_input
 from .sobol import SobolResult
 from .worstcase import WorstCase
 
 __all__ = ["ranking"]
 
 
-def _term_map(result: SobolResult, wc: WorstCase) -> np.ndarray:
-    """(K, T) map of worst-case terms to names; a row of NaN where a name has no contribution.
+def _term_map(result: SobolResult, wc: WorstCase) -> tuple[np.ndarray, list]:
+    """(K + S, T) map of worst-case terms to names, and the S known shifts' terms (rows K onwards).
 
     A clearance term rho_i cos(zeta_i - omega_i) belongs to a name holding both
     rho_i and zeta_i (clearance_i); rho_i and zeta_i alone, and groups that
-    split a clearance, get NaN.
+    split a clearance, get a row of NaN. A known shift (an offset or lead
+    scale effect) varies with no factor: it gets a row of its own.
     """
-    T = len(wc.terms)
-    out = np.zeros((len(result.names), T))
+    factors = wc.inputs
+    needs, shifts = [], []
+    for t, (kind, *args) in enumerate(wc.model._plan):
+        if kind == "shift":
+            shifts.append(t)
+            needs.append(None)
+        else:
+            needs.append({factors[i] for i in (args[0] if kind == "clearance" else args[:1])})
+    out = np.zeros((len(result.names) + len(shifts), len(wc.terms)))
     for k, name in enumerate(result.names):
         members = set(result.groups.get(name, (name,)))
-        for t, term in enumerate(wc.terms):
-            family, leg = parse_input(term)
-            needs = {term, f"zeta_{leg + 1}"} if family == "rho" else {term}
-            if needs <= members:
+        for t, need in enumerate(needs):
+            if need is None:
+                continue
+            if need <= members:
                 out[k, t] = 1.0
-            elif needs & members:
+            elif need & members:
                 out[k] = np.nan
                 break
-    return out
+    for j, t in enumerate(shifts):
+        out[len(result.names) + j, t] = 1.0
+    return out, [wc.terms[t] for t in shifts]
 
 
 def ranking(sobol_result: SobolResult, worst_case_result: WorstCase, output: str = "position",
@@ -68,7 +77,10 @@ def ranking(sobol_result: SobolResult, worst_case_result: WorstCase, output: str
         terms' contributions at the maximising vertex. The clearance term
         rho_i cos(zeta_i - omega_i) carries rho_i and zeta_i together, so its
         contribution is reported on ``clearance_i`` and rho_i, zeta_i (and
-        any group holding only one of them) show NaN.
+        any group holding only one of them) show NaN. The budget's known
+        shifts (offset effects as ``offset_q_i``, ``scale_i``) follow with
+        kind ``shift``: a systematic contribution to the worst case, no
+        variance share (S1, ST NaN), last in the order.
 
         For a region (``index=None``): S1 and ST are means over the poses,
         S1_conf and ST_conf the largest half-widths, ST_min and ST_max the
@@ -87,13 +99,15 @@ def ranking(sobol_result: SobolResult, worst_case_result: WorstCase, output: str
     if tuple(wc.inputs) != tuple(r.names[:len(wc.inputs)]):
         raise BudgetError("ranking needs the Sobol result and the worst case of the same budget")
     o = r.outputs.index(output)
-    contrib = np.einsum("...t,kt->...k", wc.contribution[output], _term_map(r, wc))    # (..., K)
+    term_map, shifts = _term_map(r, wc)
+    contrib = np.einsum("...t,kt->...k", wc.contribution[output], term_map)    # (..., K + S)
     total = wc.value(output)[..., None]
     share = np.divide(contrib, total, out=np.zeros_like(contrib), where=total > 0)
     share = np.where(np.isnan(contrib), np.nan, share)
-    idx = {"S1": r.S1[..., o, :], "S1_conf": r.S1_conf[..., o, :], "ST": r.ST[..., o, :],
-           "ST_conf": r.ST_conf[..., o, :]}
-    frame = {"output": output, "name": list(r.names), "kind": list(r.kinds)}
+    pad = np.full(r.S1.shape[:-2] + (len(shifts),), np.nan)
+    idx = {key: np.concatenate([getattr(r, key)[..., o, :], pad], axis=-1)
+           for key in ("S1", "S1_conf", "ST", "ST_conf")}
+    frame = {"output": output, "name": list(r.names) + shifts, "kind": list(r.kinds) + ["shift"] * len(shifts)}
     if index is not None or r.poses.ndim == 1:
         at = () if index is None else index
         frame.update({key: value[at] for key, value in idx.items()})
@@ -101,7 +115,7 @@ def ranking(sobol_result: SobolResult, worst_case_result: WorstCase, output: str
         df = pd.DataFrame(frame)
         df.attrs["pose"] = r.poses[at].tolist()
     else:
-        K = len(r.names)
+        K = len(r.names) + len(shifts)
         flat = {key: value.reshape(-1, K) for key, value in idx.items()}
         worst = int(np.argmax(wc.value(output).reshape(-1)))
         frame.update(S1=flat["S1"].mean(0), S1_conf=flat["S1_conf"].max(0), ST=flat["ST"].mean(0),

@@ -68,15 +68,19 @@ class Factors:
 
 
 def design_factors(budget: Budget, groups: dict | None) -> Factors:
-    """The budget's inputs, then its groups and the user's ``groups`` (validated by :class:`Budget`)."""
+    """The budget's factors, then its groups and the user's ``groups`` (validated by :class:`Budget`).
+
+    The factors are the inputs (kind ``input``) and the random factors of
+    the budget's effects, ``backlash_i`` and ``thermal`` (kind ``effect``).
+    """
     extra = {}
     for gname, members in (groups or {}).items():
         if isinstance(members, str):
             raise BudgetError(f"group {gname!r}: expected a list of inputs, got the string {members!r}")
         extra[str(gname)] = tuple(members)
     user = {k: v for k, v in budget.groups.items() if not k.startswith("clearance_")}
-    merged = Budget(budget.inputs, groups={**user, **extra}).groups  # validates the groups
-    inputs = budget.names
+    merged = Budget(budget.inputs, groups={**user, **extra}, effects=budget.effects).groups  # validates them
+    inputs = budget.factors
     d = len(inputs)
     names = inputs + tuple(merged)
     masks = np.zeros((len(names), d), dtype=bool)
@@ -88,7 +92,8 @@ def design_factors(budget: Budget, groups: dict | None) -> Factors:
     for k in range(d, len(names)):
         problem[k, k] = True
         problem[k, :d] = ~masks[k]
-    return Factors(names=names, kinds=("input",) * d + ("group",) * len(merged),
+    kinds = ("input",) * len(budget.names) + ("effect",) * (d - len(budget.names)) + ("group",) * len(merged)
+    return Factors(names=names, kinds=kinds,
                     groups={k: tuple(v) for k, v in merged.items()}, masks=masks, problem=problem)
 
 
@@ -108,8 +113,8 @@ def saltelli_design(budget: Budget, factors: Factors, n_samples: int, seed: int)
     does for the problem that makes k one factor.
     """
     from SALib.sample import sobol as sobol_sample
-    d = len(budget)
-    U = sobol_sample.sample(_salib_problem(budget.names), n_samples, calc_second_order=False,
+    d = len(budget.factors)
+    U = sobol_sample.sample(_salib_problem(budget.factors), n_samples, calc_second_order=False,
                             scramble=True, seed=seed).reshape(n_samples, d + 2, d)
     A, B = U[:, 0], U[:, d + 1]
     AB = np.where(factors.masks[:, None, :], B, A)

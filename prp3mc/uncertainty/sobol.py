@@ -63,9 +63,10 @@ class SobolResult:
     outputs : tuple of str
         Among ``x``, ``y``, ``phi``, ``position``.
     names : tuple of str
-        The budget's inputs, then the groups.
+        The budget's factors (its inputs, then the random factors of its
+        effects: ``backlash_i``, ``thermal``), then the groups.
     kinds : tuple of str
-        ``input`` or ``group`` per name.
+        ``input``, ``effect`` or ``group`` per name.
     groups : mapping of str to tuple of str
         Members of every group.
     S1, S1_conf, ST, ST_conf : ndarray (..., O, K)
@@ -192,7 +193,7 @@ def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
         ``[x_mm, y_mm, phi_deg]``; one sample matrix serves all of them.
     n_samples : int
         Base sample size N, a power of two; the model runs N (d + 2 + G)
-        times per pose (d inputs, G groups).
+        times per pose (d factors: inputs and the backlash_i, thermal effects; G groups).
     rng : None, int or numpy.random.Generator
         Randomness (Scientific Python SPEC 7). The integer seed used (drawn
         from a Generator, fresh for None) seeds SALib's scrambled Sobol'
@@ -254,7 +255,7 @@ def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
         method = "vectorised"
 
     U = saltelli_design(budget, factors, n_samples, seed)
-    F = model.features(budget.ppf(np.clip(U.reshape(-1, len(budget)), _U_EDGE, 1.0 - _U_EDGE)))
+    F = model.features(budget.ppf(np.clip(U.reshape(-1, len(budget.factors)), _U_EDGE, 1.0 - _U_EDGE)))
     del U
     K, O = len(factors.names), len(outputs)
     z = z_value(conf_level)
@@ -287,7 +288,7 @@ def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
         for done in pool.map(work, range(0, n_poses, chunk)):     # chunks of poses, not poses
             bar.update(done)
     constant = tuple(name for name, mask in zip(factors.names, factors.masks)
-                     if all(law.var == 0 for law, inside in zip(budget.inputs.values(), mask) if inside))
+                     if all(law.var == 0 for law, inside in zip(budget.factor_laws.values(), mask) if inside))
     res[..., [factors.names.index(name) for name in constant]] = np.nan  # undefined, not 0
     S1, S1_conf, ST, ST_conf = (a.reshape(shape + (O, K)) for a in res)
     return SobolResult(poses=model.poses, n_samples=n_samples, seed=seed, outputs=outputs,

@@ -1,7 +1,8 @@
 """Exact first-order and total Sobol indices of the linear outputs δx, δy, δφ.
 
 δx, δy and δφ are linear in independent terms: values of the
-inputs, and rho_i cos(zeta_i - omega_i) for a clearance. A term's part of
+inputs and of the effects' random factors (backlash_i, thermal), and
+rho_i cos(zeta_i - omega_i) for a clearance; known shifts add no variance. A term's part of
 Var(E[y | X_s]) for an input set s is its column squared times
 Var(x) (a value term, s holding x), Var(rho) E[c]^2 (s = {rho}),
 E[rho]^2 Var(c) (s = {zeta}) or Var(rho c) (both), with c = cos(zeta - omega)
@@ -20,7 +21,7 @@ import pandas as pd
 from .._result import pose_columns
 from ..kinematics.geometry import Geometry
 from ..units import POSE_OUTPUTS
-from .budget import Budget, parse_input
+from .budget import Budget
 from .laws import angle_moments
 from .model import LinearModel, linear_model
 from .saltelli import Factors, design_factors
@@ -40,26 +41,31 @@ def _analytic_arrays(model: LinearModel, factors: Factors) -> tuple[np.ndarray, 
 
     Each term t contributes V_t(s) = Var(E[term_t | inputs s]) times its
     column squared; S1(g) = sum_t V_t(g & in_t) / V and
-    ST(g) = sum_t [V_t(in_t) - V_t(in_t - g)] / V.
+    ST(g) = sum_t [V_t(in_t) - V_t(in_t - g)] / V. Known shifts (offsets,
+    scales) have no variance and no part.
     """
-    laws = model.budget.inputs
+    laws = model.budget.factor_laws
     d = factors.masks.shape[1]
     inputs = factors.names[:d]
     shape = model.poses.shape[:-1]
     first = np.zeros(shape + (3, len(factors.names)))
     total = np.zeros_like(first)
     V = np.zeros(shape + (3,))
-    for t, term in enumerate(model.terms):
-        family, leg = parse_input(term)
-        col2 = model.columns[..., :, t] ** 2                                # (..., 3)
-        if family == "rho":
-            zeta = f"zeta_{leg + 1}"
+    columns = model.columns
+    for t, (kind, *args) in enumerate(model._plan):
+        if kind == "shift":
+            continue
+        col2 = columns[..., :, t] ** 2                                      # (..., 3)
+        if kind == "clearance":
+            (k, kz), = args
+            term, zeta = inputs[k], inputs[kz]
             rho_law = laws[term]
-            ec, ecc = _cos_moments(laws[zeta], model.omega[..., leg])      # (...)
+            ec, ecc = _cos_moments(laws[zeta], model.omega[..., model.legs[t]])     # (...)
             r1, r2 = rho_law.mean, rho_law.var + rho_law.mean**2
             parts = {frozenset(): 0.0, frozenset([term]): rho_law.var * ec**2,
                      frozenset([zeta]): r1**2 * (ecc - ec**2), frozenset([term, zeta]): r2 * ecc - r1**2 * ec**2}
         else:
+            term = inputs[args[0]]
             parts = {frozenset(): 0.0, frozenset([term]): laws[term].var}
         members = max(parts, key=len)
         full = np.asarray(parts[members])[..., None] * col2

@@ -5,8 +5,9 @@ the linear model ``J_q dq``. For small errors it agrees with the exactly
 perturbed chain (:func:`~prp3mc.kinematics.exact.exact_pose_error`) to second
 order; for a budget large against the links it does not, and every figure
 built on it is off by as much. :func:`linearity_departure` measures that
-departure at a few probe poses with the budget's inputs near the corners of
-their box; :func:`check_linearity` warns when it exceeds about 1 %.
+departure at a few probe poses with the budget's inputs (and its effects'
+factors; its known shifts as they are) near the corners of their box;
+:func:`check_linearity` warns when it exceeds about 1 %.
 """
 
 from __future__ import annotations
@@ -16,10 +17,10 @@ import warnings
 import numpy as np
 
 from ..errors import ConvergenceError, LinearityWarning
-from ..kinematics.chain import as_poses
+from ..kinematics.chain import as_poses, inverse_kinematics
 from ..kinematics.exact import exact_pose_error, linear_pose_error
 from ..kinematics.geometry import Geometry
-from .budget import Budget, parse_input
+from .budget import Budget
 
 __all__ = ["linearity_departure", "check_linearity", "LINEARITY_TOLERANCE"]
 
@@ -30,9 +31,9 @@ _PROBE_SEED = 0       # fixed probes: the check is deterministic, not part of an
 
 
 def _probe_inputs(budget: Budget, n_samples: int) -> np.ndarray:
-    """Inputs near the corners of the budget's box, shape (n_samples, d), mm / deg."""
-    u = np.random.default_rng(_PROBE_SEED).random((n_samples, len(budget)))
-    corner = np.array([parse_input(name)[0] != "zeta" for name in budget.names])
+    """Factors near the corners of the budget's box, shape (n_samples, D), mm / deg (degrees C)."""
+    u = np.random.default_rng(_PROBE_SEED).random((n_samples, len(budget.factors)))
+    corner = np.array([not name.startswith("zeta_") for name in budget.factors])
     u[:, corner] = np.where(u[:, corner] < 0.5, _CORNER, 1.0 - _CORNER)
     return budget.ppf(u)
 
@@ -57,9 +58,11 @@ def linearity_departure(geometry: Geometry, budget: Budget, poses, *, n_poses: i
         the position error (mm) and dphi, the larger of the two; ``inf`` if
         the exact chain cannot be closed at a probe.
     """
+    budget.check_geometry(geometry)
     flat = as_poses(poses).reshape(-1, 3)
     idx = np.unique(np.linspace(0, flat.shape[0] - 1, min(n_poses, flat.shape[0])).round().astype(int))
-    errors = budget.errors(_probe_inputs(budget, n_samples))
+    b, _ = inverse_kinematics(geometry, flat[idx], check=False)
+    errors = budget.errors(_probe_inputs(budget, n_samples), b=b)
     probes = np.broadcast_to(flat[idx, None, :], (len(idx), n_samples, 3))
     linear = linear_pose_error(geometry, probes, errors, check=False)
     try:

@@ -15,6 +15,12 @@ pose, with no search. For a scalar output (dx, dy, dphi) the maximum of
 A clearance only enters the linear model through the component of its
 displacement along E l_i (the component along l_i is taken up by the passive
 joint), which is why it adds a segment, not a disc.
+
+A budget's effects are terms of the same kind: a known shift (offset, lead
+scale) is a term of zero width that moves the centre, a backlash of leg i
+widens u_i's interval by ±h_i/2, and thermal expansion, one temperature for
+all legs, moves u along ``alpha_T (h_b,i b_i)_i``: a fourth generator, so the
+maximum is over the 16 corners (exact all the same).
 """
 
 from __future__ import annotations
@@ -23,7 +29,7 @@ import dataclasses
 import math
 import os
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -32,13 +38,13 @@ from .._result import freeze, pose_columns, short_repr
 from .._version import __version__
 from ..errors import InfeasiblePoseError
 from ..units import OUTPUT_UNITS, RAD2DEG
-from .budget import Budget, parse_input
+from .budget import Budget
 from ..kinematics.geometry import Geometry
 from ..kinematics.chain import DEFAULT_LIMITS, as_poses, refusal
 from .model import LinearModel, linear_model
-from ._envelope import REASONS, envelope_kernel, kernel_tables, leg_signs, zonotope_maxima
+from ._envelope import REASONS, envelope_kernel, generator_signs, kernel_tables, zonotope_maxima, zonotope_scratch
 
-__all__ = ["WorstCase", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "QUANTITIES"]
+__all__ = ["WorstCase", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "term_bounds", "QUANTITIES"]
 
 #: Quantities maximised: the position-error norm, |dphi|, |dx| and |dy|.
 QUANTITIES = ("position", "phi", "x", "y")
@@ -78,10 +84,14 @@ class WorstCase(_Maxima):
     leg_signs : dict of str to ndarray (..., 3)
         For each quantity, the sign of each leg's u_i (-1 lower end, +1
         upper end of its interval) at the maximiser.
-    input_bounds : ndarray (d, 2)
-        The interval of every input used, mm or deg.
+    input_bounds : ndarray (D, 2)
+        The interval of every factor used (:attr:`inputs`), mm or deg
+        (degrees C for thermal).
     k_sigma : float or None
         How unbounded laws were bounded (mean ± k·sd), if any.
+    shared_signs : dict of str to ndarray (..., G)
+        For each quantity, the end (-1, +1) of each term of all legs
+        (thermal) at the maximiser; G = 0 without such a term.
     term_at, inputs_at, contribution : dict of str to ndarray
         Computed on access from :attr:`signs` (see the properties).
     """
@@ -95,6 +105,7 @@ class WorstCase(_Maxima):
     leg_signs: dict
     input_bounds: np.ndarray
     k_sigma: float | None = None
+    shared_signs: dict = field(default_factory=dict)
     version: str = __version__
 
     def __post_init__(self):
@@ -110,19 +121,26 @@ class WorstCase(_Maxima):
 
     @property
     def terms(self) -> tuple:
-        """Model terms (inputs except zeta_i; ``rho_i`` is the clearance term)."""
+        """Model terms (inputs except zeta_i, ``rho_i`` the clearance term; then the budget's effects)."""
         return self.model.terms
 
     @property
     def inputs(self) -> tuple:
-        """Budget input names (for :attr:`inputs_at`)."""
-        return self.model.budget.names
+        """The budget's factors (for :attr:`inputs_at`): its inputs, then backlash_i and thermal effects."""
+        return self.model.budget.factors
 
     @property
     def signs(self) -> dict:
         """For each quantity, which end of every term's interval (-1, +1) realises the maximum."""
+        legs = np.array(self.model.legs, dtype=int)
         term_sign = np.where(self.model.scale >= 0, 1.0, -1.0)
-        return {q: ls[..., list(self.model.legs)] * term_sign for q, ls in self.leg_signs.items()}
+        out = {}
+        for q, ls in self.leg_signs.items():
+            s = ls[..., np.maximum(legs, 0)] * term_sign
+            for g, t in enumerate(self.model.shared):
+                s[..., t] = self.shared_signs[q][..., g]
+            out[q] = s
+        return out
 
     @property
     def term_at(self) -> dict:
@@ -155,7 +173,7 @@ class WorstCase(_Maxima):
 
     @property
     def inputs_at(self) -> dict:
-        """Input values (..., d) at the maximiser of each quantity, mm or deg.
+        """Factor values (..., D) at the maximiser of each quantity, mm or deg (degrees C for thermal).
 
         A clearance's rho_i and contact angle zeta_i are those realising its
         term's chosen end.
@@ -165,26 +183,27 @@ class WorstCase(_Maxima):
         signs = self.signs
         for q, t_val in self.term_at.items():
             x = np.empty(self.poses.shape[:-1] + (len(self.inputs),))
-            for t, term in enumerate(self.terms):
-                k = self.inputs.index(term)
-                family, leg = parse_input(term)
-                if family == "rho":
-                    kz = self.inputs.index(f"zeta_{leg + 1}")
+            for t, (kind, *args) in enumerate(self.model._plan):
+                if kind == "clearance":
+                    (k, kz), = args
+                    leg = self.model.legs[t]
                     _, (rho_lo, z_lo), (rho_hi, z_hi) = _clearance_interval(
                         self.input_bounds[k], self.input_bounds[kz], omega[..., leg])
                     upper = signs[q][..., t] > 0
                     x[..., k] = np.where(upper, rho_hi, rho_lo)
                     x[..., kz] = np.where(upper, z_hi, z_lo)
-                else:
-                    x[..., k] = t_val[..., t]
+                elif kind == "value":
+                    x[..., args[0]] = t_val[..., t] + args[1]
             out[q] = x
         return out
 
     def contributions_frame(self, quantity: str = "position") -> pd.DataFrame:
         """Per pose and term: the maximiser's term value, its contribution and share of the maximum.
 
-        Columns: x_mm, y_mm, phi_deg, output, term, term_value (mm or deg),
-        contribution (the output's unit), share (of the maximum, 0-1).
+        Columns: x_mm, y_mm, phi_deg, output, term, term_value (mm or deg;
+        an effect's own value for a known shift, T - 20 K for thermal),
+        contribution (the output's unit), share (of the maximum, 0-1). A
+        known shift's contribution is systematic: it is there at every sample.
         """
         n, T = int(np.prod(self.poses.shape[:-1], dtype=int)), len(self.terms)
         total = self.value(quantity).reshape(n, 1)
@@ -233,17 +252,19 @@ def _clearance_interval(rho_bounds, zeta_bounds_deg, omega: np.ndarray):
     return ((rho_lo_end * cmin, rho_hi_end * cmax), (rho_lo_end, to_deg(amin)), (rho_hi_end, to_deg(amax)))
 
 
-def _term_bounds(model: LinearModel, bounds: np.ndarray) -> np.ndarray:
-    """Interval of every model term, shape (..., T, 2), mm or deg."""
-    names = model.budget.names
+def term_bounds(model: LinearModel, bounds: np.ndarray) -> np.ndarray:
+    """Interval of every model term, shape (..., T, 2), mm or deg; ``bounds`` (D, 2) of the factors."""
     tb = np.empty(model.poses.shape[:-1] + (len(model.terms), 2))
-    for t, term in enumerate(model.terms):
-        family, leg = parse_input(term)
-        k = names.index(term)
-        if family != "rho":
-            tb[..., t, :] = bounds[k]
+    for t, (kind, *args) in enumerate(model._plan):
+        if kind == "value":
+            tb[..., t, :] = bounds[args[0]] - args[1]
             continue
-        zeta = bounds[names.index(f"zeta_{leg + 1}")]
+        if kind == "shift":
+            tb[..., t, :] = args[0]
+            continue
+        (k, kz), = args
+        leg = model.legs[t]
+        zeta = bounds[kz]
         if zeta[1] - zeta[0] >= 360.0:  # no need for omega itself
             tb[..., t, 0], tb[..., t, 1] = -bounds[k][1], bounds[k][1]
         else:
@@ -253,22 +274,28 @@ def _term_bounds(model: LinearModel, bounds: np.ndarray) -> np.ndarray:
 
 
 def _maxima(model: LinearModel, tb: np.ndarray):
-    """Maxima and the sign (-1, +1) of each leg's u_i realising them, for flat poses (N,).
+    """Maxima and the sign (-1, +1) of each generator realising them, for flat poses (N,).
 
     Returns ``values`` (position mm, |dphi| rad, |dx| mm, |dy| mm), each (N,),
-    and ``leg_signs``, each (N, 3).
+    and ``signs``, each (N, 3 + G): each leg's u_i, then each term of all legs.
     """
     mid = 0.5 * (tb[..., 0] + tb[..., 1])                            # (N, T)
     half = 0.5 * (tb[..., 1] - tb[..., 0])
-    onehot = (np.array(model.legs)[:, None] == np.arange(3)).astype(float)   # (T, 3)
-    u_mid = (model.scale * mid) @ onehot                             # (N, 3)
-    u_half = (np.abs(model.scale) * half) @ onehot
+    onehot = (np.array(model.legs)[:, None] == np.arange(3)).astype(float)   # (T, 3); none for all-leg terms
+    scale = model.scale
+    u_mid = (scale * mid) @ onehot                                   # (N, 3)
+    u_half = (np.abs(scale) * half) @ onehot
+    shared = list(model.shared)
+    ext = np.ascontiguousarray(np.moveaxis(model.weights[..., :, shared] * half[..., None, shared], -1, -2))
+    u_mid += np.einsum("nit,nt->ni", model.weights[..., :, shared], mid[..., shared])
     N = u_mid.shape[0]
-    values, codes = np.empty((4, N)), np.empty((4, N), dtype=np.int8)
+    values, codes = np.empty((4, N)), np.empty((4, N), dtype=np.int16)
     Ai = np.ascontiguousarray(np.moveaxis(model.Ainv, 0, -1))          # (3, 3, N): poses last
-    zonotope_maxima(Ai, np.ascontiguousarray(u_mid.T), np.ascontiguousarray(u_half.T), values, codes, 0, N)
+    zonotope_maxima(Ai, np.ascontiguousarray(u_mid.T), np.ascontiguousarray(u_half.T),
+                    np.ascontiguousarray(np.moveaxis(ext, 0, -1)), values, codes, 0, N,
+                    zonotope_scratch(3 + len(shared), N))
     order = ("position", "phi", "x", "y")
-    return dict(zip(order, values)), dict(zip(order, leg_signs(codes).astype(float)))
+    return dict(zip(order, values)), dict(zip(order, generator_signs(codes, 3 + len(shared)).astype(float)))
 
 
 def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | None = None,
@@ -305,7 +332,7 @@ def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | No
 
     def run(sl: slice):
         model = linear_model(geometry, budget, flat[sl], check=check)
-        tb = _term_bounds(model, bounds)
+        tb = term_bounds(model, bounds)
         values, signs = _maxima(model, tb)
         return model, tb, values, signs
 
@@ -323,15 +350,18 @@ def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | No
         return (arrs[0] if len(arrs) == 1 else np.concatenate(arrs)).reshape(shape + tail)
 
     T = len(parts[0][0].terms)
+    G = len(parts[0][0].shared)
     model = dataclasses.replace(parts[0][0], poses=poses, Ainv=join(lambda p: p[0].Ainv, (3, 3)),
-                                scale=join(lambda p: p[0].scale, (T,)), cos_omega=join(lambda p: p[0].cos_omega, (3,)),
+                                weights=join(lambda p: p[0].weights, (3, T)),
+                                cos_omega=join(lambda p: p[0].cos_omega, (3,)),
                                 sin_omega=join(lambda p: p[0].sin_omega, (3,)))
+    signs = {q: join(lambda p, q=q: p[3][q], (3 + G,)) for q in QUANTITIES}
     return WorstCase(
         model=model, term_bounds=join(lambda p: p[1], (T, 2)),
         position_mm=join(lambda p: p[2]["position"]), phi_deg=join(lambda p: p[2]["phi"]) * RAD2DEG,
         x_mm=join(lambda p: p[2]["x"]), y_mm=join(lambda p: p[2]["y"]),
-        leg_signs={q: join(lambda p, q=q: p[3][q], (3,)) for q in QUANTITIES}, input_bounds=bounds,
-        k_sigma=k_sigma)
+        leg_signs={q: s[..., :3] for q, s in signs.items()}, input_bounds=bounds,
+        k_sigma=k_sigma, shared_signs={q: s[..., 3:] for q, s in signs.items()})
 
 
 @dataclass(frozen=True, slots=True, repr=False)
@@ -346,8 +376,10 @@ class WorstCaseMaxima(_Maxima):
         Largest position-error norm, |dphi|, |dx| and |dy|.
     leg_signs : dict of str to ndarray (..., 3), int8
         As :attr:`WorstCase.leg_signs`.
-    input_bounds : ndarray (d, 2)
+    input_bounds : ndarray (D, 2)
     k_sigma : float or None
+    shared_signs : dict of str to ndarray (..., G), int8
+        As :attr:`WorstCase.shared_signs`.
     """
 
     poses: np.ndarray
@@ -358,6 +390,7 @@ class WorstCaseMaxima(_Maxima):
     leg_signs: dict
     input_bounds: np.ndarray
     k_sigma: float | None = None
+    shared_signs: dict = field(default_factory=dict)
     version: str = __version__
 
     def __post_init__(self):
@@ -399,12 +432,14 @@ def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: flo
     >>> worst_case_maxima(Geometry.from_preset("u-shape"), Budget.from_preset("paper"), grid).position_mm.shape
     (11, 11)
     """
+    budget.check_geometry(geometry)
     bounds, *tables = kernel_tables(geometry, budget, k_sigma)
     poses = as_poses(poses)
     shape = poses.shape[:-1]
     flat = np.ascontiguousarray(poses.reshape(-1, 3))
     n = flat.shape[0]
-    values, codes, bad = np.empty((4, n)), np.empty((4, n), dtype=np.int8), np.empty(n, dtype=np.int16)
+    G = int((tables[2] < 0).sum())
+    values, codes, bad = np.empty((4, n)), np.empty((4, n), dtype=np.int16), np.empty(n, dtype=np.int16)
     envelope_kernel(flat, *tables, _LIMITS, check, values, codes, bad)
     if check and bad.any():
         for r, reason in enumerate(REASONS):
@@ -415,8 +450,10 @@ def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: flo
                 # the flat index, as worst_case reports it
                 raise InfeasiblePoseError(refusal(geometry, flat[p], (p,), reason, leg))
     values[1] *= RAD2DEG
+    sg = generator_signs(codes, 3 + G)                                   # (4, n, 3 + G)
     return WorstCaseMaxima(
         poses=poses, position_mm=values[0].reshape(shape), phi_deg=values[1].reshape(shape),
         x_mm=values[2].reshape(shape), y_mm=values[3].reshape(shape),
-        leg_signs=dict(zip(QUANTITIES, leg_signs(codes).reshape((4,) + shape + (3,)))),
-        input_bounds=bounds.copy(), k_sigma=k_sigma)
+        leg_signs={q: sg[j, :, :3].reshape(shape + (3,)) for j, q in enumerate(QUANTITIES)},
+        input_bounds=bounds.copy(), k_sigma=k_sigma,
+        shared_signs={q: sg[j, :, 3:].reshape(shape + (G,)) for j, q in enumerate(QUANTITIES)})
