@@ -117,8 +117,20 @@ def term_table(budget: Budget, bounds: np.ndarray):
 @njit(cache=True)
 def zonotope_scratch(n_gen, size):
     """Scratch arrays of :func:`zonotope_maxima` for ``n_gen`` generators and ``size`` poses."""
-    return (np.empty(size), np.empty(size), np.empty(size), np.empty(size), np.empty(size),
-            np.empty(size, np.int64), np.empty((n_gen, size)), np.empty((n_gen, size)))
+    return (np.empty(size), np.empty(size), np.empty(size), np.empty(size, np.int64), np.empty((n_gen - 3, size)),
+            np.empty((n_gen - 3, size)))
+
+
+@njit(inline="always")
+def _leg_corner(cx, cy, gens, k):
+    """Corner k (bits 2, 1, 0: legs 1, 2, 3 at +1) about the point (cx, cy), the legs' generators added in order."""
+    vx = cx + gens[0] if k & 4 else cx - gens[0]
+    vy = cy + gens[1] if k & 4 else cy - gens[1]
+    vx = vx + gens[2] if k & 2 else vx - gens[2]
+    vy = vy + gens[3] if k & 2 else vy - gens[3]
+    vx = vx + gens[4] if k & 1 else vx - gens[4]
+    vy = vy + gens[5] if k & 1 else vy - gens[5]
+    return vx, vy
 
 
 @njit(cache=True, error_model="numpy")
@@ -130,59 +142,63 @@ def zonotope_maxima(Ai, um, uh, ext, values, codes, first, m, scratch):
     (terms of all legs). values : (4, N) position mm, |dphi| rad, |dx| mm, |dy| mm.
     codes : (4, N) int16, the end of each generator at the maximum as bits: with the
     3 + G generators in the order legs 1-3, then ``ext``, bit 2 + G - k is set when
-    generator k is at +1 (:func:`generator_signs` unpacks them). The 2^(3 + G) corners
-    are visited in the order of their codes, the first of equal maxima kept; a corner's
-    sum adds the generators in order. Every step is a loop over the poses (they
-    vectorise). ``scratch`` : :func:`zonotope_scratch` for 3 + G generators.
+    generator k is at +1 (:func:`generator_signs` unpacks them). A corner is the centre
+    moved by the further generators, then by the legs'; of equal maxima the smallest
+    code is kept. Every step is a loop over the poses (they vectorise). ``scratch`` :
+    :func:`zonotope_scratch` for 3 + G generators.
     """
-    c0, c1, tx, ty, best, arg, gx, gy = scratch
+    sx, sy, best, arg, ex, ey = scratch
     G = ext.shape[0]
     n_gen = 3 + G
-    for j in range(m):
-        c0[j] = Ai[0, 0, j] * um[0, j] + Ai[0, 1, j] * um[1, j] + Ai[0, 2, j] * um[2, j]
-        c1[j] = Ai[1, 0, j] * um[0, j] + Ai[1, 1, j] * um[1, j] + Ai[1, 2, j] * um[2, j]
-        best[j], arg[j] = -1.0, 0
-    for i in range(3):
-        for j in range(m):
-            gx[i, j], gy[i, j] = Ai[0, i, j] * uh[i, j], Ai[1, i, j] * uh[i, j]
     for g in range(G):
         for j in range(m):
-            gx[3 + g, j] = Ai[0, 0, j] * ext[g, 0, j] + Ai[0, 1, j] * ext[g, 1, j] + Ai[0, 2, j] * ext[g, 2, j]
-            gy[3 + g, j] = Ai[1, 0, j] * ext[g, 0, j] + Ai[1, 1, j] * ext[g, 1, j] + Ai[1, 2, j] * ext[g, 2, j]
-    for k in range(1 << n_gen):
+            ex[g, j] = Ai[0, 0, j] * ext[g, 0, j] + Ai[0, 1, j] * ext[g, 1, j] + Ai[0, 2, j] * ext[g, 2, j]
+            ey[g, j] = Ai[1, 0, j] * ext[g, 0, j] + Ai[1, 1, j] * ext[g, 1, j] + Ai[1, 2, j] * ext[g, 2, j]
+    for j in range(m):
+        best[j], arg[j] = -1.0, 0
+    for e in range(1 << G):  # the further generators' ends: the centre they move the leg corners about
         for j in range(m):
-            tx[j], ty[j] = c0[j], c1[j]
-        for i in range(n_gen):
-            gxi, gyi = gx[i], gy[i]
-            if (k >> (n_gen - 1 - i)) & 1:
+            sx[j] = Ai[0, 0, j] * um[0, j] + Ai[0, 1, j] * um[1, j] + Ai[0, 2, j] * um[2, j]
+            sy[j] = Ai[1, 0, j] * um[0, j] + Ai[1, 1, j] * um[1, j] + Ai[1, 2, j] * um[2, j]
+        for g in range(G):
+            exg, eyg = ex[g], ey[g]
+            if (e >> (G - 1 - g)) & 1:
                 for j in range(m):
-                    tx[j], ty[j] = tx[j] + gxi[j], ty[j] + gyi[j]
+                    sx[j], sy[j] = sx[j] + exg[j], sy[j] + eyg[j]
             else:
                 for j in range(m):
-                    tx[j], ty[j] = tx[j] - gxi[j], ty[j] - gyi[j]
+                    sx[j], sy[j] = sx[j] - exg[j], sy[j] - eyg[j]
         for j in range(m):
-            q = tx[j] * tx[j] + ty[j] * ty[j]
-            arg[j] = k if q > best[j] else arg[j]
-            best[j] = q if q > best[j] else best[j]
+            gens = (Ai[0, 0, j] * uh[0, j], Ai[1, 0, j] * uh[0, j], Ai[0, 1, j] * uh[1, j], Ai[1, 1, j] * uh[1, j],
+                    Ai[0, 2, j] * uh[2, j], Ai[1, 2, j] * uh[2, j])
+            top, at = best[j], arg[j]
+            for k in range(8):
+                vx, vy = _leg_corner(sx[j], sy[j], gens, k)
+                q = vx * vx + vy * vy
+                code = (k << G) | e
+                better = (q > top) | ((q == top) & (code < at))
+                at = code if better else at
+                top = q if better else top
+            best[j], arg[j] = top, at
     for j in range(m):
         values[0, first + j] = np.sqrt(best[j])
         codes[0, first + j] = arg[j]
     for o, r in ((1, 2), (2, 0), (3, 1)):  # |dphi|, |dx|, |dy|: every generator at its sign
         for j in range(m):
-            c0[j] = Ai[r, 0, j] * um[0, j] + Ai[r, 1, j] * um[1, j] + Ai[r, 2, j] * um[2, j]
-            tx[j], arg[j] = abs(c0[j]), 0
-        for i in range(3):
-            for j in range(m):
-                g = Ai[r, i, j] * uh[i, j]
-                tx[j] += abs(g)
-                arg[j] |= np.int64((c0[j] >= 0) == (g >= 0)) << (n_gen - 1 - i)
+            c = Ai[r, 0, j] * um[0, j] + Ai[r, 1, j] * um[1, j] + Ai[r, 2, j] * um[2, j]
+            g0, g1, g2 = Ai[r, 0, j] * uh[0, j], Ai[r, 1, j] * uh[1, j], Ai[r, 2, j] * uh[2, j]
+            up = c >= 0
+            best[j] = c
+            sx[j] = ((abs(c) + abs(g0)) + abs(g1)) + abs(g2)
+            arg[j] = ((np.int64(up == (g0 >= 0)) << (n_gen - 1)) | (np.int64(up == (g1 >= 0)) << (n_gen - 2))
+                      | (np.int64(up == (g2 >= 0)) << (n_gen - 3)))
         for e in range(G):
             for j in range(m):
                 g = Ai[r, 0, j] * ext[e, 0, j] + Ai[r, 1, j] * ext[e, 1, j] + Ai[r, 2, j] * ext[e, 2, j]
-                tx[j] += abs(g)
-                arg[j] |= np.int64((c0[j] >= 0) == (g >= 0)) << (G - 1 - e)
+                sx[j] += abs(g)
+                arg[j] |= np.int64((best[j] >= 0) == (g >= 0)) << (G - 1 - e)
         for j in range(m):
-            values[o, first + j] = tx[j]
+            values[o, first + j] = sx[j]
             codes[o, first + j] = arg[j]
 
 
