@@ -1,15 +1,17 @@
 """Compiled sampling of a budget's features, tile by tile, with the uniforms numpy would draw.
 
 :meth:`Budget.sample(n, seed) <prp3mc.uncertainty.budget.Budget.sample>` maps the
-uniforms ``Generator(PCG64(seed)).random((n, d))`` through every law's inverse
-CDF. This module draws the same uniforms in compiled code: a 128-bit PCG64
-(XSL-RR output, numpy's ``random`` = top 53 bits) in :data:`LANES`
-interleaved streams. Lane l draws the d inputs of samples l, l + L, l + 2L...
-of a tile, jumping the other lanes' draws in one affine step, so the lanes
-run side by side in vector registers and a tile's samples come out in their
-natural order. The laws' inverse CDFs and the features (input values, or
-rho cos zeta and rho sin zeta of a clearance) follow in the same tile, so no
-block of samples is ever held in memory.
+uniforms ``Generator(PCG64(seed)).random((n, D))`` through the inverse CDF of
+each of the D factors (the inputs, then the effects' backlash and thermal).
+This module draws the same uniforms in compiled code: a 128-bit PCG64 (XSL-RR
+output, numpy's ``random`` = top 53 bits) in :data:`LANES` interleaved
+streams. Lane l draws the D uniforms of samples l, l + L, l + 2L... of a tile
+and then jumps the other lanes' draws in one affine step, so the lanes' steps
+are independent (they overlap in the processor) and a tile's samples come out
+in their natural order. The laws' inverse CDFs and the model's features
+(values less their reference, rho cos zeta and rho sin zeta of a clearance,
+the constant 1 of the known shifts) follow in the same tile, so no block of
+samples is ever held in memory.
 
 The uniforms are bit for bit numpy's; the values equal
 :meth:`Law.ppf <prp3mc.uncertainty.laws.Law.ppf>`'s to round-off (exactly for
@@ -17,8 +19,8 @@ the uniform, triangular, disc and discrete laws; the normal quantile is
 Wichura's AS 241, within about 1e-15 relative of scipy's ``ndtri``) and the
 cosines and sines of zeta (degrees) come from a polynomial after an exact
 reduction to [-45, 45] degrees, within one unit in the last place of numpy's.
-A law or a feature this module does not know returns ``None`` from
-:func:`sampler_tables`; the caller then samples through numpy.
+A law without a compiled inverse CDF makes :func:`sampler_tables` return
+``None``; the caller then samples through numpy.
 """
 
 from __future__ import annotations
@@ -102,7 +104,8 @@ def pcg_lanes(seed: int, first_sample: int, d: int) -> tuple[np.ndarray, np.ndar
     lanes : (2, LANES) uint64
         High and low halves of lane l's state: before the draws of sample ``first_sample + l``.
     consts : (6,) uint64
-        PCG64's increment and the affine jump over the other lanes' (LANES - 1) * d draws.
+        PCG64's increment and the affine jump over the other lanes' (LANES - 1) * d draws
+        (d uniforms a sample).
     """
     st = np.random.PCG64(seed).state["state"]
     state, inc = st["state"], st["inc"]

@@ -27,7 +27,6 @@ worst, so the selection always ends with the exact order statistic.
 
 from __future__ import annotations
 
-import math
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
