@@ -24,6 +24,13 @@ noise 2 µm / 0.0005 deg), it measures
 
 Usage: ``python benchmarks/bench_discrepancy.py [--seeds N] [--quick] [--json]
 [--cases NAME ...] [--geometries u-shape delta-shape]``.
+
+``--speed`` measures instead what one analysis costs a user
+(:func:`bench_discrepancy_cli`): ``prp3mc discrepancy`` on a campaign of 392
+rows (49 poses x 8 visits, registration error, U-shape), report included,
+as wall time of the whole command in a fresh process, and split into import,
+analysis and report in another fresh process; the target is 5 s on the
+2-core machine. ``benchmarks/run.py`` reports it too.
 """
 
 from __future__ import annotations
@@ -31,8 +38,14 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
+import resource
+import statistics
+import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -158,6 +171,87 @@ def table(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
+#: What ``prp3mc discrepancy`` may take on a 400-row campaign, report included (issue 10), s.
+SPEED_TARGET_S = 5.0
+
+#: The command's work in one fresh process, timed part by part (argv: data, out).
+_SPLIT = """
+import sys, time, json
+t0 = time.perf_counter()
+from prp3mc.cli import build_parser
+build_parser("discrepancy")                       # what the command line imports
+from prp3mc import Budget, Geometry
+from prp3mc.measurement.workflow import discrepancy
+from prp3mc.reports.discrepancy_report import write_report
+t1 = time.perf_counter()
+r = discrepancy(Geometry.load("u-shape"), Budget.load("paper"), sys.argv[1], instrument_sigma_mm=0.002,
+                instrument_sigma_deg=0.0005, rng=1)
+t2 = time.perf_counter()
+import matplotlib.figure, matplotlib.backends.backend_agg
+t3 = time.perf_counter()
+write_report(r, sys.argv[2])
+t4 = time.perf_counter()
+print(json.dumps({"import": t1 - t0, "analysis": t2 - t1, "report": t4 - t2, "report_matplotlib_import": t3 - t2}))
+"""
+
+
+def _children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def bench_discrepancy_cli(quick: bool = False, repeat: int = 5) -> dict:
+    """``prp3mc discrepancy`` on 392 rows, report included: wall and CPU time, and where it goes.
+
+    Each run is a fresh process (imports cold, as a user's); the best and the
+    median of ``repeat`` runs (2 with ``quick``) are reported with the
+    1-minute load average before and after, since the machine is shared.
+    """
+    repeat = 2 if quick else repeat
+    g, b = Geometry.from_preset("u-shape"), Budget.from_preset("paper")
+    campaign = simulate_campaign(g, b, campaign_poses("u-shape"), 8, rng=1, registration=REGISTRATION, **SIGMA)
+    out = {"discrepancy_cli_rows": campaign.n_measurements, "discrepancy_cli_target_s": SPEED_TARGET_S,
+           "discrepancy_cli_load_before": os.getloadavg()[0]}
+    with tempfile.TemporaryDirectory() as tmp:
+        data = Path(tmp) / "campaign.csv"
+        campaign.to_csv(data)
+        argv = [sys.executable, "-m", "prp3mc", "discrepancy", "--geometry", "u-shape", "--budget", "paper",
+                "--data", str(data), "--instrument-sigma-mm", "0.002", "--instrument-sigma-deg", "0.0005",
+                "--seed", "1", "--no-progress", "--out"]
+        walls, cpus = [], []
+        for k in range(repeat):
+            c0, t0 = _children_cpu(), time.perf_counter()
+            subprocess.run(argv + [str(Path(tmp) / f"cli{k}")], check=True, capture_output=True)
+            walls.append(time.perf_counter() - t0)
+            cpus.append(_children_cpu() - c0)
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-c", "pass"], check=True)
+        startup = time.perf_counter() - t0
+        splits = [json.loads(subprocess.run([sys.executable, "-c", _SPLIT, str(data), str(Path(tmp) / f"s{k}")],
+                                            check=True, capture_output=True, text=True).stdout)
+                  for k in range(repeat)]
+    out.update({"discrepancy_cli_wall_s_best": min(walls), "discrepancy_cli_wall_s_median": statistics.median(walls),
+                "discrepancy_cli_cpu_s_median": statistics.median(cpus), "python_startup_s": startup,
+                "discrepancy_cli_load_after": os.getloadavg()[0]})
+    for part in splits[0]:
+        out[f"discrepancy_{part}_s_median"] = statistics.median(s[part] for s in splits)
+    return out
+
+
+def speed_table(r: dict) -> str:
+    """The speed figures as a few readable lines."""
+    return "\n".join([
+        f"prp3mc discrepancy, {r['discrepancy_cli_rows']} rows, report included: "
+        f"{r['discrepancy_cli_wall_s_best']:.2f} s best, {r['discrepancy_cli_wall_s_median']:.2f} s median wall "
+        f"({r['discrepancy_cli_cpu_s_median']:.2f} s CPU; target <= {r['discrepancy_cli_target_s']:g} s)",
+        f"  split (median, fresh process): import {r['discrepancy_import_s_median']:.2f} s, analysis "
+        f"{r['discrepancy_analysis_s_median']:.2f} s, report {r['discrepancy_report_s_median']:.2f} s (of which "
+        f"importing matplotlib {r['discrepancy_report_matplotlib_import_s_median']:.2f} s); python start "
+        f"{r['python_startup_s']:.2f} s",
+        f"  1-minute load average {r['discrepancy_cli_load_before']:.1f} before, "
+        f"{r['discrepancy_cli_load_after']:.1f} after (2 cores)"])
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--seeds", type=int, default=40, help="campaigns per case and geometry (default 40)")
@@ -166,7 +260,12 @@ def main(argv=None) -> int:
     p.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES), metavar="CASE")
     p.add_argument("--geometries", nargs="+", default=["u-shape", "delta-shape"])
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    p.add_argument("--speed", action="store_true", help="time prp3mc discrepancy on 392 rows instead of the rates")
     args = p.parse_args(argv)
+    if args.speed:
+        doc = bench_discrepancy_cli(args.quick)
+        print(json.dumps(doc, indent=2) if args.json else speed_table(doc))
+        return 0
     n = 8 if args.quick else args.seeds
     seeds = range(args.first_seed, args.first_seed + n)
     t0 = time.perf_counter()

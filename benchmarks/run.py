@@ -13,8 +13,10 @@ import sys
 import time
 
 import numpy as np
+from bench_discrepancy import bench_discrepancy_cli, speed_table
 from bench_montecarlo import bench_montecarlo, peak_flops, timed
 from bench_sobol import bench_sobol, bench_sobol_pose
+from bench_study import bench_study
 
 import prp3mc
 from prp3mc import Budget, Geometry, Region, sensitivity, worst_case, worst_case_maxima
@@ -126,7 +128,8 @@ def _thread_time(fn) -> float:
     return time.thread_time() - t0
 
 
-BENCHES = [bench_sensitivity, bench_worstcase, bench_envelope, bench_montecarlo, bench_sobol, bench_sobol_pose]
+BENCHES = [bench_sensitivity, bench_worstcase, bench_envelope, bench_montecarlo, bench_sobol, bench_sobol_pose,
+           bench_study, bench_discrepancy_cli]
 
 
 def main(argv=None) -> int:
@@ -188,6 +191,16 @@ def table(r: dict) -> str:
             f"{g(r['ot_sobol_pose_seconds'])}; {g(r['ot_sobol_pose_cpu_seconds'])}",
             f"{g(r['sobol_pose_ratio_to_ot_wall'])} (wall), {g(r['sobol_pose_ratio_to_ot_cpu'])} (CPU)",
             "target: ratio <= 1.5")] if "ot_sobol_pose_seconds" in r else []),
+        ("prp3mc study paper_reproduction%s, end to end (s; CPU s)" % (" --quick" if r["study_quick"] else ""),
+         f"{g(r['study_cli_seconds'])}; {g(r['study_cli_cpu_seconds'])}",
+         "-", "-", "-", "10 s on 2 idle cores"),
+        ("the study in process: analyses + report (s; CPU s)",
+         f"{g(r['study_analyses_seconds'])} + {g(r['study_report_seconds'])}; "
+         f"{g(r['study_analyses_cpu_seconds'])} + {g(r['study_report_cpu_seconds'])}",
+         "BLAS threads free inside the analyses, figures drawn one after the other (the rest of this change kept)",
+         f"{g(r['study_analyses_blas_free_seconds'])} + {g(r['study_report_serial_seconds'])}; "
+         f"{g(r['study_analyses_blas_free_cpu_seconds'])} + {g(r['study_report_serial_cpu_seconds'])}",
+         g(r["study_speedup_vs_before"]), "-"),
         ("J_q, 201x201 (poses/s)", g(r["sensitivity_poses_per_s"]), "per-pose loop",
          g(r["sensitivity_poses_per_s"] / r["sensitivity_speedup_vs_loop"]), g(r["sensitivity_speedup_vs_loop"]), "-"),
     ]
@@ -195,6 +208,8 @@ def table(r: dict) -> str:
     lines += ["| " + " | ".join(row) + " |" for row in rows]
     lines.append(f"\n1-minute load average at the end of the Monte Carlo part: {r['load_average_1min']:.1f} (2 cores); "
                  f"a whole call of the envelope on 11x11 poses: {r['envelope_call_us']:.0f} us")
+    if "discrepancy_cli_wall_s_best" in r:
+        lines.append("\n" + speed_table(r))
     extra = {k: v for k, v in r.items() if k.startswith(("sobol", "salib")) and not k.startswith("sobol_pose")}
     lines += [f"{k:45s} {v:.4g}" if isinstance(v, float) else f"{k:45s} {v}" for k, v in extra.items()]
     return "\n".join(lines)

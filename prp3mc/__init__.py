@@ -16,28 +16,37 @@ wings, by concept: :mod:`prp3mc.kinematics`, :mod:`prp3mc.uncertainty`,
 and :mod:`prp3mc.testing` (helpers for users' CI).
 """
 
+from __future__ import annotations
+
+import importlib
+
 from ._version import __version__
 from .errors import Prp3mcError
-from .kinematics.chain import feasible, forward_kinematics, inverse_kinematics
-from .kinematics.exact import exact_pose_error
-from .kinematics.geometry import Geometry, Region
-from .kinematics.sensitivity import Sensitivity, sensitivity
-from .uncertainty.budget import Budget, Catalogue
-from .uncertainty.laws import Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
-from .uncertainty.model import LinearModel, linear_model
-from .uncertainty.montecarlo import MonteCarloResult, monte_carlo
-from .uncertainty.worstcase import WorstCase, WorstCaseMaxima, worst_case, worst_case_maxima
-from .uncertainty.allocation import AllocationResult, allocate
-from .uncertainty.sobol import SobolResult, sobol_indices
-from .uncertainty.ranking import ranking as sobol_ranking
-from .study.reader import Study
-from .study.results import StudyResult
-from .study.runner import run_study
-from .study.summary import build_summary
-from .measurement.campaign import Campaign, read_campaign
-from .measurement.results import DiscrepancyResult
-from .measurement.simulate import simulate_campaign
-from .measurement.workflow import detectable_effect, discrepancy
+
+#: Where each name of the everyday API lives: ``name -> "module"`` or ``name -> "module:attribute"``.
+#: The modules are imported on first use (PEP 562), so ``prp3mc discrepancy`` never
+#: pays for numba or SALib, and ``import prp3mc`` costs what the names used cost.
+_API = {
+    "feasible": "kinematics.chain", "forward_kinematics": "kinematics.chain",
+    "inverse_kinematics": "kinematics.chain", "exact_pose_error": "kinematics.exact",
+    "Geometry": "kinematics.geometry", "Region": "kinematics.geometry",
+    "Sensitivity": "kinematics.sensitivity", "sensitivity": "kinematics.sensitivity",
+    "Budget": "uncertainty.budget", "Catalogue": "uncertainty.catalogue",
+    **dict.fromkeys(("Disc", "Discrete", "Normal", "Triangular", "TruncNormal", "Uniform"), "uncertainty.laws"),
+    "LinearModel": "uncertainty.model", "linear_model": "uncertainty.model",
+    "MonteCarloResult": "uncertainty.montecarlo", "monte_carlo": "uncertainty.montecarlo",
+    **dict.fromkeys(("WorstCase", "WorstCaseMaxima", "worst_case", "worst_case_maxima"), "uncertainty.worstcase"),
+    "AllocationResult": "uncertainty.allocation", "allocate": "uncertainty.allocation",
+    "SobolResult": "uncertainty.sobol", "sobol_indices": "uncertainty.sobol",
+    "sobol_ranking": "uncertainty.ranking:ranking",
+    "Study": "study.reader", "StudyResult": "study.results", "run_study": "study.runner",
+    "build_summary": "study.summary",
+    "Campaign": "measurement.campaign", "read_campaign": "measurement.campaign",
+    "DiscrepancyResult": "measurement.results", "simulate_campaign": "measurement.simulate",
+    "detectable_effect": "measurement.workflow", "discrepancy": "measurement.workflow",
+}
+#: The wings, importable as attributes too (``prp3mc.measurement`` after ``import prp3mc``).
+_WINGS = ("kinematics", "uncertainty", "measurement", "study", "reports", "cli", "errors", "testing")
 
 __all__ = [
     "__version__", "Prp3mcError",
@@ -54,3 +63,20 @@ __all__ = [
     # measurements
     "Campaign", "read_campaign", "simulate_campaign", "discrepancy", "DiscrepancyResult", "detectable_effect",
 ]
+
+
+def __getattr__(name: str):
+    """Import the module behind an API name or a wing on first use, and keep it (PEP 562)."""
+    if name in _API:
+        module, _, attribute = _API[name].partition(":")
+        value = getattr(importlib.import_module(f"{__name__}.{module}"), attribute or name)
+    elif name in _WINGS:
+        value = importlib.import_module(f"{__name__}.{name}")
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__) | set(_WINGS))

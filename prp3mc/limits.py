@@ -22,7 +22,7 @@ from pathlib import Path
 from .errors import ResourceError
 
 __all__ = ["Estimate", "available_memory", "check", "montecarlo_estimate", "sobol_estimate",
-           "worstcase_estimate", "allocate_estimate", "study_estimate", "format_bytes", "format_seconds", "MAX_HOURS", "MEMORY_MARGIN"]
+           "worstcase_estimate", "allocate_estimate", "study_estimate", "discrepancy_estimate", "format_bytes", "format_seconds", "MAX_HOURS", "MEMORY_MARGIN"]
 
 #: Default time limit of one request, hours.
 MAX_HOURS = 24.0
@@ -51,6 +51,18 @@ _WC_BYTES_PER_POSE = 200
 _WC_SECONDS_PER_POSE = 3e-6
 # Tolerance allocation: the worst case of every candidate choice over the grid (measured: 301^2 poses, 56 s).
 _ALLOCATE_SECONDS_PER_POSE = 6e-4
+# Discrepancy workflow (measured on 392-12544 rows, 49-900 poses): the parametric bootstrap of the tests
+# holds every replicate's samples, features and whitened errors of every row (8 (2d + 8) bytes per
+# replicate, row); the spatial test a few dense (3P)^2 matrices and their product; ISO 9283's predicted
+# figures n_mc simulated campaigns of the most visited pose; a report reads the rows and draws them.
+_DISC_BYTES_PER_REPLICATE_ROW = lambda d: 8 * (2 * d + 8)  # noqa: E731
+_DISC_BYTES_SPATIAL = 6 * 8                 # per (3P)^2
+_DISC_BYTES_ISO_VISIT = 100                 # per simulated campaign and visit of the most visited pose
+_DISC_BYTES_FIXED = 64 << 20
+_DISC_SECONDS_PER_REPLICATE_ROW = 3e-6      # bootstrap and fits (measured: 3136 rows, 4 s; 12544, 27 s)
+_DISC_SECONDS_SPATIAL = 2e-10               # per (3P)^3 (measured: 900 poses, +4 s)
+_DISC_SECONDS_ISO_VISIT = 1.5e-7            # per simulated campaign and row
+_DISC_SECONDS_FIXED = 2.0                   # the report and the fixed costs
 
 
 @dataclass(frozen=True, slots=True)
@@ -60,10 +72,13 @@ class Estimate:
     what: str
     bytes: float
     seconds: float
+    #: How to make the request smaller, for the refusal.
+    hint: str = "use fewer samples or poses"
 
     def then(self, other: "Estimate") -> "Estimate":
         """This request followed by ``other``: the larger memory, the summed time."""
-        return Estimate(f"{self.what}, {other.what}", max(self.bytes, other.bytes), self.seconds + other.seconds)
+        return Estimate(f"{self.what}, {other.what}", max(self.bytes, other.bytes), self.seconds + other.seconds,
+                        self.hint)
 
 
 def format_bytes(n: float) -> str:
@@ -137,10 +152,10 @@ def check(estimate: Estimate, *, max_hours: float | None = None, memory: int | N
     if not estimate.bytes <= MEMORY_MARGIN * memory:
         raise ResourceError(f"{estimate.what} needs ~{format_bytes(estimate.bytes)} of memory, this machine has "
                             f"{format_bytes(memory)} available (limit {format_bytes(MEMORY_MARGIN * memory)}): "
-                            "use fewer samples or poses")
+                            f"{estimate.hint}")
     if not estimate.seconds <= 3600 * max_hours:
         raise ResourceError(f"{estimate.what} would take ~{format_seconds(estimate.seconds)}, more than the "
-                            f"limit of {format_seconds(3600 * max_hours)}: use fewer samples or poses, or "
+                            f"limit of {format_seconds(3600 * max_hours)}: {estimate.hint}, or "
                             "raise the limit with prp3mc --max-hours H")
     return estimate
 
@@ -200,3 +215,30 @@ def study_estimate(study) -> Estimate:
                             len(study.sobol_outputs), 100, salib=n_poses == 1)
         total = total.then(Estimate(so.what, so.bytes, n_conf * so.seconds))
     return Estimate(f"study {study.name!r} ({total.what})", total.bytes, total.seconds)
+
+
+def discrepancy_estimate(n_measurements: int, n_poses: int | None = None, max_visits: int | None = None,
+                         n_inputs: int = 12, n_bootstrap: int = 400, n_mc: int = 4000) -> Estimate:
+    """Memory and time of :func:`prp3mc.measurement.workflow.discrepancy` and its report.
+
+    Parameters
+    ----------
+    n_measurements : int
+        Rows of the campaign.
+    n_poses, max_visits : int, optional
+        Distinct poses, and rows of the most visited one. Unknown (None)
+        before the file is read: the estimate from the row count alone is
+        then a lower bound.
+    n_inputs : int
+        Inputs of the budget.
+    n_bootstrap, n_mc : int
+        Bootstrap replicates of the tests, simulated campaigns of ISO 9283's predicted figures.
+    """
+    m, p, visits = float(n_measurements), float(n_poses or 0), float(max_visits or 1)
+    poses = f" of {n_poses} poses" if n_poses else ""
+    return Estimate(f"discrepancy analysis of {n_measurements} measurements{poses}",
+                    n_bootstrap * m * _DISC_BYTES_PER_REPLICATE_ROW(n_inputs) + _DISC_BYTES_SPATIAL * (3 * p) ** 2
+                    + _DISC_BYTES_ISO_VISIT * n_mc * visits + _DISC_BYTES_FIXED,
+                    n_bootstrap * m * _DISC_SECONDS_PER_REPLICATE_ROW + _DISC_SECONDS_SPATIAL * (3 * p) ** 3
+                    + _DISC_SECONDS_ISO_VISIT * n_mc * m + _DISC_SECONDS_FIXED,
+                    "split the campaign into smaller ones (fewer rows or poses)")

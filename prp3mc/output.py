@@ -277,10 +277,13 @@ def save_figure(fig, folder: str | os.PathLike, name: str, formats=("png",), dpi
 
     Each format is rendered once, without a tight bounding box (the figures
     use a constrained layout); the PNG is rendered even if not written, so a
-    report embeds the very same bytes (:func:`png_data_uri`).
+    report embeds the very same bytes (:func:`png_data_uri`). The layout of
+    the PNG's drawing is kept for the other formats (the figure's layout
+    engine is switched off after it): they skip the layout, with the same result.
     """
     png = io.BytesIO()
     fig.savefig(png, format="png", dpi=dpi)
+    fig.set_layout_engine("none")      # laid out: the other formats draw it where the PNG did
     for fmt in formats:
         path = Path(folder) / f"{name}.{fmt}"
         if fmt == "png":

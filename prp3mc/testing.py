@@ -42,7 +42,7 @@ def _number(x: Any) -> bool:
 
 def assert_summary_close(actual: "dict | str | os.PathLike", golden: "dict | str | os.PathLike", *,
                          n_se: float = 5.0, rtol_exact: float = 1e-9, atol_exact: float = 1e-12,
-                         ignore: tuple = ("metadata", "inputs", "versions")) -> None:
+                         ignore: tuple = ("metadata", "inputs", "versions", "warnings")) -> None:
     """Assert that two study summaries agree within their statistical uncertainty.
 
     Walks both nested dicts (``summary.json`` layout, see
@@ -62,7 +62,8 @@ def assert_summary_close(actual: "dict | str | os.PathLike", golden: "dict | str
         Tolerance of exact quantities.
     ignore : tuple of str
         Top-level keys not compared, present or not on either side (what a
-        run was made from and how: files, seeds, versions, times).
+        run was made from and how: files, seeds, versions, times, and the
+        warnings it gave).
 
     Raises
     ------

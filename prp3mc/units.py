@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from scipy import stats
+from scipy.special import ndtri
 
 __all__ = ["RAD2DEG", "DEG2RAD", "MM2UM", "DEG2ARCSEC", "POSE_OUTPUTS", "OUTPUTS", "OUTPUT_UNITS",
            "DISPLAY", "z_value", "Z95"]
@@ -32,7 +32,7 @@ def z_value(level: float = 0.95) -> float:
     """Two-sided standard-normal quantile for a confidence ``level`` in (0, 1)."""
     if not 0.0 < level < 1.0:
         raise ValueError(f"confidence level must lie in (0, 1), got {level}")
-    return float(stats.norm.ppf(0.5 + level / 2))
+    return float(ndtri(0.5 + level / 2))  # scipy.stats.norm.ppf's own kernel, without importing scipy.stats
 
 
 #: The 95 % two-sided normal quantile, 1.959964...

@@ -69,7 +69,7 @@ def brute_force(geometry, menu, poses):
     for start in range(0, len(choices), 128):
         sl = slice(start, start + 128)
         corners = mid[sl, None, :] + signs[None] * half[sl, None, :]                   # (c, 2^T, T)
-        err = np.einsum("not,cst->cnso", cols, corners)                                 # (c, N, 2^T, 3)
+        err = np.einsum("not,cst->cnso", cols, corners, optimize=True)                  # (c, N, 2^T, 3)
         pos.append(np.hypot(err[..., 0], err[..., 1]).max(axis=(1, 2)))
         phi.append(np.degrees(np.abs(err[..., 2]).max(axis=(1, 2))))
     return choices, costs, 1e3 * np.concatenate(pos), 3600 * np.concatenate(phi)

@@ -79,6 +79,7 @@ FILES = {
     "budget_law_string": _budget(*_legs('theta_{i} = {{ law = "uniform", lo = "a", hi = 1 }}')),
     "budget_inf": _budget(*_legs('theta_{i} = {{ law = "uniform", lo = -inf, hi = inf }}')),
     "budget_unknown_law": _budget(*_legs('theta_{i} = {{ law = "gamma", k = 1 }}')),
+    "budget_zero": _budget(*_legs('theta_{i} = {{ law = "uniform", lo = 0, hi = 0 }}')),
     "study_bad_toml": "name = \n",
     "study_huge_samples": _study(samples=10**12),
     "study_huge_grid": _study(grid=100_000),
@@ -98,6 +99,8 @@ FILES = {
     "csv_one_row": _HEADER + "1,0,100,0,0.001,100,0\n",
     "csv_no_repeats": _HEADER + "".join(f"{k},{10 * k},100,0,{10 * k},100,0\n" for k in range(3)),
     "csv_two_poses": _HEADER + "".join(f"{k % 2},{10 * (k % 2)},100,0,{10 * (k % 2)},100,0\n" for k in range(6)),
+    "csv_small": _HEADER + "".join(f"{k % 4},{10 * (k % 2)},{100 + 10 * (k % 4 // 2)},0,{10 * (k % 2) + 0.001 * k},"
+                                   f"{100 + 10 * (k % 4 // 2)},0\n" for k in range(8)),
     "existing_file": "x",
     "budget_backlash": _budget(*PAPER_LEGS.splitlines()) + '[effects.backlash_1]\nvalue = 0.02\ncampaign = "c1.csv"\n',
     "budget_unknown_effect": _budget(*PAPER_LEGS.splitlines()) + "[effects.wobble_1]\nvalue = 0.02\n",
@@ -272,6 +275,10 @@ CASES = [
           message="unknown effect 'wobble_1'"),
     _case("discrepancy", *G, "--budget", "{budget_delta_model}", "--data", "{csv_no_dir}", "--out", "{root}/d22",
           message="holds effects fitted on geometry 'delta-shape', not on geometry 'u-shape'"),
+    _case("--max-hours", "1e-6", "discrepancy", *G, *B, "--data", "{csv_nan}", "--out", "{root}/d23",
+          message="discrepancy analysis of 8 measurements would take"),   # sized before the file is read
+    _case("discrepancy", *G, "--budget", "{budget_zero}", "--data", "{csv_small}", "--out", "{root}/d24",
+          message="has a zero law"),
     # ----------------------------------------------------------- allocate
     _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150", "--grid",
           "100000", message="of memory, this machine has"),

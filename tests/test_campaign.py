@@ -6,7 +6,7 @@ import pytest
 
 from prp3mc import Budget, Geometry, Region
 from prp3mc.errors import CampaignError
-from prp3mc.measurement.campaign import Campaign, read_campaign
+from prp3mc.measurement.campaign import Campaign, count_rows, read_campaign
 from prp3mc.measurement.prediction import predict
 from prp3mc.measurement.simulate import SETTLE_S, SLIDER_SPEED_MM_S, simulate_campaign
 from prp3mc.measurement.effects import EFFECT_NAMES, effect, library
@@ -247,3 +247,18 @@ def test_bad_reality_settings(setup, kwargs, message):
     g, b, poses = setup
     with pytest.raises(CampaignError, match=message):
         simulate_campaign(g, b, poses, 1, **kwargs)
+
+
+def test_rows_are_counted_without_reading_the_file(tmp_path):
+    """count_rows sizes a campaign before it is parsed: lines after the header, final newline or not."""
+    g, b = Geometry.from_preset("u-shape"), Budget.from_preset("paper")
+    path = tmp_path / "c.csv"
+    simulate_campaign(g, b, Region.from_preset("u-shape").grid(3).reshape(-1, 3), 3, rng=1).to_csv(path)
+    assert count_rows(path) == len(read_campaign(path).pose_id) == 27
+    path.write_text(path.read_text().rstrip("\n"))
+    assert count_rows(path) == 27
+    (tmp_path / "h.csv").write_text("pose_id,x_cmd\n")
+    (tmp_path / "e.csv").write_text("")
+    assert count_rows(tmp_path / "h.csv") == count_rows(tmp_path / "e.csv") == 0
+    with pytest.raises(InputFileError, match="does not exist"):
+        count_rows(tmp_path / "none.csv")

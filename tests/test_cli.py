@@ -130,3 +130,90 @@ def test_discrepancy_json_describes_itself(tmp_path, capsys):
         assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib"}
     report = (tmp_path / "out" / "report.html").read_text()
     assert "<h2>Run</h2>" in report and written["inputs"]["data"]["sha256"] in report
+
+
+def _cut_budget(path):
+    """The paper budget cut before leg 3's theta and b, as a file ending at a table boundary would be."""
+    from prp3mc import Budget
+    Budget.from_preset("paper").to_toml(path)
+    text = path.read_text()
+    path.write_text(text[:text.index("[inputs.theta_3]")])
+    return path
+
+
+def _campaign(path, n: int = 4, visits: int = 3):
+    from prp3mc import Budget, Region, simulate_campaign
+    simulate_campaign(Geometry.from_preset("u-shape"), Budget.from_preset("paper"),
+                      Region.from_preset("u-shape").grid(n).reshape(-1, 3), visits, rng=2).to_csv(path)
+    return path
+
+
+@pytest.mark.parametrize("argv", [
+    ["worstcase", "--geometry", "u-shape", "--pose", "0", "100", "0"],
+    ["montecarlo", "--geometry", "u-shape", "--pose", "0", "100", "0", "--samples", "500", "--seed", "4"],
+    ["sobol", "--geometry", "u-shape", "--pose", "0", "100", "0", "--samples", "64", "--seed", "4"],
+], ids=lambda a: a[0])
+def test_json_outputs_record_an_incomplete_budget(argv, tmp_path, capsys):
+    """A budget with inputs missing for some legs: the warning is given once and the JSON records it."""
+    budget = _cut_budget(tmp_path / "cut.toml")
+    assert main(argv + ["--budget", str(budget), "--json"]) == 0
+    out = capsys.readouterr()
+    doc = json.loads(out.out)
+    assert doc["inputs"]["budget"]["missing_inputs"] == ["b_3", "theta_3"]
+    assert len(doc["warnings"]) == 1 and "no law for b_3, theta_3 (other legs have one)" in doc["warnings"][0]
+    assert out.err.count("warning:") == 1
+
+
+def test_discrepancy_records_an_incomplete_budget(tmp_path, capsys):
+    """discrepancy.json, --json and the report say that the budget lacks inputs; so does a result made in Python."""
+    import warnings
+    from prp3mc import Budget, discrepancy
+    from prp3mc.errors import IncompleteBudgetWarning
+    from prp3mc.reports.discrepancy_report import report_document
+    budget, data = _cut_budget(tmp_path / "cut.toml"), _campaign(tmp_path / "campaign.csv")
+    assert main(["discrepancy", "--geometry", "u-shape", "--budget", str(budget), "--data", str(data),
+                 "--out", str(tmp_path / "out"), "--seed", "5", "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    written = json.loads((tmp_path / "out" / "discrepancy.json").read_text())
+    for doc in (printed, written):
+        assert doc["inputs"]["budget"]["missing_inputs"] == ["b_3", "theta_3"]
+        assert len(doc["warnings"]) == 1 and doc["warnings"][0].startswith(f"{budget}: no law for b_3, theta_3")
+    report = (tmp_path / "out" / "report.html").read_text()
+    assert "<b>Warnings</b>" in report and "no law for b_3, theta_3" in report
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", IncompleteBudgetWarning)
+        cut = Budget.load(budget)
+    doc = report_document(discrepancy(Geometry.from_preset("u-shape"), cut, data, rng=5))
+    assert doc["warnings"] == ["budget 'paper': no law for b_3, theta_3 (other legs have one): taken as exact; "
+                               "a budget cut short?"]
+    assert doc["inputs"]["budget"]["missing_inputs"] == ["b_3", "theta_3"]
+    assert "warnings" not in report_document(discrepancy(Geometry.from_preset("u-shape"), Budget.from_preset("paper"),
+                                                         data, rng=5))
+
+
+def test_discrepancy_refuses_what_cannot_finish(tmp_path, capsys, monkeypatch):
+    """Sized before it starts: one line with the estimate and the limit, exit 1, nothing written."""
+    import prp3mc.cli.discrepancy as command
+    import prp3mc.limits as limits
+    data, out = _campaign(tmp_path / "campaign.csv"), tmp_path / "out"
+    argv = ["discrepancy", "--geometry", "u-shape", "--budget", "paper", "--data", str(data), "--out", str(out)]
+    assert main(["--max-hours", "1e-6", *argv]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "discrepancy analysis of 48 measurements would take ~" in err[0]
+    assert "more than the limit of 0.0036 s" in err[0] and not out.exists()
+    # memory, from the row count alone: the file is not even read
+    monkeypatch.setattr(limits, "available_memory", lambda: 1 << 20)
+    monkeypatch.setattr(command, "read_campaign", lambda *a, **k: pytest.fail("read before it was sized"))
+    assert main(argv) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "needs ~" in err[0] and "available (limit 819 KiB)" in err[0] and not out.exists()
+    # memory, once the file is read: its poses and visits are counted too
+    monkeypatch.undo()
+    rows_only = limits.discrepancy_estimate(48).bytes
+    full = limits.discrepancy_estimate(48, 16, 3).bytes
+    assert rows_only < full
+    monkeypatch.setattr(limits, "available_memory", lambda: (rows_only + full) / 2 / limits.MEMORY_MARGIN)
+    assert main(argv) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "discrepancy analysis of 48 measurements of 16 poses needs ~" in err[0]
+    assert not out.exists()

@@ -59,6 +59,7 @@ def test_percentiles_equal_brute_force_on_same_samples(geometry, region, seed):
     assert np.all((lo <= r.position_pct) & (r.position_pct <= hi))
 
 
+@pytest.mark.slow  # a rate over 300 Monte Carlo runs
 def test_confidence_intervals_cover_the_truth(seed):
     """95 % intervals of the mean, of p95 and of an exceedance probability cover in 90-99 % of seeds.
 

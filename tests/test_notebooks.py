@@ -41,11 +41,8 @@ def test_draw_heuristic():
     assert not shows_picture(code("") | {"outputs": [nbformat.v4.new_output("stream", text="hi")]})
 
 
-SLOW_NOTEBOOKS = {"discrepancy_walkthrough"}  # runs the whole discrepancy workflow (~10 s idle)
-
-
-@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem in SLOW_NOTEBOOKS else p
-                                  for p in NOTEBOOKS], ids=[p.stem for p in NOTEBOOKS])
+@pytest.mark.slow  # a Jupyter kernel per notebook and its analyses: 5-25 s each (CI's `pytest -m slow` runs them)
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
 def test_notebook_executes_and_shows_its_figures(path, monkeypatch):
     monkeypatch.setenv("PRP3MC_NOTEBOOK_SAMPLES", "4096")
     monkeypatch.delenv("MPLBACKEND", raising=False)  # the kernel's inline backend, as a user has it

@@ -29,6 +29,10 @@ HIDDEN = {"u-shape": ("backlash_3", 0.03), "delta-shape": ("theta_1", 0.03)}
 REGISTRATION = (0.02, -0.02, 0.005)
 
 
+#: Both reference geometries; the second in CI's slow call only, for the tests that run the workflow 3-4 times.
+BOTH_ONE_SLOW = ["u-shape", pytest.param("delta-shape", marks=pytest.mark.slow)]
+
+
 def campaign(preset, seed, effects=None, vary_phi=None, **kwargs):
     g = Geometry.from_preset(preset)
     poses = campaign_poses(preset, preset == "u-shape" if vary_phi is None else vary_phi)
@@ -104,7 +108,7 @@ def test_what_registration_hides_is_said_so_and_never_named():
     assert found(known, "b_2")
 
 
-@pytest.mark.parametrize("preset", ["u-shape", "delta-shape"])
+@pytest.mark.parametrize("preset", BOTH_ONE_SLOW)
 def test_drift_is_a_nuisance_listed_when_the_data_show_it(preset):
     name, value = HIDDEN[preset]
     for hidden in (False, True):
@@ -122,7 +126,7 @@ def test_drift_is_a_nuisance_listed_when_the_data_show_it(preset):
     assert still.drift_test["time"] == "row order" and "row order" in still.not_testable["drift"]
 
 
-@pytest.mark.parametrize("preset", ["u-shape", "delta-shape"])
+@pytest.mark.parametrize("preset", BOTH_ONE_SLOW)
 def test_gross_errors_are_found_set_aside_and_never_inflate_a_spread(preset):
     g, dirty = campaign(preset, 14, outliers=(0.01, 0.5))
     rows = dirty.metadata["outlier_rows"]
@@ -154,7 +158,7 @@ def test_outlier_statistic_is_calibrated():
     assert family_wise == pytest.approx(0.01, rel=1e-9)
 
 
-@pytest.mark.parametrize("preset", ["u-shape", "delta-shape"])
+@pytest.mark.parametrize("preset", BOTH_ONE_SLOW)
 def test_errors_that_repeat_name_nothing_they_should_not(preset):
     """r = 0.8 makes pose means 6 times noisier; a backlash, seen between visits, stays visible."""
     name, value = "backlash_3", 0.03
@@ -189,7 +193,7 @@ def test_exchange_replaces_an_early_wrong_pick():
     assert beta.name == "beta_1" or not beta.evidence["identified"]
 
 
-def test_one_verdict_and_what_could_not_be_tested(tmp_path, capsys):
+def test_one_verdict_and_what_could_not_be_tested(capsys):
     g, c = campaign("delta-shape", 20, temp_drift_C=None)
     frame = c.to_frame().drop(columns=["dir_1", "dir_3", "time_s"])
     bar = Progress(len(STAGES), "discrepancy", enabled=True, delay=0.0, interval=0.0)
@@ -200,6 +204,11 @@ def test_one_verdict_and_what_could_not_be_tested(tmp_path, capsys):
     one_verdict(r)
     text = "\n".join(headline(r))
     assert ("UNEXPLAINED" in text) == (not r.gap["closed"])
+
+
+@pytest.mark.slow  # the workflow twice through the CLI, with its report
+def test_one_verdict_through_the_cli(tmp_path, capsys):
+    """The same verdict in the command's JSON and headline, with registration fitted and without."""
     data = tmp_path / "c.csv"
     campaign("delta-shape", 20, temp_drift_C=None, registration=REGISTRATION)[1].to_csv(data)
     args = ["discrepancy", "--geometry", "delta-shape", "--budget", "paper", "--data", str(data),

@@ -202,6 +202,7 @@ def test_no_json_carries_nan(tmp_path):
     assert json.loads((tmp_path / "b.json").read_text()) == {"a": None}
 
 
+@pytest.mark.slow  # two fresh interpreters running a study (the race itself is tested above without the CLI)
 def test_cli_race_through_the_command_line(tmp_path):
     """Two real `prp3mc study` runs on one new --out: one report, one one-line refusal."""
     study = tmp_path / "s.toml"
@@ -216,3 +217,12 @@ def test_cli_race_through_the_command_line(tmp_path):
     (_, _, err), = [r for r in results if r[0] == 1]
     assert err.count("\n") == 1 and "Traceback" not in err
     assert (out / "summary.json").exists() and siblings(out) == []
+
+
+def test_every_json_output_goes_through_the_one_writer():
+    """No NaN or infinity can leave prp3mc as JSON: every file and --json output is written by
+    prp3mc.output.dumps_json, which refuses them (allow_nan=False) and names where they are."""
+    package = Path(__file__).resolve().parent.parent / "prp3mc"
+    writers = {str(p.relative_to(package)) for p in package.rglob("*.py")
+               if any(call in p.read_text(encoding="utf-8") for call in ("json.dump", ".to_json("))}
+    assert writers == {"output.py"}

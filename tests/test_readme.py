@@ -16,7 +16,12 @@ def test_ci_runs_the_readme_test_command():
     assert any("python -m pytest" in line for line in first)
 
 
-@pytest.mark.parametrize("block", re.findall(r"```python\n(.*?)```", README, re.S))
+#: Blocks run by the slow call: the API tour's million-sample Monte Carlo on 21 x 21 poses (~8 CPU-s), as written.
+HEAVY = ("1_000_000",)
+
+
+@pytest.mark.parametrize("block", [pytest.param(b, marks=pytest.mark.slow) if any(h in b for h in HEAVY) else b
+                                   for b in re.findall(r"```python\n(.*?)```", README, re.S)])
 def test_python_examples_run(block, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     if "golden.json" in block:  # the pinning example: a golden made with another seed

@@ -2,6 +2,7 @@
 
 import base64
 import dataclasses
+import functools
 import hashlib
 import importlib.util
 import json
@@ -14,7 +15,7 @@ import pytest
 
 from prp3mc import Budget, Geometry, Region, sensitivity
 from prp3mc.cli import main
-from prp3mc.errors import StudyError, UnknownPresetError
+from prp3mc.errors import IncompleteBudgetWarning, StudyError, UnknownPresetError
 from prp3mc.reports import plots
 from prp3mc.study.summary import build_summary
 from prp3mc.uncertainty.ranking import ranking
@@ -136,7 +137,7 @@ def test_unknown_study_name():
 # ----------------------------------------------------------------- running and the report folder
 def test_cli_writes_report_folder(tmp_path, capsys):
     out = tmp_path / "out"
-    assert main(["study", str(study_file(tmp_path)), "--out", str(out), "--no-progress", "--formats", "png,svg"]) == 0
+    assert main(["study", str(study_file(tmp_path)), "--out", str(out), "--no-progress"]) == 0
     note = capsys.readouterr().out
     assert re.search(r"wrote .*report\.html in [\d.]+ s .*u-shape [\d.]+-[\d.]+ µm, delta [\d.]+-[\d.]+ µm", note)
     summary = json.loads((out / "summary.json").read_text())
@@ -164,7 +165,6 @@ def test_cli_writes_report_folder(tmp_path, capsys):
     assert {"ecdf_position", "ecdf_phi"} <= {p.stem for p in (out / "figures").glob("*.png")}
     images = re.findall(r'<img src="([^"]+)"', html)
     pngs = sorted(p.stem for p in (out / "figures").glob("*.png"))
-    assert sorted(p.stem for p in (out / "figures").glob("*.svg")) == pngs
     assert len(images) == len(pngs) >= 8 and all(src.startswith("data:image/png;base64,") for src in images)
     first = base64.b64decode(images[0].split(",", 1)[1])      # the embedded PNG is the written file
     assert first in [(out / "figures" / f"{p}.png").read_bytes() for p in pngs]
@@ -188,9 +188,37 @@ def test_cli_refuses_existing_folder_without_force(tmp_path, capsys):
     assert not (out / "keep.txt").exists() and (out / "report.html").is_file()
     figures = {p.suffix for p in (out / "figures").iterdir()}
     assert figures == {".png"}                                      # one format by default
+    both = tmp_path / "both"                                        # SVG on request, one per PNG
+    assert main(["study", str(path), "--out", str(both), "--no-progress", "--formats", "png,svg"]) == 0
+    pngs = sorted(p.stem for p in (both / "figures").glob("*.png"))
+    assert sorted(p.stem for p in (both / "figures").glob("*.svg")) == pngs and len(pngs) == 2
     assert main(["study", str(path), "--out", str(tmp_path / "o"), "--formats", "png,pdf"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "png, svg" in err and not (tmp_path / "o").exists()
+
+
+def _line_figure(k):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    fig = FigureCanvasAgg(Figure(figsize=(2, 1.5), layout="constrained")).figure
+    fig.subplots().plot(np.arange(5) ** k, label=f"power {k}")
+    return fig
+
+
+def test_figures_drawn_on_worker_processes_are_those_drawn_here(tmp_path):
+    """rendering() on worker processes (where the system forks) and in this process: the same files and bytes."""
+    from prp3mc.reports._render import default_workers, rendering
+    figures = [(f"f{k}", functools.partial(_line_figure, k)) for k in range(3)]
+    written = {}
+    for where, workers in (("here", 1), ("there", 2)):
+        (tmp_path / where).mkdir()
+        with rendering(figures, tmp_path / where, ("png", "svg"), workers) as pngs:
+            returned = list(pngs)
+        assert returned == [(tmp_path / where / f"f{k}.png").read_bytes() for k in range(3)]
+        written[where] = returned
+    assert written["here"] == written["there"]
+    assert {p.name for p in (tmp_path / "there").iterdir()} == {f"f{k}.{e}" for k in range(3) for e in ("png", "svg")}
+    assert 1 <= default_workers(12) <= 12 and default_workers(1) == 1
 
 
 def test_cli_bad_study_one_line(tmp_path, capsys):
@@ -314,6 +342,55 @@ def test_inputs_name_files_and_their_hashes(tmp_path):
     assert_summary_close(golden, summary)
 
 
+def test_constant_input_has_undefined_sobol_indices_in_the_summary(tmp_path):
+    """A zero-width input: S1 and ST are null with the reason, never NaN, and summary.json is written."""
+    from prp3mc import Uniform
+    from prp3mc.output import dumps_json
+    constant = Budget.from_preset("paper").replace(theta_2=Uniform(0.0, 0.0))
+    study = dataclasses.replace(Study.load(study_file(tmp_path)), budget=constant)
+    summary = build_summary(run_study(study, progress=False))
+    entry = summary["configurations"]["u-shape"]["sobol"]["position"]["theta_2"]
+    assert entry["S1"] is None and entry["ST"] is None and "constant input" in entry["reason"]
+    assert set(summary["configurations"]["u-shape"]["sobol"]["position"]["theta_1"]["S1"]) == {"value", "se"}
+    assert "reason" not in summary["configurations"]["u-shape"]["sobol"]["position"]["theta_1"]
+    assert json.loads(dumps_json(summary))["configurations"]["delta"]["sobol"]["position"]["theta_2"]["S1"] is None
+
+
+def test_incomplete_budget_is_recorded_in_summary_and_report(tmp_path, capsys):
+    """A budget with inputs missing for some legs: warned once, recorded in summary.json, shown in the report."""
+    Budget.from_preset("paper").to_toml(tmp_path / "cut.toml")
+    text = (tmp_path / "cut.toml").read_text()
+    (tmp_path / "cut.toml").write_text(text[:text.index("[inputs.theta_3]")])
+    path = study_file(tmp_path, _replace('budget = "paper"', 'budget = "cut.toml"\noutputs = []'))
+    out = tmp_path / "out"
+    assert main(["study", str(path), "--out", str(out), "--no-progress"]) == 0
+    assert capsys.readouterr().err.count("warning: ") == 1
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["inputs"]["budget"]["missing_inputs"] == ["b_3", "theta_3"]
+    assert len(summary["warnings"]) == 1 and "no law for b_3, theta_3 (other legs have one)" in summary["warnings"][0]
+    html = (out / "report.html").read_text()
+    assert "<b>Warnings</b>" in html and "no law for b_3, theta_3" in html
+    # a summary built in Python records its budget's own warning; a complete budget has none
+    with pytest.warns(IncompleteBudgetWarning):
+        study = Study.load(path)
+    assert build_summary(run_study(study, progress=False))["warnings"] == list(study.budget.warnings)
+    assert "warnings" not in build_summary(run_study(Study.load(study_file(tmp_path, _replace(
+        "seed = 3", "seed = 3\noutputs = []"), name="complete.toml")), progress=False))
+
+
+def test_budget_of_constant_inputs_runs_to_a_report(tmp_path, capsys):
+    """Every input zero-width: worst case 0 everywhere, no family share of it, Sobol undefined, said so."""
+    (tmp_path / "zero.toml").write_text('name = "zero"\n[inputs]\n' + "".join(
+        f'theta_{i} = {{ law = "uniform", lo = 0, hi = 0 }}\n' for i in (1, 2, 3)))
+    text = _replace('budget = "paper"', 'budget = "zero.toml"').replace("grid = 9", "grid = 3", 1)
+    out = tmp_path / "out"
+    assert main(["study", str(study_file(tmp_path, text)), "--out", str(out), "--no-progress"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["configurations"]["u-shape"]["worst_case_position_um"]["max"] == 0.0
+    assert summary["configurations"]["u-shape"]["sobol"]["position"]["theta_1"]["S1"] is None
+    assert "Undefined, so not drawn, for theta_1, theta_2, theta_3" in (out / "report.html").read_text()
+
+
 # ----------------------------------------------------------------- honest pictures
 def _fake_config(name, values, x=(-40, 40), y=(60, 140)):
     """What compare_maps_figure reads of a ConfigurationResult: a name and a worst case on a grid."""
@@ -325,6 +402,21 @@ def _fake_config(name, values, x=(-40, 40), y=(60, 140)):
 def _figure():
     from matplotlib.figure import Figure
     return Figure()
+
+
+def test_ecdf_steps_follow_the_sample_ecdf_within_one_step(seed):
+    values = np.random.default_rng(seed).gamma(2.0, size=100_003)
+    n, steps = values.size, 1000
+    x, weights = plots.ecdf_steps(values, steps)
+    assert len(x) <= steps + 1 and weights.sum() == n and x[0] == values.min() and x[-1] == values.max()
+    drawn = np.cumsum(weights) / n
+    ordered = np.sort(values)
+    np.testing.assert_allclose(drawn, np.searchsorted(ordered, x, side="right") / n, rtol=1e-12)  # exact there
+    between = drawn[np.searchsorted(x, ordered, side="right") - 1]                 # the drawn step at each value
+    assert np.max(np.arange(1, n + 1) / n - between) <= 1.0 / steps + 1e-12
+    few, ones = plots.ecdf_steps(values[:50], steps)                                 # small samples: every value
+    np.testing.assert_array_equal(few, values[:50])
+    assert (ones == 1).all()
 
 
 def test_constant_field_says_so_without_extrema():

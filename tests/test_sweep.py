@@ -233,6 +233,7 @@ def cluster():
         yield c.scheduler_address
 
 
+@pytest.mark.slow  # starts a LocalCluster of two worker processes (the module's Dask tests share it)
 def test_dask_gives_the_serial_summary(serial, cluster):
     s, result = serial
     on_dask = run_study(s, progress=False, scheduler=cluster)
@@ -253,6 +254,7 @@ class _KillOnce(DaskExecutor):
         return super().map(functools.partial(_die_once, self.marker, fn), tasks)
 
 
+@pytest.mark.slow  # a worker process killed and restarted by the cluster
 def test_a_dead_worker_costs_a_retry_not_the_sweep(serial, cluster, tmp_path):
     s, result = serial
     executor = _KillOnce(cluster)

@@ -1,14 +1,16 @@
 """``prp3mc discrepancy``: name what the model misses in a measurement campaign."""
 
-from ..uncertainty.budget import Budget
+from ..kinematics.geometry import Geometry
+from ..limits import discrepancy_estimate
 from ..measurement.accuracy import MODELS
+from ..measurement.campaign import count_rows, read_campaign
 from ..measurement.workflow import STAGES, discrepancy
 from ..progress import Progress
-from ..reports.discrepancy_report import write_report
-from ..kinematics.geometry import Geometry
+from ..reports.discrepancy_report import report_document, write_report
+from ..uncertainty.budget import Budget
 from ..units import MM2UM
-from . import (provenance, add_budget, add_geometry, add_json, add_progress, add_seed, command, emit_json, nonnegative_float,
-               probability)
+from . import (WARNINGS, add_budget, add_geometry, add_json, add_progress, add_seed, command, emit_json,
+               nonnegative_float, probability, provenance, within_limits)
 
 
 @command("discrepancy", "find where model and measurements disagree and name the missing effect")
@@ -39,18 +41,22 @@ class DiscrepancyCommand:
     @staticmethod
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
+        d = len(budget)
+        within_limits(args, discrepancy_estimate(count_rows(args.data), n_inputs=d))  # before reading the file
+        campaign = read_campaign(args.data, geometry)
+        within_limits(args, discrepancy_estimate(campaign.n_measurements, campaign.n_poses,
+                                                 int(campaign.repeats.max()), n_inputs=d))
         with Progress(len(STAGES) + 1, "discrepancy", args.progress) as bar:
-            result = discrepancy(geometry, budget, args.data, instrument_sigma_mm=args.instrument_sigma_mm,
+            result = discrepancy(geometry, budget, campaign, instrument_sigma_mm=args.instrument_sigma_mm,
                                  instrument_sigma_deg=args.instrument_sigma_deg,
                                  registration=not args.no_registration, alpha=args.alpha,
                                  alpha_unexplained=args.alpha_unexplained, outlier_rate=args.outlier_rate,
                                  progress=bar, rng=args.seed)
             record = provenance(args, geometry, budget)["inputs"]
-            folder = write_report(result, args.out, force=args.force, inputs=record)
+            folder = write_report(result, args.out, force=args.force, inputs=record, warnings=WARNINGS)
             bar.update(label="discrepancy: report")
         if args.json:
-            doc = result.to_dict()
-            emit_json(doc | {"inputs": doc["inputs"] | record})
+            emit_json(report_document(result, record, WARNINGS))
             return
         print("\n".join(headline(result) + [f"report: {folder / 'report.html'}",
                                              f"updated model: {folder / 'model'} (geometry.toml, budget.toml, "

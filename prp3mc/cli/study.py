@@ -12,7 +12,7 @@ from ..study.distributed import parse_scheduler
 from ..study.reader import Study, bundled_studies
 from ..study.runner import run_study
 from ..uncertainty.validity import check_linearity
-from . import add_progress, add_seed, command, within_limits
+from . import WARNINGS, add_progress, add_seed, command, within_limits
 
 #: Configurations named in the closing line; a sweep's best ones beyond that are in the report.
 _NAMED = 4
@@ -56,7 +56,7 @@ class StudyCommand:
             first = result.skipped[0]
             raise Prp3mcError(f"study {study.name}: none of its {len(result.skipped)} configurations ran; "
                               f"{first.name}: {first.reason}")
-        report = write_study(result, args.out, force=args.force, formats=formats)
+        report = write_study(result, args.out, force=args.force, formats=formats, warnings=WARNINGS)
         worst = result.to_frame().query("output == 'position' and statistic == 'worst_case'")
         span = worst.pivot(index="configuration", columns="aggregate", values="value") * MM2UM
         names = (list(span.sort_values("max").index[:_NAMED]) if study.sweep

@@ -31,7 +31,7 @@ from ..kinematics.chain import check_poses, feasible
 from ..kinematics.geometry import Geometry
 
 __all__ = ["Campaign", "read_campaign", "REQUIRED_COLUMNS", "CMD_COLUMNS", "MEAS_COLUMNS", "DIR_COLUMNS",
-           "MAX_ERROR", "MIN_POSES", "require_testable"]
+           "MAX_ERROR", "MIN_POSES", "require_testable", "count_rows"]
 
 #: Commanded and measured pose columns, ``[x mm, y mm, phi deg]``.
 CMD_COLUMNS, MEAS_COLUMNS = ("x_cmd", "y_cmd", "phi_cmd"), ("x_meas", "y_meas", "phi_meas")
@@ -264,15 +264,38 @@ def read_campaign(data: "str | os.PathLike | pd.DataFrame | Campaign", geometry:
                                                                  data.metadata)
     if isinstance(data, pd.DataFrame):
         return Campaign.from_frame(data, geometry, "campaign")
-    path = Path(data)
-    if not path.is_file():
-        raise InputFileError(f"campaign file {path} does not exist")
+    path = _campaign_file(data)
     _check_header(path)
     try:
         frame = pd.read_csv(path, dtype={"pose_id": str}, skipinitialspace=True, keep_default_na=True)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise InputFileError(f"{path}: not a readable CSV file ({str(exc).splitlines()[0]})") from None
     return Campaign.from_frame(frame, geometry, str(path), line_offset=1)
+
+
+def _campaign_file(data: "str | os.PathLike") -> Path:
+    path = Path(data)
+    if not path.is_file():
+        raise InputFileError(f"campaign file {path} does not exist")
+    return path
+
+
+def count_rows(data: "str | os.PathLike") -> int:
+    """Data rows of a campaign CSV file (its lines after the header), counted without parsing it.
+
+    What sizes an analysis before the file is read (blank lines count too);
+    reads the file in blocks, so it needs no memory for a file of any size.
+
+    Raises
+    ------
+    InputFileError
+        The file is missing.
+    """
+    lines, last = 0, b"\n"
+    with open(_campaign_file(data), "rb") as f:
+        for block in iter(lambda: f.read(1 << 24), b""):
+            lines, last = lines + block.count(b"\n"), block[-1:]
+    return max(lines + (last != b"\n") - 1, 0)
 
 
 def _check_header(path: Path) -> None:

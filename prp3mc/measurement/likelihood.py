@@ -26,8 +26,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import optimize
 
+from .._distributions import chi2_ppf
 from ..kinematics.chain import inverse_kinematics
 from ..kinematics.geometry import Geometry
 from ..kinematics.sensitivity import sensitivity
@@ -366,7 +367,7 @@ class Engine:
     # -- intervals
     def _profile_interval(self, loglik, x_hat: float, lo: float, hi: float, level: float) -> tuple[float, float]:
         """Ends of {x: 2 (max - loglik(x)) <= chi2_1(level)} within [lo, hi], by root finding."""
-        q = stats.chi2.ppf(level, 1)
+        q = chi2_ppf(level, 1)
         top = loglik(x_hat)
 
         def g(x):

@@ -261,14 +261,22 @@ class DiscrepancyResult:
         """What the analysis ran on: geometry and budget names, the data (file and sha256), seed, sizes."""
         source = self.campaign.source
         data = file_record(source) if Path(source).is_file() else {"source": source}
-        return {"geometry": {"name": self.geometry.name}, "budget": {"name": self.budget.name}, "data": data,
+        budget = {"name": self.budget.name}
+        if self.budget.missing_inputs:
+            budget["missing_inputs"] = list(self.budget.missing_inputs)
+        return {"geometry": {"name": self.geometry.name}, "budget": budget, "data": data,
                 "n_measurements": int(self.campaign.n_measurements), "n_poses": int(self.campaign.n_poses),
                 "seed": int(self.seed), "n_bootstrap": int(self.n_bootstrap)}
 
     def to_dict(self) -> dict:
-        """The ``discrepancy.json`` document (plus diagnostics), with ``inputs`` and ``versions``."""
+        """The ``discrepancy.json`` document (plus diagnostics), with ``inputs`` and ``versions``.
+
+        ``warnings`` (present when there are any) lists what needs care in the
+        result, one line each: the budget's (:attr:`Budget.warnings`).
+        """
+        warnings = {"warnings": list(self.budget.warnings)} if self.budget.warnings else {}
         return {
-            "inputs": self.inputs(), "versions": versions(),
+            "inputs": self.inputs(), "versions": versions(), **warnings,
             "named_effects": [e.to_dict() for e in self.named_effects],
             "unexplained": bool(self.unexplained),
             "gap": _thawed(self.gap),

@@ -31,8 +31,8 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-from scipy import stats
 
+from .._distributions import chi2_isf, chi2_ppf, chi2_sf
 from .effects import effect
 from .likelihood import Engine, Fit
 from .results import DiscrepancyResult, NamedEffect
@@ -42,7 +42,7 @@ from .subsets import Gram
 #: report and earlier code import it from.
 __all__ = ["DiscrepancyResult", "select", "name_effects", "names_in"]
 
-_Q_ALIAS = float(stats.chi2.ppf(0.99, 1))
+_Q_ALIAS = float(chi2_ppf(0.99, 1))
 #: Most candidates refitted with r and the spreads re-profiled at each step.
 _JOINT = 3
 _STEP_COLUMNS = ["candidate", "lr", "estimate", "lr_joint", "step", "threshold", "accepted"]
@@ -110,13 +110,13 @@ def select(engine: Engine, base: Fit, alpha: float, max_effects: int) -> tuple[F
     fit = base
     accepted: dict[str, dict] = {}
     step_rows = []
-    drop_level = float(stats.chi2.isf(alpha, 1))
+    drop_level = float(chi2_isf(alpha, 1))
     for step in range(1, max_effects + 1):
         scan = _scan(engine, fit)
         if scan.empty:
             break
         K = len(scan)
-        threshold = float(stats.chi2.isf(alpha / K, 1))
+        threshold = float(chi2_isf(alpha / K, 1))
         scan = scan.sort_values("lr", ascending=False, ignore_index=True)
         # the LR with r and spreads re-profiled is at least the scan's: refit the strongest, and the next
         # ones only when it fails (a repeatable fraction fitted high may hide an effect's pose pattern)
@@ -188,7 +188,7 @@ def name_effects(engine: Engine, fit: Fit, accepted: dict) -> tuple[NamedEffect,
             trial = _with(engine, _without(engine, fit, name), alias, r=fit.r)
             a_value, a_ci = engine.estimate(trial, alias)
             alias_fits[alias] = {"value": a_value, "unit": effect(alias).unit, "ci95": list(a_ci)}
-        p = float(stats.chi2.sf(lr, 1))
+        p = float(chi2_sf(lr, 1))
         ev.update(lr=float(lr), p_bonferroni=min(1.0, ev["n_candidates"] * p),
                   delta_bic=float(lr - np.log(n_obs)), identified=not aliases, alias_fits=alias_fits,
                   alternative_sets=[[engine.systematic[c].name for c in alt] for alt in alias_sets])

@@ -22,8 +22,9 @@ import dataclasses
 import time
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import optimize
 
+from .._distributions import chi2_isf, chi2_sf
 from .._rng import child_seed, resolve_rng
 from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
@@ -209,7 +210,7 @@ def _nuisance(engine: Engine, fit: Fit, alpha: float) -> tuple[tuple, dict]:
     no_drift = engine.refit(fit.sys, fit.factors, start_r=fit.r,
                             nuis=tuple(j for j in fit.nuis if NUISANCE_NAMES[j] not in DRIFT))
     lr = max(2.0 * (fit.loglik - no_drift.loglik), 0.0)
-    p = float(stats.chi2.sf(lr, 3))
+    p = float(chi2_sf(lr, 3))
     drift_test = {"lr": lr, "df": 3, "p": p, "significant": bool(p < alpha), "time": engine.time_source,
                   "values": {n: entries[n]["value"] for n in DRIFT}}
     listed = [n for n in REGISTRATION if n in entries] + (list(DRIFT) if drift_test["significant"] else [])
@@ -260,11 +261,12 @@ def detectable_effect(geometry: Geometry, budget: Budget, campaign: Campaign, na
     if name not in [e.name for e in engine.systematic] or name in engine.confounded:
         return float("inf")
     K = len(engine.systematic) - len(engine.confounded) + len(engine.spreads)
-    threshold = stats.chi2.isf(alpha / K, 1)
+    threshold = chi2_isf(alpha / K, 1)
     fit = engine.fit((), {}, 0.0)
     g = engine.whitened_candidates(fit)[:, engine.sys_index(name)]
     Q, _ = np.linalg.qr(engine.whitened(fit, (), engine.nuisance)[1])
     g = g - Q @ (Q.T @ g)
     info = float(g @ g)                                            # Fisher information per unit^2
-    lam = optimize.brentq(lambda nc: stats.ncx2.sf(threshold, 1, nc) - power, 1e-6, 1e4)
+    from scipy.stats import ncx2  # planning only: the analysis itself does without scipy.stats
+    lam = optimize.brentq(lambda nc: ncx2.sf(threshold, 1, nc) - power, 1e-6, 1e4)
     return float(np.sqrt(lam / info))

@@ -8,8 +8,8 @@ Figure; none changes the matplotlib backend. :func:`write_report` writes
 the figures as PNG (SVG too on request), per-pose / per-measurement
 tables as CSV and the updated model in ``model/``
 (:mod:`~prp3mc.measurement.updated`); it draws on its own Agg canvases, outside pyplot, and renders
-each figure once (constrained layout, no tight bounding box), which keeps a
-400-measurement report to about a second.
+each figure once (fixed margins, no layout engine, no tight bounding box),
+which keeps a 400-measurement report to about a second.
 
 The report shows what the measurement carries besides the machine: the
 instrument's registration and drift (``nuisance``), the measurements set
@@ -36,7 +36,7 @@ from ..output import output_folder, write_json, write_text
 from ..units import DEG2ARCSEC, MM2UM
 
 __all__ = ["plot_workspace", "plot_actuators", "plot_temperature", "plot_gap", "plot_candidates", "plot_iso9283",
-           "write_report", "render_html"]
+           "write_report", "report_document", "render_html"]
 
 #: Resolution of the report's figures (dots per inch); one render per figure.
 DPI = 90
@@ -116,7 +116,7 @@ def _draw_temperature(result: DiscrepancyResult, fig) -> None:
             ax.scatter(m["temp_C"], m[f"db_eq_{i + 1}_um"], s=5, alpha=0.4, label=f"leg {i + 1}")
         ax.axhline(0.0, color="k", lw=0.6)
         ax.set(title=f"Equivalent slider error vs temperature, {label}", xlabel="temperature (°C)",
-               ylabel="µm")
+               ylabel="µm" if ax is axes[0] else None)
         ax.legend(fontsize=7, markerscale=2)
 
 
@@ -194,6 +194,15 @@ _FIGURES = {
     "gap": (_draw_gap, lambda r: (9.0, 3.8)),
     "candidates": (_draw_candidates, lambda r: (4.2 * _n_steps(r), 4.2)),
     "iso9283": (_draw_iso9283, lambda r: None if r.iso9283_poses is None else (13.0, 3.9)),
+}
+#: Margins of the report's figures (:data:`_REPORT_FIGURES`), inches (left, right, bottom, top) and gaps between panels
+#: (wspace, hspace, fractions of a panel): a fixed layout renders in one pass, where a constrained
+#: one measures every label first and costs a second pass (about half of the report's time).
+_MARGINS = {
+    "workspace": (0.75, 0.3, 0.55, 0.35, 0.08, 0.16),
+    "actuators": (0.75, 0.15, 0.55, 0.35, 0.05, 0.22),
+    "temperature": (0.75, 0.15, 0.55, 0.35, 0.05, 0.2),
+    "iso9283": (0.5, 0.15, 0.55, 0.35, 0.3, 0.2),
 }
 #: Figures of the report, in its order (the gap and the candidates are tables there: quicker to read and to write).
 _REPORT_FIGURES = ("workspace", "iso9283", "actuators", "temperature")
@@ -283,11 +292,17 @@ def plot_iso9283(result: DiscrepancyResult, *, fig=None):
     return _plot("iso9283", result, fig)
 
 
-def _agg_figure(figsize):
-    """A figure of ``figsize`` inches at :data:`DPI` on its own Agg canvas (pyplot and the backend untouched)."""
+def _agg_figure(name: str, figsize):
+    """Figure ``name`` of ``figsize`` inches at :data:`DPI` with its fixed margins, on its own Agg canvas.
+
+    Pyplot and the backend are untouched.
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-    fig = Figure(figsize=figsize, dpi=DPI, layout="constrained")
+    (w, h), (left, right, bottom, top, wspace, hspace) = figsize, _MARGINS[name]
+    fig = Figure(figsize=figsize, dpi=DPI)
+    fig.subplots_adjust(left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h, wspace=wspace,
+                        hspace=hspace)
     FigureCanvasAgg(fig)
     return fig
 
@@ -370,8 +385,22 @@ def render_html(result: DiscrepancyResult, figures: dict, doc: dict | None = Non
         iso_n_mc=N_MC, iso_rows=_iso_summary(result.iso9283), iso_worst=_table(worst))
 
 
+def report_document(result: DiscrepancyResult, inputs: dict | None = None, warnings=None) -> dict:
+    """``discrepancy.json``: the result's document with more ``inputs`` and the ``warnings`` given.
+
+    ``inputs`` is merged into the document's; ``warnings`` (the messages a
+    command gave while it ran, which include the budget's) replace the
+    result's own when given and not empty.
+    """
+    doc = result.to_dict()
+    doc["inputs"] = doc["inputs"] | dict(inputs or {})
+    if warnings:
+        doc["warnings"] = list(warnings)
+    return doc
+
+
 def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bool = False,
-                 formats: tuple = ("png",), inputs: dict | None = None) -> Path:
+                 formats: tuple = ("png",), inputs: dict | None = None, warnings=None) -> Path:
     """Write ``discrepancy.json``, ``report.html``, figures, tables and ``model/`` into ``folder`` (atomically).
 
     Parameters
@@ -386,14 +415,15 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
     inputs : dict, optional
         More of what the analysis ran on, merged into ``discrepancy.json``'s
         ``inputs`` (the command line adds the geometry and budget files' sha256).
+    warnings : list of str, optional
+        The warnings a command gave (see :func:`report_document`); the report shows them.
 
     Returns
     -------
     Path
         The folder.
     """
-    doc = result.to_dict()
-    doc["inputs"] = doc["inputs"] | dict(inputs or {})
+    doc = report_document(result, inputs, warnings)
     with output_folder(folder, force) as tmp:
         write_json(tmp / "discrepancy.json", doc)
         uris = {}
@@ -402,7 +432,7 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
             figsize = size(result)
             if figsize is None:
                 continue
-            fig = _agg_figure(figsize)
+            fig = _agg_figure(name, figsize)
             draw(result, fig)
             _lighten(fig)
             png = _png(fig)

@@ -12,7 +12,8 @@
 The report is built from a :class:`~prp3mc.study.results.StudyResult` only;
 it is readable without prp3mc installed. Figures are drawn on figures of
 their own with an Agg canvas: writing a report never touches pyplot or the
-matplotlib backend.
+matplotlib backend. They are drawn on worker processes, one per core while a core
+is idle, while the tables are written (:mod:`prp3mc.reports._render`).
 """
 
 from __future__ import annotations
@@ -21,15 +22,17 @@ import datetime as _dt
 import os
 import platform
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import pandas as pd
 
-from ..output import check_output, figure_formats, output_folder, png_data_uri, save_figure, write_json, write_text
+from ..output import check_output, figure_formats, output_folder, png_data_uri, write_json, write_text
 from ..study.results import StudyResult
 from ..study.summary import build_summary
 from ..study.sweep import best_configurations, design_frame
 from ..units import DEG2ARCSEC, DISPLAY, MM2UM
+from ._render import rendering
 
 __all__ = ["write_study", "render_report", "comparison"]
 
@@ -47,7 +50,8 @@ def comparison(result: StudyResult, summary: dict | None = None) -> dict:
         references rank best (lowest upper bound) or None; ``ranges``: per
         configuration our worst-case range, the reference range (µm) and
         their ratio; ``max_ratio``: for two configurations, the worse one's
-        maximum over the better one's, ours and the reference's.
+        maximum over the better one's, ours and the reference's (None when
+        ours is zero: a budget of constant inputs).
     """
     summary = summary or build_summary(result)
     configs = summary["configurations"]
@@ -81,7 +85,7 @@ def comparison(result: StudyResult, summary: dict | None = None) -> dict:
     for r in ranges.values():
         r["ratio"] = None if r["reference"] is None else tuple(o / p for o, p in zip(r["ours"], r["reference"]))
     max_ratio = None
-    if reference_best is not None and len(configs) == 2:
+    if reference_best is not None and len(configs) == 2 and ranges[reference_best]["ours"][1] > 0:
         other = next(n for n in configs if n != reference_best)
         max_ratio = {"ours": ranges[other]["ours"][1] / ranges[reference_best]["ours"][1],
                      "reference": refs[other][1] / refs[reference_best][1], "worse": other}
@@ -96,9 +100,10 @@ def _family_shares(result: StudyResult) -> pd.DataFrame:
         k = np.unravel_index(np.argmax(wc.position_mm), wc.position_mm.shape)
         contrib = wc.contribution["position"][k]
         fam = pd.Series(contrib, index=[t.rsplit("_", 1)[0] for t in wc.terms]).groupby(level=0).sum()
-        for f, v in fam.items():
+        worst = float(wc.position_mm[k])
+        for f, v in fam.items():  # no share of a zero worst case (a budget of constant inputs)
             rows.append({"configuration": c.name, "family": f, "contribution_um": MM2UM * v,
-                         "share_pct": 100 * v / float(wc.position_mm[k])})
+                         "share_pct": 100 * v / worst if worst > 0 else float("nan")})
     return pd.DataFrame(rows)
 
 
@@ -154,6 +159,16 @@ def _canvas():
     return FigureCanvasAgg(Figure()).figure
 
 
+def _draw(plot, *args, **kwargs):
+    """Deferred ``plot(*args, fig=<empty Agg figure>, **kwargs)``: called where the figure is rendered."""
+    return lambda: plot(*args, fig=_canvas(), **kwargs)
+
+
+def _draw_axes(plot, size: tuple[float, float], *args, **kwargs):
+    """Deferred ``plot(*args, ax=<axes of a new Agg figure of size inches>, **kwargs)``."""
+    return lambda: plot(*args, ax=_canvas_axes(size), **kwargs)
+
+
 def _shown(result: StudyResult) -> list:
     """Configurations drawn in the maps, histograms and Sobol figures: all, or a sweep's best three."""
     if not result.study.sweep:
@@ -162,7 +177,7 @@ def _shown(result: StudyResult) -> list:
     return [c for c in result.configurations if c.name in best]
 
 
-def _design_figures(result: StudyResult) -> list[tuple[str, str, object]]:
+def _design_figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
     """The design-space view of a sweep (none without a sweep or a result)."""
     if not result.study.sweep or not result.configurations:
         return []
@@ -172,11 +187,11 @@ def _design_figures(result: StudyResult) -> list[tuple[str, str, object]]:
     return [("design_space", "Design space: each figure of merit (rows, maximum over the test region) against "
              "each swept parameter (columns). Dots: configurations; line: the best value reachable at each value "
              f"of the parameter; marked: the best configurations by exact worst case ({', '.join(best)}).",
-             design_space_figure(frame, best=best, fig=_canvas()))]
+             _draw(design_space_figure, frame, best=best))]
 
 
-def _figures(result: StudyResult) -> list[tuple[str, str, object]]:
-    """(file name, caption, figure) of every figure of the report, in order."""
+def _figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
+    """(file name, caption, draw) of every figure of the report, in order; ``draw()`` returns the Figure."""
     from . import plots
     res = _shown(result)
     scale = ("Panels share one colour scale when that helps the comparison, else each has its own "
@@ -184,33 +199,36 @@ def _figures(result: StudyResult) -> list[tuple[str, str, object]]:
     figs = _design_figures(result)
     figs += [("worstcase_position", "Exact worst-case position error (µm) over each test region (the paper's "
              f"Figs. 4-5, computed exactly). ✕ marks the maximum, ○ the minimum. {scale}",
-             plots.compare_maps_figure(res, "worstcase", "position", fig=_canvas())),
+             _draw(plots.compare_maps_figure, res, "worstcase", "position")),
             ("worstcase_phi", f"Exact worst-case orientation error |δφ| (arcsec). {scale}",
-             plots.compare_maps_figure(res, "worstcase", "phi", fig=_canvas()))]
+             _draw(plots.compare_maps_figure, res, "worstcase", "phi"))]
     if all(r.montecarlo is not None for r in res):
         pct = _MC_PERCENTILE if _MC_PERCENTILE in res[0].montecarlo.percentiles else res[0].montecarlo.percentiles[-1]
         figs += [("montecarlo_position", f"Monte Carlo p{pct:g} of the position error (µm). {scale}",
-                  plots.compare_maps_figure(res, "montecarlo", "position", pct, fig=_canvas())),
+                  _draw(plots.compare_maps_figure, res, "montecarlo", "position", pct)),
                  ("montecarlo_phi", f"Monte Carlo p{pct:g} of |δφ| (arcsec). {scale}",
-                  plots.compare_maps_figure(res, "montecarlo", "phi", pct, fig=_canvas())),
+                  _draw(plots.compare_maps_figure, res, "montecarlo", "phi", pct)),
                  ("histograms_position", "Distribution of the position error at chosen poses; dashed: the exact "
                   f"worst case at that pose, dotted: p{pct:g}.",
-                  plots.histograms_figure(res, "position", pct, fig=_canvas())),
+                  _draw(plots.histograms_figure, res, "position", pct)),
                  ("ecdf_position", "ECDF of the position error at the same poses: the fraction of assemblies "
                   f"whose error is at most x; dashed: the exact worst case, dot: p{pct:g}.",
-                  plots.ecdf_figure(res, "position", pct, fig=_canvas())),
+                  _draw(plots.ecdf_figure, res, "position", pct)),
                  ("histograms_phi", "Distribution of |δφ| at the same poses, worst case dashed.",
-                  plots.histograms_figure(res, "phi", pct, fig=_canvas())),
+                  _draw(plots.histograms_figure, res, "phi", pct)),
                  ("ecdf_phi", "ECDF of |δφ| at the same poses, worst case dashed.",
-                  plots.ecdf_figure(res, "phi", pct, fig=_canvas()))]
+                  _draw(plots.ecdf_figure, res, "phi", pct))]
     for r in res:
+        constant = tuple(getattr(r.sobol, "constant", ()))
+        undefined = (f" Undefined, so not drawn, for {', '.join(constant)}: a constant input (zero-width law) has "
+                     "no variance to share." if constant else "")
         for output, frame in r.ranking.items():
             basis = plots.ranking_basis(frame)[0]
             figs.append((f"sobol_{r.name}_{output}",
                          f"{r.name}, output {output}: Sobol indices with 95 % bootstrap intervals (left, ranked "
                          f"by ST) and each input's share of the exact worst case (right, ranked by share); "
-                         f"both the {basis} of the Sobol grid.",
-                         plots.ranking_figure(frame, f"{r.name}: {output}", fig=_canvas())))
+                         f"both the {basis} of the Sobol grid.{undefined}",
+                         _draw(plots.ranking_figure, frame, f"{r.name}: {output}")))
     return figs + _allocation_figures(result)
 
 
@@ -222,7 +240,7 @@ def _canvas_axes(size: tuple[float, float]):
     return fig.subplots()
 
 
-def _allocation_figures(result: StudyResult) -> list[tuple[str, str, object]]:
+def _allocation_figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
     """The binding-pose map and the Pareto front of every configuration's allocation."""
     from .allocation_plots import allocation_front_plot, allocation_map
     spec = result.study.allocation
@@ -235,8 +253,7 @@ def _allocation_figures(result: StudyResult) -> list[tuple[str, str, object]]:
         binding = ("the pose where the Monte Carlo percentile's 95 % upper bound is largest"
                    if a.binding == "percentile" else "the binding poses, dashed red the spec where the map reaches it")
         figs.append((f"allocation_{c.name}_map", f"{c.name}: the exact worst case of the chosen classes over the "
-                     f"test region; ★ {binding}.", allocation_map(a, (ny, nx), ax=_canvas_axes((5.6, 5.6)),
-                                                                 title=c.name)))
+                     f"test region; ★ {binding}.", _draw_axes(allocation_map, (5.6, 5.6), a, (ny, nx), title=c.name)))
         if front is not None and len(front):
             output = spec.front_output
             limit = spec.spec_phi_arcsec if output == "phi" else (
@@ -246,8 +263,8 @@ def _allocation_figures(result: StudyResult) -> list[tuple[str, str, object]]:
                          "labelled with the classes that changed from the previous one; ★ the chosen classes."
                          + (" The front is of the worst case: the percentile spec is not drawn, and the chosen "
                             "classes are marked only where they lie on it." if limit is None else ""),
-                         allocation_front_plot(front, output, spec=limit, chosen_cost=a.cost if a.feasible else None,
-                                               ax=_canvas_axes((6.4, 4.4)))))
+                         _draw_axes(allocation_front_plot, (6.4, 4.4), front, output, spec=limit,
+                                    chosen_cost=a.cost if a.feasible else None)))
     return figs
 
 
@@ -382,26 +399,33 @@ def _merit_name(analysis: str, output: str, statistic: str) -> str:
 
 
 def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = False,
-                formats=("png",)) -> Path:
+                formats=("png",), workers: int | None = None, warnings=None) -> Path:
     """Write the report, figures, tables and summary.json of ``result`` into the folder ``out``.
 
     ``out`` must not exist unless ``force``; it is replaced atomically.
     ``formats`` (``png``, ``svg`` or both, a sequence or ``"png,svg"``) are
     the files written per figure; each is rendered once and the report
-    embeds the same PNG. Returns the path of ``report.html``.
+    embeds the same PNG. ``workers``: processes drawing the figures
+    (:func:`prp3mc.reports._render.rendering`; default one per core while a core
+    is idle, where the system can fork, 1 draws them here). ``warnings`` (the
+    messages a command gave while it ran, which include the budget's) replace
+    the summary's own when given and not empty; the report shows them.
+    Returns the path of ``report.html``.
     """
     formats = figure_formats(formats)
     check_output(out, force)
     summary = build_summary(result)
+    if warnings:
+        summary["warnings"] = list(warnings)
+    figures = _figures(result)
     with output_folder(out, force) as tmp:
         (tmp / "figures").mkdir()
         (tmp / "tables").mkdir()
-        embedded = []
-        for name, caption, fig in _figures(result):
-            embedded.append((name, caption, png_data_uri(save_figure(fig, tmp / "figures", name, formats))))
-        tables = _tables(result)
-        for name, frame in tables.items():
-            frame.to_csv(tmp / "tables" / f"{name}.csv", index=False)
-        write_json(tmp / "summary.json", summary)
+        with rendering([(name, draw) for name, _, draw in figures], tmp / "figures", formats, workers) as pngs:
+            tables = _tables(result)                # while the figures are drawn
+            for name, frame in tables.items():
+                frame.to_csv(tmp / "tables" / f"{name}.csv", index=False)
+            write_json(tmp / "summary.json", summary)
+            embedded = [(name, caption, png_data_uri(png)) for (name, caption, _), png in zip(figures, pngs)]
         write_text(tmp / "report.html", render_report(result, embedded, tables, summary))
     return Path(out) / "report.html"

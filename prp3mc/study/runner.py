@@ -32,6 +32,7 @@ from typing import Any, Iterable, Iterator
 import numpy as np
 
 from .._rng import child_seed, resolve_rng
+from .._threads import single_threaded_blas
 from ..errors import GeometryError, InfeasiblePoseError
 from ..uncertainty.budget import Budget
 from ..uncertainty.model import linear_model
@@ -125,7 +126,8 @@ def run_configuration(plan: Plan, variant: Variant) -> Outcome:
     except (GeometryError, InfeasiblePoseError) as exc:
         return _skip(variant, "infeasible", exc)
     try:
-        result, timings = _analyses(plan, config, variant)
+        with single_threaded_blas():   # the analyses spread over threads of their own (prp3mc._threads)
+            result, timings = _analyses(plan, config, variant)
     except InfeasiblePoseError as exc:
         if not variant.parameters:
             raise

@@ -16,7 +16,8 @@ Layout (µm and arcsec)::
          "sobol": {"position": {"theta_1": {"kind": "input", "S1": {"value": ..., "se": ...},
                                             "ST": {...}, "worst_case_share": 0.31}, ...}, ...}},
                                             # worst_case_share null where undefined (rho_i, zeta_i alone);
-                                            # S1, ST null for a known shift (kind "shift") or a constant input
+                                            # S1, ST null, with a "reason", for a known shift (kind "shift")
+                                            # or a constant input
          "allocation": {"cost": 26.0, "choice": {"rho_1": "CN", ...}, "worst_case_position_um": 77.6,
                         "worst_case_phi_arcsec": 88.2, "feasible": true,
                         "spec": {"position_um": 80.0, "phi_arcsec": 120.0, "percentile": null},
@@ -32,7 +33,9 @@ Layout (µm and arcsec)::
                                                "region": {"x_mm": [-40, 40], "y_mm": [60, 140], "phi_deg": 0}}},
                 "seed": 7, "montecarlo_seed": ..., "sobol_seed": ..., "worstcase_grid": [41, 41],
                 "montecarlo_samples": 32768, ...},
-     "versions": {"prp3mc": ..., "python": ..., "numpy": ..., "scipy": ..., "pandas": ..., "SALib": ...}}
+     "versions": {"prp3mc": ..., "python": ..., "numpy": ..., "scipy": ..., "pandas": ..., "SALib": ...},
+     "warnings": ["budget 'b': no law for theta_3 (other legs have one): taken as exact; ..."]}
+                                            # only when there are any: the budget's, or those a command gave
 
 A study with a ``[sweep]`` table (SPEC §8) names its expanded configurations
 ``base.k``; each entry also carries ``"parameters": {key: value}`` with the
@@ -66,11 +69,12 @@ skips ``metadata``, ``inputs`` and ``versions``.
 from __future__ import annotations
 
 import tomllib
+import warnings
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import Prp3mcError
+from ..errors import Prp3mcError, Prp3mcWarning
 from ..kinematics.geometry import Geometry
 from ..provenance import file_record, spec_record, versions
 from ..uncertainty.budget import Budget
@@ -79,6 +83,15 @@ from .allocation import allocation_summary
 from .results import ConfigurationResult, StudyResult, over_grid, pct_se
 
 __all__ = ["build_summary", "study_inputs"]
+
+
+def _undefined(name: str, kind: str, constant: set) -> str:
+    """Why a Sobol index is undefined (it is NaN in the result, null in summary.json)."""
+    if kind == "shift":
+        return "undefined: a known shift (an offset or lead scale of the budget's effects) has no variance to share"
+    if name in constant:
+        return "undefined: a constant input (zero-width law) has no variance to share"
+    return "undefined: the output does not vary over the budget"
 
 
 def _stat(value, se) -> dict:
@@ -93,11 +106,6 @@ def _over_grid(values: np.ndarray, se: np.ndarray) -> dict:
 def _exact_or_none(value) -> float | None:
     """An exact number, or None (JSON null) where it is undefined (NaN)."""
     return None if np.isnan(value) else float(value)
-
-
-def _stat_or_none(value, se) -> dict | None:
-    """A statistic, or None where it is undefined (a known shift, a constant input: no variance)."""
-    return None if np.isnan(value) else _stat(value, se)
 
 
 def _exact(values: np.ndarray) -> dict:
@@ -121,13 +129,18 @@ def _montecarlo(c: ConfigurationResult) -> dict:
 
 
 def _sobol(c: ConfigurationResult) -> dict:
+    """Indices of every factor and group; S1 and ST null, with the ``reason``, where undefined (JSON has no NaN)."""
     out = {}
+    constant = set(getattr(c.sobol, "constant", ()))
     for output, frame in c.ranking.items():
-        out[output] = {row.name: {"kind": row.kind,
-                                  "S1": _stat_or_none(row.S1, row.S1_conf / Z95),
-                                  "ST": _stat_or_none(row.ST, row.ST_conf / Z95),
-                                  "worst_case_share": _exact_or_none(row.worst_case_share)}
-                       for row in frame.itertuples(index=False)}
+        entries = {}
+        for row in frame.itertuples(index=False):
+            entry = {"kind": row.kind, "S1": _stat(row.S1, row.S1_conf / Z95), "ST": _stat(row.ST, row.ST_conf / Z95),
+                     "worst_case_share": _exact_or_none(row.worst_case_share)}
+            if not np.isfinite([row.S1, row.ST, row.S1_conf, row.ST_conf]).all():
+                entry.update(S1=None, ST=None, reason=_undefined(row.name, row.kind, constant))
+            entries[row.name] = entry
+        out[output] = entries
     return out
 
 
@@ -154,8 +167,10 @@ def _record(used, specs: list[str], base: Path, loader) -> dict:
     for spec in specs:
         target = base / spec if spec.endswith(".toml") else spec
         try:
-            if loader(target) == used:
-                return spec_record(target, used)
+            with warnings.catch_warnings():  # given once already, when the study was read
+                warnings.simplefilter("ignore", Prp3mcWarning)
+                if loader(target) == used:
+                    return spec_record(target, used)
         except Prp3mcError:
             continue
     return {"name": used.name, "note": "not as the study file names it (replaced in code, or varied)"}
@@ -175,6 +190,8 @@ def study_inputs(result: StudyResult) -> dict:
                            "region": {"x_mm": [float(v) for v in region.x_mm],
                                       "y_mm": [float(v) for v in region.y_mm], "phi_deg": float(region.phi_deg)}}
     budget = _record(study.budget, budgets, base, Budget.load) | study.budget.effects_record()
+    if study.budget.missing_inputs:
+        budget["missing_inputs"] = list(study.budget.missing_inputs)
     out = {"study": record, "budget": budget,
            "configurations": configs, "seed": result.seed, "montecarlo_seed": result.montecarlo_seed,
            "sobol_seed": result.sobol_seed, **study.sizes()}
@@ -209,4 +226,6 @@ def build_summary(result: StudyResult) -> dict:
                         "configurations": len(result.configurations) + len(result.skipped),
                         **{kind: [s.to_dict() for s in result.skipped if s.kind == kind]
                            for kind in ("infeasible", "failed")}}
-    return out | {"metadata": result.metadata(), "inputs": study_inputs(result), "versions": versions()}
+    notes = result.study.budget.warnings
+    return out | {"metadata": result.metadata(), "inputs": study_inputs(result), "versions": versions(),
+                  **({"warnings": list(notes)} if notes else {})}

@@ -48,6 +48,11 @@ def parse_input(name: str) -> tuple[str, int]:
     return match.group(1), int(match.group(2)) - 1
 
 
+def _missing_text(missing: tuple[str, ...]) -> str:
+    """The warning for inputs a budget names for some legs only."""
+    return f"no law for {', '.join(missing)} (other legs have one): taken as exact; a budget cut short?"
+
+
 def input_unit(name: str) -> str:
     """Boundary unit of an input: ``mm`` or ``deg``."""
     family, _ = parse_input(name)
@@ -177,6 +182,15 @@ class Budget:
         present = {parse_input(name)[0] for name in self.inputs}
         return tuple(f"{family}_{leg}" for family in _FAMILY_ORDER if family in present
                      for leg in (1, 2, 3) if f"{family}_{leg}" not in self.inputs)
+
+    @property
+    def warnings(self) -> tuple[str, ...]:
+        """What needs care in this budget, one line each (today: inputs missing for some legs).
+
+        Outputs record these (``"warnings"`` in JSON, a note in reports) besides
+        the :class:`~prp3mc.errors.IncompleteBudgetWarning` given when the budget is read.
+        """
+        return (f"budget {self.name!r}: {_missing_text(self.missing_inputs)}",) if self.missing_inputs else ()
 
     def replace(self, name: str | None = None, **laws: Law) -> "Budget":
         """A copy with some inputs' laws replaced or added (``theta_1=Uniform(...)``)."""
@@ -415,8 +429,7 @@ class Budget:
         except BudgetError as exc:
             raise BudgetError(f"{source}: {exc}") from None
         if budget.missing_inputs:
-            warnings.warn(f"{source}: no law for {', '.join(budget.missing_inputs)} (other legs have one): "
-                          "taken as exact; a budget cut short?", IncompleteBudgetWarning, stacklevel=2)
+            warnings.warn(f"{source}: {_missing_text(budget.missing_inputs)}", IncompleteBudgetWarning, stacklevel=2)
         return budget
 
     @classmethod

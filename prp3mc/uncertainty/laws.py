@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass, fields
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy import integrate, special, stats
+from scipy import integrate, special
 
 from ..errors import BudgetError
 
@@ -181,8 +181,9 @@ class TruncNormal(Law):
         return self.tol / (3.0 * self.cpk)
 
     def _dist(self):
+        from scipy.stats import truncnorm  # only this law needs scipy.stats: imported when it is used
         z = 3.0 * self.cpk
-        return stats.truncnorm(-z, z, loc=self.center, scale=self.sd_parent)
+        return truncnorm(-z, z, loc=self.center, scale=self.sd_parent)
 
     def ppf(self, u):
         z = 3.0 * self.cpk

@@ -108,15 +108,19 @@ def _salib_problem(inputs: tuple, members: tuple = ()) -> dict:
 def saltelli_design(budget: Budget, factors: Factors, n_samples: int, seed: int) -> np.ndarray:
     """Unit samples of SALib's sobol sampler rearranged as [A, B, AB_1..AB_K], shape (K + 2, N, d).
 
-    A and B come from SALib's own matrix (rows 0 and d + 1 of each block of
-    d + 2); AB_k takes the columns of factor k from B, as SALib's sampler
-    does for the problem that makes k one factor.
+    SALib's sampler (``calc_second_order=False``, ``scramble=True``) draws
+    ``scipy.stats.qmc.Sobol(2 d, scramble=True, seed=seed).random(N)`` and
+    copies, row by row in Python, its first d columns as A and its last d
+    as B (rows 0 and d + 1 of each block of d + 2), on the unit cube
+    unscaled. A and B are taken from that sequence directly: the same
+    numbers, without the loop over N (d + 2) rows. AB_k takes the columns of
+    factor k from B, as SALib's sampler does for the problem that makes k
+    one factor.
     """
-    from SALib.sample import sobol as sobol_sample
+    from scipy.stats import qmc
     d = len(budget.factors)
-    U = sobol_sample.sample(_salib_problem(budget.factors), n_samples, calc_second_order=False,
-                            scramble=True, seed=seed).reshape(n_samples, d + 2, d)
-    A, B = U[:, 0], U[:, d + 1]
+    base = qmc.Sobol(d=2 * d, scramble=True, seed=seed).random(n_samples)
+    A, B = base[:, :d], base[:, d:]
     AB = np.where(factors.masks[:, None, :], B, A)
     return np.concatenate([A[None], B[None], AB], axis=0)
 

@@ -28,6 +28,7 @@ import pandas as pd
 
 from .._result import freeze, interval_frame, pose_columns, short_repr
 from .._rng import MAX_SEED, resolve_rng
+from .._threads import single_threaded_blas
 from .._version import __version__
 from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
@@ -265,7 +266,8 @@ def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     sampled = [i for i in range(O) if i not in linear]
     if method == "vectorised":
         weights = resample_weights(n_samples, num_resamples, bootstrap_seed)
-        fs = feature_sums(F.reshape(K + 2, n_samples, -1), factors, weights)
+        with single_threaded_blas():      # R x N x F^2 products: one BLAS thread is faster, see prp3mc._threads
+            fs = feature_sums(F.reshape(K + 2, n_samples, -1), factors, weights)
     per_pose = 8 * n_samples * (K + 2) * (3 + 2 * len(sampled)) + 8 * n_samples * len(sampled) * (4 + 2 * K)
     chunk = max(1, min(n_poses, max_chunk_bytes // per_pose))
     res = np.empty((4, n_poses, O, K))
@@ -284,7 +286,8 @@ def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
         return p
 
     threads = 1 if method == "salib" else (workers or os.cpu_count() or 1)
-    with Progress(n_poses, "sobol", progress) as bar, ThreadPoolExecutor(max_workers=threads) as pool:
+    with (single_threaded_blas(), Progress(n_poses, "sobol", progress) as bar,
+          ThreadPoolExecutor(max_workers=threads) as pool):
         for done in pool.map(work, range(0, n_poses, chunk)):     # chunks of poses, not poses
             bar.update(done)
     constant = tuple(name for name, mask in zip(factors.names, factors.masks)

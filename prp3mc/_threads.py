@@ -1,0 +1,31 @@
+"""BLAS threads inside prp3mc's own parallel sections.
+
+prp3mc spreads its long loops over threads of its own (chunks of poses and
+samples in Monte Carlo, Sobol and the worst case). A matrix product inside
+such a thread would start BLAS's own threads on the same cores: with two
+cores that is four busy threads, and OpenBLAS's threads spin while they wait
+for work, so a product that takes 20 ms on one thread took 0.4 s on this
+2-core machine under load (``benchmarks/bench_study.py`` shows the study's
+time both ways). Inside these sections BLAS runs on one thread.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from typing import Iterator
+
+__all__ = ["single_threaded_blas"]
+
+
+@contextlib.contextmanager
+def single_threaded_blas() -> Iterator[None]:
+    """Run BLAS (numpy's and scipy's OpenBLAS or MKL) on one thread inside the block; restored after it.
+
+    The numbers are those of any one-thread BLAS run: how BLAS splits a long
+    sum between its threads depends on the machine's cores and moves the last
+    bit of some results (the paper study's Sobol tables: at most 8e-16
+    relative, before this limit, between one and two BLAS threads).
+    """
+    from threadpoolctl import threadpool_limits
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield
