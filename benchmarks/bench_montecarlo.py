@@ -1,16 +1,22 @@
-"""Monte Carlo throughput and memory against the obvious numpy code and the machine's flop limit.
+"""Monte Carlo throughput and memory against the obvious numpy code and the machine's limits.
 
-Figures (paper budget, U-shape):
+Figures (paper budget, U-shape), each timed with its wall and CPU time and the
+1-minute load average right after it (the machine may be shared):
 - 21 x 21 poses x 2^20 samples (2^18 with ``quick``): pose-samples/s of
   :func:`prp3mc.monte_carlo` (all summaries: moments with standard errors,
   exact percentiles with intervals, maxima, means) against the obvious numpy
   code on the same samples: per pose one small matrix product, a norm and
   ``np.percentile`` (no standard errors, no intervals: less work).
 - one pose x 2^24 samples (2^22): samples/s, against the same numpy code.
-- peak memory of one pose at 1e8 samples (and 1e9 with ``--huge``), each in
-  a fresh process (``ru_maxrss``).
-- the limit: a pose-sample costs ~72 flops (a 3 x 12 by 12 product), so the
-  machine's float32 matrix-product rate (measured here, all cores) / 72.
+- peak memory (the high-water mark of a fresh process) and rate of one pose at 1e8
+  samples (and 1e9 with ``--huge``); the obvious code would hold the samples,
+  their features and the errors: (d + F + 3) x 8 bytes a sample (not run).
+- the limits, measured in the same run: a pose-sample costs ~72 flops (a 3 x 12
+  by 12 product), so the float32 matrix-product rate (all cores) / 72; and, for
+  one pose, the rate at which the d uniforms of a sample are drawn alone (the
+  compiled PCG64 lanes, one per core), which a Monte Carlo on numpy's random
+  numbers pays before it computes anything; numpy's own ``Generator.random``
+  drawing them is reported beside it.
 
 Usage: ``python benchmarks/bench_montecarlo.py [--quick] [--huge]`` prints one JSON object.
 """
@@ -20,30 +26,64 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from prp3mc import Budget, Geometry, Region, linear_model, monte_carlo
+from prp3mc.uncertainty._mckernel import TILE
+from prp3mc.uncertainty._sampler import draw_uniforms, pcg_lanes
 
 FLOPS_PER_POSE_SAMPLE = 72
 PERCENTILES = (50.0, 95.0, 99.0, 99.73)
 
 
+def timed(fn, repeat: int = 1) -> tuple[float, float, float]:
+    """(wall s, CPU s, 1-minute load) of the fastest of ``repeat`` calls (all threads' CPU time)."""
+    best = (np.inf, np.inf)
+    for _ in range(repeat):
+        t0, c0 = time.perf_counter(), time.process_time()
+        fn()
+        best = min(best, (time.perf_counter() - t0, time.process_time() - c0))
+    return best[0], best[1], os.getloadavg()[0]
+
+
 def peak_flops(dtype=np.float32, size: int = 4096, repeat: int = 3) -> float:
     """Best rate of a large square matrix product (flop/s, all cores via BLAS)."""
     a = np.random.default_rng(0).random((size, size)).astype(dtype)
-    best = min(_timed(lambda: a @ a) for _ in range(repeat))
-    return 2.0 * size**3 / best
+    return 2.0 * size**3 / timed(lambda: a @ a, repeat)[0]
 
 
-def _timed(fn) -> float:
-    t0 = time.perf_counter()
-    fn()
-    return time.perf_counter() - t0
+def _on_all_cores(work, repeat: int = 3) -> float:
+    """Wall time of ``work(k)`` for k = 0 .. cores - 1 in as many threads."""
+    workers = os.cpu_count() or 1
+    with ThreadPoolExecutor(workers) as pool:
+        return timed(lambda: list(pool.map(work, range(workers))), repeat)[0]
+
+
+def uniform_rates(d: int, n: int = 1 << 23) -> tuple[float, float]:
+    """Samples/s at which d uniforms a sample are drawn, on all cores: by numpy's Generator, and compiled.
+
+    The compiled lanes (:func:`prp3mc.uncertainty._sampler.draw_uniforms`) draw
+    the same numbers as numpy: their rate bounds a Monte Carlo on them.
+    """
+    workers = os.cpu_count() or 1
+    per = n // workers // TILE * TILE
+    gens = [np.random.default_rng(k) for k in range(workers)]
+    bufs = [np.empty((per, d)) for _ in range(workers)]
+    numpy_wall = _on_all_cores(lambda k: gens[k].random(out=bufs[k]))
+    lanes = [pcg_lanes(k, 0, d) for k in range(workers)]
+    tiles = [np.empty((d, TILE)) for _ in range(workers)]
+
+    def compiled(k):
+        for _ in range(per // TILE):
+            draw_uniforms(*lanes[k], tiles[k])
+
+    compiled(0)
+    return workers * per / numpy_wall, workers * per / _on_all_cores(compiled)
 
 
 def obvious_numpy(geometry, budget, poses, n: int, seed: int):
@@ -58,19 +98,24 @@ def obvious_numpy(geometry, budget, poses, n: int, seed: int):
     return out
 
 
-def _best(fn, repeat: int) -> float:
-    return min(_timed(fn) for _ in range(repeat))
+def peak_memory(n: int) -> dict:
+    """Peak resident memory (GB) and rate of a fresh process running one pose with ``n`` samples.
 
-
-def peak_memory_gb(n: int) -> float:
-    """Peak resident memory (GB) of a fresh process running one pose with ``n`` samples."""
-    code = ("import resource, prp3mc; g = prp3mc.Geometry.from_preset('u-shape'); "
-            "b = prp3mc.Budget.from_preset('paper'); "
-            f"prp3mc.monte_carlo(g, b, [0.0, 100.0, 0.0], {n}, rng=1); "
-            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
-    t0 = time.perf_counter()
+    The peak is the child's own high-water mark (``VmHWM``, Linux), not ``ru_maxrss``: a
+    forked child's ``ru_maxrss`` keeps the parent's size at the fork, so it would report
+    this benchmark's memory instead (the 4.4 GB once printed for 1e8 samples).
+    """
+    code = ("import resource, time, prp3mc; g = prp3mc.Geometry.from_preset('u-shape'); "
+            "b = prp3mc.Budget.from_preset('paper'); t = time.perf_counter(); "
+            f"prp3mc.monte_carlo(g, b, [0.0, 100.0, 0.0], {n}, rng=1); s = time.perf_counter() - t\n"
+            "try:\n"
+            "    kib = next(int(l.split()[1]) for l in open('/proc/self/status') if l.startswith('VmHWM'))\n"
+            "except OSError:\n"
+            "    kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
+            "print(s, kib)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    return int(out.stdout.split()[-1]) / 1e6, time.perf_counter() - t0
+    seconds, kib = out.stdout.split()[-2:]
+    return {"peak_gb": int(kib) * 1024 / 1e9, "samples_per_s": n / float(seconds), "load": os.getloadavg()[0]}
 
 
 def bench_montecarlo(quick: bool, huge: bool = False) -> dict:
@@ -78,34 +123,30 @@ def bench_montecarlo(quick: bool, huge: bool = False) -> dict:
     grid = Region.from_preset("u-shape").grid(21)
     pose = np.array([0.0, 100.0, 0.0])
     monte_carlo(g, budget, grid[:2, :2], 10_000, rng=0)  # compile / load the kernels
-    repeat = 1 if quick else 2
+    repeat = 1 if quick else 3
     n_grid = 1 << (18 if quick else 20)
     n_pose = 1 << (22 if quick else 24)
     P = grid[..., 0].size
-    t_grid = _best(lambda: monte_carlo(g, budget, grid, n_grid, rng=1), repeat)
-    t_grid_np = _best(lambda: obvious_numpy(g, budget, grid, n_grid, 1), 1)
-    t_pose = _best(lambda: monte_carlo(g, budget, pose, n_pose, rng=1), repeat)
-    t_pose_np = _best(lambda: obvious_numpy(g, budget, pose, n_pose, 1), 1)
+    r = {"mc_grid_poses": P, "mc_grid_samples": n_grid, "mc_pose_samples": n_pose}
+    for key, (poses, n, count) in {"mc_grid": (grid, n_grid, P * n_grid), "mc_pose": (pose, n_pose, n_pose)}.items():
+        wall, cpu, load = timed(lambda: monte_carlo(g, budget, poses, n, rng=1), repeat)
+        r[f"{key}_rate"], r[f"{key}_rate_cpu"], r[f"{key}_load"] = count / wall, count / cpu, load
+        wall, cpu, load = timed(lambda: obvious_numpy(g, budget, poses, n, 1))
+        r[f"{key}_numpy_rate"], r[f"{key}_numpy_rate_cpu"], r[f"{key}_numpy_load"] = count / wall, count / cpu, load
+        r[f"{key}_speedup_vs_numpy"] = r[f"{key}_rate"] / r[f"{key}_numpy_rate"]
     flops = peak_flops()
-    result = {
-        "mc_grid_poses": P, "mc_grid_samples": n_grid,
-        "mc_grid_pose_samples_per_s": P * n_grid / t_grid,
-        "mc_grid_numpy_pose_samples_per_s": P * n_grid / t_grid_np,
-        "mc_grid_speedup_vs_numpy": t_grid_np / t_grid,
-        "mc_pose_samples": n_pose,
-        "mc_pose_samples_per_s": n_pose / t_pose,
-        "mc_pose_numpy_samples_per_s": n_pose / t_pose_np,
-        "mc_pose_speedup_vs_numpy": t_pose_np / t_pose,
-        "peak_float32_flops": flops,
-        "mc_limit_pose_samples_per_s": flops / FLOPS_PER_POSE_SAMPLE,
-        "mc_grid_fraction_of_limit": P * n_grid / t_grid / (flops / FLOPS_PER_POSE_SAMPLE),
-    }
+    r["peak_float32_flops"] = flops
+    r["mc_limit_pose_samples_per_s"] = flops / FLOPS_PER_POSE_SAMPLE
+    r["mc_grid_fraction_of_limit"] = r["mc_grid_rate"] / r["mc_limit_pose_samples_per_s"]
+    r["mc_uniforms_numpy_samples_per_s"], r["mc_uniforms_limit_samples_per_s"] = uniform_rates(len(budget))
+    r["mc_pose_fraction_of_uniforms_limit"] = r["mc_pose_rate"] / r["mc_uniforms_limit_samples_per_s"]
+    n_feat = linear_model(g, budget, pose).coef.shape[-1]
     for n in ([] if quick else [10**8]) + ([10**9] if huge else []):
-        gb, seconds = peak_memory_gb(n)
-        result[f"mc_pose_1e{len(str(n)) - 1}_peak_gb"] = gb
-        result[f"mc_pose_1e{len(str(n)) - 1}_samples_per_s"] = n / seconds
-    result["load_average_1min"] = os.getloadavg()[0]
-    return result
+        tag = f"mc_pose_1e{len(str(n)) - 1}"
+        r.update({f"{tag}_{k}": v for k, v in peak_memory(n).items()})
+        r[f"{tag}_numpy_gb"] = n * (len(budget) + n_feat + 3) * 8 / 1e9
+    r["load_average_1min"] = os.getloadavg()[0]
+    return r
 
 
 def main(argv=None) -> int:

@@ -14,13 +14,15 @@ import time
 
 import numpy as np
 from bench_discrepancy import bench_discrepancy_cli, speed_table
-from bench_montecarlo import bench_montecarlo
+from bench_montecarlo import bench_montecarlo, peak_flops, timed
 from bench_sobol import bench_sobol, bench_sobol_pose
 from bench_study import bench_study
 
 import prp3mc
 from prp3mc import Budget, Geometry, Region, sensitivity, worst_case, worst_case_maxima
+from prp3mc.uncertainty._envelope import envelope_kernel, kernel_tables
 from prp3mc.uncertainty.crosscheck import optimizer_worst_case
+from prp3mc.uncertainty.worstcase import _LIMITS
 
 
 def best_of(fn, repeat: int) -> float:
@@ -73,46 +75,57 @@ def bench_worstcase(quick: bool) -> dict:
     }
 
 
-def bench_envelope(quick: bool) -> dict:
-    """The fused envelope kernel (maxima only) from 11x11 to 2001x2001, wall and CPU time per pose.
+#: Flops of one pose in the envelope kernel, counted from its source: the chain and the h entries
+#: (~230), A^-1 (~40), the feasibility tests (~45), the terms (~45), the zonotope maxima (~140).
+ENVELOPE_FLOPS_PER_POSE = 500
 
-    The alternative is worst_case's numpy frame path at 201x201 (it keeps the model).
+
+def bench_envelope(quick: bool) -> dict:
+    """The fused envelope kernel (maxima only) from 11x11 to 2001x2001: wall and CPU rates with the load.
+
+    ``envelope_{n}_ns_per_pose`` is the kernel alone on one thread (thread CPU time, the
+    outputs allocated once): the per-pose cost, to compare across sizes. The whole call
+    adds a fixed cost (bounds, result), which dominates at 11x11. The alternative is
+    worst_case's numpy frame path at 201x201 (it keeps the model); the limit is
+    ENVELOPE_FLOPS_PER_POSE at the float64 matrix-product rate of all cores.
     """
     g, budget, region = Geometry.from_preset("u-shape"), Budget.from_preset("paper"), Region.from_preset("u-shape")
-    worst_case_maxima(g, budget, region.grid(11))
-    worst_case_maxima(g, budget, region.grid(101))     # compile both the serial and the threaded kernel
+    worst_case_maxima(g, budget, region.grid(11))   # compile / load the kernels
+    _, *tables = kernel_tables(g, budget, None)
     out = {}
     for n in (11, 101, 1001) if quick else (11, 101, 1001, 2001):
         grid = region.grid(n)
-        wall, cpu = [], []
-        for _ in range(3 if n > 101 else 20):
-            t0, c0 = time.perf_counter(), time.process_time()
-            worst_case_maxima(g, budget, grid)
-            wall.append(time.perf_counter() - t0)
-            cpu.append(time.process_time() - c0)
-        out[f"envelope_{n}_poses_per_s"] = n * n / min(wall)
-        out[f"envelope_{n}_poses_per_cpu_s"] = n * n / min(cpu)
+        wall, cpu, load = timed(lambda: worst_case_maxima(g, budget, grid), 30 if n <= 101 else 3)
+        out[f"envelope_{n}_poses_per_s"], out[f"envelope_{n}_poses_per_cpu_s"] = n * n / wall, n * n / cpu
+        out[f"envelope_{n}_load"] = load
+        flat = np.ascontiguousarray(grid.reshape(-1, 3))
+        values, codes, bad = np.empty((4, n * n)), np.empty((4, n * n), np.int8), np.empty(n * n, np.int16)
+        kernel = lambda: envelope_kernel(flat, *tables, _LIMITS, True, values, codes, bad, workers=1)  # noqa: E731
+        kernel()
+        out[f"envelope_{n}_ns_per_pose"] = 1e9 / (n * n) * min(_thread_time(kernel) for _ in range(3 if n > 101 else 30))
+    out["envelope_call_us"] = 1e6 * timed(lambda: worst_case_maxima(g, budget, region.grid(11)), 30)[0]
     grid = region.grid(201)
-    c0 = time.process_time()
     worst_case(g, budget, grid)
-    out["worstcase_numpy_poses_per_cpu_s"] = grid[..., 0].size / (time.process_time() - c0)
+    wall, cpu, load = timed(lambda: worst_case(g, budget, grid), 3)
+    out["worstcase_numpy_poses_per_s"], out["worstcase_numpy_poses_per_cpu_s"] = grid[..., 0].size / wall, grid[..., 0].size / cpu
+    out["worstcase_numpy_load"] = load
+    out["envelope_limit_poses_per_s"] = peak_flops(np.float64) / ENVELOPE_FLOPS_PER_POSE
     # a machine's [effects]: thermal adds a shared generator (16 corners), backlash and a lead scale two terms
     from prp3mc.uncertainty.systematic import SystematicEffect as Effect
     machine = budget.with_effects({"backlash_1": Effect("backlash_1", 0.02), "scale_2": Effect("scale_2", 1e-4),
                                    "thermal": Effect("thermal", 1.2e-5, temp_range_C=(15.0, 30.0))})
     grid = region.grid(1001)
     worst_case_maxima(g, machine, region.grid(11))
-    cpu = {}
-    for name, b in (("paper", budget), ("effects", machine)):
-        times = []
-        for _ in range(3):
-            c0 = time.process_time()
-            worst_case_maxima(g, b, grid)
-            times.append(time.process_time() - c0)
-        cpu[name] = min(times)
+    cpu = {name: timed(lambda: worst_case_maxima(g, b, grid), 3)[1] for name, b in (("paper", budget), ("effects", machine))}
     out["envelope_1001_effects_poses_per_cpu_s"] = grid[..., 0].size / cpu["effects"]
     out["envelope_effects_cost_ratio"] = cpu["effects"] / cpu["paper"]
     return out
+
+
+def _thread_time(fn) -> float:
+    t0 = time.thread_time()
+    fn()
+    return time.thread_time() - t0
 
 
 BENCHES = [bench_sensitivity, bench_worstcase, bench_envelope, bench_montecarlo, bench_sobol, bench_sobol_pose,
@@ -140,20 +153,33 @@ def table(r: dict) -> str:
     g = lambda v: f"{v:.3g}"  # noqa: E731
     rows = [
         ("Monte Carlo, 21x21 poses x %d samples (pose-samples/s)" % r["mc_grid_samples"],
-         g(r["mc_grid_pose_samples_per_s"]), "numpy per pose: product, norm, np.percentile",
-         g(r["mc_grid_numpy_pose_samples_per_s"]), g(r["mc_grid_speedup_vs_numpy"]),
-         "%s (float32 matmul / 72 flops)" % g(r["mc_limit_pose_samples_per_s"])),
+         f"{g(r['mc_grid_rate'])} ({g(r['mc_grid_rate_cpu'])} per CPU-s; load {r['mc_grid_load']:.1f})",
+         "numpy per pose: product, norm, np.percentile",
+         f"{g(r['mc_grid_numpy_rate'])} (load {r['mc_grid_numpy_load']:.1f})", g(r["mc_grid_speedup_vs_numpy"]),
+         "%s (float32 matmul / 72 flops): %s of it" % (g(r["mc_limit_pose_samples_per_s"]),
+                                                      g(r["mc_grid_fraction_of_limit"]))),
         ("Monte Carlo, one pose x %d samples (samples/s)" % r["mc_pose_samples"],
-         g(r["mc_pose_samples_per_s"]), "the same numpy code", g(r["mc_pose_numpy_samples_per_s"]),
-         g(r["mc_pose_speedup_vs_numpy"]), "-"),
+         f"{g(r['mc_pose_rate'])} ({g(r['mc_pose_rate_cpu'])} per CPU-s; load {r['mc_pose_load']:.1f})",
+         "the same numpy code", f"{g(r['mc_pose_numpy_rate'])} (load {r['mc_pose_numpy_load']:.1f})",
+         g(r["mc_pose_speedup_vs_numpy"]),
+         "%s (drawing the 12 uniforms of a sample alone, compiled, all cores; numpy's Generator: %s): %s of it"
+         % (g(r["mc_uniforms_limit_samples_per_s"]), g(r["mc_uniforms_numpy_samples_per_s"]),
+            g(r["mc_pose_fraction_of_uniforms_limit"]))),
+        *[(f"Monte Carlo, one pose x 1e{e} samples: peak memory (GB); samples/s",
+           f"{g(r[f'mc_pose_1e{e}_peak_gb'])}; {g(r[f'mc_pose_1e{e}_samples_per_s'])} (load {r[f'mc_pose_1e{e}_load']:.1f})",
+           "numpy holding samples, features and errors (not run)", g(r[f"mc_pose_1e{e}_numpy_gb"]),
+           g(r[f"mc_pose_1e{e}_numpy_gb"] / r[f"mc_pose_1e{e}_peak_gb"]), "target: <= 1 GB")
+          for e in (8, 9) if f"mc_pose_1e{e}_peak_gb" in r],
         ("Exact envelope, 201x201 (poses/s)", g(r["worstcase_poses_per_s"]),
          "differential evolution per pose", g(1 / r["de_seconds_per_pose"]), g(r["worstcase_speedup_vs_de"]), "-"),
-        *[(f"Exact envelope, fused kernel (maxima only), {n}x{n} (poses/s; per CPU-second)",
-           f"{g(r[f'envelope_{n}_poses_per_s'])}; {g(r[f'envelope_{n}_poses_per_cpu_s'])}",
-           "worst_case (numpy frame, keeps the model), 201x201, per CPU-second",
-           g(r["worstcase_numpy_poses_per_cpu_s"]),
+        *[(f"Exact envelope, fused kernel (maxima only), {n}x{n} (poses/s; per CPU-s; kernel ns a pose)",
+           f"{g(r[f'envelope_{n}_poses_per_s'])}; {g(r[f'envelope_{n}_poses_per_cpu_s'])}; "
+           f"{r[f'envelope_{n}_ns_per_pose']:.0f} ns (load {r[f'envelope_{n}_load']:.1f})",
+           "worst_case (numpy frame, keeps the model), 201x201, per CPU-s",
+           f"{g(r['worstcase_numpy_poses_per_cpu_s'])} (load {r['worstcase_numpy_load']:.1f})",
            g(r[f"envelope_{n}_poses_per_cpu_s"] / r["worstcase_numpy_poses_per_cpu_s"]) + " (CPU)",
-           "1e7 poses/s wall on 2 idle cores = 5e6 per CPU-second")
+           "%s (%d flops a pose at the float64 matmul rate); target 1e7 wall"
+           % (g(r["envelope_limit_poses_per_s"]), ENVELOPE_FLOPS_PER_POSE))
           for n in (11, 101, 1001, 2001) if f"envelope_{n}_poses_per_s" in r],
         ("Exact envelope, fused kernel, 1001x1001, budget with [effects] (backlash, scale, thermal: 16 corners; "
          "per CPU-second)", g(r["envelope_1001_effects_poses_per_cpu_s"]), "the same without effects (8 corners)",
@@ -178,13 +204,10 @@ def table(r: dict) -> str:
         ("J_q, 201x201 (poses/s)", g(r["sensitivity_poses_per_s"]), "per-pose loop",
          g(r["sensitivity_poses_per_s"] / r["sensitivity_speedup_vs_loop"]), g(r["sensitivity_speedup_vs_loop"]), "-"),
     ]
-    for k in sorted(r):
-        if k.endswith("_peak_gb"):
-            n = k.split("_")[2]
-            rows.append((f"Monte Carlo, one pose x {n} samples: peak memory (GB)", g(r[k]), "-", "-", "-", "-"))
     lines = ["| figure | prp3mc | alternative | alternative's figure | ratio | limit |", "|---|---|---|---|---|---|"]
     lines += ["| " + " | ".join(row) + " |" for row in rows]
-    lines.append(f"\n1-minute load average during the run: {r['load_average_1min']:.1f} (2 cores)")
+    lines.append(f"\n1-minute load average at the end of the Monte Carlo part: {r['load_average_1min']:.1f} (2 cores); "
+                 f"a whole call of the envelope on 11x11 poses: {r['envelope_call_us']:.0f} us")
     if "discrepancy_cli_wall_s_best" in r:
         lines.append("\n" + speed_table(r))
     extra = {k: v for k, v in r.items() if k.startswith(("sobol", "salib")) and not k.startswith("sobol_pose")}

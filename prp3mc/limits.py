@@ -31,13 +31,15 @@ MEMORY_MARGIN = 0.8
 
 # Monte Carlo streams its samples in blocks of 65536 (prp3mc.uncertainty._stream): what still grows
 # with n is the float32 pilot (n / 1024 samples of f features), the per-segment feature sums
-# (S1, S2: f + f^2 float64 per block) and, per pose, one position sum per block; the order
-# statistics of a chunk of poses take at most _MC_CHUNK_BYTES, plus the blocks in flight.
+# (S1, S2: f + f^2 float64 per block) and, per pose, one position sum per segment (a block or one
+# of the 64 batches) besides the pose's model and results; the order statistics of a chunk of
+# poses take at most _MC_CHUNK_BYTES, plus the blocks in flight.
 _MC_BYTES_PER_SAMPLE = lambda d, f: 4 * f / 1024 + 8 * f * (f + 1) / 65536  # noqa: E731
 _MC_BYTES_PER_SAMPLE_POSE = 8 / 65536
+_MC_BYTES_PER_POSE = lambda f: 8 * 64 + 1000 + 40 * f  # noqa: E731
 _MC_CHUNK_BYTES = 256 << 20
-_MC_SECONDS_PER_SAMPLE = 2.5e-6         # blocks, features, moments (measured: 6.4e7 samples, 167 s)
-_MC_SECONDS_PER_SAMPLE_POSE = 1e-6      # streamed order statistics per pose (measured: 4e6 x 21 poses, 104 s)
+_MC_SECONDS_PER_SAMPLE = 1e-7          # sampling, features, moments (measured: 1e9 samples at one pose, 90 s loaded)
+_MC_SECONDS_PER_SAMPLE_POSE = 1e-8      # streamed order statistics per pose (measured: 441 poses x 2^20, 2.4-3.1 s)
 # Sobol: the design and its features for (K + 2) N model runs, SALib's bootstrap index
 # arrays (N x R, about ten of them alive), and per pose in flight the outputs of every run.
 _SOBOL_BOOTSTRAP_BYTES = 80
@@ -164,7 +166,7 @@ def montecarlo_estimate(n_samples: int, n_poses: int, n_inputs: int, workers: in
     workers = workers or os.cpu_count() or 1
     return Estimate(f"Monte Carlo of {n_samples} samples at {n_poses} pose(s)",
                     n * _MC_BYTES_PER_SAMPLE(d, d) + n * n_poses * _MC_BYTES_PER_SAMPLE_POSE
-                    + _MC_CHUNK_BYTES + workers * 16 * d * 65536,
+                    + n_poses * _MC_BYTES_PER_POSE(d) + _MC_CHUNK_BYTES + workers * 16 * d * 65536,
                     n * _MC_SECONDS_PER_SAMPLE + n * n_poses * _MC_SECONDS_PER_SAMPLE_POSE)
 
 

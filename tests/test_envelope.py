@@ -5,6 +5,7 @@ import pytest
 
 from prp3mc import Budget, Normal, Uniform, feasible, worst_case
 from prp3mc.errors import InfeasiblePoseError
+from prp3mc.uncertainty import _envelope
 from prp3mc.uncertainty.worstcase import QUANTITIES, worst_case_maxima
 
 from .conftest import random_poses
@@ -37,8 +38,10 @@ def test_kernel_equals_numpy_path(geometry, region, name, theta):
     np.testing.assert_array_equal(mx.input_bounds, wc.input_bounds)
 
 
-def test_threaded_grid_equals_numpy_path(geometry, region):
-    """A grid large enough for the threaded blocks, with the shape kept."""
+def test_threaded_grid_equals_numpy_path(geometry, region, monkeypatch):
+    """A grid in chunks on threads (made small here, ragged at the end), with the shape kept."""
+    monkeypatch.setattr(_envelope, "THREADS_FROM", 1000)
+    monkeypatch.setattr(_envelope, "CHUNK", 777)
     grid = region.grid(131)
     wc, mx = worst_case(geometry, PAPER, grid), worst_case_maxima(geometry, PAPER, grid)
     assert mx.position_mm.shape == grid.shape[:-1]

@@ -119,9 +119,8 @@ def as_poses(poses: "np.typing.ArrayLike") -> np.ndarray:
     arr = np.asarray(poses, dtype=float)
     if arr.ndim == 0 or arr.shape[-1] != 3:
         raise InfeasiblePoseError(f"poses must have shape (..., 3) as [x_mm, y_mm, phi_deg], got {arr.shape}")
-    bad = ~np.all(np.isfinite(arr), axis=-1)
-    if np.any(bad):
-        idx = tuple(int(v) for v in np.argwhere(bad)[0])
+    if not np.isfinite(arr).all():  # (one flat pass; the pose's index only when there is one)
+        idx = tuple(int(v) for v in np.argwhere(~np.all(np.isfinite(arr), axis=-1))[0])
         raise InfeasiblePoseError(f"pose {_where(idx)}contains NaN or infinity: {arr[idx].tolist()}")
     return arr
 

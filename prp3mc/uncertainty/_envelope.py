@@ -3,12 +3,14 @@
 Per pose it evaluates what :func:`~prp3mc.uncertainty.worstcase.worst_case`
 computes through the numpy frame (:func:`~prp3mc.kinematics.chain.frame`,
 :func:`~prp3mc.kinematics.sensitivity.h_entries`, the term intervals and the
-8-corner maxima), in scalars: the trigonometry of the chain from cos and sin
-of phi alone (the per-leg angles enter as constants), the inverse kinematics,
-A and A^-1 by cofactors, the feasibility tests of
+corner maxima), with the same arithmetic: the trigonometry of the chain
+from cos and sin of phi alone (the per-leg angles enter as constants), the
+inverse kinematics, A and A^-1 by cofactors, the feasibility tests of
 :func:`~prp3mc.kinematics.chain.validated_frame`, the h entries of the
-budget's terms, the clearance intervals and the zonotope maxima. Poses are
-spread over threads (``prange``); memory is the outputs only.
+budget's terms, the clearance intervals and the zonotope maxima. Poses go
+through in blocks of :data:`BLOCK`, each step a loop over the block's poses
+(it vectorises); larger batches go in chunks to a pool of threads.
+Memory is the outputs only (42 bytes a pose) plus a few scratch rows per thread.
 
 A budget's effects are terms too: known shifts are terms of zero width, a
 backlash a term of its leg, a lead scale and thermal expansion are multiplied
@@ -18,10 +20,13 @@ once, so it adds a shared generator to the zonotope (16 corners).
 
 from __future__ import annotations
 
+import functools
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-from numba import njit, prange
+from numba import literal_unroll, njit
 
 from ..kinematics.geometry import Geometry
 from ..kinematics.sensitivity import FAMILIES, LENGTH_FAMILIES
@@ -29,7 +34,8 @@ from ..units import DEG2RAD
 from .budget import Budget, parse_input
 from .systematic import EFFECT_NAMES, T_REF_C
 
-__all__ = ["REASONS", "leg_constants", "term_table", "envelope_kernel", "zonotope_max"]
+__all__ = ["REASONS", "leg_constants", "term_table", "kernel_tables", "envelope_kernel", "zonotope_maxima",
+           "zonotope_scratch", "generator_signs"]
 
 #: Refusal reasons in the order :func:`~prp3mc.kinematics.chain.validated_frame` tests them;
 #: bit ``3 * reason + leg`` of the kernel's ``bad`` word.
@@ -48,6 +54,19 @@ def leg_constants(geometry: Geometry) -> np.ndarray:
                      np.cos(tl), np.sin(tl), np.cos(ps), np.sin(ps),
                      *(geometry.rad(k) for k in ("a", "c", "e"))] + [geometry.stroke_mm[:, 0],
                                                                       geometry.stroke_mm[:, 1]])
+
+
+@functools.lru_cache(maxsize=16)
+def kernel_tables(geometry: Geometry, budget: Budget, k_sigma: float | None) -> tuple:
+    """``(bounds, legc, family, leg, unit, mode, box)``: the budget's bounds and the kernel's tables, read-only.
+
+    Kept for the last few (geometry, budget, k_sigma), so that a small batch does not pay for them again.
+    """
+    bounds = budget.bounds(k_sigma)
+    out = (bounds, leg_constants(geometry), *term_table(budget, bounds))
+    for a in out:
+        a.flags.writeable = False
+    return out
 
 
 def term_table(budget: Budget, bounds: np.ndarray):
@@ -95,56 +114,109 @@ def term_table(budget: Budget, bounds: np.ndarray):
             np.array(mode, dtype=np.int64), np.array(box, dtype=float).reshape(-1, 4))
 
 
-@njit(inline="always")
-def zonotope_max(a, u_mid, u_half, ext, values, signs, n):
-    """Maxima over one pose's zonotope into ``values[:, n]`` and ``signs[:, n, :]``.
+@njit(cache=True)
+def zonotope_scratch(n_gen, size):
+    """Scratch arrays of :func:`zonotope_maxima` for ``n_gen`` generators and ``size`` poses."""
+    return (np.empty(size), np.empty(size), np.empty(size), np.empty(size, np.int64), np.empty((n_gen - 3, size)),
+            np.empty((n_gen - 3, size)))
 
-    a : (3, 3) A^-1; u_mid, u_half : (3,) centre and half-width of u along
-    the legs' axes; ext : (G, 3) further generators of u (terms of all legs).
-    values : (4, N) position mm, |dphi| rad, |dx| mm, |dy| mm.
-    signs : (4, N, 3 + G) sign of each leg's u_i, then of each further
-    generator, at the maximum. The 2^(3 + G) corners are visited in the order
-    s1, s2, s3, then the further generators, in (-1, +1), the first of equal maxima kept.
+
+@njit(inline="always")
+def _leg_corner(cx, cy, gens, k):
+    """Corner k (bits 2, 1, 0: legs 1, 2, 3 at +1) about the point (cx, cy), the legs' generators added in order."""
+    vx = cx + gens[0] if k & 4 else cx - gens[0]
+    vy = cy + gens[1] if k & 4 else cy - gens[1]
+    vx = vx + gens[2] if k & 2 else vx - gens[2]
+    vy = vy + gens[3] if k & 2 else vy - gens[3]
+    vx = vx + gens[4] if k & 1 else vx - gens[4]
+    vy = vy + gens[5] if k & 1 else vy - gens[5]
+    return vx, vy
+
+
+@njit(cache=True, error_model="numpy")
+def zonotope_maxima(Ai, um, uh, ext, values, codes, first, m, scratch):
+    """Maxima over the zonotopes of ``m`` poses into ``values`` and ``codes`` from column ``first`` on.
+
+    Ai : (3, 3, >= m) A^-1 of each pose (last axis the pose); um, uh : (3, >= m) centre
+    and half-width of u along the legs' axes; ext : (G, 3, >= m) further generators of u
+    (terms of all legs). values : (4, N) position mm, |dphi| rad, |dx| mm, |dy| mm.
+    codes : (4, N) int16, the end of each generator at the maximum as bits: with the
+    3 + G generators in the order legs 1-3, then ``ext``, bit 2 + G - k is set when
+    generator k is at +1 (:func:`generator_signs` unpacks them). A corner is the centre
+    moved by the further generators, then by the legs'; of equal maxima the smallest
+    code is kept. Every step is a loop over the poses (they vectorise). ``scratch`` :
+    :func:`zonotope_scratch` for 3 + G generators.
     """
+    sx, sy, best, arg, ex, ey = scratch
     G = ext.shape[0]
-    m = 3 + G
-    c0 = a[0, 0] * u_mid[0] + a[0, 1] * u_mid[1] + a[0, 2] * u_mid[2]
-    c1 = a[1, 0] * u_mid[0] + a[1, 1] * u_mid[1] + a[1, 2] * u_mid[2]
-    best, arg = -1.0, 0
-    for k in range(1 << m):
-        vx, vy = c0, c1
-        for i in range(3):
-            gx, gy = a[0, i] * u_half[i], a[1, i] * u_half[i]
-            if (k >> (m - 1 - i)) & 1:
-                vx, vy = vx + gx, vy + gy
-            else:
-                vx, vy = vx - gx, vy - gy
+    n_gen = 3 + G
+    for g in range(G):
+        for j in range(m):
+            ex[g, j] = Ai[0, 0, j] * ext[g, 0, j] + Ai[0, 1, j] * ext[g, 1, j] + Ai[0, 2, j] * ext[g, 2, j]
+            ey[g, j] = Ai[1, 0, j] * ext[g, 0, j] + Ai[1, 1, j] * ext[g, 1, j] + Ai[1, 2, j] * ext[g, 2, j]
+    for j in range(m):
+        best[j], arg[j] = -1.0, 0
+    for e in range(1 << G):  # the further generators' ends: the centre they move the leg corners about
+        for j in range(m):
+            sx[j] = Ai[0, 0, j] * um[0, j] + Ai[0, 1, j] * um[1, j] + Ai[0, 2, j] * um[2, j]
+            sy[j] = Ai[1, 0, j] * um[0, j] + Ai[1, 1, j] * um[1, j] + Ai[1, 2, j] * um[2, j]
         for g in range(G):
-            gx = a[0, 0] * ext[g, 0] + a[0, 1] * ext[g, 1] + a[0, 2] * ext[g, 2]
-            gy = a[1, 0] * ext[g, 0] + a[1, 1] * ext[g, 1] + a[1, 2] * ext[g, 2]
-            if (k >> (G - 1 - g)) & 1:
-                vx, vy = vx + gx, vy + gy
+            exg, eyg = ex[g], ey[g]
+            if (e >> (G - 1 - g)) & 1:
+                for j in range(m):
+                    sx[j], sy[j] = sx[j] + exg[j], sy[j] + eyg[j]
             else:
-                vx, vy = vx - gx, vy - gy
-        q = vx * vx + vy * vy
-        if q > best:
-            best, arg = q, k
-    values[0, n] = np.sqrt(best)
-    for i in range(m):
-        signs[0, n, i] = 1 if (arg >> (m - 1 - i)) & 1 else -1
-    for j, r in ((1, 2), (2, 0), (3, 1)):
-        c = a[r, 0] * u_mid[0] + a[r, 1] * u_mid[1] + a[r, 2] * u_mid[2]
-        sc = 1 if c >= 0 else -1
-        total = abs(c)
-        for i in range(3):
-            g = a[r, i] * u_half[i]
-            total += abs(g)
-            signs[j, n, i] = sc * (1 if g >= 0 else -1)
+                for j in range(m):
+                    sx[j], sy[j] = sx[j] - exg[j], sy[j] - eyg[j]
+        for j in range(m):
+            gens = (Ai[0, 0, j] * uh[0, j], Ai[1, 0, j] * uh[0, j], Ai[0, 1, j] * uh[1, j], Ai[1, 1, j] * uh[1, j],
+                    Ai[0, 2, j] * uh[2, j], Ai[1, 2, j] * uh[2, j])
+            top, at = best[j], arg[j]
+            for k in range(8):
+                vx, vy = _leg_corner(sx[j], sy[j], gens, k)
+                q = vx * vx + vy * vy
+                code = (k << G) | e
+                better = (q > top) | ((q == top) & (code < at))
+                at = code if better else at
+                top = q if better else top
+            best[j], arg[j] = top, at
+    for j in range(m):
+        values[0, first + j] = np.sqrt(best[j])
+        codes[0, first + j] = arg[j]
+    for o, r in ((1, 2), (2, 0), (3, 1)):  # |dphi|, |dx|, |dy|: every generator at its sign
+        for j in range(m):
+            c = Ai[r, 0, j] * um[0, j] + Ai[r, 1, j] * um[1, j] + Ai[r, 2, j] * um[2, j]
+            g0, g1, g2 = Ai[r, 0, j] * uh[0, j], Ai[r, 1, j] * uh[1, j], Ai[r, 2, j] * uh[2, j]
+            up = c >= 0
+            best[j] = c
+            sx[j] = ((abs(c) + abs(g0)) + abs(g1)) + abs(g2)
+            arg[j] = ((np.int64(up == (g0 >= 0)) << (n_gen - 1)) | (np.int64(up == (g1 >= 0)) << (n_gen - 2))
+                      | (np.int64(up == (g2 >= 0)) << (n_gen - 3)))
         for e in range(G):
-            g = a[r, 0] * ext[e, 0] + a[r, 1] * ext[e, 1] + a[r, 2] * ext[e, 2]
-            total += abs(g)
-            signs[j, n, 3 + e] = sc * (1 if g >= 0 else -1)
-        values[j, n] = total
+            for j in range(m):
+                g = Ai[r, 0, j] * ext[e, 0, j] + Ai[r, 1, j] * ext[e, 1, j] + Ai[r, 2, j] * ext[e, 2, j]
+                sx[j] += abs(g)
+                arg[j] |= np.int64((best[j] >= 0) == (g >= 0)) << (G - 1 - e)
+        for j in range(m):
+            values[o, first + j] = sx[j]
+            codes[o, first + j] = arg[j]
+
+
+def generator_signs(codes: np.ndarray, n_gen: int) -> np.ndarray:
+    """The ends (-1, +1) of each generator, int8 of shape ``codes.shape + (n_gen,)``, from
+    :func:`zonotope_maxima`'s codes (legs 1-3, then the terms of all legs)."""
+    out = np.empty(codes.shape + (n_gen,), dtype=np.int8)
+    _unpack(np.ascontiguousarray(codes).reshape(-1), out.reshape(-1, n_gen))
+    return out
+
+
+@njit(nogil=True, cache=True)
+def _unpack(codes, out):
+    n_gen = out.shape[1]
+    for n in range(codes.size):
+        c = codes[n]
+        for k in range(n_gen):
+            out[n, k] = ((c >> (n_gen - 1 - k)) & 1) * 2 - 1
 
 
 @njit(inline="always", error_model="numpy")
@@ -158,133 +230,162 @@ def _cos_range(lo, hi):
     return math.cos(arg_min), math.cos(arg_max)
 
 
-#: Poses per block of the threaded kernel (scratch arrays are allocated once per block).
-BLOCK = 1024
+#: Poses per block: the block's scratch rows (about 70 x BLOCK float64) stay in cache and every
+#: step is a loop over the block's poses, which vectorises.
+BLOCK = 128
+#: Fewest poses for which threads pay (below, the calling thread runs them) and the most poses per chunk
+#: of a thread: chunks are handed to whichever thread is free, so a core busy with other work slows its
+#: share only.
+THREADS_FROM = 1 << 16
+CHUNK = 1 << 15
 
 
-def envelope_kernel(poses, legc, family, leg, unit, mode, box, limits, check, values, signs, bad):
+def envelope_kernel(poses, legc, family, leg, unit, mode, box, limits, check, values, codes, bad, workers=None):
     """Maxima of the linear model over the budget's box at every pose (compiled).
 
     poses : (N, 3) x mm, y mm, phi deg. legc : (15, 3) :func:`leg_constants`.
     family, leg, unit, mode, box : :func:`term_table`. limits : (3,) min transmission,
     max condition, stroke tolerance mm; check : test them.
-    values : (4, N) out, as :func:`zonotope_max`; signs : (4, N, 3 + G) out
-    (G: the terms of all legs).
-    bad : (N,) int64 out, bit ``3 * reason + leg`` set for each refusal (see REASONS).
-    Small batches run on the calling thread, larger ones in blocks on all cores.
+    values, codes : (4, N) out, as :func:`zonotope_maxima` (G: the terms of all legs, leg -1).
+    bad : (N,) int16 out, bit ``3 * reason + leg`` set for each refusal (see REASONS).
+    workers : threads for large batches (default: CPU count); every pose's numbers are the same.
     """
-    run = _blocks_threaded if poses.shape[0] > 16 * BLOCK else _blocks_serial   # threads pay from ~128^2
-    run(poses, legc, family, leg, unit, mode, box, limits, check, values, signs, bad)
-
-
-@njit(parallel=True, cache=True, error_model="numpy")
-def _blocks_threaded(poses, legc, family, leg, unit, mode, box, limits, check, values, signs, bad):
-    """:func:`_block` over blocks of :data:`BLOCK` poses on all cores."""
     N = poses.shape[0]
-    for k in prange((N + BLOCK - 1) // BLOCK):
-        _block(k * BLOCK, min(N, (k + 1) * BLOCK), poses, legc, family, leg, unit, mode, box, limits,
-               check, values, signs, bad)
+    args = (poses, legc, family, leg, unit, mode, box, limits, check, values, codes, bad)
+    workers = workers or os.cpu_count() or 1
+    if N < THREADS_FROM or workers == 1:
+        _range(0, N, *args)
+        return
+    chunk = min(CHUNK, -(-N // workers))
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        list(pool.map(lambda a: _range(a, min(N, a + chunk), *args), range(0, N, chunk)))
+
+
+@njit(nogil=True, cache=True, error_model="numpy")
+def _range(start, stop, poses, legc, family, leg, unit, mode, box, limits, check, values, codes, bad):
+    """The envelope at poses ``start:stop``, block by block, with scratch arrays allocated once.
+
+    Scratch arrays are flat, one row of BLOCK values per quantity at a constant offset, so
+    that the compiler sees the rows a loop reads and writes cannot overlap and vectorises it.
+    """
+    cs = np.empty(4 * BLOCK)        # cos, sin of phi; x, y
+    A = np.empty(9 * BLOCK)         # A[i, c] in row 3 i + c
+    hb = np.empty(42 * BLOCK)       # per leg i, rows 14 i + (b, d, the h entries of the ten families, cos, sin omega)
+    Ai = np.empty(9 * BLOCK)        # A^-1[r, c] in row 3 r + c
+    um, uh = np.empty((3, BLOCK)), np.empty((3, BLOCK))  # centre and half-width of u along the legs' axes
+    G = 0
+    for k in range(leg.size):
+        G += leg[k] < 0
+    ext = np.empty((G, 3, BLOCK))   # further generators of u: the terms of all legs
+    zs = zonotope_scratch(3 + G, BLOCK)
+    for b0 in range(start, stop, BLOCK):
+        _block(b0, min(stop, b0 + BLOCK), poses, legc, family, leg, unit, mode, box, limits, check, values, codes,
+               bad, cs, A, hb, Ai, um, uh, ext, zs)
 
 
 @njit(cache=True, error_model="numpy")
-def _blocks_serial(poses, legc, family, leg, unit, mode, box, limits, check, values, signs, bad):
-    """:func:`_block` over all poses on the calling thread."""
-    _block(0, poses.shape[0], poses, legc, family, leg, unit, mode, box, limits, check, values, signs, bad)
-
-
-@njit(inline="always", error_model="numpy")
-def _block(start, stop, poses, legc, family, leg, unit, mode, box, limits, check, values, signs, bad):
-    """The envelope at poses ``start:stop`` (see :func:`envelope_kernel`)."""
-    T = family.shape[0]
-    G = 0
-    for k in range(T):
-        G += leg[k] < 0
-    ext = np.empty((G, 3))
-    A = np.empty((3, 3))
-    Ai = np.empty((3, 3))
-    hb = np.empty((3, 14))          # per leg: b, d, the h entries of the ten families, cos, sin omega
-    u_mid = np.empty(3)
-    u_half = np.empty(3)
-    for n in range(start, stop):
-        phi = poses[n, 2] * (math.pi / 180.0)
-        cp, sp = math.cos(phi), math.sin(phi)
-        for i in range(3):
-            ci, si, cj, sj = legc[0, i], legc[1, i], legc[2, i], legc[3, i]
-            ck, sk = legc[4, i] * cp - legc[5, i] * sp, legc[5, i] * cp + legc[4, i] * sp
-            cl, sl = legc[6, i] * cp - legc[7, i] * sp, legc[7, i] * cp + legc[6, i] * sp
-            cm, sm = legc[8, i] * cp - legc[9, i] * sp, legc[9, i] * cp + legc[8, i] * sp
-            a, c, e = legc[10, i], legc[11, i], legc[12, i]
-            rx = poses[n, 0] - (a * ci + c * ck + e * cm)
-            ry = poses[n, 1] - (a * si + c * sk + e * sm)
+def _block(start, stop, poses, legc, family, leg, unit, mode, box, limits, check, values, codes, bad, cs, A, hb, Ai,
+           um, uh, ext, zs):
+    """The envelope at poses ``start:stop`` (at most BLOCK), one step at a time over all of them."""
+    m, B = stop - start, BLOCK
+    phi_deg, cp, sp = math.nan, 1.0, 0.0
+    for j in range(m):
+        if poses[start + j, 2] != phi_deg:  # a grid keeps phi: its cosine and sine once
+            phi_deg = poses[start + j, 2]
+            cp, sp = math.cos(phi_deg * (math.pi / 180.0)), math.sin(phi_deg * (math.pi / 180.0))
+        cs[j], cs[B + j], cs[2 * B + j], cs[3 * B + j] = cp, sp, poses[start + j, 0], poses[start + j, 1]
+    for i in literal_unroll((0, 1, 2)):  # constant offsets in every loop below
+        ci, si, cj, sj = legc[0, i], legc[1, i], legc[2, i], legc[3, i]
+        c4, c5, c6, c7, c8, c9 = legc[4, i], legc[5, i], legc[6, i], legc[7, i], legc[8, i], legc[9, i]
+        a, c, e = legc[10, i], legc[11, i], legc[12, i]
+        ra, rh = 3 * i * B, 14 * i * B
+        for j in range(m):
+            cp, sp = cs[j], cs[B + j]
+            ck, sk = c4 * cp - c5 * sp, c5 * cp + c4 * sp
+            cl, sl = c6 * cp - c7 * sp, c7 * cp + c6 * sp
+            cm, sm = c8 * cp - c9 * sp, c9 * cp + c8 * sp
+            rx = cs[2 * B + j] - (a * ci + c * ck + e * cm)
+            ry = cs[3 * B + j] - (a * si + c * sk + e * sm)
             den = cj * sl - sj * cl
             b = (rx * sl - ry * cl) / den
             d = (rx * sj - ry * cj) / -den
             lk, lm = cl * ck + sl * sk, cl * cm + sl * sm
-            A[i, 0], A[i, 1], A[i, 2] = -sl, cl, -(d + c * lk + e * lm)
-            hb[i, 0], hb[i, 1] = b, d
-            hb[i, 2] = cl * si - sl * ci                                         # a
-            hb[i, 3] = a * (cl * ci + sl * si) + b * (cl * cj + sl * sj) + c * lk + d   # alpha
-            hb[i, 4] = cl * sj - sl * cj                                         # b (transmission)
-            hb[i, 5] = b * (cl * cj + sl * sj) + c * lk + d                      # beta
-            hb[i, 6] = 1.0                                                       # rho
-            hb[i, 7] = cl * sk - sl * ck                                         # c
-            hb[i, 8] = c * lk + d                                                # gamma
-            hb[i, 9] = d                                                         # theta
-            hb[i, 10] = cl * sm - sl * cm                                        # e
-            hb[i, 11] = e * lm                                                   # psi
-            hb[i, 12], hb[i, 13] = -sl, cl
-        (p, q, r), (s, t, u), (v, w, x) = (A[0, 0], A[0, 1], A[0, 2]), (A[1, 0], A[1, 1], A[1, 2]), \
-            (A[2, 0], A[2, 1], A[2, 2])
-        Ai[0, 0], Ai[1, 0], Ai[2, 0] = t * x - u * w, u * v - s * x, s * w - t * v
-        Ai[0, 1], Ai[1, 1], Ai[2, 1] = r * w - q * x, p * x - r * v, q * v - p * w
-        Ai[0, 2], Ai[1, 2], Ai[2, 2] = q * u - r * t, r * s - p * u, p * t - q * s
-        det = p * Ai[0, 0] + q * Ai[1, 0] + r * Ai[2, 0]
-        inv_det = 1.0 / det
-        for rr in range(3):
-            for cc in range(3):
-                Ai[rr, cc] *= inv_det
-        word = 0
-        if check:
+            A[ra + j], A[ra + B + j], A[ra + 2 * B + j] = -sl, cl, -(d + c * lk + e * lm)
+            hb[rh + j], hb[rh + B + j] = b, d
+            hb[rh + 2 * B + j] = cl * si - sl * ci                                         # a
+            hb[rh + 3 * B + j] = a * (cl * ci + sl * si) + b * (cl * cj + sl * sj) + c * lk + d   # alpha
+            hb[rh + 4 * B + j] = cl * sj - sl * cj                                         # b (transmission)
+            hb[rh + 5 * B + j] = b * (cl * cj + sl * sj) + c * lk + d                      # beta
+            hb[rh + 6 * B + j] = 1.0                                                       # rho
+            hb[rh + 7 * B + j] = cl * sk - sl * ck                                         # c
+            hb[rh + 8 * B + j] = c * lk + d                                                # gamma
+            hb[rh + 9 * B + j] = d                                                         # theta
+            hb[rh + 10 * B + j] = cl * sm - sl * cm                                        # e
+            hb[rh + 11 * B + j] = e * lm                                                   # psi
+            hb[rh + 12 * B + j], hb[rh + 13 * B + j] = -sl, cl
+    for j in range(m):  # A^-1 by cofactors
+        p, q, r = A[j], A[B + j], A[2 * B + j]
+        s, t, w0 = A[3 * B + j], A[4 * B + j], A[5 * B + j]
+        v, w, x = A[6 * B + j], A[7 * B + j], A[8 * B + j]
+        a00, a10, a20 = t * x - w0 * w, w0 * v - s * x, s * w - t * v
+        a01, a11, a21 = r * w - q * x, p * x - r * v, q * v - p * w
+        a02, a12, a22 = q * w0 - r * t, r * s - p * w0, p * t - q * s
+        inv_det = 1.0 / (p * a00 + q * a10 + r * a20)
+        Ai[j], Ai[3 * B + j], Ai[6 * B + j] = a00 * inv_det, a10 * inv_det, a20 * inv_det
+        Ai[B + j], Ai[4 * B + j], Ai[7 * B + j] = a01 * inv_det, a11 * inv_det, a21 * inv_det
+        Ai[2 * B + j], Ai[5 * B + j], Ai[8 * B + j] = a02 * inv_det, a12 * inv_det, a22 * inv_det
+    if check:
+        for j in range(m):
             cond = 0.0
-            for rr in range(3):
-                col2 = A[0, rr] ** 2 + A[1, rr] ** 2 + A[2, rr] ** 2
-                cond += col2 * (Ai[rr, 0] ** 2 + Ai[rr, 1] ** 2 + Ai[rr, 2] ** 2)
+            for rr in literal_unroll((0, 1, 2)):
+                col2 = A[rr * B + j] ** 2 + A[(3 + rr) * B + j] ** 2 + A[(6 + rr) * B + j] ** 2
+                cond += col2 * (Ai[3 * rr * B + j] ** 2 + Ai[(3 * rr + 1) * B + j] ** 2 + Ai[(3 * rr + 2) * B + j] ** 2)
             cond = math.sqrt(3.0 * cond)
-            for i in range(3):
-                b, d = hb[i, 0], hb[i, 1]
-                if b < legc[13, i] - limits[2]:
-                    word |= 1 << i
-                if b > legc[14, i] + limits[2]:
-                    word |= 1 << (3 + i)
-                if not d > 0:
-                    word |= 1 << (6 + i)
-                if not abs(hb[i, 4]) >= limits[0]:
-                    word |= 1 << (9 + i)
-                if not cond <= limits[1]:
-                    word |= 1 << (12 + i)
-        bad[n] = word
-        u_mid[:] = 0.0
-        u_half[:] = 0.0
-        g = 0
-        for k in range(T):
-            i = leg[k]
-            lo, hi = box[k, 0], box[k, 1]
-            if i < 0:           # a term of every leg: a further generator
-                for j in range(3):
-                    w = hb[j, 2 + family[k]] * unit[k] * (hb[j, 0] if mode[k] else 1.0)
-                    u_mid[j] += w * (0.5 * (lo + hi))
-                    ext[g, j] = w * (0.5 * (hi - lo))
-                g += 1
-                continue
-            scale = hb[i, 2 + family[k]] * unit[k] * (hb[i, 0] if mode[k] else 1.0)
-            if family[k] == _RHO:
-                if box[k, 3] == math.inf:
-                    lo, hi = -box[k, 1], box[k, 1]
-                else:
-                    omega = math.atan2(hb[i, 13], hb[i, 12])
-                    cmin, cmax = _cos_range(box[k, 2] - omega, box[k, 3] - omega)
-                    lo = (box[k, 1] if cmin <= 0 else box[k, 0]) * cmin
-                    hi = (box[k, 1] if cmax >= 0 else box[k, 0]) * cmax
-            u_mid[i] += scale * (0.5 * (lo + hi))
-            u_half[i] += abs(scale) * (0.5 * (hi - lo))
-        zonotope_max(Ai, u_mid, u_half, ext, values, signs, n)
+            word = 0
+            for i in literal_unroll((0, 1, 2)):
+                b, d = hb[14 * i * B + j], hb[(14 * i + 1) * B + j]
+                word |= (b < legc[13, i] - limits[2]) << i
+                word |= (b > legc[14, i] + limits[2]) << (3 + i)
+                word |= (not d > 0) << (6 + i)
+                word |= (not abs(hb[(14 * i + 4) * B + j]) >= limits[0]) << (9 + i)
+                word |= (not cond <= limits[1]) << (12 + i)
+            bad[start + j] = word
+    else:
+        bad[start:stop] = 0
+    um[:] = 0.0
+    uh[:] = 0.0
+    g = 0
+    for k in range(family.shape[0]):
+        i, fam, un, by_b = leg[k], family[k], unit[k], mode[k]
+        lo, hi = box[k, 0], box[k, 1]
+        if i < 0:  # a term of every leg: a further generator, w_l = h_l unit (b_l) on leg l
+            mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+            for l in range(3):
+                hf, bl = hb[(14 * l + 2 + fam) * B:(14 * l + 3 + fam) * B], hb[14 * l * B:(14 * l + 1) * B]
+                mid_l, gen = um[l, :m], ext[g, l, :m]
+                for j in range(m):
+                    w = hf[j] * un * (bl[j] if by_b else 1.0)
+                    mid_l[j] += w * mid
+                    gen[j] = w * half
+            g += 1
+            continue
+        mid_i, half_i = um[i, :m], uh[i, :m]
+        hf, bi = hb[(14 * i + 2 + fam) * B:(14 * i + 3 + fam) * B], hb[14 * i * B:(14 * i + 1) * B]
+        if fam == _RHO and box[k, 3] != math.inf:  # part of a circle: the interval depends on omega
+            for j in range(m):
+                omega = math.atan2(hb[(14 * i + 13) * B + j], hb[(14 * i + 12) * B + j])
+                cmin, cmax = _cos_range(box[k, 2] - omega, box[k, 3] - omega)
+                lo = (box[k, 1] if cmin <= 0 else box[k, 0]) * cmin
+                hi = (box[k, 1] if cmax >= 0 else box[k, 0]) * cmax
+                scale = hf[j] * un * (bi[j] if by_b else 1.0)
+                mid_i[j] += scale * (0.5 * (lo + hi))
+                half_i[j] += abs(scale) * (0.5 * (hi - lo))
+            continue
+        if fam == _RHO:
+            lo, hi = -box[k, 1], box[k, 1]
+        mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+        for j in range(m):
+            scale = hf[j] * un * (bi[j] if by_b else 1.0)
+            mid_i[j] += scale * mid
+            half_i[j] += abs(scale) * half
+    zonotope_maxima(Ai.reshape((3, 3, B)), um, uh, ext, values, codes, start, m, zs)

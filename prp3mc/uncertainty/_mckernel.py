@@ -1,25 +1,34 @@
 """Compiled kernels of the streamed Monte Carlo (numba, cached on disk).
 
-One call of :func:`scan_block` evaluates the position-error norm and |dphi|
-of every pose of a chunk on one block of samples (float32, in cache-sized
-tiles) and folds them into the streaming summaries: per-segment sums of the
-norm, exceedance counts, maxima, and, for each selection window
-``[lo, hi)``, the count below it, the values inside it (up to a capacity)
-and a histogram of the values beyond the capacity over the window's sub-bin edges. Kernels
-release the GIL so that sample blocks run in parallel threads.
+One call of :func:`scan_blocks` is one pass of one thread over a range of
+sample blocks for a chunk of poses, tile by tile (:data:`TILE` samples, so a
+tile stays in cache while every pose reads it). A tile's features are drawn
+in place (:func:`~prp3mc.uncertainty._sampler.draw_features`) or copied from
+features the caller sampled through numpy. On the first pass their sums per
+segment (about the exact mean) are added up. Then every pose's
+position-error norm and |dphi| are evaluated in float32 and folded into the
+streaming summaries: per-segment sums of the norm, exceedance counts,
+maxima, and, for each selection window ``[lo, hi)``, the count below it, the
+values inside it (up to a capacity) and a histogram over the window's
+sub-bin edges of the values beyond the capacity. Kernels release the GIL so
+that ranges of blocks run in parallel threads.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from numba.cpython.unsafe.numbers import trailing_zeros
 
-__all__ = ["pose_values", "scan_block", "feature_key", "SUB_BINS", "TILE"]
+from ._sampler import draw_features
+from .budget import SAMPLE_BLOCK
+
+__all__ = ["pose_values", "scan_blocks", "feature_key", "SUB_BINS", "TILE"]
 
 #: Sub-bins of a selection window, to narrow it when its values overflow the buffer.
 SUB_BINS = 64
 #: Samples per tile: a tile of features (F x TILE float32) stays in L2 while every pose reads it.
-TILE = 4096
+TILE = 2048
 
 
 @njit(nogil=True, cache=True, fastmath=True)
@@ -51,72 +60,180 @@ def feature_key(n_features: int) -> tuple:
 
 
 @njit(nogil=True, cache=True, fastmath=True)
-def _sum64(v, a, b):
-    """Sum of v[a:b] in float64 (vectorised; the order is fixed by the compiled code)."""
+def _sum64(v):
+    """Sum of v in float64 (vectorised; the order is fixed by the compiled code)."""
     acc = 0.0
-    for s in range(a, b):
+    for s in range(v.size):
         acc += np.float64(v[s])
     return acc
 
 
-@njit(nogil=True, cache=True, fastmath=True)
+@njit(nogil=True, cache=True)
 def _max32(v):
-    m = np.float32(0.0)
-    for s in range(v.size):
-        x = v[s]
-        m = x if x > m else m
-    return m
+    """Largest of the float32 values v >= 0 (compared as integers, which vectorises)."""
+    bits = v.view(np.int32)
+    top = np.int32(0)
+    for s in range(bits.size):
+        x = bits[s]
+        top = x if x > top else top
+    return np.int32(top)
 
 
 @njit(nogil=True, cache=True)
-def _mark_windows(v, lo, hi, nw, below, wid):
-    """Count the values below each window; ``wid``: the window holding each value, or -1.
-
-    Windows are disjoint, so a value lies in one window at most.
-    """
-    wid[:v.size] = -1
-    for w in range(nw):
-        a, h = lo[w], hi[w]
-        k = 0
-        for s in range(v.size):
-            x = v[s]
-            k += x < a
-            wid[s] = w if (x >= a) & (x < h) else wid[s]
-        below[w] += k
-
-
-@njit(nogil=True, cache=True)
-def _count_above(v, t):
+def _count_above(v, m, t):
     k = 0
-    for s in range(v.size):
+    for s in range(m):
         k += v[s] > t
     return k
 
 
+#: Samples per chunk of the feature sums: the chunk's centred features (F x 256 float64) stay in L1.
+_SUM_CHUNK = 256
+
+
+@njit(nogil=True, cache=True, fastmath=True)
+def _pair_sums(x0, x1, y0, y1):
+    """Sums of x0 y0, x0 y1, x1 y0, x1 y1 (four dot products sharing their loads)."""
+    a00 = a01 = a10 = a11 = 0.0
+    for s in range(x0.size):
+        u0, u1, v0, v1 = x0[s], x1[s], y0[s], y1[s]
+        a00 += u0 * v0
+        a01 += u0 * v1
+        a10 += u1 * v0
+        a11 += u1 * v1
+    return a00, a01, a10, a11
+
+
 @njit(nogil=True, cache=True)
-def scan_block(FT, b, C, nf, seg_lo, seg_hi, tol, main, lo, hi, nwin, edges, off, cap,
-               below, inside, sub, buf, vmax, possum, exceed):
-    """Fold one block of samples into the summaries of a chunk of poses.
+def _moment_sums(F, nF, m, first, shift, seg_start, seg_stop, s0, s1, S1, S2):
+    """Add the tile's centred feature sums to the segments it meets.
+
+    F : (nF rounded up to even, T) float64 features of samples ``first`` to
+    ``first + m``, centred in place (a padding row is zero); segments ``s0:s1``
+    of ``seg_start``/``seg_stop`` (global sample bounds); S1 (S, nF), S2 (S, nF, nF).
+    Products are summed in chunks of :data:`_SUM_CHUNK` samples, read from L1,
+    two rows by two rows.
+    """
+    for f in range(nF):
+        row, c = F[f, :m], shift[f]
+        for s in range(m):
+            row[s] -= c
+    for j in range(s0, s1):
+        a, z = max(seg_start[j], first) - first, min(seg_stop[j], first + m) - first
+        for c0 in range(a, z, _SUM_CHUNK):
+            c1 = min(z, c0 + _SUM_CHUNK)
+            for f in range(nF):
+                S1[j, f] += _sum64(F[f, c0:c1])
+            for f in range(0, nF, 2):
+                for g in range(f, nF, 2):
+                    a00, a01, a10, a11 = _pair_sums(F[f, c0:c1], F[f + 1, c0:c1], F[g, c0:c1], F[g + 1, c0:c1])
+                    S2[j, f, g] += a00
+                    if g + 1 < nF:
+                        S2[j, f, g + 1] += a01
+                    if f + 1 < nF:
+                        S2[j, f + 1, g] += a10
+                        if g + 1 < nF:
+                            S2[j, f + 1, g + 1] += a11
+        for f in range(nF):
+            for g in range(f):
+                S2[j, f, g] = S2[j, g, f]
+
+
+@njit(nogil=True, cache=True)
+def _windows(v, m, p, o, lo, hi, nwin, edges, off, cap, below, inside, sub, buf, flag):
+    """Fold the values v[:m] of pose p, output o into its selection windows (disjoint, by increasing lo).
+
+    ``flag[s]`` becomes 1 + the window holding v[s], or 0; the flagged values
+    are then visited eight flags (one 64-bit word) at a time.
+    """
+    nw = nwin[p, o]
+    if nw == 0:
+        return
+    for w in range(nw):
+        a, h = lo[p, o, w], hi[p, o, w]
+        k = 0
+        tag = np.uint8(w + 1)
+        if w == 0:
+            for s in range(m):
+                x = v[s]
+                k += x < a
+                flag[s] = tag if (x >= a) & (x < h) else np.uint8(0)
+        else:
+            for s in range(m):
+                x = v[s]
+                k += x < a
+                flag[s] = tag if (x >= a) & (x < h) else flag[s]
+        below[p, o, w] += k
+    flag[m:] = 0
+    words = flag.view(np.uint64)
+    for q in range((m + 7) // 8):
+        word = words[q]
+        while word:  # the set bytes of the word, lowest first
+            s = 8 * q + (trailing_zeros(word) >> 3)
+            word &= ~(np.uint64(0xFF) << np.uint64(8 * (s - 8 * q)))
+            w = flag[s] - 1
+            x = v[s]
+            n_in = inside[p, o, w]
+            if n_in < cap[p, o, w]:
+                buf[off[p, o, w] + n_in] = x
+            else:  # overflow: histogram it (the kept values are histogrammed afterwards)
+                sub[p, o, w, np.searchsorted(edges[p, o, w], x, side="right") - 1] += 1
+            inside[p, o, w] = n_in + 1
+
+
+@njit(nogil=True, cache=True)
+def _scan_tile(FT, m, first, C, nf, seg_start, seg_stop, s0, s1, tol, main, lo, hi, nwin, edges, off, cap,
+               below, inside, sub, buf, vmax, possum, exceed, pos_t, phi_t, flag):
+    """Fold one tile (features FT[:, :m] of samples ``first`` to ``first + m``) into every pose's summaries."""
+    for p in range(C.shape[0]):
+        if not main and nwin[p, 0] == 0 and nwin[p, 1] == 0:
+            continue
+        pos, phi = pos_t[:m], phi_t[:m]
+        pose_values(FT, C[p], pos, phi, nf)
+        if main:
+            for j in range(s0, s1):
+                a, z = max(seg_start[j], first) - first, min(seg_stop[j], first + m) - first
+                if a < z:
+                    possum[p, j] += _sum64(pos[a:z])
+            if tol >= 0:
+                exceed[p] += _count_above(pos, m, tol)
+            vmax_bits = vmax[p].view(np.int32)
+            vmax_bits[0] = max(vmax_bits[0], _max32(pos))
+            vmax_bits[1] = max(vmax_bits[1], _max32(phi))
+        _windows(pos_t, m, p, 0, lo, hi, nwin, edges, off, cap, below, inside, sub, buf, flag)
+        _windows(phi_t, m, p, 1, lo, hi, nwin, edges, off, cap, below, inside, sub, buf, flag)
+
+
+@njit(nogil=True, cache=True)
+def scan_blocks(k0, k1, n, lanes, consts, codes, params, cdf, values, ops, refs, Fext, C, nf, shift, block_segs,
+                seg_start, seg_stop, sums, S1, S2, tol, main, lo, hi, nwin, edges, off, cap,
+                below, inside, sub, buf, vmax, possum, exceed):
+    """Fold sample blocks ``k0:k1`` into the summaries of a chunk of poses (one pass of one thread).
 
     Parameters
     ----------
-    FT : (nt, F, T) float32
-        Features of the block's samples in tiles of T samples (the last one
-        padded), so that a tile stays in cache while every pose reads it.
-    b : int
-        Samples in the block.
+    k0, k1, n : int
+        Blocks (of SAMPLE_BLOCK samples) and the run's sample count.
+    lanes, consts, codes, params, cdf, values, ops, refs
+        The compiled sampler (:mod:`._sampler`): lane states at sample ``k0 * SAMPLE_BLOCK`` (updated).
+    Fext : (b, F) float64
+        Features of block k0 sampled by the caller (then k1 = k0 + 1), or an empty array: draw them.
     C : (P, 3, F) float32
         Feature coefficients of the chunk's poses.
     nf : tuple
         :func:`feature_key` of F.
-    seg_lo, seg_hi : (S,) int64
-        Segments of the block (sample bounds within the block) for the sums.
+    shift : (F,) float64
+        Exact feature means: the sums are about them.
+    block_segs, seg_start, seg_stop : int64
+        Segments of block k: ``block_segs[k]:block_segs[k + 1]``, with global sample bounds.
+    sums : bool
+        Add the feature sums S1 (S, F) and S2 (S, F, F) per segment.
     tol : float32
         Exceedance threshold of the norm (mm); negative: not counted.
     main : bool
-        First pass: also sums, exceedances and maxima.
+        First pass: also sums of the norm, exceedances and maxima.
     lo, hi : (P, 2, W) float32
-        Disjoint selection windows per pose and output (0 norm, 1 |dphi|), W < 128.
+        Disjoint selection windows per pose and output (0 norm, 1 |dphi|), by increasing lo.
     nwin : (P, 2) int64
         Windows in use per pose and output.
     edges : (P, 2, W, SUB_BINS + 1) float32
@@ -133,38 +250,29 @@ def scan_block(FT, b, C, nf, seg_lo, seg_hi, tol, main, lo, hi, nwin, edges, off
     possum : (P, S) float64, accumulated when ``main``
     exceed : (P,) int64, accumulated when ``main``
     """
-    P, nt, T = C.shape[0], FT.shape[0], FT.shape[2]
+    nF, T = C.shape[2], TILE
+    fused = Fext.shape[0] == 0
+    d = codes.size
+    U, X = np.empty((d, T)), np.empty((d, T))
+    F, FT = np.zeros((nF + nF % 2, T)), np.empty((nF, T), np.float32)
     pos_t, phi_t = np.empty(T, np.float32), np.empty(T, np.float32)
-    wid = np.empty(T, np.int8)
-    idx = np.empty(T, np.int32)
-    for t in range(nt):
-        t0 = t * T
-        m = min(T, b - t0)
-        for p in range(P):
-            pos, phi = pos_t[:m], phi_t[:m]
-            pose_values(FT[t], C[p], pos, phi, nf)
-            if main:
-                for k in range(seg_lo.size):
-                    a, z = max(seg_lo[k], t0) - t0, min(seg_hi[k], t0 + m) - t0
-                    if a < z:
-                        possum[p, k] += _sum64(pos, a, z)
-                if tol >= 0:
-                    exceed[p] += _count_above(pos, tol)
-                vmax[p, 0] = max(vmax[p, 0], _max32(pos))
-                vmax[p, 1] = max(vmax[p, 1], _max32(phi))
-            for o in range(2):
-                v, nw = pos if o == 0 else phi, nwin[p, o]
-                _mark_windows(v, lo[p, o], hi[p, o], nw, below[p, o], wid)
-                k = 0
-                for s in range(m):  # indices of the values inside a window, without branches
-                    idx[k] = s
-                    k += wid[s] >= 0
-                for i in range(k):
-                    s = idx[i]
-                    w, x = wid[s], v[s]
-                    n_in = inside[p, o, w]
-                    if n_in < cap[p, o, w]:
-                        buf[off[p, o, w] + n_in] = x
-                    else:  # overflow: histogram it (the kept values are histogrammed afterwards)
-                        sub[p, o, w, np.searchsorted(edges[p, o, w], x, side="right") - 1] += 1
-                    inside[p, o, w] = n_in + 1
+    flag = np.zeros(T, np.uint8)
+    for k in range(k0, k1):
+        start = k * SAMPLE_BLOCK
+        b = min(n - start, SAMPLE_BLOCK)
+        s0, s1 = block_segs[k], block_segs[k + 1]
+        for t0 in range(0, b, T):
+            m = min(T, b - t0)
+            if fused:
+                draw_features(lanes, consts, codes, params, cdf, values, ops, refs, m, U, X, F)
+            else:
+                for f in range(nF):
+                    for s in range(m):
+                        F[f, s] = Fext[t0 + s, f]
+            for f in range(nF):
+                for s in range(m):
+                    FT[f, s] = F[f, s]
+            if sums:
+                _moment_sums(F, nF, m, start + t0, shift, seg_start, seg_stop, s0, s1, S1, S2)
+            _scan_tile(FT, m, start + t0, C, nf, seg_start, seg_stop, s0, s1, tol, main, lo, hi, nwin, edges, off,
+                       cap, below, inside, sub, buf, vmax, possum, exceed, pos_t, phi_t, flag)

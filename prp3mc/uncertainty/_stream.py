@@ -1,10 +1,13 @@
 """Streamed Monte Carlo: sample blocks, moments by segments, exact order statistics in bounded memory.
 
-Samples are drawn in blocks of :data:`~prp3mc.uncertainty.budget.SAMPLE_BLOCK`;
-block k is drawn alone (:meth:`Budget.sample_block`, a jump ahead in the
-seed's stream), so the samples are exactly those of ``budget.sample(n, seed)``
-whatever the number of threads or the memory limit, and no more than a few
-blocks are ever in memory.
+Samples are the rows of ``budget.sample(n, seed)``, in blocks of
+:data:`~prp3mc.uncertainty.budget.SAMPLE_BLOCK`; each thread takes a
+contiguous range of blocks and starts its generator where that range starts
+(a jump ahead in the seed's stream), so the samples do not depend on the
+number of threads or the memory limit. When every law and feature has a
+compiled form (:mod:`._sampler`) the samples are drawn tile by tile inside
+the kernel and never held; otherwise block k is drawn through numpy
+(:meth:`Budget.sample_block`) and handed to the same kernel.
 
 Moments: sums of the features and of their cross products (about their exact
 mean) per *segment*, the intersection of a sample block with one of the 64
@@ -15,7 +18,7 @@ first ``m`` samples, places a window ``[lo, hi)`` around each wanted rank
 (the pilot's order statistics at the rank's quantile +- 5 pilot standard
 errors). One streamed pass counts the values below each window and keeps the
 values inside it; a rank whose window turns out to hold it is read off the
-kept values by selection. Otherwise (a pilot off by more than 5 standard
+kept values by radix selection (:mod:`._select`). Otherwise (a pilot off by more than 5 standard
 errors, or a window holding more values than its buffer) the next pass uses
 a narrower window, known from that pass's exact counts and a 64-bin
 histogram inside every window; windows shrink to a single float32 value at
@@ -24,13 +27,14 @@ worst, so the selection always ends with the exact order statistic.
 
 from __future__ import annotations
 
-import math
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
-from ._mckernel import SUB_BINS, TILE, feature_key, pose_values, scan_block
+from ._mckernel import SUB_BINS, TILE, feature_key, pose_values, scan_blocks
+from ._select import count_below, order_statistics
+from ._sampler import LANES, draw_features, pcg_lanes, sampler_tables
 from .budget import SAMPLE_BLOCK, Budget
 from .model import LinearModel
 
@@ -78,15 +82,35 @@ class Stream:
         self.worker_blocks = [range(int(p[0]), int(p[-1]) + 1) for p in parts if len(p)]
         self.worker_n = np.array([min(n, r.stop * SAMPLE_BLOCK) - r.start * SAMPLE_BLOCK for r in self.worker_blocks])
         self.shift = model.feature_moments()[0]
+        tables = sampler_tables(budget, model.feature_ops())
+        self.fused = tables is not None
+        if self.fused:  # compiled sampling: every worker's lanes start at its first block
+            self.tables = tables
+            self.worker_lanes = [pcg_lanes(seed, r.start * SAMPLE_BLOCK, len(budget.factor_laws))
+                                 for r in self.worker_blocks]
+        else:  # numpy sampling, block by block
+            self.tables = (np.zeros(0, np.int64), np.zeros((0, 4)), np.zeros(0), np.zeros(0), np.zeros((0, 3), np.int64),
+                           np.zeros(0))
+            self.worker_lanes = [(np.zeros((2, LANES), np.uint64), np.zeros(6, np.uint64))] * len(self.worker_blocks)
 
     def features(self, k: int) -> np.ndarray:
-        """Features (b, F) float64 of block k."""
+        """Features (b, F) float64 of block k, sampled through numpy."""
         return self.model.features(self.budget.sample_block(self.seed, k, self.n))
 
     def pilot(self, m: int) -> np.ndarray:
         """Features (F, m) float32 of the first m samples."""
-        blocks = [self.features(k) for k in range(-(-m // SAMPLE_BLOCK))]
-        return np.ascontiguousarray(np.concatenate(blocks)[:m].T, dtype=np.float32)
+        if not self.fused:
+            blocks = [self.features(k) for k in range(-(-m // SAMPLE_BLOCK))]
+            return np.ascontiguousarray(np.concatenate(blocks)[:m].T, dtype=np.float32)
+        D, nF = len(self.budget.factor_laws), self.shift.size
+        lanes, consts = pcg_lanes(self.seed, 0, D)
+        U, X, F = np.empty((D, TILE)), np.empty((D, TILE)), np.empty((nF, TILE))
+        out = np.empty((nF, m), np.float32)
+        for t0 in range(0, m, TILE):
+            k = min(TILE, m - t0)
+            draw_features(lanes, consts, *self.tables, k, U, X, F)
+            out[:, t0:t0 + k] = F[:, :k]
+        return out
 
     def moments(self, S1: np.ndarray, S2: np.ndarray) -> Moments:
         """Moments from per-segment sums S1 (S, F) and S2 (S, F, F) about :attr:`shift`."""
@@ -108,30 +132,32 @@ class Stream:
     # ------------------------------------------------------------------ passes
     def scan(self, C32: np.ndarray, win: "_Windows", main: bool, tol: float, sums: dict | None,
              pool: ThreadPoolExecutor) -> list[dict]:
-        """One pass over all blocks for the poses of ``C32`` (P, 3, F); per-worker accumulators."""
-        P = C32.shape[0]
+        """One pass over all blocks for the poses of ``C32`` (P, 3, F); per-worker accumulators.
+
+        On the main pass ``sums`` receives the norm sums per pose and segment
+        (``possum``) and, if it holds ``S1`` and ``S2``, the feature sums per segment.
+        """
+        P, nF = C32.shape[0], C32.shape[2]
         tol32 = np.float32(-1.0 if tol is None else tol)
+        with_sums = sums is not None and "S1" in sums
+        S1 = sums["S1"] if with_sums else np.zeros((0, nF))
+        S2 = sums["S2"] if with_sums else np.zeros((0, nF, nF))
+        possum = sums["possum"] if sums is not None else np.zeros((P, self.seg_start.size))
+        key = feature_key(nF)
 
         def work(w: int) -> dict:
             acc = {"below": np.zeros(win.shape, np.int64), "inside": np.zeros(win.shape, np.int64),
                    "sub": np.zeros(win.shape + (SUB_BINS,), np.int64), "buf": np.empty(win.size[w], np.float32),
                    "vmax": np.zeros((P, 2), np.float32), "exceed": np.zeros(P, np.int64)}
-            for k in self.worker_blocks[w]:
-                F = self.features(k)
-                s0, s1 = self.block_segs[k], self.block_segs[k + 1]
-                a = self.seg_start[s0:s1] - k * SAMPLE_BLOCK
-                b = self.seg_stop[s0:s1] - k * SAMPLE_BLOCK
-                if sums is not None and "S1" in sums:
-                    for j, (u, v) in enumerate(zip(a, b), start=s0):
-                        Fc = F[u:v] - self.shift
-                        sums["S1"][j] = Fc.sum(0)
-                        sums["S2"][j] = Fc.T @ Fc
-                FT = np.zeros((-(-F.shape[0] // TILE), TILE, F.shape[1]), np.float32)
-                FT.reshape(-1, F.shape[1])[:F.shape[0]] = F
-                possum = sums["possum"][:, s0:s1] if sums is not None else np.zeros((P, s1 - s0))
-                scan_block(np.ascontiguousarray(FT.transpose(0, 2, 1)), F.shape[0], C32, feature_key(C32.shape[2]), a, b, tol32, main, win.lo, win.hi, win.nwin, win.edges, win.off[w],
-                           win.cap[w], acc["below"], acc["inside"], acc["sub"], acc["buf"], acc["vmax"],
-                           possum, acc["exceed"])
+            lanes, consts = self.worker_lanes[w]
+            blocks = self.worker_blocks[w]
+            ranges = [(blocks.start, blocks.stop, np.zeros((0, nF)))] if self.fused else \
+                [(k, k + 1, self.features(k)) for k in blocks]
+            for k0, k1, Fext in ranges:
+                scan_blocks(k0, k1, self.n, lanes.copy(), consts, *self.tables, Fext, C32, key, self.shift,
+                            self.block_segs, self.seg_start, self.seg_stop, with_sums, S1, S2, tol32, main,
+                            win.lo, win.hi, win.nwin, win.edges, win.off[w], win.cap[w], acc["below"],
+                            acc["inside"], acc["sub"], acc["buf"], acc["vmax"], possum, acc["exceed"])
             return acc
 
         return list(pool.map(work, range(len(self.worker_blocks))))
@@ -191,31 +217,31 @@ def pilot_fraction(ranks: np.ndarray, n: int, m: int) -> float:
     return float(min(1.0, np.sum(2 * (_PILOT_SE * np.sqrt(f * (1 - f) / m) + 3.0 / m))))
 
 
-def pilot_windows(sorted_vals: np.ndarray, ranks: np.ndarray, n: int, worker_n: np.ndarray) -> list:
-    """Disjoint windows around each rank (0-based in n) from the sorted pilot values.
+def pilot_windows(vals: np.ndarray, ranks: np.ndarray, n: int, worker_n: np.ndarray) -> list:
+    """Disjoint windows around each rank (0-based in n) from the pilot's values ``vals`` (unsorted).
 
     The window of a rank at quantile f spans the pilot's order statistics at
     f +- 5 pilot standard errors; its capacity per worker is the expected
     count with a margin.
     """
-    m = sorted_vals.size
+    m = vals.size
     f = ranks / max(n - 1, 1)
     half = _PILOT_SE * np.sqrt(f * (1 - f) * m) + 2.0
     i_lo = np.maximum(np.floor(f * (m - 1) - half).astype(np.int64), 0)
     i_hi = np.minimum(np.ceil(f * (m - 1) + half).astype(np.int64), m)
-    wins = []
-    for r, (a, b) in enumerate(zip(i_lo, i_hi)):
-        lo = sorted_vals[a] if a > 0 else np.float32(0.0)
-        if b < m:
-            hi = top = np.nextafter(sorted_vals[b], _F32_INF)
-        else:
-            hi, top = _F32_INF, sorted_vals[-1] * np.float32(2.0) + np.float32(1e-30)
-        wins.append((lo, hi, top, np.zeros_like(worker_n), [r]))
-    merged = _merge(wins)
+    idx = np.unique(np.concatenate([i_lo, i_hi[i_hi < m], [m - 1]]))
+    stat = order_statistics(vals, idx)  # the pilot's order statistics at idx
+    lo = np.where(i_lo > 0, stat[np.searchsorted(idx, i_lo)], np.float32(0.0))
+    top_all = stat[-1] * np.float32(2.0) + np.float32(1e-30)
+    inner = np.nextafter(stat[np.minimum(np.searchsorted(idx, i_hi), idx.size - 1)], _F32_INF)
+    hi = np.where(i_hi < m, inner, _F32_INF)
+    top = np.where(i_hi < m, inner, top_all)
+    none = np.zeros_like(worker_n)
+    merged = _merge([(lo[r], hi[r], top[r], none, [r]) for r in range(len(ranks))])
+    k = count_below(vals, np.array([b for w in merged for b in w[:2]], np.float32)).reshape(-1, 2)
     out = []
-    for lo, hi, top, _, rs in merged:  # capacity from the merged window's pilot count
-        k = np.searchsorted(sorted_vals, [lo, hi], side="left")
-        expected = (k[1] - k[0] + 1) / m * worker_n
+    for (lo, hi, top, _, rs), (k_lo, k_hi) in zip(merged, k):  # capacity from the merged window's pilot count
+        expected = (k_hi - k_lo + 1) / m * worker_n
         out.append((lo, hi, top, np.ceil(1.2 * expected + 6 * np.sqrt(expected) + 64).astype(np.int64), rs))
     return out
 
@@ -243,7 +269,7 @@ def select_order_statistics(stream: Stream, C32: np.ndarray, ranks: np.ndarray, 
     def pilot(p):
         pos, phi = np.empty(m, np.float32), np.empty(m, np.float32)
         pose_values(pilot_FT, C32[p], pos, phi, key)
-        return [pilot_windows(np.sort(v), ranks, n, stream.worker_n) for v in (pos, phi)]
+        return [pilot_windows(v, ranks, n, stream.worker_n) for v in (pos, phi)]
 
     specs = list(pool.map(pilot, range(P)))
     values = np.full((P, 2, R), np.nan, np.float32)
@@ -279,7 +305,8 @@ def _resolve(win: _Windows, accs: list, ranks: np.ndarray, vmax: np.ndarray, val
                 held = [r for r in rs if B <= ranks[r] < B + I]
                 if held and np.all(iw <= cw):  # every value of the window was kept: select
                     kth = ranks[held] - B
-                    values[p, o, held] = np.partition(np.concatenate(parts), kth)[kth]
+                    order = np.argsort(kth)
+                    values[p, o, np.asarray(held)[order]] = order_statistics(np.concatenate(parts), kth[order])
                     held = []
                 for r in rs:
                     rank = int(ranks[r])

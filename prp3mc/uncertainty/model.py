@@ -30,10 +30,13 @@ from ..kinematics.geometry import Geometry
 from ..kinematics.chain import as_poses, frame, validated_frame
 from ..kinematics.sensitivity import LENGTH_FAMILIES, h_entries
 
-__all__ = ["LinearModel", "linear_model", "ALL_LEGS"]
+__all__ = ["LinearModel", "linear_model", "ALL_LEGS", "FEATURE_VALUE", "FEATURE_COS", "FEATURE_SIN", "FEATURE_ONE"]
 
 #: The leg of a term that acts on all three legs at once (thermal expansion).
 ALL_LEGS = -1
+#: Feature codes of :meth:`LinearModel.feature_ops`: factor a's value less a reference; X_a cos(X_b deg);
+#: X_a sin(X_b deg); the constant 1 of the known shifts.
+FEATURE_VALUE, FEATURE_COS, FEATURE_SIN, FEATURE_ONE = range(4)
 
 
 @dataclass(frozen=True, slots=True, repr=False)
@@ -152,6 +155,33 @@ class LinearModel:
         if self.has_shift:
             cols.append(np.ones(X.shape[0]))
         return np.stack(cols, axis=1)
+
+    def feature_ops(self) -> tuple[np.ndarray, np.ndarray]:
+        """How :meth:`features` makes each feature from the factors, for compiled samplers.
+
+        Returns
+        -------
+        ops : ndarray, shape (F, 3), int64
+            Rows ``(op, a, b)``: ``FEATURE_VALUE`` is factor a's value less
+            its reference, ``FEATURE_COS`` / ``FEATURE_SIN`` are X_a cos(X_b) /
+            X_a sin(X_b) with X_b in degrees, ``FEATURE_ONE`` the constant 1
+            (a and b unused where they do not apply).
+        refs : ndarray, shape (F,)
+            The reference subtracted from a value (20 degrees C for thermal, else 0).
+        """
+        rows, refs = [], []
+        for kind, *args in self._plan:
+            if kind == "value":
+                rows.append((FEATURE_VALUE, args[0], args[0]))
+                refs.append(args[1])
+            elif kind == "clearance":
+                (k, kz), = args
+                rows += [(FEATURE_COS, k, kz), (FEATURE_SIN, k, kz)]
+                refs += [0.0, 0.0]
+        if self.has_shift:
+            rows.append((FEATURE_ONE, 0, 0))
+            refs.append(0.0)
+        return np.array(rows, dtype=np.int64).reshape(-1, 3), np.array(refs, dtype=float)
 
     def evaluate(self, X: np.ndarray, dtype=np.float64) -> np.ndarray:
         """Pose errors for every pose and sample, shape (..., n, 3): dx mm, dy mm, dphi rad."""

@@ -1,16 +1,19 @@
 """Monte Carlo propagation of an error budget through the linear model.
 
-One sample matrix is shared by all poses (common random numbers); it is
-never held whole. Samples are streamed in blocks that are drawn
-independently (jumps in the seed's stream, :meth:`Budget.sample_block`), so
-memory is bounded whatever ``n_samples`` and the numbers do not depend on the
-chunking or the threads. Means and covariances of the pose error are linear
-images of the features' sample moments (:class:`prp3mc.uncertainty.model.LinearModel`),
-summed per block and batch, with standard errors from 64 batch means. The
-position-error norm and |dphi| are evaluated per pose and sample in float32
-by a compiled kernel and summarised by EXACT order statistics (the values a
-full sort would give), found in streamed passes (:mod:`._stream`), with
-distribution-free confidence intervals.
+One sample matrix, ``budget.sample(n_samples, seed)``, is shared by all
+poses (common random numbers); it is never held whole. Samples are streamed
+in blocks, drawn by a compiled kernel in small tiles where every law has a
+compiled inverse CDF (the same uniforms as numpy, see :mod:`._sampler`) or
+block by block through numpy otherwise; threads start at jumps in the
+seed's stream, so memory is bounded whatever ``n_samples`` (a few hundred MB
+at 1e9 samples) and the numbers do not depend on the chunking or the
+threads. Means and covariances of the pose error are linear images of the
+features' sample moments (:class:`prp3mc.uncertainty.model.LinearModel`),
+summed in float64 per block and batch, with standard errors from 64 batch
+means. The position-error norm and |dphi| are evaluated per pose and sample
+in float32 by the kernel and summarised by EXACT order statistics of those
+float32 values (the values a full sort would give), found in streamed passes
+(:mod:`._stream`), with distribution-free confidence intervals.
 """
 
 from __future__ import annotations
@@ -270,7 +273,7 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     n_threads = workers or os.cpu_count() or 1
     stream = Stream(model, budget, seed, n_samples, _N_BATCHES, n_threads)
     n_seg = stream.seg_start.size
-    sums = {"S1": np.empty((n_seg, n_feat)), "S2": np.empty((n_seg, n_feat, n_feat))}
+    sums = {"S1": np.zeros((n_seg, n_feat)), "S2": np.zeros((n_seg, n_feat, n_feat))}
     C32 = C.astype(np.float32)
     stats = np.empty((n_poses, 2, len(ranks)))
     vmax = np.empty((n_poses, 2))

@@ -33,7 +33,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
-from numba import njit
 
 from .._result import freeze, pose_columns, short_repr
 from .._version import __version__
@@ -43,7 +42,7 @@ from .budget import Budget
 from ..kinematics.geometry import Geometry
 from ..kinematics.chain import DEFAULT_LIMITS, as_poses, refusal
 from .model import LinearModel, linear_model
-from ._envelope import REASONS, envelope_kernel, leg_constants, term_table, zonotope_max
+from ._envelope import REASONS, envelope_kernel, generator_signs, kernel_tables, zonotope_maxima, zonotope_scratch
 
 __all__ = ["WorstCase", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "term_bounds", "QUANTITIES"]
 
@@ -274,17 +273,6 @@ def term_bounds(model: LinearModel, bounds: np.ndarray) -> np.ndarray:
     return tb
 
 
-@njit(nogil=True, cache=True)
-def _corner_maxima(Ai, u_mid, u_half, ext, values, signs):
-    """:func:`~prp3mc.uncertainty._envelope.zonotope_max` of every pose (compiled).
-
-    Ai : (N, 3, 3) A^-1; u_mid, u_half : (N, 3); ext : (N, G, 3);
-    values (4, N) and signs (4, N, 3 + G) out.
-    """
-    for n in range(Ai.shape[0]):
-        zonotope_max(Ai[n], u_mid[n], u_half[n], ext[n], values, signs, n)
-
-
 def _maxima(model: LinearModel, tb: np.ndarray):
     """Maxima and the sign (-1, +1) of each generator realising them, for flat poses (N,).
 
@@ -301,10 +289,13 @@ def _maxima(model: LinearModel, tb: np.ndarray):
     ext = np.ascontiguousarray(np.moveaxis(model.weights[..., :, shared] * half[..., None, shared], -1, -2))
     u_mid += np.einsum("nit,nt->ni", model.weights[..., :, shared], mid[..., shared])
     N = u_mid.shape[0]
-    values, signs = np.empty((4, N)), np.empty((4, N, 3 + len(shared)))
-    _corner_maxima(np.ascontiguousarray(model.Ainv), u_mid, u_half, ext, values, signs)
+    values, codes = np.empty((4, N)), np.empty((4, N), dtype=np.int16)
+    Ai = np.ascontiguousarray(np.moveaxis(model.Ainv, 0, -1))          # (3, 3, N): poses last
+    zonotope_maxima(Ai, np.ascontiguousarray(u_mid.T), np.ascontiguousarray(u_half.T),
+                    np.ascontiguousarray(np.moveaxis(ext, 0, -1)), values, codes, 0, N,
+                    zonotope_scratch(3 + len(shared), N))
     order = ("position", "phi", "x", "y")
-    return dict(zip(order, values)), dict(zip(order, signs))
+    return dict(zip(order, values)), dict(zip(order, generator_signs(codes, 3 + len(shared)).astype(float)))
 
 
 def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | None = None,
@@ -409,13 +400,17 @@ class WorstCaseMaxima(_Maxima):
         return short_repr(self, "poses", "k_sigma")
 
 
+#: The feasibility limits of validated_frame, as the envelope kernel reads them.
+_LIMITS = np.array([DEFAULT_LIMITS.min_transmission, DEFAULT_LIMITS.max_condition, DEFAULT_LIMITS.stroke_tol_mm])
+
+
 def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | None = None,
                       check: bool = True) -> WorstCaseMaxima:
     """The maxima of :func:`worst_case` from one fused compiled pass over the poses.
 
     Per pose the kernel computes the inverse kinematics, A^-1, the h entries
     of the budget's terms, the clearance intervals and the 8-corner maxima
-    in scalars, on all cores; nothing per pose is kept but the maxima and
+    over blocks of poses, on all cores; nothing per pose is kept but the maxima and
     their signs (44 bytes), so memory is that of the poses and the result.
     The values equal :func:`worst_case`'s to round-off (1e-12 relative).
 
@@ -438,16 +433,14 @@ def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: flo
     (11, 11)
     """
     budget.check_geometry(geometry)
-    bounds = budget.bounds(k_sigma)
+    bounds, *tables = kernel_tables(geometry, budget, k_sigma)
     poses = as_poses(poses)
     shape = poses.shape[:-1]
     flat = np.ascontiguousarray(poses.reshape(-1, 3))
     n = flat.shape[0]
-    table = term_table(budget, bounds)
-    G = int((table[1] < 0).sum())
-    values, signs, bad = np.empty((4, n)), np.empty((4, n, 3 + G), dtype=np.int8), np.empty(n, dtype=np.int64)
-    limits = np.array([DEFAULT_LIMITS.min_transmission, DEFAULT_LIMITS.max_condition, DEFAULT_LIMITS.stroke_tol_mm])
-    envelope_kernel(flat, leg_constants(geometry), *table, limits, check, values, signs, bad)
+    G = int((tables[2] < 0).sum())
+    values, codes, bad = np.empty((4, n)), np.empty((4, n), dtype=np.int16), np.empty(n, dtype=np.int16)
+    envelope_kernel(flat, *tables, _LIMITS, check, values, codes, bad)
     if check and bad.any():
         for r, reason in enumerate(REASONS):
             hit = np.flatnonzero(bad & (0b111 << 3 * r))
@@ -456,9 +449,11 @@ def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: flo
                 leg = next(i for i in range(3) if bad[p] >> (3 * r + i) & 1)
                 # the flat index, as worst_case reports it
                 raise InfeasiblePoseError(refusal(geometry, flat[p], (p,), reason, leg))
+    values[1] *= RAD2DEG
+    sg = generator_signs(codes, 3 + G)                                   # (4, n, 3 + G)
     return WorstCaseMaxima(
-        poses=poses, position_mm=values[0].reshape(shape), phi_deg=values[1].reshape(shape) * RAD2DEG,
+        poses=poses, position_mm=values[0].reshape(shape), phi_deg=values[1].reshape(shape),
         x_mm=values[2].reshape(shape), y_mm=values[3].reshape(shape),
-        leg_signs={q: signs[j, :, :3].reshape(shape + (3,)) for j, q in enumerate(QUANTITIES)},
-        input_bounds=bounds, k_sigma=k_sigma,
-        shared_signs={q: signs[j, :, 3:].reshape(shape + (G,)) for j, q in enumerate(QUANTITIES)})
+        leg_signs={q: sg[j, :, :3].reshape(shape + (3,)) for j, q in enumerate(QUANTITIES)},
+        input_bounds=bounds.copy(), k_sigma=k_sigma,
+        shared_signs={q: sg[j, :, 3:].reshape(shape + (G,)) for j, q in enumerate(QUANTITIES)})
