@@ -275,22 +275,38 @@ def figure_formats(spec) -> tuple[str, ...]:
 def save_figure(fig, folder: str | os.PathLike, name: str, formats=("png",), dpi: int = 150) -> bytes:
     """Save a figure as ``folder/name.<format>`` for every format; return its PNG bytes.
 
-    Each format is rendered once, without a tight bounding box (the figures
-    use a constrained layout); the PNG is rendered even if not written, so a
-    report embeds the very same bytes (:func:`png_data_uri`). The layout of
-    the PNG's drawing is kept for the other formats (the figure's layout
-    engine is switched off after it): they skip the layout, with the same result.
+    Each format is rendered once, without a tight bounding box; the PNG is
+    rendered even if not written, so a report embeds the very same bytes
+    (:func:`png_data_uri`). A figure with a layout engine is laid out by the
+    PNG's drawing, and the other formats keep that layout (its engine is
+    switched off after it): they skip the layout, with the same result.
     """
-    png = io.BytesIO()
-    fig.savefig(png, format="png", dpi=dpi)
+    png = _png(fig, dpi)
     fig.set_layout_engine("none")      # laid out: the other formats draw it where the PNG did
     for fmt in formats:
         path = Path(folder) / f"{name}.{fmt}"
         if fmt == "png":
-            path.write_bytes(png.getvalue())
+            path.write_bytes(png)
         else:
             fig.savefig(path, format=fmt, dpi=dpi)
-    return png.getvalue()
+    return png
+
+
+def _png(fig, dpi: float) -> bytes:
+    """``fig`` drawn once on its Agg canvas at ``dpi``, as PNG bytes: RGB when every pixel is opaque.
+
+    An opaque figure (the reports' white ones) loses nothing without its
+    alpha channel, and a quarter less to compress halves the encoding time
+    of a large figure (it was a fifth of a report figure's cost).
+    """
+    import numpy as np
+    from PIL import Image
+    fig.set_dpi(dpi)
+    fig.canvas.draw()
+    rgba = np.asarray(fig.canvas.buffer_rgba())
+    buf = io.BytesIO()
+    Image.fromarray(rgba[..., :3] if (rgba[..., 3] == 255).all() else rgba).save(buf, format="png")
+    return buf.getvalue()
 
 
 def png_data_uri(png: bytes) -> str:

@@ -85,7 +85,8 @@ def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=
     if workers == 1:
         yield (save_figure(draw(), folder, name, formats) for name, draw in figures)
         return
-    import matplotlib.backends.backend_agg  # noqa: F401 -- once here, inherited, not in every worker
+    import matplotlib.backends.backend_agg  # noqa: F401 -- imported once here and inherited, not in every worker
+    import matplotlib.figure  # noqa: F401 -- (the Agg backend no longer imports it: a quarter second a worker)
     with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
                              initializer=_inherit, initargs=(figures, folder, tuple(formats))) as pool:
         yield pool.map(_render, range(len(figures)))

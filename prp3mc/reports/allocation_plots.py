@@ -14,7 +14,8 @@ import numpy as np
 import pandas as pd
 
 from ..units import DISPLAY
-from .plots import region_map
+from ._layout import text_inches, wrap
+from .plots import legend_below, region_map
 
 __all__ = ["allocation_front_plot", "allocation_map", "class_changes"]
 
@@ -60,11 +61,13 @@ def allocation_front_plot(front: pd.DataFrame, output: str = "position", *, spec
     ax.step(rows["cost"], y, where="post", color="0.6", lw=1)
     ax.plot(rows["cost"], y, "o", color="C0", ms=4, label="Pareto-optimal choices")
     if annotate or (annotate is None and len(rows) <= 15):
-        previous = None
+        previous, labels = None, []
         for (_, row), value in zip(rows.iterrows(), y):
-            ax.annotate(class_changes(previous, row[inputs]), (row["cost"], value), xytext=(4, 3),
-                        textcoords="offset points", fontsize=6, color="0.3")
+            labels.append(class_changes(previous, row[inputs]))
+            ax.annotate(labels[-1], (row["cost"], value), xytext=(4, 3), textcoords="offset points", fontsize=6,
+                        color="0.3")
             previous = row[inputs]
+        _room_right(ax, rows["cost"].to_numpy(dtype=float), labels, 6)
     if spec is not None:
         ax.axhline(spec, color="C3", ls="--", lw=1, label=f"spec {spec:g} {unit}")
     if chosen_cost is not None:
@@ -74,9 +77,25 @@ def allocation_front_plot(front: pd.DataFrame, output: str = "position", *, spec
     label = "position error" if output == "position" else "|δφ|"
     ax.set_xlabel("total cost")
     ax.set_ylabel(f"worst-case {label} over the region ({unit})")
-    ax.set_title("What each step of cost buys", fontsize=10)
+    ax.set_title("What each step of cost buys", fontsize=10, y=1.0)
     ax.legend(fontsize=8, frameon=False)
     return fig
+
+
+def _room_right(ax, x: np.ndarray, labels: list, fontsize: float) -> None:
+    """Widen ``ax``'s x range so that ``labels`` written right of the points ``x`` end inside the axes.
+
+    The axes' width (inches) is where its figure's layout puts it; a label
+    wider than 0.9 of it is left to stick out.
+    """
+    width = ax.get_position().width * ax.figure.get_figwidth()
+    need = np.array([text_inches(t, fontsize)[0] + 6 / 72 for t in labels]) / width     # fractions of the axes
+    margin = 0.05 * (np.ptp(x) or 1.0)                                                  # matplotlib's own
+    lo, hi = x.min() - margin, x.max() + margin
+    fits = need < 0.9
+    if fits.any():
+        hi = max(hi, float(np.max((x[fits] - need[fits] * lo) / (1 - need[fits]))))
+    ax.set_xlim(lo, hi)
 
 
 def allocation_map(result, shape: tuple, *, ax=None, title: str = ""):
@@ -116,7 +135,9 @@ def allocation_map(result, shape: tuple, *, ax=None, title: str = ""):
             label=f"binding: {what} ({len(binding)} pose{'s' if len(binding) != 1 else ''})")
     if reached:
         ax.plot([], [], color="C3", ls="--", lw=1.5, label=f"spec {scale * spec:g} {unit}")
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), fontsize=7, frameon=False, ncol=1)
+    legend_below(ax)
     label = "position error" if output == "position" else "|δφ|"
-    ax.set_title(f"{title + ': ' if title else ''}worst-case {label} of the chosen classes ({unit})", fontsize=10)
+    width = ax.get_position().width * fig.get_figwidth() + 0.6
+    ax.set_title(wrap(f"{title + ': ' if title else ''}worst-case {label} of the chosen classes ({unit})", width, 10),
+                 fontsize=10, y=1.0)
     return fig

@@ -34,6 +34,7 @@ from ..measurement.iso9283 import ISO_STATISTICS, N_MC
 from ..measurement.results import DiscrepancyResult
 from ..output import output_folder, write_json, write_text
 from ..units import DEG2ARCSEC, MM2UM
+from ._layout import agg_figure, lighten
 
 __all__ = ["plot_workspace", "plot_actuators", "plot_temperature", "plot_gap", "plot_candidates", "plot_iso9283",
            "write_report", "report_document", "render_html"]
@@ -208,16 +209,6 @@ _MARGINS = {
 _REPORT_FIGURES = ("workspace", "iso9283", "actuators", "temperature")
 
 
-def _lighten(fig) -> None:
-    """At most five automatic major ticks per axis and no minor ticks: most of a figure's cost is tick text."""
-    from matplotlib.ticker import AutoLocator, MaxNLocator
-    for ax in fig.axes:
-        ax.minorticks_off()
-        for axis in (ax.xaxis, ax.yaxis):
-            if type(axis.get_major_locator()) is AutoLocator:
-                axis.set_major_locator(MaxNLocator(5))
-
-
 def _plot(name: str, result: DiscrepancyResult, fig):
     """Draw figure ``name`` into ``fig`` (a new pyplot figure of its size when None); None if it does not apply."""
     draw, size = _FIGURES[name]
@@ -228,7 +219,7 @@ def _plot(name: str, result: DiscrepancyResult, fig):
         import matplotlib.pyplot as plt
         fig = plt.figure(figsize=figsize, layout="constrained")
     draw(result, fig)
-    _lighten(fig)
+    lighten(fig)
     return fig
 
 
@@ -290,21 +281,6 @@ def plot_iso9283(result: DiscrepancyResult, *, fig=None):
     (1 x 4 panels) as in :func:`plot_workspace`; returns the Figure.
     """
     return _plot("iso9283", result, fig)
-
-
-def _agg_figure(name: str, figsize):
-    """Figure ``name`` of ``figsize`` inches at :data:`DPI` with its fixed margins, on its own Agg canvas.
-
-    Pyplot and the backend are untouched.
-    """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    (w, h), (left, right, bottom, top, wspace, hspace) = figsize, _MARGINS[name]
-    fig = Figure(figsize=figsize, dpi=DPI)
-    fig.subplots_adjust(left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h, wspace=wspace,
-                        hspace=hspace)
-    FigureCanvasAgg(fig)
-    return fig
 
 
 _CAPTIONS = {
@@ -432,9 +408,9 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
             figsize = size(result)
             if figsize is None:
                 continue
-            fig = _agg_figure(name, figsize)
+            fig = agg_figure(figsize, _MARGINS[name], dpi=DPI)
             draw(result, fig)
-            _lighten(fig)
+            lighten(fig)
             png = _png(fig)
             uris[name] = "data:image/png;base64," + base64.b64encode(png).decode("ascii")
             if "png" in formats:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..units import DISPLAY
+from ._layout import ROUND_STEPS, fix_layout, grid, lighten, text_inches, wrap
 
 __all__ = ["is_constant", "shared_levels", "region_map", "worst_case_map", "montecarlo_map", "compare_maps_figure",
            "error_histogram", "histograms_figure", "ecdf_steps", "error_ecdf", "ecdf_figure", "sobol_ranking",
@@ -26,6 +27,10 @@ CONSTANT_RTOL = 1e-9
 MIN_SCALE_FRACTION = 0.25
 #: Steps an ECDF is drawn with at most (:func:`ecdf_steps`): 1 / ECDF_STEPS is below a pixel of a report figure.
 ECDF_STEPS = 2048
+#: Width of a map panel, inches (a region's map keeps its aspect inside it).
+MAP_INCHES = 3.6
+#: How far below a map's axes its legend (extrema, binding poses) starts, inches: under the tick labels and x label.
+LEGEND_DROP = 0.55
 
 
 def _axes(ax, figsize=(5.0, 4.2)):
@@ -36,14 +41,47 @@ def _axes(ax, figsize=(5.0, 4.2)):
     return ax
 
 
-def _figure(fig, figsize):
-    """``fig`` resized to ``figsize`` with a constrained layout, or a new pyplot figure of that size."""
+def _figure(fig, figsize, margins):
+    """``fig`` (a new pyplot figure when None) of ``figsize`` inches, its panels placed by ``margins`` (inches).
+
+    No layout engine: the figure draws once (:func:`prp3mc.reports._layout.fix_layout`).
+    """
     if fig is None:
         import matplotlib.pyplot as plt
-        return plt.figure(figsize=figsize, layout="constrained")
-    fig.set_size_inches(figsize)
-    fig.set_layout_engine("constrained")
-    return fig
+        fig = plt.figure()
+    return fix_layout(fig, figsize, margins)
+
+
+def _title(text: str, width: float) -> tuple[str, float]:
+    """A figure title (12 pt) wrapped to ``width`` inches, and the inches it takes at the top (:func:`_set_title`)."""
+    text = wrap(text, width - 0.2, 12)
+    return text, 0.08 + text_inches(text, 12)[1]
+
+
+def _set_title(fig, text: str) -> None:
+    """``text`` as ``fig``'s title, 0.08 inches below its top edge."""
+    fig.suptitle(text, y=1.0, va="top").set_transform(fig.transFigure + _inches(fig, 0.0, -0.08))
+
+
+def _inches(fig, dx: float, dy: float):
+    """A translation by (dx, dy) inches on ``fig``, to add to a transform."""
+    from matplotlib.transforms import ScaledTranslation
+    return ScaledTranslation(dx, dy, fig.dpi_scale_trans)
+
+
+def _tick_width(lo: float, hi: float, fontsize: float = 10.0) -> float:
+    """Inches taken by the widest of the (at most five, :func:`~prp3mc.reports._layout.lighten`) tick labels of [lo, hi]."""
+    from matplotlib.ticker import MaxNLocator
+    slack = 1e-9 * abs(hi - lo)
+    ticks = [t for t in MaxNLocator(5, steps=ROUND_STEPS).tick_values(lo, hi) if lo - slack <= t <= hi + slack]
+    return max(text_inches(f"{t:g}".replace("-", "\u2212"), fontsize)[0] for t in ticks or [lo, hi])
+
+
+def legend_below(ax, **kwargs):
+    """A legend centred under ``ax``, :data:`LEGEND_DROP` inches below it (under its x tick labels and label)."""
+    below = ax.transAxes + _inches(ax.figure, 0.0, -LEGEND_DROP)
+    return ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=below, fontsize=7,
+                     frameon=False, ncol=1, **kwargs)
 
 
 def is_constant(values: np.ndarray, rtol: float = CONSTANT_RTOL) -> bool:
@@ -74,7 +112,8 @@ def region_map(poses: np.ndarray, values: np.ndarray, *, ax=None, levels=None, c
     X, Y = poses[..., 0], poses[..., 1]
     levels = shared_levels(values) if levels is None else levels
     ax.contourf(X, Y, values, levels=levels, cmap=cmap, extend="neither")
-    ax.set(xlabel="x (mm)", ylabel="y (mm)", title=title, aspect="equal")
+    ax.set(xlabel="x (mm)", ylabel="y (mm)", aspect="equal")
+    ax.set_title(title, y=1.0)
     if is_constant(values):
         ax.text(0.5, 0.5, f"constant: {float(np.mean(values)):.4g} {unit}".rstrip(), transform=ax.transAxes,
                 ha="center", va="center", fontsize=11, bbox={"boxstyle": "round", "fc": "white", "ec": "0.6"})
@@ -86,7 +125,7 @@ def region_map(poses: np.ndarray, values: np.ndarray, *, ax=None, levels=None, c
             k = np.unravel_index(fn(values), values.shape)
             ax.plot(X[k], Y[k], marker=marker, color="white", mec="k", ms=8, ls="none", clip_on=False, zorder=5,
                     label=f"{word} {values[k]:.4g} {unit} at ({X[k]:.4g}, {Y[k]:.4g})")
-        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), fontsize=7, frameon=False, ncol=1)
+        legend_below(ax)
     return ax.figure
 
 
@@ -136,41 +175,70 @@ def compare_maps_figure(results, kind: str = "worstcase", quantity: str = "posit
     -------
     Figure
     """
-    import matplotlib
-    from matplotlib.cm import ScalarMappable
-    from matplotlib.colors import BoundaryNorm
     label, unit, f = _QUANTITY[quantity]
     if kind == "worstcase":
         values = [f * r.worst_case.value(quantity) for r in results]
+        poses = [r.worst_case.poses for r in results]
         what, cmap = f"exact worst-case {label}", "viridis"
     else:
         q = list(results[0].montecarlo.percentiles).index(float(percentile))
         values = [f * (r.montecarlo.position_pct if quantity == "position" else r.montecarlo.phi_pct)[..., q]
                   for r in results]
+        poses = [r.montecarlo.poses for r in results]
         what, cmap = f"Monte Carlo p{percentile:g} of the {label}", "magma"
     shared = _share_scale(values, share_scale)
     constant = [is_constant(v) for v in values]
-    fig = _figure(fig, ((5.2 if shared else 5.8) * len(results) + 1.2, 5.4))
-    axes = fig.subplots(1, len(results), squeeze=False)[0]
     common = shared_levels(*values, n=20)
-    for ax, r, v, flat in zip(axes, results, values, constant):
-        levels = common if shared else shared_levels(v, n=20)
-        if kind == "worstcase":
-            worst_case_map(r.worst_case, quantity, ax=ax, levels=levels, title=r.name)
-        else:
-            montecarlo_map(r.montecarlo, percentile, quantity, ax=ax, levels=levels, title=r.name)
-        if not shared and not flat:
-            sm = ScalarMappable(norm=BoundaryNorm(levels, matplotlib.colormaps[cmap].N), cmap=cmap)
-            fig.colorbar(sm, ax=ax, label=f"{label} ({unit})", shrink=0.85)
+    levels = [common if shared else shared_levels(v, n=20) for v in values]
     if all(constant):
-        fig.suptitle(f"{what}: constant over each region")
+        title = f"{what}: constant over each region"
     elif shared:
-        sm = ScalarMappable(norm=BoundaryNorm(common, matplotlib.colormaps[cmap].N), cmap=cmap)
-        fig.colorbar(sm, ax=axes.tolist(), label=f"{label} ({unit})", shrink=0.85)
-        fig.suptitle(f"{what}, one colour scale")
+        title = f"{what}, one colour scale"
     else:
-        fig.suptitle(f"{what}, each panel on its own colour scale (their ranges differ too much to share one)")
+        title = f"{what}, each panel on its own colour scale (their ranges differ too much to share one)"
+    # the layout, inches: y tick labels and label left of each map, its colour bar (or the shared one) right of it
+    n = len(results)
+    bars = [] if all(constant) else [common] if shared else [lv for lv, flat in zip(levels, constant) if not flat]
+    bar = 0.8 + max(text_inches(f"{v:g}".replace("-", "\u2212"))[0] for v in np.concatenate(bars)) if bars else 0.0
+    y_room = 0.5 + max(_tick_width(float(p[..., 1].min()), float(p[..., 1].max())) for p in poses)
+    aspect = max(np.ptp(p[..., 1]) / max(np.ptp(p[..., 0]), 1e-300) for p in poses)
+    height = MAP_INCHES * float(np.clip(aspect, 0.35, 1.4))
+    gap = y_room + (0.0 if shared else bar)
+    width = y_room + n * MAP_INCHES + (n - 1) * gap + bar + 0.15
+    names = [wrap(r.name, MAP_INCHES, 12) for r in results]
+    title, top = _title(title, width)
+    top += 0.15 + max(text_inches(name, 12)[1] for name in names) + 0.1
+    bottom = LEGEND_DROP + (0.0 if all(constant) else 0.5)
+    fig = _figure(fig, *grid((MAP_INCHES, height), (1, n), y_room, bar + 0.15, bottom, top, wgap=gap))
+    _set_title(fig, title)
+    axes = fig.subplots(1, n, squeeze=False)[0]
+    for ax, r, v, name, lv in zip(axes, results, values, names, levels):
+        if kind == "worstcase":
+            worst_case_map(r.worst_case, quantity, ax=ax, levels=lv, title=name)
+        else:
+            montecarlo_map(r.montecarlo, percentile, quantity, ax=ax, levels=lv, title=name)
+    lighten(fig, ROUND_STEPS)
+    if shared and not all(constant):
+        _colorbar(axes, common, cmap, f"{label} ({unit})")
+    elif not shared:
+        for ax, lv, flat in zip(axes, levels, constant):
+            if not flat:
+                _colorbar([ax], lv, cmap, f"{label} ({unit})")
     return fig
+
+
+def _colorbar(axes, levels, cmap: str, label: str):
+    """A colour bar of ``levels`` right of ``axes`` (as drawn, aspect kept), 85 % of their height."""
+    import matplotlib
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import BoundaryNorm
+    fig = axes[0].figure
+    boxes = [ax.get_position() for ax in axes]                 # where each is drawn, its aspect applied
+    x0, y0, y1 = max(b.x1 for b in boxes), min(b.y0 for b in boxes), max(b.y1 for b in boxes)
+    w = 1.0 / fig.get_figwidth()
+    cax = fig.add_axes((x0 + 0.15 * w, y0 + 0.075 * (y1 - y0), 0.15 * w, 0.85 * (y1 - y0)), label="<colorbar>")
+    sm = ScalarMappable(norm=BoundaryNorm(levels, matplotlib.colormaps[cmap].N), cmap=cmap)
+    return fig.colorbar(sm, cax=cax, label=label)
 
 
 def _at_pose(samples, index: int, quantity: str):
@@ -193,6 +261,9 @@ def error_histogram(samples, index: int, quantity: str = "position", *, ax=None,
     quantity : ``"position"`` (µm) or ``"phi"`` (|δφ|, arcsec)
     percentile : float
         Also marked (dotted).
+    label : str, optional
+        The histogram's legend entry (default: the pose's label; ``""``
+        none: the figures of several poses name each in its panel's title).
 
     Returns
     -------
@@ -213,29 +284,47 @@ def error_histogram(samples, index: int, quantity: str = "position", *, ax=None,
     ax.axvline(worst, ls="--", lw=1.5, color=color, label=f"worst case {worst:.4g} {unit}")
     ax.axvline(p, ls=":", lw=1.2, color=color, label=f"p{percentile:g} {p:.4g} {unit}")
     ax.set_ylabel("density")
-    shown = any(t.get_visible() for t in ax.get_xticklabels())     # hidden inside a column of shared x axes
-    ax.set_xlabel(f"{name} ({unit})", visible=shown)
-    ax.legend(fontsize=7)
+    ax.set_xlabel(f"{name} ({unit})", visible=_x_labelled(ax))
+    ax.legend(fontsize=7, loc="upper right")
     return ax.figure
 
 
-def _pose_grid(results, fig, draw, title: str, panel=(4.2, 3.2)):
+#: A panel of the histogram and ECDF figures, inches (width, height), and the room left of it for its y
+#: tick labels (up to seven characters) and y label.
+_POSE_PANEL, _POSE_Y_ROOM = (3.2, 2.4), 0.95
+
+
+def _x_labelled(ax) -> bool:
+    """Whether ``ax`` shows x tick labels (not inside a column of shared x axes): its x label goes with them."""
+    return ax.xaxis.get_tick_params().get("labelbottom", True)
+
+
+def _pose_grid(results, fig, draw, title: str):
     """One row per configuration, one panel per chosen pose: ``draw(samples, k, ax, color)`` fills each."""
     import matplotlib
-    n_cols = max(len(r.samples.labels) for r in results)
-    fig = _figure(fig, (panel[0] * n_cols, panel[1] * len(results)))
-    axes = fig.subplots(len(results), n_cols, squeeze=False, sharex=True)
+    (pw, ph), y_room = _POSE_PANEL, _POSE_Y_ROOM
+    shape = (len(results), max(len(r.samples.labels) for r in results))
+    heads = [[wrap(f"{r.name}: {label}", pw + 0.6, 9) + f"\n(x={x:.4g}, y={y:.4g} mm, φ={phi:.4g}°)"
+              for label, (x, y, phi) in zip(r.samples.labels, r.samples.poses)] for r in results]
+    head = max(text_inches(h, 9)[1] for row in heads for h in row) + 0.1        # a panel's title
+    width = y_room + shape[1] * pw + (shape[1] - 1) * (y_room + 0.15) + 0.2
+    title, top = _title(f"{title} ({results[0].samples.n_samples} samples)", width)
+    fig = _figure(fig, *grid(_POSE_PANEL, shape, y_room, 0.2, 0.6, top + 0.1 + head, wgap=y_room + 0.15,
+                             hgap=head + 0.15))
+    axes = fig.subplots(*shape, squeeze=False, sharex=True)
     colors = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
-    for row, r in zip(axes, results):
+    for i, (row, r) in enumerate(zip(axes, results)):
         s = r.samples
         for k, ax in enumerate(row):
             if k >= len(s.labels):
                 ax.set_visible(False)
                 continue
+            if i + 1 < shape[0] and k >= len(results[i + 1].samples.labels):   # nothing below: x labels here
+                ax.xaxis.set_tick_params(labelbottom=True)
             draw(s, k, ax, colors[k % len(colors)])
-            x, y, phi = s.poses[k]
-            ax.set_title(f"{r.name}: {s.labels[k]}\n(x={x:.4g}, y={y:.4g} mm, φ={phi:.4g}°)", fontsize=9)
-    fig.suptitle(f"{title} ({results[0].samples.n_samples} samples)")
+            ax.set_title(heads[i][k], fontsize=9, y=1.0)
+    lighten(fig, ROUND_STEPS)
+    _set_title(fig, title)
     return fig
 
 
@@ -245,7 +334,7 @@ def histograms_figure(results, quantity: str = "position", percentile: float = 9
     ``fig``: an empty figure to draw into (a new pyplot figure when None). Returns the Figure.
     """
     def draw(s, k, ax, color):
-        error_histogram(s, k, quantity, ax=ax, percentile=percentile, color=color)
+        error_histogram(s, k, quantity, ax=ax, percentile=percentile, color=color, label="")
     return _pose_grid(results, fig, draw, f"Monte Carlo {_QUANTITY[quantity][0]} at chosen poses")
 
 
@@ -287,7 +376,8 @@ def error_ecdf(samples, index: int, quantity: str = "position", *, ax=None, perc
             label=f"p{percentile:g} {p:.4g} {unit}")
     ax.axvline(worst, ls="--", lw=1.5, color=color, label=f"worst case {worst:.4g} {unit}")
     ax.axhline(percentile / 100, ls=":", lw=0.8, color="0.5")
-    ax.set(xlabel=f"{name} ({unit})", ylabel="fraction of assemblies at most x", ylim=(0, 1.02))
+    ax.set(ylabel="fraction of assemblies at most x", ylim=(0, 1.02))
+    ax.set_xlabel(f"{name} ({unit})", visible=_x_labelled(ax))
     ax.legend(fontsize=7, loc="lower right")
     return ax.figure
 
@@ -298,7 +388,7 @@ def ecdf_figure(results, quantity: str = "position", percentile: float = 99.73, 
     ``fig``: an empty figure to draw into (a new pyplot figure when None). Returns the Figure.
     """
     def draw(s, k, ax, color):
-        error_ecdf(s, k, quantity, ax=ax, percentile=percentile, color=color)
+        error_ecdf(s, k, quantity, ax=ax, percentile=percentile, color=color, label="")
     return _pose_grid(results, fig, draw, f"ECDF of the {_QUANTITY[quantity][0]} at chosen poses, "
                       "exact worst case dashed")
 
@@ -337,12 +427,25 @@ def sobol_ranking(frame, *, ax=None, title: str = ""):
             error_kw={"lw": 1, "capsize": 2})
     ax.barh(y + h / 2, frame["S1"], height=h, xerr=frame["S1_conf"], label="first order S1", color="#dd8452",
             error_kw={"lw": 1, "capsize": 2})
-    labels = [f"{n} (group)" if k == "group" else n for n, k in zip(frame["name"], frame["kind"])]
-    ax.set_yticks(y, labels)
+    ax.set_yticks(y, _bar_labels(frame))
     ax.invert_yaxis()
-    ax.set(xlabel="Sobol index (95 % CI)", title=title)
+    ax.set_xlabel("Sobol index (95 % CI)")
+    ax.set_title(title, fontsize=10, y=1.0)
     ax.legend(fontsize=7, loc="lower right")
     return ax.figure
+
+
+def _bar_labels(frame) -> list[str]:
+    """The names of a ranking frame's rows as its bar charts label them, groups marked."""
+    return [f"{n} (group)" if k == "group" else n for n, k in zip(frame["name"], frame["kind"])]
+
+
+def _shares_xlabel(undefined: list, width: float) -> str:
+    """x label of :func:`worst_case_shares` (8 pt), the names without a share of their own wrapped to ``width`` inches."""
+    label = "share of the worst case (%)"
+    if undefined:
+        label += "\n" + wrap(f"no share of their own (counted in their group): {', '.join(undefined)}", width, 8)
+    return label
 
 
 def worst_case_shares(frame, *, ax=None, title: str = "share of the exact worst case", column: str | None = None):
@@ -352,35 +455,46 @@ def worst_case_shares(frame, *, ax=None, title: str = "share of the exact worst 
     Names without a share of their own (rho_i, zeta_i: their clearance term
     is counted in clearance_i) are listed under the bars, not drawn.
     """
-    import textwrap
     column = ranking_basis(frame)[1] if column is None else column
     undefined = frame[frame[column].isna()]["name"].tolist()
     frame = frame.dropna(subset=[column]).sort_values(column, ascending=False, kind="stable")
     ax = _axes(ax, figsize=(3.5, 0.32 * len(frame) + 1.2))
     y = np.arange(len(frame))
     ax.barh(y, 100 * frame[column], color="#55a868")
-    ax.set_yticks(y, [f"{n} (group)" if k == "group" else n for n, k in zip(frame["name"], frame["kind"])])
+    ax.set_yticks(y, _bar_labels(frame))
     ax.invert_yaxis()
-    xlabel = "share of the worst case (%)"
-    if undefined:
-        xlabel += "\n" + textwrap.fill(f"no share of their own (counted in their group): {', '.join(undefined)}",
-                                        48)
-    ax.set_xlabel(xlabel, fontsize=8)
-    ax.set_title(title)
+    ax.set_xlabel(_shares_xlabel(undefined, ax.get_position().width * ax.figure.get_figwidth()), fontsize=8)
+    ax.set_title(title, fontsize=10, y=1.0)
     return ax.figure
+
+
+#: Widths of the two panels of :func:`ranking_figure`, inches (Sobol indices, worst-case shares).
+_RANKING_PANELS = (3.8, 2.6)
 
 
 def ranking_figure(frame, title: str = "", *, fig=None):
     """Sobol ranking with CIs next to the worst-case shares, each ranked in its own order, on one basis.
 
     Both panels are taken on the same basis (:func:`ranking_basis`: the mean
-    over the poses of a region, or one pose) and say which.
+    over the poses of a region, or one pose) and say which. The figure grows
+    with the number of inputs, its margins with their names.
     ``fig``: an empty figure to draw into (a new pyplot figure when None). Returns the Figure.
     """
     basis, column = ranking_basis(frame)
-    fig = _figure(fig, (10, 0.34 * len(frame) + 1.9))
-    a, b = fig.subplots(1, 2, width_ratios=(3, 2))
-    sobol_ranking(frame, ax=a, title=f"Sobol indices (variance shares),\n{basis}")
-    worst_case_shares(frame, ax=b, column=column, title=f"share of the exact worst case,\n{basis}")
-    fig.suptitle(title)
+    (wa, wb), shares = _RANKING_PANELS, frame.dropna(subset=[column])
+    heads = (wrap(f"Sobol indices (variance shares),\n{basis}", wa + 0.3, 10),
+             wrap(f"share of the exact worst case,\n{basis}", wb + 0.3, 10))
+    left = max(text_inches(t)[0] for t in _bar_labels(frame)) + 0.2          # the y tick labels of each panel
+    middle = max((text_inches(t)[0] for t in _bar_labels(shares)), default=0.0) + 0.3
+    xlabel = _shares_xlabel(frame[frame[column].isna()]["name"].tolist(), wb)
+    title, top = _title(title, left + wa + middle + wb + 0.3) if title else ("", 0.0)
+    top += 0.1 + max(text_inches(h, 10)[1] for h in heads) + 0.1
+    bottom = 0.45 + max(text_inches("S", 10)[1], text_inches(xlabel, 8)[1]) + 0.1
+    fig = _figure(fig, *grid(((wa + wb) / 2, 0.27 * len(frame) + 0.45), (1, 2), left, 0.3, bottom, top,
+                             wgap=middle))
+    a, b = fig.subplots(1, 2, width_ratios=(wa, wb))
+    sobol_ranking(frame, ax=a, title=heads[0])
+    worst_case_shares(frame, ax=b, column=column, title=heads[1])
+    lighten(fig, ROUND_STEPS)
+    _set_title(fig, title)
     return fig

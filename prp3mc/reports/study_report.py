@@ -12,8 +12,10 @@
 The report is built from a :class:`~prp3mc.study.results.StudyResult` only;
 it is readable without prp3mc installed. Figures are drawn on figures of
 their own with an Agg canvas: writing a report never touches pyplot or the
-matplotlib backend. They are drawn on worker processes, one per core while a core
-is idle, while the tables are written (:mod:`prp3mc.reports._render`).
+matplotlib backend. Each is laid out once with margins in inches and drawn
+once, without a layout engine (:mod:`prp3mc.reports._layout`). They are drawn
+on worker processes, one per core while a core is idle, while the tables are
+written (:mod:`prp3mc.reports._render`).
 """
 
 from __future__ import annotations
@@ -32,7 +34,9 @@ from ..study.results import StudyResult
 from ..study.summary import build_summary
 from ..study.sweep import best_configurations, design_frame
 from ..units import DEG2ARCSEC, DISPLAY, MM2UM
+from ._layout import ROUND_STEPS, Margins, agg_figure, lighten
 from ._render import rendering
+from .plots import LEGEND_DROP
 
 __all__ = ["write_study", "render_report", "comparison"]
 
@@ -92,16 +96,23 @@ def comparison(result: StudyResult, summary: dict | None = None) -> dict:
     return {"criteria": rows, "reference_best": reference_best, "ranges": ranges, "max_ratio": max_ratio}
 
 
-def _family_shares(result: StudyResult) -> pd.DataFrame:
-    """Share of each error family in the worst case at each configuration's worst pose (%)."""
+def _worst_index(c) -> tuple:
+    """Grid index of the pose where a configuration's worst-case position error is largest."""
+    wc = c.worst_case
+    return np.unravel_index(np.argmax(wc.position_mm), wc.position_mm.shape)
+
+
+def _family_shares(result: StudyResult, contributions: dict[str, pd.DataFrame]) -> pd.DataFrame:
+    """Share of each error family in the worst case at each configuration's worst pose (%).
+
+    ``contributions``: :func:`_contributions` of every configuration, by name.
+    """
     rows = []
     for c in result.configurations:
-        wc = c.worst_case
-        k = np.unravel_index(np.argmax(wc.position_mm), wc.position_mm.shape)
-        contrib = wc.contribution["position"][k]
-        fam = pd.Series(contrib, index=[t.rsplit("_", 1)[0] for t in wc.terms]).groupby(level=0).sum()
-        worst = float(wc.position_mm[k])
-        for f, v in fam.items():  # no share of a zero worst case (a budget of constant inputs)
+        frame = contributions[c.name]
+        fam = pd.Series(frame["contribution"].to_numpy(), index=[t.rsplit("_", 1)[0] for t in frame["term"]])
+        worst = float(c.worst_case.position_mm[_worst_index(c)])
+        for f, v in fam.groupby(level=0).sum().items():  # no share of a zero worst case (a budget of constant inputs)
             rows.append({"configuration": c.name, "family": f, "contribution_um": MM2UM * v,
                          "share_pct": 100 * v / worst if worst > 0 else float("nan")})
     return pd.DataFrame(rows)
@@ -109,19 +120,13 @@ def _family_shares(result: StudyResult) -> pd.DataFrame:
 
 def _worst_pose(c) -> str:
     """The pose where a configuration's worst-case position error is largest, for labels."""
-    wc = c.worst_case
-    x, y, phi = wc.poses[np.unravel_index(np.argmax(wc.position_mm), wc.position_mm.shape)]
+    x, y, phi = c.worst_case.poses[_worst_index(c)]
     return f"x = {x:.4g} mm, y = {y:.4g} mm, φ = {phi:.4g}°"
 
 
 def _contributions(c) -> pd.DataFrame:
     """Worst-case contributions at the configuration's worst pose."""
-    wc = c.worst_case
-    k = np.unravel_index(np.argmax(wc.position_mm), wc.position_mm.shape)
-    frame = wc.contributions_frame("position")
-    flat = int(np.ravel_multi_index(k, wc.position_mm.shape))
-    T = len(wc.terms)
-    return frame.iloc[flat * T:(flat + 1) * T].reset_index(drop=True)
+    return c.worst_case.contributions_frame("position", _worst_index(c))
 
 
 def _grid_frame(c) -> pd.DataFrame:
@@ -152,21 +157,21 @@ def _summary_display(frame: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _canvas():
-    """An empty figure on its own Agg canvas (no pyplot, no backend switch)."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    return FigureCanvasAgg(Figure()).figure
-
-
 def _draw(plot, *args, **kwargs):
-    """Deferred ``plot(*args, fig=<empty Agg figure>, **kwargs)``: called where the figure is rendered."""
-    return lambda: plot(*args, fig=_canvas(), **kwargs)
+    """Deferred ``plot(*args, fig=<empty Agg figure>, **kwargs)``: called where the figure is rendered.
+
+    ``plot`` sizes the figure and fixes its margins itself (one draw, no layout engine).
+    """
+    return lambda: plot(*args, fig=agg_figure(), **kwargs)
 
 
-def _draw_axes(plot, size: tuple[float, float], *args, **kwargs):
-    """Deferred ``plot(*args, ax=<axes of a new Agg figure of size inches>, **kwargs)``."""
-    return lambda: plot(*args, ax=_canvas_axes(size), **kwargs)
+def _draw_axes(plot, size: tuple[float, float], margins: Margins, *args, **kwargs):
+    """Deferred ``plot(*args, ax=<the axes of a new Agg figure of size inches, margins fixed>, **kwargs)``."""
+    def draw():
+        fig = plot(*args, ax=agg_figure(size, margins).subplots(), **kwargs)
+        lighten(fig, ROUND_STEPS)
+        return fig
+    return draw
 
 
 def _shown(result: StudyResult) -> list:
@@ -232,12 +237,9 @@ def _figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
     return figs + _allocation_figures(result)
 
 
-def _canvas_axes(size: tuple[float, float]):
-    """One axes on a new Agg-canvas figure of ``size`` inches, constrained layout."""
-    fig = _canvas()
-    fig.set_size_inches(size)
-    fig.set_layout_engine("constrained")
-    return fig.subplots()
+#: Size and margins (inches) of an allocation's map (its legend below it) and of its Pareto front.
+_ALLOCATION_MAP = ((5.2, 5.6), Margins(0.8, 0.3, LEGEND_DROP + 0.5, 0.6))
+_ALLOCATION_FRONT = ((6.4, 4.4), Margins(0.85, 0.25, 0.55, 0.4))
 
 
 def _allocation_figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
@@ -253,7 +255,7 @@ def _allocation_figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
         binding = ("the pose where the Monte Carlo percentile's 95 % upper bound is largest"
                    if a.binding == "percentile" else "the binding poses, dashed red the spec where the map reaches it")
         figs.append((f"allocation_{c.name}_map", f"{c.name}: the exact worst case of the chosen classes over the "
-                     f"test region; ★ {binding}.", _draw_axes(allocation_map, (5.6, 5.6), a, (ny, nx), title=c.name)))
+                     f"test region; ★ {binding}.", _draw_axes(allocation_map, *_ALLOCATION_MAP, a, (ny, nx), title=c.name)))
         if front is not None and len(front):
             output = spec.front_output
             limit = spec.spec_phi_arcsec if output == "phi" else (
@@ -263,13 +265,14 @@ def _allocation_figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
                          "labelled with the classes that changed from the previous one; ★ the chosen classes."
                          + (" The front is of the worst case: the percentile spec is not drawn, and the chosen "
                             "classes are marked only where they lie on it." if limit is None else ""),
-                         _draw_axes(allocation_front_plot, (6.4, 4.4), front, output, spec=limit,
+                         _draw_axes(allocation_front_plot, *_ALLOCATION_FRONT, front, output, spec=limit,
                                     chosen_cost=a.cost if a.feasible else None)))
     return figs
 
 
 def _tables(result: StudyResult) -> dict[str, pd.DataFrame]:
-    tables = {"summary": result.to_frame(), "worstcase_families": _family_shares(result),
+    contributions = {c.name: _contributions(c) for c in result.configurations}
+    tables = {"summary": result.to_frame(), "worstcase_families": _family_shares(result, contributions),
               "budget": result.study.budget.to_frame()}
     if result.study.budget.effects:
         tables["effects"] = result.study.budget.effects_frame()
@@ -277,7 +280,7 @@ def _tables(result: StudyResult) -> dict[str, pd.DataFrame]:
         tables["design_space"] = design_frame(result, _MC_PERCENTILE)
     for c in result.configurations:
         tables[f"worstcase_{c.name}"] = _grid_frame(c)
-        tables[f"contributions_{c.name}"] = _contributions(c)
+        tables[f"contributions_{c.name}"] = contributions[c.name]
         if c.montecarlo is not None:
             tables[f"montecarlo_{c.name}"] = c.montecarlo.to_frame()
         if c.sobol is not None:

@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 
 from ..units import DISPLAY
+from ._layout import ROUND_STEPS, grid, lighten, text_inches
 from .plots import _axes, _figure
 
 __all__ = ["merits", "merit_plot", "design_space_figure"]
@@ -119,10 +120,31 @@ def design_space_figure(frame: pd.DataFrame, *, best: list | None = None, fig=No
     fixed = {"configuration", "analysis", "output", "statistic", "value", "unit", "input"}
     parameters = [c for c in frame.columns if c not in fixed]
     rows = merits(frame)
-    fig = _figure(fig, (3.4 * len(parameters) + 0.8, 2.6 * len(rows) + 0.4))
+    # margins, inches: y tick labels and the two-line y label left; each panel's x tick labels (categories
+    # slanted at 30°) and x label below it
+    categories = [t for p in parameters for t in (_positions(frame[p])[1] or [])]
+    slant = max((text_inches(t, 7)[0] / 2 for t in categories), default=0.0)
+    left = 0.45 + max(text_inches(_merit_label(*m)[0], 8)[1] for m in rows) + _tick_room(frame, rows)
+    below = 0.55 + slant
+    fig = _figure(fig, *grid((2.6, 1.9), (len(rows), len(parameters)), left, 0.2, below, 0.15, wgap=0.25,
+                             hgap=below + 0.1))
     axes = np.atleast_2d(fig.subplots(len(rows), len(parameters), squeeze=False, sharey="row"))
     for i, merit in enumerate(rows):
         for j, parameter in enumerate(parameters):
             merit_plot(frame, parameter, merit, best=best, ax=axes[i, j], ylabel=j == 0,
                        legend=j == len(parameters) - 1 and (i == 0 or merit[2] == "ST_top"))
+    lighten(fig, ROUND_STEPS)
     return fig
+
+
+def _tick_room(frame: pd.DataFrame, rows) -> float:
+    """Inches of the widest y tick label of the merits' panels (at most six characters of a round number)."""
+    from .plots import _tick_width
+    widths = []
+    for merit in rows:
+        sel = (frame["analysis"] == merit[0]) & (frame["output"] == merit[1]) & (frame["statistic"] == merit[2])
+        values = _merit_label(*merit)[1] * frame.loc[sel, "value"].to_numpy(dtype=float)
+        if len(values) and np.isfinite(values).any():
+            lo, hi = float(np.nanmin(values)), float(np.nanmax(values))
+            widths.append(_tick_width(lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo)))
+    return max(widths, default=0.4)

@@ -197,21 +197,23 @@ class WorstCase(_Maxima):
             out[q] = x
         return out
 
-    def contributions_frame(self, quantity: str = "position") -> pd.DataFrame:
+    def contributions_frame(self, quantity: str = "position", index: tuple | None = None) -> pd.DataFrame:
         """Per pose and term: the maximiser's term value, its contribution and share of the maximum.
 
         Columns: x_mm, y_mm, phi_deg, output, term, term_value (mm or deg;
         an effect's own value for a known shift, T - 20 K for thermal),
         contribution (the output's unit), share (of the maximum, 0-1). A
         known shift's contribution is systematic: it is there at every sample.
+        ``index`` (indices into ``poses.shape[:-1]``): the rows of that pose only.
         """
-        n, T = int(np.prod(self.poses.shape[:-1], dtype=int)), len(self.terms)
-        total = self.value(quantity).reshape(n, 1)
-        contrib = self.contribution[quantity].reshape(n, T)
+        T = len(self.terms)
+        at = (lambda a: np.asarray(a)) if index is None else (lambda a: np.asarray(a)[index])
+        total = at(self.value(quantity)).reshape(-1, 1)
+        contrib = at(self.contribution[quantity]).reshape(-1, T)
         share = np.divide(contrib, total, out=np.zeros_like(contrib), where=total > 0)
         return pd.DataFrame({
-            **pose_columns(self.poses, repeat=T), "output": quantity, "term": np.tile(self.terms, n),
-            "term_value": self.term_at[quantity].reshape(n, T).ravel(),
+            **pose_columns(at(self.poses), repeat=T), "output": quantity, "term": np.tile(self.terms, len(total)),
+            "term_value": at(self.term_at[quantity]).reshape(-1, T).ravel(),
             "contribution": contrib.ravel(), "share": share.ravel(),
         })
 
