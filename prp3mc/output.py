@@ -39,7 +39,7 @@ from typing import Any, Iterator
 from .errors import Prp3mcError
 
 __all__ = ["OutputError", "OutputExistsError", "OutputBusyError", "claim_output", "output_folder",
-           "check_output", "dumps_json", "write_json", "write_text", "check_json", "FigureFormatError",
+           "check_output", "dumps_json", "write_json", "write_text", "write_csv", "check_json", "FigureFormatError",
            "save_figure", "png_data_uri", "figure_formats", "FIGURE_FORMATS"]
 
 
@@ -218,6 +218,26 @@ def write_text(path: str | os.PathLike, text: str) -> None:
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, path)
+
+
+def write_csv(frame, path: str | os.PathLike) -> None:
+    """``frame.to_csv(path, index=False)``: the same bytes, a frame of float columns about twice as fast.
+
+    pandas writes each float as its shortest repr, which Python's ``repr``
+    gives too: a frame whose columns are all float64 without NaN (which
+    pandas writes as nothing) and whose column names need no quotes is
+    written row by row from those reprs (the large grids of a report);
+    any other frame by pandas.
+    """
+    import numpy as np
+    floats = all(dtype == np.float64 for dtype in frame.dtypes)
+    plain = all(isinstance(c, str) and not any(ch in c for ch in ',"\r\n') for c in frame.columns)
+    if not (floats and plain) or frame.isna().to_numpy().any():
+        frame.to_csv(path, index=False)
+        return
+    rows = zip(*(frame[c].to_numpy().tolist() for c in frame.columns))
+    lines = [",".join(frame.columns), *(",".join(map(repr, row)) for row in rows)]
+    Path(path).write_text(os.linesep.join(lines) + os.linesep, encoding="utf-8")
 
 
 def check_json(obj: Any, where: str = "") -> Any:

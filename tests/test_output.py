@@ -13,7 +13,8 @@ import pytest
 
 from prp3mc.cli import main
 from prp3mc.errors import Prp3mcError
-from prp3mc.output import (OutputBusyError, OutputExistsError, check_json, claim_output, output_folder, write_json)
+from prp3mc.output import (OutputBusyError, OutputExistsError, check_json, claim_output, output_folder, write_csv,
+                           write_json)
 
 # A run that writes its PID into the folder, holding it for HOLD seconds (HOLD < 0: until its stdin closes).
 WRITER = textwrap.dedent("""
@@ -200,6 +201,23 @@ def test_no_json_carries_nan(tmp_path):
     assert check_json({"a": [1, 2.0, None, "x"]}) == {"a": [1, 2.0, None, "x"]}
     write_json(tmp_path / "b.json", {"a": None})
     assert json.loads((tmp_path / "b.json").read_text()) == {"a": None}
+
+
+def test_csv_has_the_bytes_pandas_writes(tmp_path, seed):
+    """Float frames written from the values' reprs, any other frame by pandas: the same bytes as to_csv."""
+    import numpy as np
+    import pandas as pd
+    rng = np.random.default_rng(seed)
+    wild = rng.standard_normal(400) * 10.0 ** rng.uniform(-30, 30, 400)
+    special = [0.0, -0.0, 1.0, 1e16, 1e15, 1e-5, 1e-4, 0.1 + 0.2, np.inf, -np.inf, 5e-324, 1.7976931348623157e308]
+    floats = pd.DataFrame({"x_mm": np.resize(special, 400), "value": wild, "y": wild.round(3)})
+    others = [floats.assign(value=np.where(wild > 0, np.nan, wild)),                   # NaN: written as nothing
+              floats.assign(label=["a,b", 'say "x"'] * 200), floats.rename(columns={"y": "y,z"}),
+              pd.DataFrame({"n": np.arange(3), "f": [0.5, 1.5, 2.5]})]
+    for k, frame in enumerate([floats, *others]):
+        write_csv(frame, tmp_path / f"{k}.csv")
+        frame.to_csv(tmp_path / f"{k}_pandas.csv", index=False)
+        assert (tmp_path / f"{k}.csv").read_bytes() == (tmp_path / f"{k}_pandas.csv").read_bytes(), k
 
 
 @pytest.mark.slow  # two fresh interpreters running a study (the race itself is tested above without the CLI)

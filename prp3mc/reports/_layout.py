@@ -14,7 +14,8 @@ from __future__ import annotations
 import functools
 from typing import NamedTuple
 
-__all__ = ["Margins", "agg_figure", "fix_layout", "grid", "text_inches", "wrap", "lighten", "ROUND_STEPS"]
+__all__ = ["Margins", "agg_figure", "fix_layout", "grid", "text_inches", "wrap", "number_inches", "tick_width",
+           "title_lines", "set_title", "shift", "lighten", "ROUND_STEPS"]
 
 _POINTS = 72.0
 #: Tick steps of matplotlib's default ticks (1, 2, 2.5, 5 times a power of ten), for :func:`lighten`.
@@ -102,6 +103,36 @@ def wrap(text: str, width: float, fontsize: float = 10.0) -> str:
             else:
                 out.append(word)
     return "\n".join(out)
+
+
+def number_inches(value: float, fontsize: float = 10.0) -> float:
+    """Width (inches) of ``value`` written as a tick label (``%g``, matplotlib's minus sign)."""
+    return text_inches(f"{value:g}".replace("-", "\u2212"), fontsize)[0]
+
+
+def tick_width(lo: float, hi: float, fontsize: float = 10.0) -> float:
+    """Width (inches) of the widest tick label of an axis over [lo, hi] with (at most five, :func:`lighten`) round ticks."""
+    from matplotlib.ticker import MaxNLocator
+    slack = 1e-9 * abs(hi - lo)
+    ticks = [t for t in MaxNLocator(5, steps=ROUND_STEPS).tick_values(lo, hi) if lo - slack <= t <= hi + slack]
+    return max(number_inches(t, fontsize) for t in ticks or [lo, hi])
+
+
+def title_lines(text: str, width: float) -> tuple[str, float]:
+    """A figure title (12 pt) wrapped to ``width`` inches, and the inches it takes at the top (:func:`set_title`)."""
+    text = wrap(text, width - 0.2, 12)
+    return text, 0.08 + text_inches(text, 12)[1]
+
+
+def set_title(fig, text: str) -> None:
+    """``text`` as ``fig``'s title, 0.08 inches below its top edge whatever the figure's height."""
+    fig.suptitle(text, y=1.0, va="top").set_transform(fig.transFigure + shift(fig, 0.0, -0.08))
+
+
+def shift(fig, dx: float, dy: float):
+    """A translation by (dx, dy) inches on ``fig``, to add to a transform."""
+    from matplotlib.transforms import ScaledTranslation
+    return ScaledTranslation(dx, dy, fig.dpi_scale_trans)
 
 
 def lighten(fig, steps=None) -> None:

@@ -22,7 +22,7 @@ from typing import Callable, Iterator, Sequence
 
 from ..output import save_figure
 
-__all__ = ["rendering", "default_workers"]
+__all__ = ["rendering", "default_workers", "preloading"]
 
 #: (file name, a callable that draws the figure and returns it)
 FigureTask = tuple[str, Callable[[], object]]
@@ -50,6 +50,35 @@ def default_workers(n_figures: int) -> int:
         return 1
     cores = len(os.sched_getaffinity(0))
     return max(1, min(n_figures, cores)) if os.getloadavg()[0] < cores else 1
+
+
+def _import_drawing() -> None:
+    """Import what drawing a report's figures needs, and load its font."""
+    import matplotlib.backends.backend_agg  # noqa: F401
+    import matplotlib.figure  # noqa: F401 -- (the Agg backend no longer imports it)
+    from ._layout import text_inches
+    text_inches("0")
+
+
+@contextlib.contextmanager
+def preloading(enabled: bool = True) -> Iterator[None]:
+    """Import what drawing the figures needs on a thread while the block runs; the thread is joined at its end.
+
+    Matplotlib takes about half a second to import, on one core: a command
+    that writes a report after its analyses (which leave a core idle part
+    of the time) imports it meanwhile. Nothing is imported twice: the
+    report's figures then start at once (:func:`rendering`). The thread is
+    joined when the block ends, so it never runs when the figures' worker
+    processes fork. ``enabled=False`` runs the block alone.
+    """
+    thread = threading.Thread(target=_import_drawing, name="prp3mc-preload", daemon=True) if enabled else None
+    if thread is not None:
+        thread.start()
+    try:
+        yield
+    finally:
+        if thread is not None:
+            thread.join()
 
 
 def _render(k: int) -> bytes:
@@ -85,8 +114,7 @@ def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=
     if workers == 1:
         yield (save_figure(draw(), folder, name, formats) for name, draw in figures)
         return
-    import matplotlib.backends.backend_agg  # noqa: F401 -- imported once here and inherited, not in every worker
-    import matplotlib.figure  # noqa: F401 -- (the Agg backend no longer imports it: a quarter second a worker)
+    _import_drawing()                       # once here (if not preloaded), inherited, not in every worker
     with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
                              initializer=_inherit, initargs=(figures, folder, tuple(formats))) as pool:
         yield pool.map(_render, range(len(figures)))

@@ -13,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..units import DISPLAY
-from ._layout import ROUND_STEPS, fix_layout, grid, lighten, text_inches, wrap
+from ._layout import (ROUND_STEPS, fix_layout, grid, lighten, number_inches, set_title, shift, text_inches,
+                      tick_width, title_lines, wrap)
 
 __all__ = ["is_constant", "shared_levels", "region_map", "worst_case_map", "montecarlo_map", "compare_maps_figure",
            "error_histogram", "histograms_figure", "ecdf_steps", "error_ecdf", "ecdf_figure", "sobol_ranking",
@@ -52,34 +53,9 @@ def _figure(fig, figsize, margins):
     return fix_layout(fig, figsize, margins)
 
 
-def _title(text: str, width: float) -> tuple[str, float]:
-    """A figure title (12 pt) wrapped to ``width`` inches, and the inches it takes at the top (:func:`_set_title`)."""
-    text = wrap(text, width - 0.2, 12)
-    return text, 0.08 + text_inches(text, 12)[1]
-
-
-def _set_title(fig, text: str) -> None:
-    """``text`` as ``fig``'s title, 0.08 inches below its top edge."""
-    fig.suptitle(text, y=1.0, va="top").set_transform(fig.transFigure + _inches(fig, 0.0, -0.08))
-
-
-def _inches(fig, dx: float, dy: float):
-    """A translation by (dx, dy) inches on ``fig``, to add to a transform."""
-    from matplotlib.transforms import ScaledTranslation
-    return ScaledTranslation(dx, dy, fig.dpi_scale_trans)
-
-
-def _tick_width(lo: float, hi: float, fontsize: float = 10.0) -> float:
-    """Inches taken by the widest of the (at most five, :func:`~prp3mc.reports._layout.lighten`) tick labels of [lo, hi]."""
-    from matplotlib.ticker import MaxNLocator
-    slack = 1e-9 * abs(hi - lo)
-    ticks = [t for t in MaxNLocator(5, steps=ROUND_STEPS).tick_values(lo, hi) if lo - slack <= t <= hi + slack]
-    return max(text_inches(f"{t:g}".replace("-", "\u2212"), fontsize)[0] for t in ticks or [lo, hi])
-
-
 def legend_below(ax, **kwargs):
     """A legend centred under ``ax``, :data:`LEGEND_DROP` inches below it (under its x tick labels and label)."""
-    below = ax.transAxes + _inches(ax.figure, 0.0, -LEGEND_DROP)
+    below = ax.transAxes + shift(ax.figure, 0.0, -LEGEND_DROP)
     return ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=below, fontsize=7,
                      frameon=False, ncol=1, **kwargs)
 
@@ -199,18 +175,18 @@ def compare_maps_figure(results, kind: str = "worstcase", quantity: str = "posit
     # the layout, inches: y tick labels and label left of each map, its colour bar (or the shared one) right of it
     n = len(results)
     bars = [] if all(constant) else [common] if shared else [lv for lv, flat in zip(levels, constant) if not flat]
-    bar = 0.8 + max(text_inches(f"{v:g}".replace("-", "\u2212"))[0] for v in np.concatenate(bars)) if bars else 0.0
-    y_room = 0.5 + max(_tick_width(float(p[..., 1].min()), float(p[..., 1].max())) for p in poses)
+    bar = 0.8 + max(number_inches(v) for v in np.concatenate(bars)) if bars else 0.0
+    y_room = 0.5 + max(tick_width(float(p[..., 1].min()), float(p[..., 1].max())) for p in poses)
     aspect = max(np.ptp(p[..., 1]) / max(np.ptp(p[..., 0]), 1e-300) for p in poses)
     height = MAP_INCHES * float(np.clip(aspect, 0.35, 1.4))
     gap = y_room + (0.0 if shared else bar)
     width = y_room + n * MAP_INCHES + (n - 1) * gap + bar + 0.15
     names = [wrap(r.name, MAP_INCHES, 12) for r in results]
-    title, top = _title(title, width)
+    title, top = title_lines(title, width)
     top += 0.15 + max(text_inches(name, 12)[1] for name in names) + 0.1
     bottom = LEGEND_DROP + (0.0 if all(constant) else 0.5)
     fig = _figure(fig, *grid((MAP_INCHES, height), (1, n), y_room, bar + 0.15, bottom, top, wgap=gap))
-    _set_title(fig, title)
+    set_title(fig, title)
     axes = fig.subplots(1, n, squeeze=False)[0]
     for ax, r, v, name, lv in zip(axes, results, values, names, levels):
         if kind == "worstcase":
@@ -284,7 +260,7 @@ def error_histogram(samples, index: int, quantity: str = "position", *, ax=None,
     ax.axvline(worst, ls="--", lw=1.5, color=color, label=f"worst case {worst:.4g} {unit}")
     ax.axvline(p, ls=":", lw=1.2, color=color, label=f"p{percentile:g} {p:.4g} {unit}")
     ax.set_ylabel("density")
-    ax.set_xlabel(f"{name} ({unit})", visible=_x_labelled(ax))
+    ax.set_xlabel(f"{name} ({unit})", visible=_labelled(ax.xaxis))
     ax.legend(fontsize=7, loc="upper right")
     return ax.figure
 
@@ -294,24 +270,27 @@ def error_histogram(samples, index: int, quantity: str = "position", *, ax=None,
 _POSE_PANEL, _POSE_Y_ROOM = (3.2, 2.4), 0.95
 
 
-def _x_labelled(ax) -> bool:
-    """Whether ``ax`` shows x tick labels (not inside a column of shared x axes): its x label goes with them."""
-    return ax.xaxis.get_tick_params().get("labelbottom", True)
+def _labelled(axis) -> bool:
+    """Whether ``axis`` shows its tick labels (not inside a row or column of shared axes): its label goes with them."""
+    return axis.get_tick_params().get("labelbottom" if axis.axis_name == "x" else "labelleft", True)
 
 
-def _pose_grid(results, fig, draw, title: str):
-    """One row per configuration, one panel per chosen pose: ``draw(samples, k, ax, color)`` fills each."""
+def _pose_grid(results, fig, draw, title: str, sharey: bool = False):
+    """One row per configuration, one panel per chosen pose: ``draw(samples, k, ax, color)`` fills each.
+
+    ``sharey``: one y axis per row, labelled on its first panel only (the panels then sit closer).
+    """
     import matplotlib
     (pw, ph), y_room = _POSE_PANEL, _POSE_Y_ROOM
     shape = (len(results), max(len(r.samples.labels) for r in results))
     heads = [[wrap(f"{r.name}: {label}", pw + 0.6, 9) + f"\n(x={x:.4g}, y={y:.4g} mm, φ={phi:.4g}°)"
               for label, (x, y, phi) in zip(r.samples.labels, r.samples.poses)] for r in results]
     head = max(text_inches(h, 9)[1] for row in heads for h in row) + 0.1        # a panel's title
-    width = y_room + shape[1] * pw + (shape[1] - 1) * (y_room + 0.15) + 0.2
-    title, top = _title(f"{title} ({results[0].samples.n_samples} samples)", width)
-    fig = _figure(fig, *grid(_POSE_PANEL, shape, y_room, 0.2, 0.6, top + 0.1 + head, wgap=y_room + 0.15,
-                             hgap=head + 0.15))
-    axes = fig.subplots(*shape, squeeze=False, sharex=True)
+    wgap = 0.3 if sharey else y_room + 0.15
+    width = y_room + shape[1] * pw + (shape[1] - 1) * wgap + 0.2
+    title, top = title_lines(f"{title} ({results[0].samples.n_samples} samples)", width)
+    fig = _figure(fig, *grid(_POSE_PANEL, shape, y_room, 0.2, 0.6, top + 0.1 + head, wgap=wgap, hgap=head + 0.15))
+    axes = fig.subplots(*shape, squeeze=False, sharex=True, sharey=sharey)
     colors = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     for i, (row, r) in enumerate(zip(axes, results)):
         s = r.samples
@@ -324,7 +303,7 @@ def _pose_grid(results, fig, draw, title: str):
             draw(s, k, ax, colors[k % len(colors)])
             ax.set_title(heads[i][k], fontsize=9, y=1.0)
     lighten(fig, ROUND_STEPS)
-    _set_title(fig, title)
+    set_title(fig, title)
     return fig
 
 
@@ -376,8 +355,9 @@ def error_ecdf(samples, index: int, quantity: str = "position", *, ax=None, perc
             label=f"p{percentile:g} {p:.4g} {unit}")
     ax.axvline(worst, ls="--", lw=1.5, color=color, label=f"worst case {worst:.4g} {unit}")
     ax.axhline(percentile / 100, ls=":", lw=0.8, color="0.5")
-    ax.set(ylabel="fraction of assemblies at most x", ylim=(0, 1.02))
-    ax.set_xlabel(f"{name} ({unit})", visible=_x_labelled(ax))
+    ax.set_ylim(0, 1.02)
+    ax.set_ylabel("fraction of assemblies at most x", visible=_labelled(ax.yaxis))
+    ax.set_xlabel(f"{name} ({unit})", visible=_labelled(ax.xaxis))
     ax.legend(fontsize=7, loc="lower right")
     return ax.figure
 
@@ -390,7 +370,7 @@ def ecdf_figure(results, quantity: str = "position", percentile: float = 99.73, 
     def draw(s, k, ax, color):
         error_ecdf(s, k, quantity, ax=ax, percentile=percentile, color=color, label="")
     return _pose_grid(results, fig, draw, f"ECDF of the {_QUANTITY[quantity][0]} at chosen poses, "
-                      "exact worst case dashed")
+                      "exact worst case dashed", sharey=True)
 
 
 def ranking_basis(frame) -> tuple[str, str]:
@@ -487,7 +467,7 @@ def ranking_figure(frame, title: str = "", *, fig=None):
     left = max(text_inches(t)[0] for t in _bar_labels(frame)) + 0.2          # the y tick labels of each panel
     middle = max((text_inches(t)[0] for t in _bar_labels(shares)), default=0.0) + 0.3
     xlabel = _shares_xlabel(frame[frame[column].isna()]["name"].tolist(), wb)
-    title, top = _title(title, left + wa + middle + wb + 0.3) if title else ("", 0.0)
+    title, top = title_lines(title, left + wa + middle + wb + 0.3) if title else ("", 0.0)
     top += 0.1 + max(text_inches(h, 10)[1] for h in heads) + 0.1
     bottom = 0.45 + max(text_inches("S", 10)[1], text_inches(xlabel, 8)[1]) + 0.1
     fig = _figure(fig, *grid(((wa + wb) / 2, 0.27 * len(frame) + 0.45), (1, 2), left, 0.3, bottom, top,
@@ -496,5 +476,5 @@ def ranking_figure(frame, title: str = "", *, fig=None):
     sobol_ranking(frame, ax=a, title=heads[0])
     worst_case_shares(frame, ax=b, column=column, title=heads[1])
     lighten(fig, ROUND_STEPS)
-    _set_title(fig, title)
+    set_title(fig, title)
     return fig

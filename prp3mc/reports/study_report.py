@@ -15,7 +15,8 @@ their own with an Agg canvas: writing a report never touches pyplot or the
 matplotlib backend. Each is laid out once with margins in inches and drawn
 once, without a layout engine (:mod:`prp3mc.reports._layout`). They are drawn
 on worker processes, one per core while a core is idle, while the tables are
-written (:mod:`prp3mc.reports._render`).
+written (:mod:`prp3mc.reports._render`); analyses run inside
+:func:`preloading` import matplotlib meanwhile.
 """
 
 from __future__ import annotations
@@ -29,16 +30,16 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from ..output import check_output, figure_formats, output_folder, png_data_uri, write_json, write_text
+from ..output import check_output, figure_formats, output_folder, png_data_uri, write_csv, write_json, write_text
 from ..study.results import StudyResult
 from ..study.summary import build_summary
 from ..study.sweep import best_configurations, design_frame
 from ..units import DEG2ARCSEC, DISPLAY, MM2UM
 from ._layout import ROUND_STEPS, Margins, agg_figure, lighten
-from ._render import rendering
+from ._render import preloading, rendering
 from .plots import LEGEND_DROP
 
-__all__ = ["write_study", "render_report", "comparison"]
+__all__ = ["write_study", "render_report", "comparison", "preloading"]
 
 _MC_PERCENTILE = 99.73
 
@@ -427,7 +428,7 @@ def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = Fa
         with rendering([(name, draw) for name, _, draw in figures], tmp / "figures", formats, workers) as pngs:
             tables = _tables(result)                # while the figures are drawn
             for name, frame in tables.items():
-                frame.to_csv(tmp / "tables" / f"{name}.csv", index=False)
+                write_csv(frame, tmp / "tables" / f"{name}.csv")
             write_json(tmp / "summary.json", summary)
             embedded = [(name, caption, png_data_uri(png)) for (name, caption, _), png in zip(figures, pngs)]
         write_text(tmp / "report.html", render_report(result, embedded, tables, summary))

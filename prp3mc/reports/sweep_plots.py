@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from ..units import DISPLAY
-from ._layout import ROUND_STEPS, grid, lighten, text_inches
+from ._layout import ROUND_STEPS, grid, lighten, text_inches, tick_width
 from .plots import _axes, _figure
 
 __all__ = ["merits", "merit_plot", "design_space_figure"]
@@ -139,12 +139,11 @@ def design_space_figure(frame: pd.DataFrame, *, best: list | None = None, fig=No
 
 def _tick_room(frame: pd.DataFrame, rows) -> float:
     """Inches of the widest y tick label of the merits' panels (at most six characters of a round number)."""
-    from .plots import _tick_width
     widths = []
     for merit in rows:
         sel = (frame["analysis"] == merit[0]) & (frame["output"] == merit[1]) & (frame["statistic"] == merit[2])
         values = _merit_label(*merit)[1] * frame.loc[sel, "value"].to_numpy(dtype=float)
         if len(values) and np.isfinite(values).any():
             lo, hi = float(np.nanmin(values)), float(np.nanmax(values))
-            widths.append(_tick_width(lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo)))
+            widths.append(tick_width(lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo)))
     return max(widths, default=0.4)
