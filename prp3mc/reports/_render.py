@@ -7,6 +7,8 @@ worker process per core while a core is idle, and the caller goes on
 pickled but each figure's index and its PNG bytes. Elsewhere, or with one
 core, the figures are drawn here, one after the other. The files and bytes
 are the same either way (``benchmarks/bench_study.py`` times both).
+:func:`preloading` imports matplotlib on a thread while a command's analyses
+run, so that drawing starts at once.
 """
 
 from __future__ import annotations

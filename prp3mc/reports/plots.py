@@ -6,6 +6,13 @@ several panels out on one figure and take ``fig=`` (an empty Figure to draw
 into, sized to fit; a new pyplot figure when None). Nothing here switches the
 matplotlib backend, so figures show inline in notebooks; reports draw on a
 :class:`matplotlib.figure.Figure` of their own. Maps show µm and arcsec.
+
+The ``*_figure`` functions lay their panels out once, with margins in inches
+sized from what the figure holds (tick labels, names, titles wrapped to its
+width; :mod:`prp3mc.reports._layout`): no layout engine, so a figure renders
+in a single draw, the same in a report and in a notebook. Axes titles are set
+at ``y=1.0``, where matplotlib puts them above axes without top ticks, so
+that no draw measures every tick label to place them.
 """
 
 from __future__ import annotations

@@ -138,7 +138,7 @@ def design_space_figure(frame: pd.DataFrame, *, best: list | None = None, fig=No
 
 
 def _tick_room(frame: pd.DataFrame, rows) -> float:
-    """Inches of the widest y tick label of the merits' panels (at most six characters of a round number)."""
+    """Width (inches) of the widest y tick label of the merits' rows: each row's values with matplotlib's 5 % margins."""
     widths = []
     for merit in rows:
         sel = (frame["analysis"] == merit[0]) & (frame["output"] == merit[1]) & (frame["statistic"] == merit[2])
