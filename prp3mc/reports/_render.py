@@ -59,6 +59,7 @@ def _import_drawing() -> None:
     """Import what drawing a report's figures needs, and load its font."""
     import matplotlib.backends.backend_agg  # noqa: F401
     import matplotlib.figure  # noqa: F401 -- (the Agg backend no longer imports it)
+    import PIL.PngImagePlugin  # noqa: F401 -- (imported by the first PNG written)
     from ._layout import text_inches
     text_inches("0")
 
