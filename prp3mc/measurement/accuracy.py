@@ -29,8 +29,6 @@ from .._rng import child_seed
 from ..kinematics.chain import feasible
 from ..kinematics.geometry import REGION_PRESETS, Geometry, Region
 from ..uncertainty.budget import Budget
-from ..uncertainty.montecarlo import monte_carlo
-from ..uncertainty.worstcase import worst_case
 from .campaign import Campaign
 from .updated import UpdatedModel, base_name
 
@@ -81,6 +79,9 @@ def predicted_accuracy(geometry: Geometry, budget: Budget, model: UpdatedModel, 
         ``worst_case_phi_deg``, ``p95_position_mm``, ``p99_position_mm``,
         ``p95_phi_deg``, ``p99_phi_deg`` (largest over the region; phi of |dphi|).
     """
+    # imported here: numba, which these load, is for this stage only (a forked process of its own, where one is)
+    from ..uncertainty.montecarlo import monte_carlo
+    from ..uncertainty.worstcase import worst_case
     region, source = accuracy_region(geometry, campaign)
     poses = region.grid(grid).reshape(-1, 3)
     poses = poses[feasible(model.geometry, poses) & feasible(geometry, poses)]

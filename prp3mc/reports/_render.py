@@ -14,12 +14,11 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import os
-import sys
-import threading
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
+from .._fork import fork_workers as default_workers
 from ..output import save_figure
 
 __all__ = ["rendering", "default_workers"]
@@ -30,40 +29,18 @@ FigureTask = tuple[str, Callable[[], object]]
 _TASKS: dict = {}  # in a worker process: what rendering() handed it at the fork
 
 
-def default_workers(n_figures: int) -> int:
-    """Worker processes for ``n_figures``: one per core while some core is idle, where the system can fork; else 1.
-
-    A core is taken as idle while the 1-minute load average is below the
-    cores this process may use. On the 2-core development machine shared
-    with other jobs, two workers drew the paper study's figures 1.4 times
-    faster than one process at load 2.3, and slower at load 4.4
-    (``benchmarks/bench_study.py``): with every core busy they only add
-    processes competing for it. The files are the same either way.
-
-    A process with other threads running (a notebook kernel, a Dask worker)
-    never forks: a fork copies only the calling thread, and a lock another
-    thread held stays held in the child.
-    """
-    if not sys.platform.startswith("linux") or "fork" not in multiprocessing.get_all_start_methods():
-        return 1
-    if threading.active_count() > 1:
-        return 1
-    cores = len(os.sched_getaffinity(0))
-    return max(1, min(n_figures, cores)) if os.getloadavg()[0] < cores else 1
-
-
 def _render(k: int) -> bytes:
     name, draw = _TASKS["figures"][k]
-    return save_figure(draw(), _TASKS["folder"], name, _TASKS["formats"])
+    return save_figure(draw(), _TASKS["folder"], name, _TASKS["formats"], _TASKS["dpi"])
 
 
-def _inherit(figures, folder, formats) -> None:
-    _TASKS.update(figures=figures, folder=folder, formats=formats)
+def _inherit(figures, folder, formats, dpi) -> None:
+    _TASKS.update(figures=figures, folder=folder, formats=formats, dpi=dpi)
 
 
 @contextlib.contextmanager
 def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=("png",),
-              workers: int | None = None) -> Iterator[Iterator[bytes]]:
+              workers: int | None = None, dpi: int = 150) -> Iterator[Iterator[bytes]]:
     """Draw every figure and save it as ``folder/name.<format>``; yields an iterator of their PNG bytes, in order.
 
     Parameters
@@ -74,8 +51,11 @@ def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=
     formats : sequence of str
         As :func:`prp3mc.output.save_figure`.
     workers : int, optional
-        Worker processes (default :func:`default_workers`); 1 draws in this
-        process, lazily, as the iterator is consumed.
+        Worker processes (default :func:`default_workers`, that is
+        :func:`prp3mc._fork.fork_workers`: one per core while a core is
+        idle); 1 draws in this process, lazily, as the iterator is consumed.
+    dpi : int
+        Resolution of every format (:func:`prp3mc.output.save_figure`).
 
     With workers, drawing starts on entry and the caller can do other work
     before consuming the iterator; leaving the block waits for every figure.
@@ -83,9 +63,9 @@ def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=
     figures, folder = list(figures), Path(folder)
     workers = default_workers(len(figures)) if workers is None else max(1, int(workers))
     if workers == 1:
-        yield (save_figure(draw(), folder, name, formats) for name, draw in figures)
+        yield (save_figure(draw(), folder, name, formats, dpi) for name, draw in figures)
         return
-    import matplotlib.backends.backend_agg  # noqa: F401 -- once here, inherited, not in every worker
+    import matplotlib.backends.backend_agg, matplotlib.figure  # noqa: F401,E401 -- once here, inherited by every worker
     with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
-                             initializer=_inherit, initargs=(figures, folder, tuple(formats))) as pool:
+                             initializer=_inherit, initargs=(figures, folder, tuple(formats), dpi)) as pool:
         yield pool.map(_render, range(len(figures)))
