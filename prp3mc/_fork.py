@@ -2,27 +2,31 @@
 
 Where the operating system can fork (Linux), a forked process inherits
 everything in memory, so independent work (a report's figures, a stage of an
-analysis) can run on another core with nothing pickled but its result.
-:func:`fork_workers` says how many processes pay; :func:`in_background` runs
-one function on a forked process while the caller goes on. The numbers are
-the same either way: the work is the same code on the same data.
+analysis) can run on another core with nothing pickled but its arguments
+and its result. :func:`fork_workers` says how many processes pay;
+:func:`in_background` starts one at once, so that it can get ready (import
+what it needs) while the caller computes its arguments. The numbers are the
+same either way: the work is the same code on the same data.
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import multiprocessing
 import os
 import pickle
 import signal
+import struct
 import sys
 import threading
 import warnings
-from typing import Callable, Iterator, TypeVar
+from typing import Callable, Iterator
 
-__all__ = ["fork_workers", "in_background"]
+__all__ = ["fork_workers", "in_background", "Background"]
 
-T = TypeVar("T")
+_SIZE = struct.Struct("<Q")           # each message: its length, then its pickle
+_PR_SET_PDEATHSIG = 1
 
 
 def fork_workers(n_tasks: int) -> int:
@@ -47,66 +51,160 @@ def fork_workers(n_tasks: int) -> int:
     return max(1, min(n_tasks, cores)) if os.getloadavg()[0] < cores else 1
 
 
-def _child(fn: Callable[[], object], fd: int) -> None:
-    """In the forked process: ``fn()`` and the warnings it gave, pickled into ``fd``; never returns."""
+def _message(obj) -> bytes:
+    """``obj`` pickled, behind its length."""
+    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    return _SIZE.pack(len(data)) + data
+
+
+def _write(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view):]
+
+
+def _read(fd: int, n: int) -> bytes:
+    """Up to ``n`` bytes from ``fd``: fewer only where the writer closed it first."""
+    chunks = []
+    while n > 0:
+        chunk = os.read(fd, min(n, 1 << 20))
+        if not chunk:
+            break
+        chunks.append(chunk)
+        n -= len(chunk)
+    return b"".join(chunks)
+
+
+def _receive(fd: int):
+    """The object a :func:`_message` brought through ``fd``; ValueError where it broke off."""
+    head = _read(fd, _SIZE.size)
+    if len(head) < _SIZE.size:
+        raise ValueError("nothing came through the pipe")
+    size = _SIZE.unpack(head)[0]
+    data = _read(fd, size)
+    if len(data) < size:
+        raise ValueError("the message broke off")
+    return pickle.loads(data)
+
+
+def _widen(fd: int) -> None:
+    """Let a writer put up to 1 MiB into the pipe ``fd`` without waiting for the reader (Linux)."""
+    with contextlib.suppress(AttributeError, OSError):
+        import fcntl
+        fcntl.fcntl(fd, fcntl.F_SETPIPE_SZ, 1 << 20)
+
+
+def _die_with(parent: int) -> None:
+    """Have the kernel end this (forked) process when its parent ends, so it never outlives the run."""
+    with contextlib.suppress(AttributeError, OSError):
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    if os.getppid() != parent:            # the parent ended before the request took effect
+        os._exit(1)
+
+
+def _child(fn: Callable, prepare: Callable | None, parent: int, args_fd: int, value_fd: int) -> None:
+    """In the forked process: ``prepare()``, then ``fn(*args)`` on the arguments sent, its value and warnings sent
+    back; never returns."""
     code = 1
     try:
+        _die_with(parent)
+        if prepare is not None:
+            prepare()
+        args = _receive(args_fd)
         with warnings.catch_warnings(record=True) as caught:
-            value = fn()
-        shown = [(w.message, w.category, w.filename, w.lineno) for w in caught]
-        data = pickle.dumps((value, shown), protocol=pickle.HIGHEST_PROTOCOL)
-        with os.fdopen(fd, "wb") as pipe:
-            pipe.write(data)
+            value = fn(*args)
+        _write(value_fd, _message((value, [(w.message, w.category, w.filename, w.lineno) for w in caught])))
         code = 0
     finally:
         os._exit(code)  # no interpreter exit: the caller's buffers, atexit and finally blocks are the caller's
 
 
-@contextlib.contextmanager
-def in_background(fn: Callable[[], T]) -> Iterator[Callable[[], T]]:
-    """Start ``fn()`` on a forked process while a core is idle; yields ``result()``, which returns its value.
+class Background:
+    """``fn(*args)`` on a forked process, started before its arguments are known (see :func:`in_background`)."""
 
-    Where no process is forked (:func:`fork_workers` gives no second
-    process), ``result()`` calls ``fn()`` here. It does so too when the
-    forked process gave nothing back (``fn`` raised, or the process was
-    killed): an error is then raised here, with its traceback. Warnings
-    ``fn`` gave there are given again here. Leaving the block ends the
-    forked process if its result was not asked for.
-    """
-    child = None                                   # (pid, read end of the pipe) while the process runs
-    if fork_workers(2) > 1:
-        read, write = os.pipe()
+    def __init__(self, fn: Callable, prepare: Callable | None = None):
+        self.fn, self.args = fn, ()
+        self._pid = self._args_fd = self._value_fd = None
+        if fork_workers(2) < 2:
+            return
+        parent = os.getpid()
+        args_read, args_write = os.pipe()
+        value_read, value_write = os.pipe()
         pid = os.fork()
         if pid == 0:
-            os.close(read)
-            _child(fn, write)
-        os.close(write)
-        child = (pid, read)
+            os.close(args_write)
+            os.close(value_read)
+            _child(fn, prepare, parent, args_read, value_write)
+        os.close(args_read)
+        os.close(value_write)
+        _widen(args_write)
+        self._pid, self._args_fd, self._value_fd = pid, args_write, value_read
 
-    def collect() -> bytes:
-        nonlocal child
-        pid, read = child
-        child = None
-        try:
-            with os.fdopen(read, "rb") as pipe:
-                return pipe.read()
-        finally:
-            os.waitpid(pid, 0)
+    @property
+    def forked(self) -> bool:
+        """Whether ``fn`` runs on a forked process (until its result is collected)."""
+        return self._pid is not None
 
-    def result() -> T:
-        if child is None:
-            return fn()
+    def submit(self, *args) -> None:
+        """Hand ``fn`` its arguments: it starts there now (here, it waits for :meth:`result`)."""
+        self.args = args
+        if self._args_fd is not None:
+            fd, self._args_fd = self._args_fd, None
+            try:
+                _write(fd, _message(args))
+            except Exception:       # unpicklable, or the process is gone: result() computes here
+                pass
+            finally:
+                os.close(fd)
+
+    def result(self):
+        """``fn(*args)``: the forked process's value, or computed here where it gave none (``fn`` raised there,
+        or the process was killed: an error is then raised here, with its traceback). Warnings ``fn`` gave
+        there are given again here."""
+        if self._pid is None:
+            return self.fn(*self.args)
+        if self._args_fd is not None:       # never submitted: fn()
+            self.submit(*self.args)
         try:
-            value, shown = pickle.loads(collect())
-        except Exception:           # nothing (or not all) came back: the forked process failed
-            return fn()
+            value, shown = _receive(self._value_fd)
+        except Exception:
+            value = shown = None
+        self.close(wait=True)
+        if shown is None:
+            return self.fn(*self.args)
         for message, category, filename, lineno in shown:
             warnings.warn_explicit(message, category, filename, lineno)
         return value
 
+    def close(self, wait: bool = False) -> None:
+        """Release the pipes and end the forked process (``wait``: for it to end by itself)."""
+        for fd in (self._args_fd, self._value_fd):
+            if fd is not None:
+                os.close(fd)
+        self._args_fd = self._value_fd = None
+        if self._pid is not None:
+            pid, self._pid = self._pid, None
+            if not wait:
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+
+
+@contextlib.contextmanager
+def in_background(fn: Callable, *, prepare: Callable | None = None) -> Iterator[Background]:
+    """Fork a process for ``fn`` now, while a core is idle; yields a :class:`Background`.
+
+    The process runs ``prepare()`` at once (say, imports), then waits for
+    :meth:`Background.submit` to hand it ``fn``'s arguments;
+    :meth:`Background.result` returns ``fn(*args)``. Where no process is
+    forked (:func:`fork_workers` gives no second process), or it gave
+    nothing back (``fn`` raised, or it was killed), ``result()`` calls
+    ``fn(*args)`` here: the value is the same, and an error is raised here
+    with its traceback. Leaving the block ends the process if its result was
+    not asked for; it also ends with its parent.
+    """
+    job = Background(fn, prepare)
     try:
-        yield result
+        yield job
     finally:
-        if child is not None:
-            os.kill(child[0], signal.SIGKILL)
-            collect()
+        job.close()

@@ -11,34 +11,54 @@ import pytest
 import prp3mc._fork as fork
 
 forks = pytest.mark.skipif(not hasattr(os, "fork"), reason="the system cannot fork")
+READY = {}
 
 
-def _work():
-    warnings.warn("said by the work", UserWarning)
-    return {"value": np.arange(6.0) ** 2, "pid": os.getpid()}
+def _prepare():
+    READY["pid"] = os.getpid()
+
+
+def _work(k, text):
+    warnings.warn(f"said by the work: {text}", UserWarning)
+    return {"value": np.arange(6.0) ** k, "pid": os.getpid(), "prepared": READY.get("pid")}
 
 
 @forks
 @pytest.mark.parametrize("processes", [1, 2])
 def test_the_value_is_the_same_there_and_here(processes, monkeypatch):
     monkeypatch.setattr(fork, "fork_workers", lambda n: min(n, processes))
-    with pytest.warns(UserWarning, match="said by the work"):
-        with fork.in_background(_work) as result:
-            got = result()
+    READY.clear()
+    with pytest.warns(UserWarning, match="said by the work: hello"):
+        with fork.in_background(_work, prepare=_prepare) as job:
+            assert job.forked == (processes == 2)
+            job.submit(2, "hello")
+            got = job.result()
     assert np.array_equal(got["value"], np.arange(6.0) ** 2)
-    assert (got["pid"] != os.getpid()) == (processes == 2)
+    there = processes == 2
+    assert (got["pid"] != os.getpid()) == there
+    assert got["prepared"] == (got["pid"] if there else None)     # prepared there, where there is a there
 
 
-def _fails():
+def _fails(*args):
     raise ValueError("bad input, one line")
 
 
 @forks
 def test_an_error_there_is_raised_here(monkeypatch):
     monkeypatch.setattr(fork, "fork_workers", lambda n: 2)
-    with fork.in_background(_fails) as result:
+    with fork.in_background(_fails) as job:
+        job.submit(1)
         with pytest.raises(ValueError, match="bad input, one line"):
-            result()
+            job.result()
+
+
+@forks
+def test_arguments_that_cannot_go_there_are_used_here(monkeypatch):
+    monkeypatch.setattr(fork, "fork_workers", lambda n: 2)
+    with fork.in_background(_work) as job:
+        job.submit(1, lambda: None)              # a lambda does not pickle: computed here
+        with pytest.warns(UserWarning):
+            assert job.result()["pid"] == os.getpid()
 
 
 @forks
@@ -50,7 +70,8 @@ def test_leaving_without_the_result_ends_the_process(tmp_path, monkeypatch):
         marker.write_text(str(os.getpid()))
         time.sleep(600)
 
-    with fork.in_background(sleeper):
+    with fork.in_background(sleeper) as job:
+        job.submit()
         while not marker.exists() or not marker.read_text():
             time.sleep(0.01)
     with pytest.raises(ProcessLookupError):   # killed and reaped: no such process any more
@@ -63,9 +84,11 @@ def test_never_forks_while_another_thread_runs():
     other.start()
     try:
         assert fork.fork_workers(12) == 1
-        with fork.in_background(_work) as result:
+        with fork.in_background(_work) as job:
+            assert not job.forked
+            job.submit(1, "here")
             with pytest.warns(UserWarning):
-                assert result()["pid"] == os.getpid()
+                assert job.result()["pid"] == os.getpid()
     finally:
         stop.set()
         other.join()

@@ -33,7 +33,7 @@ from ..uncertainty.budget import Budget
 from .campaign import Campaign
 from .updated import UpdatedModel, base_name
 
-__all__ = ["predicted_accuracy", "accuracy_region", "GRID", "N_SAMPLES", "MODELS"]
+__all__ = ["predicted_accuracy", "accuracy_region", "load_propagation", "GRID", "N_SAMPLES", "MODELS"]
 
 #: Grid points per side of the region (7 x 7 keeps the three models' Monte Carlo to about 0.3 s; on the u-shape
 #: region its maxima were within 1 % of an 11 x 11 grid's with 16384 samples).
@@ -55,6 +55,15 @@ def accuracy_region(geometry: Geometry, campaign: Campaign) -> tuple[Region, str
     phi = float(np.median(campaign.poses[:, 2]))
     return (Region((lo[0], hi[0]), (lo[1], hi[1]), phi),
             "the campaign's pose hull (its commanded x and y range at its median phi, reachable poses)")
+
+
+def load_propagation() -> tuple:
+    """:func:`~prp3mc.uncertainty.montecarlo.monte_carlo` and :func:`~prp3mc.uncertainty.worstcase.worst_case`,
+    imported on first use: numba, which they load (about 0.3 s), serves this stage only, which
+    :func:`~prp3mc.measurement.workflow.discrepancy` runs on a process of its own where a core is idle."""
+    from ..uncertainty.montecarlo import monte_carlo
+    from ..uncertainty.worstcase import worst_case
+    return monte_carlo, worst_case
 
 
 def predicted_accuracy(geometry: Geometry, budget: Budget, model: UpdatedModel, campaign: Campaign, seed: int, *,
@@ -80,9 +89,7 @@ def predicted_accuracy(geometry: Geometry, budget: Budget, model: UpdatedModel, 
         ``worst_case_phi_deg``, ``p95_position_mm``, ``p99_position_mm``,
         ``p95_phi_deg``, ``p99_phi_deg`` (largest over the region; phi of |dphi|).
     """
-    # imported here: numba, which these load, is for this stage only (a forked process of its own, where one is)
-    from ..uncertainty.montecarlo import monte_carlo
-    from ..uncertainty.worstcase import worst_case
+    monte_carlo, worst_case = load_propagation()
     region, source = accuracy_region(geometry, campaign)
     poses = region.grid(grid).reshape(-1, 3)
     poses = poses[feasible(model.geometry, poses) & feasible(geometry, poses)]

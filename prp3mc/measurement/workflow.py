@@ -18,9 +18,7 @@ degrees of freedom.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import functools
 import time
 
 import numpy as np
@@ -45,7 +43,7 @@ from .prediction import noise_cov, predict
 from .results import DiscrepancyResult
 from .selection import name_effects, names_in, select
 from .updated import updated_model
-from .accuracy import predicted_accuracy
+from .accuracy import load_propagation, predicted_accuracy
 from .iso9283 import iso9283_figures
 
 __all__ = ["discrepancy", "detectable_effect", "STAGES"]
@@ -109,7 +107,9 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
             raise BudgetError(f"{name} must lie in (0, 1), got {value}")
     budget.check_geometry(geometry)
     campaign = require_testable(read_campaign(campaign, geometry))
-    with contextlib.ExitStack() as stack:        # ends the accuracy's process if the analysis fails
+    # the predicted accuracy needs the named effects only: on another core where one is idle, which loads
+    # numba (the Monte Carlo's and the worst case's kernels) while the effects are named
+    with in_background(predicted_accuracy, prepare=load_propagation) as accuracy:
         noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
         full = Engine(geometry, budget, campaign, noise, registration=registration)
         bar = progress if isinstance(progress, Progress) else Progress(len(STAGES), "discrepancy", progress)
@@ -142,9 +142,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
             d2 = gross.distances(full, keep, engine.values(fit), fit.factors, fit.r)
         named = name_effects(engine, fit, accepted)
         model = updated_model(geometry, budget, named, campaign)
-        # the predicted accuracy needs the named effects only: computed meanwhile, on another core where one is idle
-        accuracy = stack.enter_context(in_background(
-            functools.partial(predicted_accuracy, geometry, budget, model, campaign, seed)))
+        accuracy.submit(geometry, budget, model, campaign, seed)
         done()
         null_before = null_variances(engine, base, n_bootstrap, rng)
         before = diagnose(engine, base, null=null_before)
@@ -196,7 +194,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
             iso9283=iso, iso9283_poses=iso_poses, invisible=engine.invisible,
             confounded_with_registration=confounded,
             structural_aliases=tuple(tuple(g) for g in engine.structural_aliases()), not_testable=not_testable,
-            model=model, accuracy=accuracy(),
+            model=model, accuracy=accuracy.result(),
             campaign=campaign, geometry=geometry, budget=budget, seed=seed, n_bootstrap=n_bootstrap, alpha=alpha,
             alpha_unexplained=alpha_unexplained, instrument_sigma_mm=instrument_sigma_mm,
             instrument_sigma_deg=instrument_sigma_deg, wall_time_s=time.perf_counter() - t0)

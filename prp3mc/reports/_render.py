@@ -18,10 +18,10 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
-from .._fork import fork_workers as default_workers
+from .._fork import Background, fork_workers as default_workers, in_background
 from ..output import save_figure
 
-__all__ = ["rendering", "default_workers"]
+__all__ = ["rendering", "drawing_ahead", "default_workers"]
 
 #: (file name, a callable that draws the figure and returns it)
 FigureTask = tuple[str, Callable[[], object]]
@@ -38,9 +38,33 @@ def _inherit(figures, folder, formats, dpi) -> None:
     _TASKS.update(figures=figures, folder=folder, formats=formats, dpi=dpi)
 
 
+def _import_matplotlib() -> None:
+    import matplotlib.backends.backend_agg, matplotlib.figure  # noqa: F401,E401 -- what drawing on Agg needs
+
+
+def _drawn(figures: list, folder: Path, formats: tuple, workers: int | None, dpi: int) -> list[bytes]:
+    with rendering(figures, folder, formats, workers, dpi) as pngs:
+        return list(pngs)
+
+
+def drawing_ahead() -> contextlib.AbstractContextManager[Background]:
+    """A process for a report's figures, forked now where a core is idle: it imports matplotlib (about
+    0.45 s) while the caller computes what to draw, then draws what :func:`rendering` hands it (``ahead=``).
+
+    A context manager (:func:`prp3mc._fork.in_background`); without a forked process the figures are
+    drawn as :func:`rendering` draws them without ``ahead``.
+    """
+    return in_background(_drawn, prepare=_import_matplotlib)
+
+
+def _later(get: Callable[[], list]) -> Iterator[bytes]:
+    yield from get()
+
+
 @contextlib.contextmanager
 def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=("png",),
-              workers: int | None = None, dpi: int = 150) -> Iterator[Iterator[bytes]]:
+              workers: int | None = None, dpi: int = 150, ahead: Background | None = None
+              ) -> Iterator[Iterator[bytes]]:
     """Draw every figure and save it as ``folder/name.<format>``; yields an iterator of their PNG bytes, in order.
 
     Parameters
@@ -56,16 +80,24 @@ def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=
         idle); 1 draws in this process, lazily, as the iterator is consumed.
     dpi : int
         Resolution of every format (:func:`prp3mc.output.save_figure`).
+    ahead : Background, optional
+        A process made ready beforehand (:func:`drawing_ahead`): the figures
+        are drawn there (on ``workers`` worker processes of its own), and the
+        iterator waits for all of them.
 
     With workers, drawing starts on entry and the caller can do other work
     before consuming the iterator; leaving the block waits for every figure.
     """
     figures, folder = list(figures), Path(folder)
+    if ahead is not None:
+        ahead.submit(figures, folder, tuple(formats), workers, dpi)
+        yield _later(ahead.result)
+        return
     workers = default_workers(len(figures)) if workers is None else max(1, int(workers))
     if workers == 1:
         yield (save_figure(draw(), folder, name, formats, dpi) for name, draw in figures)
         return
-    import matplotlib.backends.backend_agg, matplotlib.figure  # noqa: F401,E401 -- once here, inherited by every worker
+    _import_matplotlib()                   # once here, inherited by every worker
     with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
                              initializer=_inherit, initargs=(figures, folder, tuple(formats), dpi)) as pool:
         yield pool.map(_render, range(len(figures)))

@@ -366,6 +366,11 @@ def _iso_summary(iso: dict) -> list[dict]:
 
 def render_html(result: DiscrepancyResult, figures: dict, doc: dict | None = None) -> str:
     """The HTML report; ``figures`` maps figure names to data URIs, ``doc`` is discrepancy.json (default: the result's)."""
+    return _page(result, doc)(figures)
+
+
+def _page(result: DiscrepancyResult, doc: dict | None):
+    """All of the HTML report but its figures (template compiled, tables made): a function of the figures."""
     import jinja2
     text = resources.files("prp3mc.reports").joinpath("templates/discrepancy.html.j2").read_text(encoding="utf-8")
     env = jinja2.Environment(autoescape=True, undefined=jinja2.StrictUndefined)
@@ -378,14 +383,17 @@ def render_html(result: DiscrepancyResult, figures: dict, doc: dict | None = Non
         f, shown = (MM2UM, "µm") if unit == "mm" else (DEG2ARCSEC, "arcsec")
         for which in ("measured", "predicted"):
             worst[f"{stat} {which[:4]}. ({shown})"] = f * wide.loc[worst["pose_id"], (which, stat)].to_numpy()
-    return env.from_string(text).render(
-        r=result, doc=doc if doc is not None else result.to_dict(), figures=figures, captions=_CAPTIONS, mm2um=MM2UM, deg2arcsec=DEG2ARCSEC,
-        top_poses=_table(top), gap=result.gap, channel=result.gap["deciding_channel"].replace("_", " "), steps=_table(_top_candidates(result.steps)), before=result.before.summary,
-        after=result.after.summary,
+    template = env.from_string(text)
+    context = dict(
+        r=result, doc=doc if doc is not None else result.to_dict(), captions=_CAPTIONS, mm2um=MM2UM,
+        deg2arcsec=DEG2ARCSEC, top_poses=_table(top), gap=result.gap,
+        channel=result.gap["deciding_channel"].replace("_", " "), steps=_table(_top_candidates(result.steps)),
+        before=result.before.summary, after=result.after.summary,
         nuisance=list(result.nuisance), drift_test=result.drift_test, registration_fitted=result.registration,
         confounded=list(result.confounded_with_registration), outliers=list(result.outliers),
         outlier_rule=result.outlier_rule, with_outliers=result.with_outliers, repeatability=result.repeatability,
         iso_n_mc=N_MC, iso_rows=_iso_summary(result.iso9283), iso_worst=_table(worst))
+    return lambda figures: template.render(figures=figures, **context)
 
 
 def report_document(result: DiscrepancyResult, inputs: dict | None = None, warnings=None) -> dict:
@@ -404,7 +412,7 @@ def report_document(result: DiscrepancyResult, inputs: dict | None = None, warni
 
 def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bool = False,
                  formats: tuple = ("png",), inputs: dict | None = None, warnings=None,
-                 workers: int | None = None) -> Path:
+                 workers: int | None = None, ahead=None) -> Path:
     """Write ``discrepancy.json``, ``report.html``, figures, tables and ``model/`` into ``folder`` (atomically).
 
     Parameters
@@ -425,6 +433,9 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
         Processes drawing the figures (:func:`prp3mc.reports._render.rendering`;
         default one per core while a core is idle, where the system can fork;
         1 draws them here). The files are the same either way.
+    ahead : Background, optional
+        A process readied for the figures while the analysis ran
+        (:func:`prp3mc.reports._render.drawing_ahead`); it draws them.
 
     Returns
     -------
@@ -435,7 +446,7 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
     figures = [(name, functools.partial(_report_figure, name, result)) for name in _REPORT_FIGURES
                if _FIGURES[name][1](result) is not None]
     with output_folder(folder, force) as tmp:
-        with rendering(figures, tmp, formats, workers, dpi=DPI) as pngs:
+        with rendering(figures, tmp, formats, workers, DPI, ahead) as pngs:
             write_json(tmp / "discrepancy.json", doc)   # while the figures are drawn
             result.model.write(tmp / "model")
             for label, d in (("before", result.before), ("after", result.after)):
@@ -443,6 +454,7 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
                 d.measurements.to_csv(tmp / f"measurements_{label}.csv", index=False)
             result.steps.to_csv(tmp / "selection_steps.csv", index=False)
             result.iso9283_poses.to_csv(tmp / "iso9283_per_pose.csv", index=False)
+            page = _page(result, doc)
             uris = {name: png_data_uri(png) for (name, _), png in zip(figures, pngs)}
-        write_text(tmp / "report.html", render_html(result, uris, doc))
+        write_text(tmp / "report.html", page(uris))
     return Path(folder)
