@@ -20,6 +20,7 @@ import signal
 import struct
 import sys
 import threading
+import time
 import warnings
 from typing import Callable, Iterator
 
@@ -32,12 +33,19 @@ _PR_SET_PDEATHSIG = 1
 def fork_workers(n_tasks: int) -> int:
     """Processes for ``n_tasks``: one per core while some core is idle, where the system can fork; else 1.
 
-    A core is taken as idle while the 1-minute load average is below the
-    cores this process may use. On the 2-core development machine shared
-    with other jobs, two workers drew the paper study's figures 1.4 times
-    faster than one process at load 2.3, and slower at load 4.4
-    (``benchmarks/bench_study.py``): with every core busy they only add
-    processes competing for it.
+    A core is idle when other processes leave it so: the busy time of this
+    process's cores (``/proc/stat``) less this process's own CPU time (its
+    threads and its children, :class:`_Meter`), over the time since the
+    previous decision or since this module was imported, leaves at least half
+    a core free besides this process's own. Where that cannot be read, while
+    the 1-minute load average is below the cores (it counts this process,
+    and lags: after a run it still counts that run).
+
+    On the 2-core development machine shared with other jobs, forked
+    processes (the discrepancy command's accuracy and figures) made a run
+    3.0-3.4 s instead of 4.3 s when the other core was free, and 4.4-5.6 s
+    instead of 4.4-4.9 s when another job kept it busy: with every core busy
+    they only add processes competing for it.
 
     A process with other threads running (a notebook kernel, a Dask worker)
     never forks: a fork copies only the calling thread, and a lock another
@@ -48,7 +56,52 @@ def fork_workers(n_tasks: int) -> int:
     if threading.active_count() > 1:
         return 1
     cores = len(os.sched_getaffinity(0))
-    return max(1, min(n_tasks, cores)) if os.getloadavg()[0] < cores else 1
+    busy = _METER.busy_elsewhere()
+    if busy is None:
+        return max(1, min(n_tasks, cores)) if os.getloadavg()[0] < cores else 1
+    return max(1, min(n_tasks, cores, 1 + int(cores - 1 - busy + 0.5)))
+
+
+class _Meter:
+    """Cores kept busy by other processes than this one and its children, from ``/proc/stat`` (Linux)."""
+
+    #: Shortest window (s) measured; a decision sooner after the previous one reuses its measure.
+    WINDOW = 0.2
+
+    def __init__(self):
+        self.children: set = set()          # running forked processes, whose CPU time is this process's
+        self.busy = None
+        self.last = self._sample()
+
+    def _sample(self) -> tuple[float, float, float] | None:
+        """(time, busy CPU-s of this process's cores since boot, this process's CPU-s), or None."""
+        try:
+            names = {f"cpu{c}" for c in os.sched_getaffinity(0)}
+            with open("/proc/stat", "rb") as f:
+                rows = [line.split() for line in f.read().decode().splitlines() if line.split(" ", 1)[0] in names]
+            busy = sum(int(r[1]) + int(r[2]) + int(r[3]) + int(r[6]) + int(r[7]) + int(r[8]) for r in rows)
+            own = sum(os.times()[:4])
+            for pid in self.children:       # user, system and waited-for children's times, in clock ticks
+                with open(f"/proc/{pid}/stat", "rb") as f:
+                    own += sum(int(v) for v in f.read().rsplit(b")", 1)[1].split()[11:15]) / _TICKS
+        except (OSError, ValueError, IndexError, AttributeError):
+            return None
+        return time.monotonic(), busy / _TICKS, own
+
+    def busy_elsewhere(self) -> float | None:
+        """Cores other processes kept busy since the previous measure (None where ``/proc`` cannot be read)."""
+        now = self._sample()
+        if now is None or self.last is None:
+            return None
+        if now[0] - self.last[0] < self.WINDOW and self.busy is not None:
+            return self.busy
+        self.busy = max(0.0, ((now[1] - self.last[1]) - (now[2] - self.last[2])) / max(now[0] - self.last[0], 1e-3))
+        self.last = now
+        return self.busy
+
+
+_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+_METER = _Meter()
 
 
 def _message(obj) -> bytes:
@@ -105,9 +158,11 @@ def _die_with(parent: int) -> None:
 def _child(fn: Callable, prepare: Callable | None, parent: int, args_fd: int, value_fd: int) -> None:
     """In the forked process: ``prepare()``, then ``fn(*args)`` on the arguments sent, its value and warnings sent
     back; never returns."""
+    global _METER
     code = 1
     try:
         _die_with(parent)
+        _METER = _Meter()                       # this process's own times start at the fork
         if prepare is not None:
             prepare()
         args = _receive(args_fd)
@@ -139,6 +194,7 @@ class Background:
         os.close(value_write)
         _widen(args_write)
         self._pid, self._args_fd, self._value_fd = pid, args_write, value_read
+        _METER.children.add(pid)
 
     @property
     def forked(self) -> bool:
@@ -187,7 +243,8 @@ class Background:
             if not wait:
                 with contextlib.suppress(ProcessLookupError):
                     os.kill(pid, signal.SIGKILL)
-            os.waitpid(pid, 0)
+            os.waitpid(pid, 0)                  # its CPU time now counts among this process's children's
+            _METER.children.discard(pid)
 
 
 @contextlib.contextmanager

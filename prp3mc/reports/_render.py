@@ -89,11 +89,11 @@ def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=
     before consuming the iterator; leaving the block waits for every figure.
     """
     figures, folder = list(figures), Path(folder)
+    workers = default_workers(len(figures)) if workers is None else max(1, int(workers))
     if ahead is not None:
         ahead.submit(figures, folder, tuple(formats), workers, dpi)
         yield _later(ahead.result)
         return
-    workers = default_workers(len(figures)) if workers is None else max(1, int(workers))
     if workers == 1:
         yield (save_figure(draw(), folder, name, formats, dpi) for name, draw in figures)
         return
