@@ -99,8 +99,8 @@ def bench_envelope(quick: bool) -> dict:
         out[f"envelope_{n}_poses_per_s"], out[f"envelope_{n}_poses_per_cpu_s"] = n * n / wall, n * n / cpu
         out[f"envelope_{n}_load"] = load
         flat = np.ascontiguousarray(grid.reshape(-1, 3))
-        values, codes, bad = np.empty((4, n * n)), np.empty((4, n * n), np.int8), np.empty(n * n, np.int16)
-        kernel = lambda: envelope_kernel(flat, *tables, _LIMITS, True, values, codes, bad, workers=1)  # noqa: E731
+        values, signs, bad = np.empty((4, n * n)), np.empty((4, n * n, 3), np.int8), np.empty(n * n, np.int16)
+        kernel = lambda: envelope_kernel(flat, *tables, _LIMITS, True, values, signs, bad, workers=1)  # noqa: E731
         kernel()
         out[f"envelope_{n}_ns_per_pose"] = 1e9 / (n * n) * min(_thread_time(kernel) for _ in range(3 if n > 101 else 30))
     out["envelope_call_us"] = 1e6 * timed(lambda: worst_case_maxima(g, budget, region.grid(11)), 30)[0]

@@ -12,9 +12,21 @@ time both ways). Inside these sections BLAS runs on one thread.
 from __future__ import annotations
 
 import contextlib
+import functools
+import os
 from typing import Iterator
 
-__all__ = ["single_threaded_blas"]
+__all__ = ["single_threaded_blas", "cores"]
+
+
+@functools.cache
+def cores() -> int:
+    """The CPU cores this process may run on: the default number of prp3mc's threads.
+
+    Read once (``os.cpu_count()`` reads a file at every call, about 7 µs: most
+    of a small batch's time in the worst-case envelope).
+    """
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 @contextlib.contextmanager

@@ -19,6 +19,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from ._threads import cores
 from .errors import ResourceError
 
 __all__ = ["Estimate", "available_memory", "check", "montecarlo_estimate", "sobol_estimate",
@@ -163,7 +164,7 @@ def check(estimate: Estimate, *, max_hours: float | None = None, memory: int | N
 def montecarlo_estimate(n_samples: int, n_poses: int, n_inputs: int, workers: int | None = None) -> Estimate:
     """Memory and time of :func:`prp3mc.uncertainty.montecarlo.monte_carlo` (features ~ inputs)."""
     n, d = float(n_samples), n_inputs
-    workers = workers or os.cpu_count() or 1
+    workers = workers or cores()
     return Estimate(f"Monte Carlo of {n_samples} samples at {n_poses} pose(s)",
                     n * _MC_BYTES_PER_SAMPLE(d, d) + n * n_poses * _MC_BYTES_PER_SAMPLE_POSE
                     + n_poses * _MC_BYTES_PER_POSE(d) + _MC_CHUNK_BYTES + workers * 16 * d * 65536,

@@ -10,7 +10,8 @@ inverse kinematics, A and A^-1 by cofactors, the feasibility tests of
 budget's terms, the clearance intervals and the zonotope maxima. Poses go
 through in blocks of :data:`BLOCK`, each step a loop over the block's poses
 (it vectorises); larger batches go in chunks to a pool of threads.
-Memory is the outputs only (42 bytes a pose) plus a few scratch rows per thread.
+Memory is the outputs only (50 bytes a pose: the maxima, the ends of their
+generators, the refusal word) plus a few scratch rows per thread.
 
 A budget's effects are terms too: known shifts are terms of zero width, a
 backlash a term of its leg, a lead scale and thermal expansion are multiplied
@@ -22,15 +23,15 @@ from __future__ import annotations
 
 import functools
 import math
-import os
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from numba import literal_unroll, njit
 
+from .._threads import cores
 from ..kinematics.geometry import Geometry
 from ..kinematics.sensitivity import FAMILIES, LENGTH_FAMILIES
-from ..units import DEG2RAD
+from ..units import DEG2RAD, RAD2DEG
 from .budget import Budget, parse_input
 from .systematic import EFFECT_NAMES, T_REF_C
 
@@ -240,30 +241,31 @@ THREADS_FROM = 1 << 16
 CHUNK = 1 << 15
 
 
-def envelope_kernel(poses, legc, family, leg, unit, mode, box, limits, check, values, codes, bad, workers=None):
-    """Maxima of the linear model over the budget's box at every pose (compiled).
+def envelope_kernel(poses, legc, family, leg, unit, mode, box, limits, check, values, signs, bad, workers=None) -> int:
+    """Maxima of the linear model over the budget's box at every pose (compiled); returns the poses refused.
 
     poses : (N, 3) x mm, y mm, phi deg. legc : (15, 3) :func:`leg_constants`.
     family, leg, unit, mode, box : :func:`term_table`. limits : (3,) min transmission,
-    max condition, stroke tolerance mm; check : test them.
-    values, codes : (4, N) out, as :func:`zonotope_maxima` (G: the terms of all legs, leg -1).
+    max condition, stroke tolerance mm; check : test them (else nothing is refused).
+    values : (4, N) out, position mm, |dphi| deg, |dx| mm, |dy| mm.
+    signs : (4, N, 3 + G) int8 out, the end (-1, +1) of each generator at each maximum
+    (legs 1-3, then the G terms of all legs, leg -1), as :func:`generator_signs`.
     bad : (N,) int16 out, bit ``3 * reason + leg`` set for each refusal (see REASONS).
-    workers : threads for large batches (default: CPU count); every pose's numbers are the same.
+    workers : threads for large batches (default: the cores); every pose's numbers are the same.
     """
     N = poses.shape[0]
-    args = (poses, legc, family, leg, unit, mode, box, limits, check, values, codes, bad)
-    workers = workers or os.cpu_count() or 1
+    args = (poses, legc, family, leg, unit, mode, box, limits, check, values, signs, bad)
+    workers = workers or cores()
     if N < THREADS_FROM or workers == 1:
-        _range(0, N, *args)
-        return
+        return _range(0, N, *args)
     chunk = min(CHUNK, -(-N // workers))
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        list(pool.map(lambda a: _range(a, min(N, a + chunk), *args), range(0, N, chunk)))
+        return sum(pool.map(lambda a: _range(a, min(N, a + chunk), *args), range(0, N, chunk)))
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
-def _range(start, stop, poses, legc, family, leg, unit, mode, box, limits, check, values, codes, bad):
-    """The envelope at poses ``start:stop``, block by block, with scratch arrays allocated once.
+def _range(start, stop, poses, legc, family, leg, unit, mode, box, limits, check, values, signs, bad):
+    """The envelope at poses ``start:stop``, block by block, with scratch arrays allocated once; the poses refused.
 
     Scratch arrays are flat, one row of BLOCK values per quantity at a constant offset, so
     that the compiler sees the rows a loop reads and writes cannot overlap and vectorises it.
@@ -273,20 +275,35 @@ def _range(start, stop, poses, legc, family, leg, unit, mode, box, limits, check
     hb = np.empty(42 * BLOCK)       # per leg i, rows 14 i + (b, d, the h entries of the ten families, cos, sin omega)
     Ai = np.empty(9 * BLOCK)        # A^-1[r, c] in row 3 r + c
     um, uh = np.empty((3, BLOCK)), np.empty((3, BLOCK))  # centre and half-width of u along the legs' axes
-    G = 0
-    for k in range(leg.size):
-        G += leg[k] < 0
+    G = signs.shape[2] - 3
     ext = np.empty((G, 3, BLOCK))   # further generators of u: the terms of all legs
     zs = zonotope_scratch(3 + G, BLOCK)
+    vals, codes = np.empty((4, BLOCK)), np.empty((4, BLOCK), np.int64)
+    refused = 0
     for b0 in range(start, stop, BLOCK):
-        _block(b0, min(stop, b0 + BLOCK), poses, legc, family, leg, unit, mode, box, limits, check, values, codes,
-               bad, cs, A, hb, Ai, um, uh, ext, zs)
+        b1 = min(stop, b0 + BLOCK)
+        _block(b0, b1, poses, legc, family, leg, unit, mode, box, limits, check, vals, codes, bad, cs, A, hb, Ai,
+               um, uh, ext, zs)
+        for j in range(b1 - b0):
+            refused += bad[b0 + j] != 0
+        for o in range(4):
+            f = RAD2DEG if o == 1 else 1.0
+            for j in range(b1 - b0):
+                values[o, b0 + j] = vals[o, j] * f
+                c = codes[o, j]
+                for k in range(3 + G):
+                    signs[o, b0 + j, k] = ((c >> (2 + G - k)) & 1) * 2 - 1
+    return refused
 
 
 @njit(cache=True, error_model="numpy")
 def _block(start, stop, poses, legc, family, leg, unit, mode, box, limits, check, values, codes, bad, cs, A, hb, Ai,
            um, uh, ext, zs):
-    """The envelope at poses ``start:stop`` (at most BLOCK), one step at a time over all of them."""
+    """The envelope at poses ``start:stop`` (at most BLOCK), one step at a time over all of them.
+
+    The block's maxima and codes (:func:`zonotope_maxima`) go to columns ``0:stop - start`` of
+    ``values`` and ``codes``; its refusals to ``bad[start:stop]``.
+    """
     m, B = stop - start, BLOCK
     phi_deg, cp, sp = math.nan, 1.0, 0.0
     for j in range(m):
@@ -388,4 +405,4 @@ def _block(start, stop, poses, legc, family, leg, unit, mode, box, limits, check
             scale = hf[j] * un * (bi[j] if by_b else 1.0)
             mid_i[j] += scale * mid
             half_i[j] += abs(scale) * half
-    zonotope_maxima(Ai.reshape((3, 3, B)), um, uh, ext, values, codes, start, m, zs)
+    zonotope_maxima(Ai.reshape((3, 3, B)), um, uh, ext, values, codes, 0, m, zs)

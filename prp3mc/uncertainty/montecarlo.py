@@ -19,7 +19,6 @@ float32 values (the values a full sort would give), found in streamed passes
 from __future__ import annotations
 
 import math
-import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -27,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from .._threads import cores
 from .._rng import resolve_rng
 from .._result import freeze, pose_columns, short_repr
 from ..units import OUTPUT_UNITS, POSE_OUTPUTS, RAD2DEG, Z95, z_value
@@ -270,7 +270,7 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     window_values = max(64, max_chunk_bytes // 16)
     per_pose = 2 * 4 * 1.3 * n_samples * pilot_fraction(ranks, n_samples, pilot_m) + (16 << 10)
     chunk = max(1, min(n_poses, int(max_chunk_bytes // per_pose)))
-    n_threads = workers or os.cpu_count() or 1
+    n_threads = workers or cores()
     stream = Stream(model, budget, seed, n_samples, _N_BATCHES, n_threads)
     n_seg = stream.seg_start.size
     sums = {"S1": np.zeros((n_seg, n_feat)), "S2": np.zeros((n_seg, n_feat, n_feat))}

@@ -18,7 +18,6 @@ bootstrap estimates. That standard deviation is the standard error,
 
 from __future__ import annotations
 
-import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -28,7 +27,7 @@ import pandas as pd
 
 from .._result import freeze, interval_frame, pose_columns, short_repr
 from .._rng import MAX_SEED, resolve_rng
-from .._threads import single_threaded_blas
+from .._threads import cores, single_threaded_blas
 from .._version import __version__
 from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
@@ -285,7 +284,7 @@ def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
             res[:, sl, sampled] = np.stack(parts).reshape(4, p, -1, K)
         return p
 
-    threads = 1 if method == "salib" else (workers or os.cpu_count() or 1)
+    threads = 1 if method == "salib" else (workers or cores())
     with (single_threaded_blas(), Progress(n_poses, "sobol", progress) as bar,
           ThreadPoolExecutor(max_workers=threads) as pool):
         for done in pool.map(work, range(0, n_poses, chunk)):     # chunks of poses, not poses

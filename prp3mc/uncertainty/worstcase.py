@@ -27,14 +27,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 
-from .._result import freeze, pose_columns, short_repr
+from .._threads import cores
+from .._result import FrozenDict, freeze, pose_columns, short_repr
 from .._version import __version__
 from ..errors import InfeasiblePoseError
 from ..units import OUTPUT_UNITS, RAD2DEG
@@ -341,7 +341,7 @@ def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | No
     if len(slices) == 1:
         parts = [run(slices[0])]
     else:
-        with ThreadPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
+        with ThreadPoolExecutor(max_workers=workers or cores()) as pool:
             parts = list(pool.map(run, slices))
     shape = poses.shape[:-1]
 
@@ -402,6 +402,24 @@ class WorstCaseMaxima(_Maxima):
 
 #: The feasibility limits of validated_frame, as the envelope kernel reads them.
 _LIMITS = np.array([DEFAULT_LIMITS.min_transmission, DEFAULT_LIMITS.max_condition, DEFAULT_LIMITS.stroke_tol_mm])
+_LIMITS.flags.writeable = False
+
+#: The last (geometry, budget, k_sigma) of :func:`worst_case_maxima` and its kernel tables: a loop of
+#: small batches (an allocation search, a sweep) finds them by identity, without hashing either. One
+#: tuple, replaced whole: a thread reads a consistent one.
+_last: list = [(None, None, None, None)]
+
+
+def _prepared(geometry: Geometry, budget: Budget, k_sigma: float | None) -> tuple:
+    """``(bounds, tables, G)`` of :func:`~prp3mc.uncertainty._envelope.kernel_tables`, checked and cached."""
+    g, b, k, prepared = _last[0]
+    if g is geometry and b is budget and k == k_sigma:
+        return prepared
+    budget.check_geometry(geometry)
+    bounds, *tables = kernel_tables(geometry, budget, k_sigma)
+    prepared = bounds, tables, int((tables[2] < 0).sum())
+    _last[0] = geometry, budget, k_sigma, prepared
+    return prepared
 
 
 def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | None = None,
@@ -411,7 +429,7 @@ def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: flo
     Per pose the kernel computes the inverse kinematics, A^-1, the h entries
     of the budget's terms, the clearance intervals and the 8-corner maxima
     over blocks of poses, on all cores; nothing per pose is kept but the maxima and
-    their signs (44 bytes), so memory is that of the poses and the result.
+    their signs (about 50 bytes), so memory is that of the poses and the result.
     The values equal :func:`worst_case`'s to round-off (1e-12 relative).
 
     Parameters
@@ -432,16 +450,13 @@ def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: flo
     >>> worst_case_maxima(Geometry.from_preset("u-shape"), Budget.from_preset("paper"), grid).position_mm.shape
     (11, 11)
     """
-    budget.check_geometry(geometry)
-    bounds, *tables = kernel_tables(geometry, budget, k_sigma)
+    bounds, tables, G = _prepared(geometry, budget, k_sigma)
     poses = as_poses(poses)
     shape = poses.shape[:-1]
     flat = np.ascontiguousarray(poses.reshape(-1, 3))
     n = flat.shape[0]
-    G = int((tables[2] < 0).sum())
-    values, codes, bad = np.empty((4, n)), np.empty((4, n), dtype=np.int16), np.empty(n, dtype=np.int16)
-    envelope_kernel(flat, *tables, _LIMITS, check, values, codes, bad)
-    if check and bad.any():
+    values, signs, bad = np.empty((4, n)), np.empty((4, n, 3 + G), dtype=np.int8), np.empty(n, dtype=np.int16)
+    if envelope_kernel(flat, *tables, _LIMITS, check, values, signs, bad):
         for r, reason in enumerate(REASONS):
             hit = np.flatnonzero(bad & (0b111 << 3 * r))
             if hit.size:
@@ -449,11 +464,9 @@ def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: flo
                 leg = next(i for i in range(3) if bad[p] >> (3 * r + i) & 1)
                 # the flat index, as worst_case reports it
                 raise InfeasiblePoseError(refusal(geometry, flat[p], (p,), reason, leg))
-    values[1] *= RAD2DEG
-    sg = generator_signs(codes, 3 + G)                                   # (4, n, 3 + G)
+    values.flags.writeable = signs.flags.writeable = False      # every view of them is read-only: nothing to freeze
+    values, signs = values.reshape((4,) + shape), signs.reshape((4,) + shape + (3 + G,))
     return WorstCaseMaxima(
-        poses=poses, position_mm=values[0].reshape(shape), phi_deg=values[1].reshape(shape),
-        x_mm=values[2].reshape(shape), y_mm=values[3].reshape(shape),
-        leg_signs={q: sg[j, :, :3].reshape(shape + (3,)) for j, q in enumerate(QUANTITIES)},
-        input_bounds=bounds.copy(), k_sigma=k_sigma,
-        shared_signs={q: sg[j, :, 3:].reshape(shape + (G,)) for j, q in enumerate(QUANTITIES)})
+        poses=poses, position_mm=values[0], phi_deg=values[1], x_mm=values[2], y_mm=values[3],
+        leg_signs=FrozenDict(zip(QUANTITIES, signs[..., :3])), input_bounds=bounds, k_sigma=k_sigma,
+        shared_signs=FrozenDict(zip(QUANTITIES, signs[..., 3:])))
