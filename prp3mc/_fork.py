@@ -24,6 +24,8 @@ import time
 import warnings
 from typing import Callable, Iterator
 
+from ._threads import cores
+
 __all__ = ["fork_workers", "in_background", "Background"]
 
 _SIZE = struct.Struct("<Q")           # each message: its length, then its pickle
@@ -55,11 +57,11 @@ def fork_workers(n_tasks: int) -> int:
         return 1
     if threading.active_count() > 1:
         return 1
-    cores = len(os.sched_getaffinity(0))
+    n = cores()
     busy = _METER.busy_elsewhere()
     if busy is None:
-        return max(1, min(n_tasks, cores)) if os.getloadavg()[0] < cores else 1
-    return max(1, min(n_tasks, cores, 1 + int(cores - 1 - busy + 0.5)))
+        return max(1, min(n_tasks, n)) if os.getloadavg()[0] < n else 1
+    return max(1, min(n_tasks, n, 1 + int(n - 1 - busy + 0.5)))
 
 
 class _Meter:
