@@ -45,9 +45,11 @@ def fork_workers(n_tasks: int) -> int:
 
     On the 2-core development machine shared with other jobs, forked
     processes (the discrepancy command's accuracy and figures) made a run
-    3.0-3.4 s instead of 4.3 s when the other core was free, and 4.4-5.6 s
-    instead of 4.4-4.9 s when another job kept it busy: with every core busy
-    they only add processes competing for it.
+    2.5-3.4 s instead of 3.6-4.3 s when the other core was free, and
+    4.4-5.6 s instead of 4.4-4.9 s when another job kept it busy; two workers
+    drew the paper study's figures 1.4 times faster at load 2.3 and slower at
+    4.4 (``benchmarks/bench_study.py``): with every core busy they only add
+    processes competing for it.
 
     A process with other threads running (a notebook kernel, a Dask worker)
     never forks: a fork copies only the calling thread, and a lock another
