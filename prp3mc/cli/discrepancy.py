@@ -6,6 +6,7 @@ from ..measurement.accuracy import MODELS
 from ..measurement.campaign import count_rows, read_campaign
 from ..measurement.workflow import STAGES, discrepancy
 from ..progress import Progress
+from ..reports._render import drawing_ahead
 from ..reports.discrepancy_report import report_document, write_report
 from ..uncertainty.budget import Budget
 from ..units import MM2UM
@@ -46,14 +47,15 @@ class DiscrepancyCommand:
         campaign = read_campaign(args.data, geometry)
         within_limits(args, discrepancy_estimate(campaign.n_measurements, campaign.n_poses,
                                                  int(campaign.repeats.max()), n_inputs=d))
-        with Progress(len(STAGES) + 1, "discrepancy", args.progress) as bar:
+        # the figures' process imports matplotlib while the analysis runs, where a core is idle
+        with Progress(len(STAGES) + 1, "discrepancy", args.progress) as bar, drawing_ahead() as ahead:
             result = discrepancy(geometry, budget, campaign, instrument_sigma_mm=args.instrument_sigma_mm,
                                  instrument_sigma_deg=args.instrument_sigma_deg,
                                  registration=not args.no_registration, alpha=args.alpha,
                                  alpha_unexplained=args.alpha_unexplained, outlier_rate=args.outlier_rate,
                                  progress=bar, rng=args.seed)
             record = provenance(args, geometry, budget)["inputs"]
-            folder = write_report(result, args.out, force=args.force, inputs=record, warnings=WARNINGS)
+            folder = write_report(result, args.out, force=args.force, inputs=record, warnings=WARNINGS, ahead=ahead)
             bar.update(label="discrepancy: report")
         if args.json:
             emit_json(report_document(result, record, WARNINGS))

@@ -7,7 +7,7 @@ from ..errors import Prp3mcError
 from ..limits import study_estimate
 from ..output import figure_formats
 from ..units import MM2UM
-from ..reports.study_report import preloading, write_study
+from ..reports.study_report import write_study
 from ..study.distributed import parse_scheduler
 from ..study.reader import Study, bundled_studies
 from ..study.runner import run_study
@@ -51,8 +51,7 @@ class StudyCommand:
         if not study.sweep:  # a sweep's base configuration need not be feasible: its combinations are checked
             for c in study.configurations:
                 check_linearity(c.geometry, study.budget, c.region.grid((3, 3)))
-        with preloading(enabled=args.scheduler is None):   # matplotlib imported while the analyses run
-            result = run_study(study, rng=args.seed, progress=args.progress, scheduler=args.scheduler)
+        result = run_study(study, rng=args.seed, progress=args.progress, scheduler=args.scheduler)
         if not result.configurations:
             first = result.skipped[0]
             raise Prp3mcError(f"study {study.name}: none of its {len(result.skipped)} configurations ran; "

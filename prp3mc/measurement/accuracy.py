@@ -18,7 +18,8 @@ propagated with the analyses that understand a budget's ``[effects]``:
 
 Each gives the exact worst case and Monte Carlo p95 and p99 of the position
 error and of |dphi|, each the largest over the grid (the three Monte Carlo
-runs share their seed).
+runs share their seed, so models that differ in their names only, as all
+three do when nothing was named, are computed once).
 """
 
 from __future__ import annotations
@@ -29,12 +30,10 @@ from .._rng import child_seed
 from ..kinematics.chain import feasible
 from ..kinematics.geometry import REGION_PRESETS, Geometry, Region
 from ..uncertainty.budget import Budget
-from ..uncertainty.montecarlo import monte_carlo
-from ..uncertainty.worstcase import worst_case
 from .campaign import Campaign
 from .updated import UpdatedModel, base_name
 
-__all__ = ["predicted_accuracy", "accuracy_region", "GRID", "N_SAMPLES", "MODELS"]
+__all__ = ["predicted_accuracy", "accuracy_region", "load_propagation", "GRID", "N_SAMPLES", "MODELS"]
 
 #: Grid points per side of the region (7 x 7 keeps the three models' Monte Carlo to about 0.3 s; on the u-shape
 #: region its maxima were within 1 % of an 11 x 11 grid's with 16384 samples).
@@ -56,6 +55,15 @@ def accuracy_region(geometry: Geometry, campaign: Campaign) -> tuple[Region, str
     phi = float(np.median(campaign.poses[:, 2]))
     return (Region((lo[0], hi[0]), (lo[1], hi[1]), phi),
             "the campaign's pose hull (its commanded x and y range at its median phi, reachable poses)")
+
+
+def load_propagation() -> tuple:
+    """:func:`~prp3mc.uncertainty.montecarlo.monte_carlo` and :func:`~prp3mc.uncertainty.worstcase.worst_case`,
+    imported on first use: numba, which they load (about 0.3 s), serves this stage only, which
+    :func:`~prp3mc.measurement.workflow.discrepancy` runs on a process of its own where a core is idle."""
+    from ..uncertainty.montecarlo import monte_carlo
+    from ..uncertainty.worstcase import worst_case
+    return monte_carlo, worst_case
 
 
 def predicted_accuracy(geometry: Geometry, budget: Budget, model: UpdatedModel, campaign: Campaign, seed: int, *,
@@ -81,6 +89,7 @@ def predicted_accuracy(geometry: Geometry, budget: Budget, model: UpdatedModel, 
         ``worst_case_phi_deg``, ``p95_position_mm``, ``p99_position_mm``,
         ``p95_phi_deg``, ``p99_phi_deg`` (largest over the region; phi of |dphi|).
     """
+    monte_carlo, worst_case = load_propagation()
     region, source = accuracy_region(geometry, campaign)
     poses = region.grid(grid).reshape(-1, 3)
     poses = poses[feasible(model.geometry, poses) & feasible(geometry, poses)]
@@ -92,13 +101,24 @@ def predicted_accuracy(geometry: Geometry, budget: Budget, model: UpdatedModel, 
                  "n_samples": n_samples, "seed": mc_seed}
     pairs = {"original": (geometry, budget), "updated": (model.geometry, model.budget),
              "compensated": (model.geometry, model.compensated)}
+    figures: list = []                       # (what the analyses read of a model, its figures)
     for label, (g, b) in pairs.items():
-        wc = worst_case(g, b, poses)        # the numpy path: at 49 poses it beats loading the fused kernel
-        mc = monte_carlo(g, b, poses, n_samples, rng=mc_seed, percentiles=(95.0, 99.0), progress=False, workers=1)
-        out[label] = {"geometry": g.name, "budget": b.name,
-                      "worst_case_position_mm": float(wc.position_mm.max()),
+        key = _content(g, b)
+        known = [f for k, f in figures if k == key]     # models that differ in names only: computed once
+        if not known:
+            wc = worst_case(g, b, poses)     # the numpy path: at 49 poses it beats loading the fused kernel
+            mc = monte_carlo(g, b, poses, n_samples, rng=mc_seed, percentiles=(95.0, 99.0), progress=False,
+                             workers=1)
+            known = [{"worst_case_position_mm": float(wc.position_mm.max()),
                       "worst_case_phi_deg": float(wc.phi_deg.max()),
                       "p95_position_mm": float(mc.position_pct[:, 0].max()),
                       "p99_position_mm": float(mc.position_pct[:, 1].max()),
-                      "p95_phi_deg": float(mc.phi_pct[:, 0].max()), "p99_phi_deg": float(mc.phi_pct[:, 1].max())}
+                      "p95_phi_deg": float(mc.phi_pct[:, 0].max()), "p99_phi_deg": float(mc.phi_pct[:, 1].max())}]
+            figures.append((key, known[0]))
+        out[label] = {"geometry": g.name, "budget": b.name, **known[0]}
     return out
+
+
+def _content(geometry: Geometry, budget: Budget) -> tuple:
+    """What the worst case and the Monte Carlo read of a model: all but its names (and the budget's records)."""
+    return geometry.replace(name=""), list(budget.inputs.items()), list(budget.effects.items())

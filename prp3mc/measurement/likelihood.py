@@ -160,7 +160,10 @@ class Engine:
         self._starts = np.concatenate([[0], np.cumsum(campaign.repeats)[:-1]])
         self.b_pose, _ = inverse_kinematics(geometry, campaign.poses, check=False)   # (P, 3) mm
         self.Jb = sensitivity(geometry, campaign.poses, check=False).J["b"] * ROW_TO_DEG[:, None]  # (P, 3, 3)
-        self._cache: dict = {}
+        self._cache: dict = {}                            # spread factors -> basis (see _basis)
+        self._centred_cache: dict = {}                    # columns -> centred signatures (see _centred)
+        C = np.linalg.cholesky(noise + self.jitter)      # the same for every model state: factorised once
+        self._noise_factor = (np.linalg.inv(C), 2.0 * np.log(np.diagonal(C, axis1=-2, axis2=-1)).sum(-1))
         self.confounded = self._confounded()
 
     # -- model moments and whitening
@@ -187,16 +190,14 @@ class Engine:
         if cached is not None:
             return cached
         mean, sigma = self._sigma(factors)
-        noise = self.noise + self.jitter
-        C = np.linalg.cholesky(noise)
-        Ci = np.linalg.inv(C)
+        Ci, logdet_noise = self._noise_factor
         lam, U = np.linalg.eigh(Ci @ sigma @ np.swapaxes(Ci, 1, 2))
         Vt = np.swapaxes(U, 1, 2) @ Ci                                     # (P, 3, 3): V'
         y = self.err - mean[self.idx]
         ybar = self.pose_mean(y)
         Vm = Vt[self.idx]
         basis = {"mean": mean, "lam": np.maximum(lam, 0.0), "Vt": Vt, "Vm": Vm,
-                 "logdet_noise": 2.0 * np.log(np.diagonal(C, axis1=-2, axis2=-1)).sum(-1),
+                 "logdet_noise": logdet_noise,
                  "yw": np.einsum("mij,mj->mi", Vm, y - ybar[self.idx]), "yb": np.einsum("pij,pj->pi", Vt, ybar)}
         if len(self._cache) > 64:
             self._cache.clear()
@@ -234,46 +235,69 @@ class Engine:
         """
         swm = sw[self.idx]
         z0 = np.concatenate([(basis["yw"] * swm).ravel(), (basis["yb"] * sb).ravel()])
-        projected = basis.setdefault("columns", {})         # column -> its (within, between) parts in the basis
-        missing = [c for c in dict.fromkeys(cols) if c not in projected]
-        if missing:
-            nH = self.H.shape[2]
-            X = np.stack([self.H[:, :, c] if c < nH else self.G[:, :, c - nH] for c in missing], axis=2)
-            Xbar = self.pose_mean(X)
-            cw, cb = basis["Vm"] @ (X - Xbar[self.idx]), basis["Vt"] @ Xbar
-            for k, c in enumerate(missing):
-                projected[c] = (cw[:, :, k], cb[:, :, k])
-        cw = np.stack([projected[c][0] for c in cols], axis=2) if cols else np.zeros((self.M, 3, 0))
-        cb = np.stack([projected[c][1] for c in cols], axis=2) if cols else np.zeros((self.P, 3, 0))
+        stacks = basis.setdefault("stacks", {})             # columns -> their (within, between) parts, stacked
+        if tuple(cols) not in stacks:
+            projected = basis.setdefault("columns", {})     # column -> its (within, between) parts in the basis
+            missing = tuple(c for c in dict.fromkeys(cols) if c not in projected)
+            if missing:
+                centred, Xbar = self._centred(missing)
+                cw, cb = basis["Vm"] @ centred, basis["Vt"] @ Xbar
+                for k, c in enumerate(missing):
+                    projected[c] = (cw[:, :, k], cb[:, :, k])
+            stacks[tuple(cols)] = (
+                np.stack([projected[c][0] for c in cols], axis=2) if cols else np.zeros((self.M, 3, 0)),
+                np.stack([projected[c][1] for c in cols], axis=2) if cols else np.zeros((self.P, 3, 0)))
+        cw, cb = stacks[tuple(cols)]
         A = np.concatenate([(cw * swm[..., None]).reshape(3 * self.M, len(cols)),
                             (cb * sb[..., None]).reshape(3 * self.P, len(cols))])
         return z0, A
+
+    def _centred(self, cols: tuple) -> tuple[np.ndarray, np.ndarray]:
+        """Signatures ``cols`` (nuisance columns, then candidates offset by the nuisances' count) less their pose
+        means, (M, 3, k), and those means, (P, 3, k): the same in every basis, computed once."""
+        if cols not in self._centred_cache:
+            nH = self.H.shape[2]
+            X = np.stack([self.H[:, :, c] if c < nH else self.G[:, :, c - nH] for c in cols], axis=2)
+            Xbar = self.pose_mean(X)
+            self._centred_cache[cols] = (X - Xbar[self.idx], Xbar)
+        return self._centred_cache[cols]
 
     def columns(self, sys: tuple, nuis: tuple | None = None) -> np.ndarray:
         """Signatures (M, 3, n_nuis + k) of the nuisances ``nuis`` (all fitted ones if None), then ``sys``."""
         nuis = self.nuisance if nuis is None else nuis
         return np.concatenate([self.H[:, :, list(nuis)], self.G[:, :, list(sys)]], axis=2)
 
-    def fit(self, sys: tuple, factors: dict, r: float, nuis: tuple | None = None) -> Fit:
-        """Fit of the systematic candidates ``sys`` (indices) at fixed spread ``factors`` and ``r``."""
+    def _solve(self, sys: tuple, factors: dict, r: float, nuis: tuple | None) -> tuple:
+        """The generalized least squares of a model state: ``sys, nuis, basis, sw, sb, A, theta, theta_cov, z,
+        loglik`` (what :meth:`fit` returns, before the parts only a :class:`Fit` carries)."""
         nuis = self.nuisance if nuis is None else tuple(nuis)
         sys = tuple(sys)
         basis = self._basis(factors)
         sw, sb, logdet = self._scales(basis, r)
         cols = list(nuis) + [self.H.shape[2] + j for j in sys]
         z0, A = self._stacked(basis, sw, sb, cols)
-        resid = self.err - basis["mean"][self.idx]
         if cols:
-            gram = A.T @ A
-            theta_cov = np.linalg.pinv(gram)
+            theta_cov = np.linalg.pinv(A.T @ A)
             theta = theta_cov @ (A.T @ z0)
             z = z0 - A @ theta
+        else:
+            theta, theta_cov, z = np.zeros(0), np.zeros((0, 0)), z0
+        loglik = -0.5 * (float(z @ z) + logdet + 3 * self.M * np.log(2 * np.pi))
+        return sys, nuis, basis, sw, sb, A, theta, theta_cov, z, loglik
+
+    def loglik(self, sys: tuple, factors: dict, r: float, nuis: tuple | None = None) -> float:
+        """Log-likelihood of :meth:`fit`'s model state alone (what the optimisers evaluate)."""
+        return self._solve(sys, factors, r, nuis)[-1]
+
+    def fit(self, sys: tuple, factors: dict, r: float, nuis: tuple | None = None) -> Fit:
+        """Fit of the systematic candidates ``sys`` (indices) at fixed spread ``factors`` and ``r``."""
+        sys, nuis, basis, sw, sb, A, theta, theta_cov, z, loglik = self._solve(sys, factors, r, nuis)
+        resid = self.err - basis["mean"][self.idx]
+        k_between = 0.0
+        if theta.size:
             Ab = A[3 * self.M:]
             k_between = float(np.trace(theta_cov @ (Ab.T @ Ab)))
             resid = resid - self.columns(sys, nuis) @ theta
-        else:
-            theta, theta_cov, z, k_between = np.zeros(0), np.zeros((0, 0)), z0, 0.0
-        loglik = -0.5 * (float(z @ z) + logdet + 3 * self.M * np.log(2 * np.pi))
         Lw = sw[:, :, None] * basis["Vt"]
         Lb = sb[:, :, None] * basis["Vt"]
         return Fit(sys, dict(factors), float(r), nuis, theta, theta_cov, loglik, z, resid, Lw, Lb, k_between)
@@ -295,7 +319,7 @@ class Engine:
 
         def nll(x):
             f, rr = state(x)
-            return -self.fit(sys, f, rr, nuis).loglik
+            return -self.loglik(sys, f, rr, nuis)
 
         x0 = [np.log(factors[n]) for n in names] + ([start_r] if free_r else [])
         bounds = [_FACTOR_BOUNDS] * len(names) + ([(0.0, 1.0)] if free_r else [])
@@ -384,13 +408,13 @@ class Engine:
     def spread_interval(self, fit: Fit, name: str, level: float = 0.95) -> tuple[float, float]:
         """Profile-likelihood interval of a spread factor at ``level`` (other spreads and r fixed)."""
         def ll(x):
-            return self.fit(fit.sys, {**fit.factors, name: np.exp(x)}, fit.r, fit.nuis).loglik
+            return self.loglik(fit.sys, {**fit.factors, name: np.exp(x)}, fit.r, fit.nuis)
         lo, hi = self._profile_interval(ll, np.log(fit.factors[name]), *_FACTOR_BOUNDS, level)
         return float(np.exp(lo)), float(np.exp(hi))
 
     def r_interval(self, fit: Fit, level: float = 0.95) -> tuple[float, float]:
         """Profile-likelihood interval of the repeatable fraction (spread factors fixed)."""
-        return self._profile_interval(lambda r: self.fit(fit.sys, fit.factors, r, fit.nuis).loglik,
+        return self._profile_interval(lambda r: self.loglik(fit.sys, fit.factors, r, fit.nuis),
                                       fit.r, 0.0, 1.0, level)
 
     def wald(self, fit: Fit, j: int, level: float = 0.95) -> tuple[float, tuple[float, float]]:

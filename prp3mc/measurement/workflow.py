@@ -25,7 +25,9 @@ import numpy as np
 from scipy import optimize
 
 from .._distributions import chi2_isf, chi2_sf
+from .._fork import in_background
 from .._rng import child_seed, resolve_rng
+from .._threads import single_threaded_blas
 from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
 from ..progress import Progress
@@ -41,8 +43,7 @@ from .prediction import noise_cov, predict
 from .results import DiscrepancyResult
 from .selection import name_effects, names_in, select
 from .updated import updated_model
-from .accuracy import predicted_accuracy
-
+from .accuracy import load_propagation, predicted_accuracy
 from .iso9283 import iso9283_figures
 
 __all__ = ["discrepancy", "detectable_effect", "STAGES"]
@@ -51,6 +52,7 @@ __all__ = ["discrepancy", "detectable_effect", "STAGES"]
 STAGES = ("fit and gross errors", "selection", "diagnoses", "with the gross errors", "ISO 9283")
 
 
+@single_threaded_blas()  # the analysis's products are small: a second BLAS thread only spun (0.2 CPU-s a run)
 def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigma_mm: float = 0.0,
                 instrument_sigma_deg: float = 0.0, registration: bool = True, alpha: float = 0.01,
                 alpha_unexplained: float = 0.05, outlier_rate: float = 0.01, max_effects: int = 6,
@@ -105,92 +107,97 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
             raise BudgetError(f"{name} must lie in (0, 1), got {value}")
     budget.check_geometry(geometry)
     campaign = require_testable(read_campaign(campaign, geometry))
-    noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
-    full = Engine(geometry, budget, campaign, noise, registration=registration)
-    bar = progress if isinstance(progress, Progress) else Progress(len(STAGES), "discrepancy", progress)
-    stages = iter(STAGES)
+    # the predicted accuracy needs the named effects only: on another core where one is idle, which loads
+    # numba (the Monte Carlo's and the worst case's kernels) while the effects are named
+    with in_background(predicted_accuracy, prepare=load_propagation) as accuracy:
+        noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
+        full = Engine(geometry, budget, campaign, noise, registration=registration)
+        bar = progress if isinstance(progress, Progress) else Progress(len(STAGES), "discrepancy", progress)
+        stages = iter(STAGES)
 
-    def done():
-        bar.update(label=f"discrepancy: {next(stages)}")
+        def done():
+            bar.update(label=f"discrepancy: {next(stages)}")
 
-    def engine_for(keep):
-        return full if keep.all() else Engine(geometry, budget, campaign, noise, registration=registration,
-                                              keep=keep)
+        def engine_for(keep):
+            return full if keep.all() else Engine(geometry, budget, campaign, noise, registration=registration,
+                                                  keep=keep)
 
-    def base_fit(keep):
-        engine = engine_for(keep)
-        return engine, engine.refit((), {})
+        def base_fit(keep):
+            engine = engine_for(keep)
+            return engine, engine.refit((), {})
 
-    def named_model(keep):
-        engine, base = base_fit(keep)
-        return (engine, base, *select(engine, base, alpha, max_effects))
+        def named_model(keep):
+            engine, base = base_fit(keep)
+            return (engine, base, *select(engine, base, alpha, max_effects))
 
-    keep, _ = gross.flag(full, base_fit, outlier_rate)
-    done()
-    engine, base, fit, accepted, steps = named_model(keep)
-    # every row tested again under the named model: rows set aside only for a missing spread come back
-    limit = gross.threshold(campaign.n_measurements, outlier_rate)
-    d2 = gross.distances(full, keep, engine.values(fit), fit.factors, fit.r)
-    if ((d2 <= limit) != keep).any() and (d2 <= limit).sum() > 3:
-        keep = d2 <= limit
+        keep, _ = gross.flag(full, base_fit, outlier_rate)
+        done()
         engine, base, fit, accepted, steps = named_model(keep)
+        # every row tested again under the named model: rows set aside only for a missing spread come back
+        limit = gross.threshold(campaign.n_measurements, outlier_rate)
         d2 = gross.distances(full, keep, engine.values(fit), fit.factors, fit.r)
-    named = name_effects(engine, fit, accepted)
-    done()
-    null_before = null_variances(engine, base, n_bootstrap, rng)
-    before = diagnose(engine, base, null=null_before)
-    null_after = null_variances(engine, fit, n_bootstrap, rng)
-    after = diagnose(engine, fit, null=null_after)
-    gap_doc = gap(before, after, alpha_unexplained)
-    gap_doc["held_out"] = held_out_gap(engine, {"before": (base, null_before), "after": (fit, null_after)}, seed)
-    done()
-    outlier_rows = tuple({"row": int(m), "pose_id": str(campaign.pose_id[m]), "z": float(np.sqrt(d2[m]))}
-                         for m in np.flatnonzero(~keep))
-    with_outliers = None
-    if outlier_rows:
-        engine_all, base_all, fit_all, accepted_all, _ = named_model(np.ones(campaign.n_measurements, bool))
-        n_boot = max(n_bootstrap // 4, 50)               # for the comparison only
-        g_before, _ = gap_value(diagnose(engine_all, base_all, n_boot, rng))
-        g_after, _ = gap_value(diagnose(engine_all, fit_all, n_boot, rng))
-        with_outliers = {
-            "named_effects": [{"name": n, "value": float(v)} for n, v in _effect_values(engine_all, fit_all).items()],
-            "gap_before": g_before, "gap_after": g_after, "unexplained": bool(g_after > gap_doc["closed_at"]),
-            "repeatable_fraction": fit_all.r}
-    done()
-    nuisance, drift_test = _nuisance(engine, fit, alpha)
-    r_lo, r_hi = engine.r_interval(fit)
-    effects_after = _effect_values(engine, fit)
-    systematic = {n: v for n, v in effects_after.items() if effect(n).systematic}
-    prediction = predict(geometry, budget, campaign, effects=effects_after, instrument_sigma_mm=instrument_sigma_mm,
-                         instrument_sigma_deg=instrument_sigma_deg, repeatable_fraction=fit.r)
-    iso, iso_poses = _iso9283(engine, fit, child_seed(seed, 9283))
-    done()
-    if bar is not progress:
-        bar.close()
-    model = updated_model(geometry, budget, named, campaign)
-    confounded = tuple(n for n, with_ in engine.confounded.items() if "registration" in with_)
-    not_testable = dict(engine.not_testable)
-    not_testable.update({n: f"confounded with {with_}" for n, with_ in engine.confounded.items()})
-    if engine.time_source != "time_s":
-        not_testable["drift"] = "no time_s column: drift fitted against row order"
-    return DiscrepancyResult(
-        named_effects=named, unexplained=not gap_doc["closed"], gap=gap_doc, before=before, after=after,
-        steps=steps, prediction_after=prediction, budget_after=prediction.budget, systematic=systematic,
-        nuisance=nuisance, drift_test=drift_test, registration=registration, outliers=outlier_rows,
-        outlier_rule={"family_wise_rate": outlier_rate,
-                      "per_measurement_level": float(-np.expm1(np.log1p(-outlier_rate) / campaign.n_measurements)),
-                      "z_threshold": float(np.sqrt(limit)),
-                      "statistic": "squared standardised error of each measurement predicted from the other visits "
-                                   "of its pose under the fitted model, chi2(3), Sidak over all rows"},
-        with_outliers=with_outliers,
-        repeatability={"repeatable_fraction": fit.r, "ci95": [r_lo, r_hi]},
-        iso9283=iso, iso9283_poses=iso_poses, invisible=engine.invisible,
-        confounded_with_registration=confounded,
-        structural_aliases=tuple(tuple(g) for g in engine.structural_aliases()), not_testable=not_testable,
-        model=model, accuracy=predicted_accuracy(geometry, budget, model, campaign, seed),
-        campaign=campaign, geometry=geometry, budget=budget, seed=seed, n_bootstrap=n_bootstrap, alpha=alpha,
-        alpha_unexplained=alpha_unexplained, instrument_sigma_mm=instrument_sigma_mm,
-        instrument_sigma_deg=instrument_sigma_deg, wall_time_s=time.perf_counter() - t0)
+        if ((d2 <= limit) != keep).any() and (d2 <= limit).sum() > 3:
+            keep = d2 <= limit
+            engine, base, fit, accepted, steps = named_model(keep)
+            d2 = gross.distances(full, keep, engine.values(fit), fit.factors, fit.r)
+        named = name_effects(engine, fit, accepted)
+        model = updated_model(geometry, budget, named, campaign)
+        accuracy.submit(geometry, budget, model, campaign, seed)
+        done()
+        null_before = null_variances(engine, base, n_bootstrap, rng)
+        before = diagnose(engine, base, null=null_before)
+        null_after = null_variances(engine, fit, n_bootstrap, rng)
+        after = diagnose(engine, fit, null=null_after)
+        gap_doc = gap(before, after, alpha_unexplained)
+        gap_doc["held_out"] = held_out_gap(engine, {"before": (base, null_before), "after": (fit, null_after)}, seed)
+        done()
+        outlier_rows = tuple({"row": int(m), "pose_id": str(campaign.pose_id[m]), "z": float(np.sqrt(d2[m]))}
+                             for m in np.flatnonzero(~keep))
+        with_outliers = None
+        if outlier_rows:
+            engine_all, base_all, fit_all, accepted_all, _ = named_model(np.ones(campaign.n_measurements, bool))
+            n_boot = max(n_bootstrap // 4, 50)               # for the comparison only
+            g_before, _ = gap_value(diagnose(engine_all, base_all, n_boot, rng))
+            g_after, _ = gap_value(diagnose(engine_all, fit_all, n_boot, rng))
+            with_outliers = {
+                "named_effects": [{"name": n, "value": float(v)}
+                                  for n, v in _effect_values(engine_all, fit_all).items()],
+                "gap_before": g_before, "gap_after": g_after, "unexplained": bool(g_after > gap_doc["closed_at"]),
+                "repeatable_fraction": fit_all.r}
+        done()
+        nuisance, drift_test = _nuisance(engine, fit, alpha)
+        r_lo, r_hi = engine.r_interval(fit)
+        effects_after = _effect_values(engine, fit)
+        systematic = {n: v for n, v in effects_after.items() if effect(n).systematic}
+        prediction = predict(geometry, budget, campaign, effects=effects_after, instrument_sigma_mm=instrument_sigma_mm,
+                             instrument_sigma_deg=instrument_sigma_deg, repeatable_fraction=fit.r)
+        iso, iso_poses = _iso9283(engine, fit, child_seed(seed, 9283))
+        done()
+        if bar is not progress:
+            bar.close()
+        confounded = tuple(n for n, with_ in engine.confounded.items() if "registration" in with_)
+        not_testable = dict(engine.not_testable)
+        not_testable.update({n: f"confounded with {with_}" for n, with_ in engine.confounded.items()})
+        if engine.time_source != "time_s":
+            not_testable["drift"] = "no time_s column: drift fitted against row order"
+        return DiscrepancyResult(
+            named_effects=named, unexplained=not gap_doc["closed"], gap=gap_doc, before=before, after=after,
+            steps=steps, prediction_after=prediction, budget_after=prediction.budget, systematic=systematic,
+            nuisance=nuisance, drift_test=drift_test, registration=registration, outliers=outlier_rows,
+            outlier_rule={"family_wise_rate": outlier_rate,
+                          "per_measurement_level": float(-np.expm1(np.log1p(-outlier_rate) / campaign.n_measurements)),
+                          "z_threshold": float(np.sqrt(limit)),
+                          "statistic": "squared standardised error of each measurement predicted from the other visits "
+                                       "of its pose under the fitted model, chi2(3), Sidak over all rows"},
+            with_outliers=with_outliers,
+            repeatability={"repeatable_fraction": fit.r, "ci95": [r_lo, r_hi]},
+            iso9283=iso, iso9283_poses=iso_poses, invisible=engine.invisible,
+            confounded_with_registration=confounded,
+            structural_aliases=tuple(tuple(g) for g in engine.structural_aliases()), not_testable=not_testable,
+            model=model, accuracy=accuracy.result(),
+            campaign=campaign, geometry=geometry, budget=budget, seed=seed, n_bootstrap=n_bootstrap, alpha=alpha,
+            alpha_unexplained=alpha_unexplained, instrument_sigma_mm=instrument_sigma_mm,
+            instrument_sigma_deg=instrument_sigma_deg, wall_time_s=time.perf_counter() - t0)
 
 
 def _effect_values(engine: Engine, fit: Fit) -> dict:

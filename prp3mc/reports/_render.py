@@ -7,8 +7,6 @@ worker process per core while a core is idle, and the caller goes on
 pickled but each figure's index and its PNG bytes. Elsewhere, or with one
 core, the figures are drawn here, one after the other. The files and bytes
 are the same either way (``benchmarks/bench_study.py`` times both).
-:func:`preloading` imports matplotlib on a thread while a command's analyses
-run, so that drawing starts at once.
 """
 
 from __future__ import annotations
@@ -17,15 +15,14 @@ import contextlib
 import gc
 import multiprocessing
 import os
-import sys
-import threading
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
+from .._fork import Background, fork_workers as default_workers, in_background
 from ..output import save_figure
 
-__all__ = ["rendering", "default_workers", "preloading"]
+__all__ = ["rendering", "drawing_ahead", "default_workers"]
 
 #: (file name, a callable that draws the figure and returns it)
 FigureTask = tuple[str, Callable[[], object]]
@@ -33,70 +30,53 @@ FigureTask = tuple[str, Callable[[], object]]
 _TASKS: dict = {}  # in a worker process: what rendering() handed it at the fork
 
 
-def default_workers(n_figures: int) -> int:
-    """Worker processes for ``n_figures``: one per core while some core is idle, where the system can fork; else 1.
+def _render(k: int) -> bytes:
+    name, draw = _TASKS["figures"][k]
+    return save_figure(draw(), _TASKS["folder"], name, _TASKS["formats"], _TASKS["dpi"])
 
-    A core is taken as idle while the 1-minute load average is below the
-    cores this process may use. On the 2-core development machine shared
-    with other jobs, two workers drew the paper study's figures 1.4 times
-    faster than one process at load 2.3, and slower at load 4.4
-    (``benchmarks/bench_study.py``): with every core busy they only add
-    processes competing for it. The files are the same either way.
 
-    A process with other threads running (a notebook kernel, a Dask worker)
-    never forks: a fork copies only the calling thread, and a lock another
-    thread held stays held in the child.
+def _inherit(figures, folder, formats, dpi) -> None:
+    """A worker's start: what it draws, and every object it inherited frozen out of its garbage collector.
+
+    A figure leaves tens of thousands of objects in reference cycles; the
+    full collections they trigger would otherwise walk every inherited
+    object too (a tenth of a second each), copying their pages.
     """
-    if not sys.platform.startswith("linux") or "fork" not in multiprocessing.get_all_start_methods():
-        return 1
-    if threading.active_count() > 1:
-        return 1
-    cores = len(os.sched_getaffinity(0))
-    return max(1, min(n_figures, cores)) if os.getloadavg()[0] < cores else 1
+    gc.freeze()
+    _TASKS.update(figures=figures, folder=folder, formats=formats, dpi=dpi)
 
 
-def _import_drawing() -> None:
-    """Import what drawing a report's figures needs, and load its font."""
-    import matplotlib.backends.backend_agg  # noqa: F401
-    import matplotlib.figure  # noqa: F401 -- (the Agg backend no longer imports it)
-    import PIL.PngImagePlugin  # noqa: F401 -- (imported by the first PNG written)
+def _import_matplotlib() -> None:
+    """Import what drawing on Agg and writing PNG need, and load the font (the Agg backend no longer imports
+    matplotlib.figure; PIL's PNG writer comes with the first PNG written)."""
+    import matplotlib.backends.backend_agg, matplotlib.figure, PIL.PngImagePlugin  # noqa: F401,E401
     from ._layout import text_inches
     text_inches("0")
 
 
-@contextlib.contextmanager
-def preloading(enabled: bool = True) -> Iterator[None]:
-    """Import what drawing the figures needs on a thread while the block runs; the thread is joined at its end.
+def _drawn(figures: list, folder: Path, formats: tuple, workers: int | None, dpi: int) -> list[bytes]:
+    with rendering(figures, folder, formats, workers, dpi) as pngs:
+        return list(pngs)
 
-    Matplotlib takes about half a second to import, on one core: a command
-    that writes a report after its analyses (which leave a core idle part
-    of the time) imports it meanwhile. Nothing is imported twice: the
-    report's figures then start at once (:func:`rendering`). The thread is
-    joined when the block ends, so it never runs when the figures' worker
-    processes fork. ``enabled=False`` runs the block alone.
+
+def drawing_ahead() -> contextlib.AbstractContextManager[Background]:
+    """A process for a report's figures, forked now where a core is idle: it imports matplotlib (about
+    0.45 s) while the caller computes what to draw, then draws what :func:`rendering` hands it (``ahead=``).
+
+    A context manager (:func:`prp3mc._fork.in_background`); without a forked process the figures are
+    drawn as :func:`rendering` draws them without ``ahead``.
     """
-    thread = threading.Thread(target=_import_drawing, name="prp3mc-preload", daemon=True) if enabled else None
-    if thread is not None:
-        thread.start()
-    try:
-        yield
-    finally:
-        if thread is not None:
-            thread.join()
+    return in_background(_drawn, prepare=_import_matplotlib)
 
 
-def _render(k: int) -> bytes:
-    name, draw = _TASKS["figures"][k]
-    return save_figure(draw(), _TASKS["folder"], name, _TASKS["formats"])
-
-
-def _inherit(figures, folder, formats) -> None:
-    _TASKS.update(figures=figures, folder=folder, formats=formats)
+def _later(get: Callable[[], list]) -> Iterator[bytes]:
+    yield from get()
 
 
 @contextlib.contextmanager
 def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=("png",),
-              workers: int | None = None) -> Iterator[Iterator[bytes]]:
+              workers: int | None = None, dpi: int = 150, ahead: Background | None = None
+              ) -> Iterator[Iterator[bytes]]:
     """Draw every figure and save it as ``folder/name.<format>``; yields an iterator of their PNG bytes, in order.
 
     Parameters
@@ -107,30 +87,29 @@ def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=
     formats : sequence of str
         As :func:`prp3mc.output.save_figure`.
     workers : int, optional
-        Worker processes (default :func:`default_workers`); 1 draws in this
-        process, lazily, as the iterator is consumed.
+        Worker processes (default :func:`default_workers`, that is
+        :func:`prp3mc._fork.fork_workers`: one per core while a core is
+        idle); 1 draws in this process, lazily, as the iterator is consumed.
+    dpi : int
+        Resolution of every format (:func:`prp3mc.output.save_figure`).
+    ahead : Background, optional
+        A process made ready beforehand (:func:`drawing_ahead`): the figures
+        are drawn there (on ``workers`` worker processes of its own), and the
+        iterator waits for all of them.
 
     With workers, drawing starts on entry and the caller can do other work
     before consuming the iterator; leaving the block waits for every figure.
-
-    Inside the block the objects that exist on entry (the libraries'
-    modules, the results) are frozen out of the garbage collector
-    (:func:`gc.freeze`): a figure leaves tens of thousands of objects in
-    reference cycles, and each full collection they trigger would walk those
-    too (a tenth of a second each), in this process and, copying their pages,
-    in every worker. They are unfrozen when the block ends.
     """
     figures, folder = list(figures), Path(folder)
     workers = default_workers(len(figures)) if workers is None else max(1, int(workers))
-    if workers > 1:
-        _import_drawing()                   # once here (if not preloaded), inherited, not in every worker
-    gc.freeze()
-    try:
-        if workers == 1:
-            yield (save_figure(draw(), folder, name, formats) for name, draw in figures)
-            return
-        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
-                                 initializer=_inherit, initargs=(figures, folder, tuple(formats))) as pool:
-            yield pool.map(_render, range(len(figures)))
-    finally:
-        gc.unfreeze()
+    if ahead is not None:
+        ahead.submit(figures, folder, tuple(formats), workers, dpi)
+        yield _later(ahead.result)
+        return
+    if workers == 1:
+        yield (save_figure(draw(), folder, name, formats, dpi) for name, draw in figures)
+        return
+    _import_matplotlib()                   # once here, inherited by every worker
+    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
+                             initializer=_inherit, initargs=(figures, folder, tuple(formats), dpi)) as pool:
+        yield pool.map(_render, range(len(figures)))

@@ -9,7 +9,8 @@ the figures as PNG (SVG too on request), per-pose / per-measurement
 tables as CSV and the updated model in ``model/``
 (:mod:`~prp3mc.measurement.updated`); it draws on its own Agg canvases, outside pyplot, and renders
 each figure once (fixed margins, no layout engine, no tight bounding box),
-which keeps a 400-measurement report to about a second.
+on worker processes while a core is idle (:mod:`~prp3mc.reports._render`),
+and writes the JSON, tables and model files meanwhile.
 
 The report shows what the measurement carries besides the machine: the
 instrument's registration and drift (``nuisance``), the measurements set
@@ -21,8 +22,7 @@ measured next to predicted (:mod:`~prp3mc.measurement.iso9283`).
 
 from __future__ import annotations
 
-import base64
-import io
+import functools
 import os
 from importlib import resources
 from pathlib import Path
@@ -32,9 +32,10 @@ import numpy as np
 from ..measurement.diagnostics import Diagnosis
 from ..measurement.iso9283 import ISO_STATISTICS, N_MC
 from ..measurement.results import DiscrepancyResult
-from ..output import output_folder, write_json, write_text
+from ..output import output_folder, png_data_uri, write_json, write_text
 from ..units import DEG2ARCSEC, MM2UM
 from ._layout import agg_figure, lighten
+from ._render import rendering
 
 __all__ = ["plot_workspace", "plot_actuators", "plot_temperature", "plot_gap", "plot_candidates", "plot_iso9283",
            "write_report", "report_document", "render_html"]
@@ -306,11 +307,13 @@ _CAPTIONS = {
 }
 
 
-def _png(fig) -> bytes:
-    """The figure rendered once as PNG at :data:`DPI`."""
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi="figure")
-    return buf.getvalue()
+def _report_figure(name: str, result: DiscrepancyResult):
+    """Figure ``name`` of the report on its own Agg canvas, with its fixed margins (rendered once where saved)."""
+    draw, size = _FIGURES[name]
+    fig = agg_figure(size(result), _MARGINS[name], dpi=DPI)
+    draw(result, fig)
+    lighten(fig)
+    return fig
 
 
 def _table(frame) -> str:
@@ -339,6 +342,11 @@ def _iso_summary(iso: dict) -> list[dict]:
 
 def render_html(result: DiscrepancyResult, figures: dict, doc: dict | None = None) -> str:
     """The HTML report; ``figures`` maps figure names to data URIs, ``doc`` is discrepancy.json (default: the result's)."""
+    return _page(result, doc)(figures)
+
+
+def _page(result: DiscrepancyResult, doc: dict | None):
+    """All of the HTML report but its figures (template compiled, tables made): a function of the figures."""
     import jinja2
     text = resources.files("prp3mc.reports").joinpath("templates/discrepancy.html.j2").read_text(encoding="utf-8")
     env = jinja2.Environment(autoescape=True, undefined=jinja2.StrictUndefined)
@@ -351,14 +359,17 @@ def render_html(result: DiscrepancyResult, figures: dict, doc: dict | None = Non
         f, shown = (MM2UM, "µm") if unit == "mm" else (DEG2ARCSEC, "arcsec")
         for which in ("measured", "predicted"):
             worst[f"{stat} {which[:4]}. ({shown})"] = f * wide.loc[worst["pose_id"], (which, stat)].to_numpy()
-    return env.from_string(text).render(
-        r=result, doc=doc if doc is not None else result.to_dict(), figures=figures, captions=_CAPTIONS, mm2um=MM2UM, deg2arcsec=DEG2ARCSEC,
-        top_poses=_table(top), gap=result.gap, channel=result.gap["deciding_channel"].replace("_", " "), steps=_table(_top_candidates(result.steps)), before=result.before.summary,
-        after=result.after.summary,
+    template = env.from_string(text)
+    context = dict(
+        r=result, doc=doc if doc is not None else result.to_dict(), captions=_CAPTIONS, mm2um=MM2UM,
+        deg2arcsec=DEG2ARCSEC, top_poses=_table(top), gap=result.gap,
+        channel=result.gap["deciding_channel"].replace("_", " "), steps=_table(_top_candidates(result.steps)),
+        before=result.before.summary, after=result.after.summary,
         nuisance=list(result.nuisance), drift_test=result.drift_test, registration_fitted=result.registration,
         confounded=list(result.confounded_with_registration), outliers=list(result.outliers),
         outlier_rule=result.outlier_rule, with_outliers=result.with_outliers, repeatability=result.repeatability,
         iso_n_mc=N_MC, iso_rows=_iso_summary(result.iso9283), iso_worst=_table(worst))
+    return lambda figures: template.render(figures=figures, **context)
 
 
 def report_document(result: DiscrepancyResult, inputs: dict | None = None, warnings=None) -> dict:
@@ -376,7 +387,8 @@ def report_document(result: DiscrepancyResult, inputs: dict | None = None, warni
 
 
 def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bool = False,
-                 formats: tuple = ("png",), inputs: dict | None = None, warnings=None) -> Path:
+                 formats: tuple = ("png",), inputs: dict | None = None, warnings=None,
+                 workers: int | None = None, ahead=None) -> Path:
     """Write ``discrepancy.json``, ``report.html``, figures, tables and ``model/`` into ``folder`` (atomically).
 
     Parameters
@@ -393,6 +405,13 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
         ``inputs`` (the command line adds the geometry and budget files' sha256).
     warnings : list of str, optional
         The warnings a command gave (see :func:`report_document`); the report shows them.
+    workers : int, optional
+        Processes drawing the figures (:func:`prp3mc.reports._render.rendering`;
+        default one per core while a core is idle, where the system can fork;
+        1 draws them here). The files are the same either way.
+    ahead : Background, optional
+        A process readied for the figures while the analysis ran
+        (:func:`prp3mc.reports._render.drawing_ahead`); it draws them.
 
     Returns
     -------
@@ -400,28 +419,18 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
         The folder.
     """
     doc = report_document(result, inputs, warnings)
+    figures = [(name, functools.partial(_report_figure, name, result)) for name in _REPORT_FIGURES
+               if _FIGURES[name][1](result) is not None]
     with output_folder(folder, force) as tmp:
-        write_json(tmp / "discrepancy.json", doc)
-        uris = {}
-        for name in _REPORT_FIGURES:
-            draw, size = _FIGURES[name]
-            figsize = size(result)
-            if figsize is None:
-                continue
-            fig = agg_figure(figsize, _MARGINS[name], dpi=DPI)
-            draw(result, fig)
-            lighten(fig)
-            png = _png(fig)
-            uris[name] = "data:image/png;base64," + base64.b64encode(png).decode("ascii")
-            if "png" in formats:
-                (tmp / f"{name}.png").write_bytes(png)
-            if "svg" in formats:
-                fig.savefig(tmp / f"{name}.svg", format="svg")
-        write_text(tmp / "report.html", render_html(result, uris, doc))
-        result.model.write(tmp / "model")
-        for label, d in (("before", result.before), ("after", result.after)):
-            d.poses.to_csv(tmp / f"poses_{label}.csv", index=False)
-            d.measurements.to_csv(tmp / f"measurements_{label}.csv", index=False)
-        result.steps.to_csv(tmp / "selection_steps.csv", index=False)
-        result.iso9283_poses.to_csv(tmp / "iso9283_per_pose.csv", index=False)
+        with rendering(figures, tmp, formats, workers, DPI, ahead) as pngs:
+            write_json(tmp / "discrepancy.json", doc)   # while the figures are drawn
+            result.model.write(tmp / "model")
+            for label, d in (("before", result.before), ("after", result.after)):
+                d.poses.to_csv(tmp / f"poses_{label}.csv", index=False)
+                d.measurements.to_csv(tmp / f"measurements_{label}.csv", index=False)
+            result.steps.to_csv(tmp / "selection_steps.csv", index=False)
+            result.iso9283_poses.to_csv(tmp / "iso9283_per_pose.csv", index=False)
+            page = _page(result, doc)
+            uris = {name: png_data_uri(png) for (name, _), png in zip(figures, pngs)}
+        write_text(tmp / "report.html", page(uris))
     return Path(folder)

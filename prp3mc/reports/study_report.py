@@ -15,8 +15,7 @@ their own with an Agg canvas: writing a report never touches pyplot or the
 matplotlib backend. Each is laid out once with margins in inches and drawn
 once, without a layout engine (:mod:`prp3mc.reports._layout`). They are drawn
 on worker processes, one per core while a core is idle, while the tables are
-written (:mod:`prp3mc.reports._render`); analyses run inside
-:func:`preloading` import matplotlib meanwhile.
+written (:mod:`prp3mc.reports._render`).
 """
 
 from __future__ import annotations
@@ -36,10 +35,10 @@ from ..study.summary import build_summary
 from ..study.sweep import best_configurations, design_frame
 from ..units import DEG2ARCSEC, DISPLAY, MM2UM
 from ._layout import ROUND_STEPS, Margins, agg_figure, lighten
-from ._render import preloading, rendering
+from ._render import rendering
 from .plots import LEGEND_DROP
 
-__all__ = ["write_study", "render_report", "comparison", "preloading"]
+__all__ = ["write_study", "render_report", "comparison"]
 
 _MC_PERCENTILE = 99.73
 
