@@ -18,6 +18,7 @@ from prp3mc import Budget, Geometry, Region, sensitivity
 from prp3mc.cli import main
 from prp3mc.errors import IncompleteBudgetWarning, StudyError, UnknownPresetError
 from prp3mc.reports import plots
+from prp3mc.reports.study_report import comparison, write_study
 from prp3mc.study.summary import build_summary
 from prp3mc.uncertainty.ranking import ranking
 from prp3mc.uncertainty.worstcase import worst_case
@@ -479,3 +480,14 @@ def test_ranking_figure_one_basis_each_ranking_in_its_own_order(tmp_path):
     assert any(np.allclose(line.get_xdata(), worst) for line in ax.get_lines())   # the worst case, dashed
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
     assert any(label.startswith("worst case") and label.endswith("µm") for label in labels)
+
+
+def test_reference_range_from_zero_has_no_ratio_and_renders(tmp_path):
+    """A published range starting at 0 µm: its ratio is undefined (said so), never a division by zero."""
+    path = study_file(tmp_path, _replace("reference_position_um = [70, 95]", "reference_position_um = [0, 95]")
+                      .replace("seed = 3", "seed = 3\noutputs = []"))
+    result = run_study(Study.load(path), progress=False)
+    cmp = comparison(result)
+    assert cmp["ranges"]["delta"]["ratio"][0] is None and cmp["ranges"]["delta"]["ratio"][1] > 0
+    write_study(result, tmp_path / "out", workers=1)
+    assert "– (paper: 0)" in (tmp_path / "out" / "report.html").read_text()

@@ -87,9 +87,11 @@ def comparison(result: StudyResult, summary: dict | None = None) -> dict:
     ranges = {n: {"ours": (c["worst_case_position_um"]["min"], c["worst_case_position_um"]["max"]),
                   "reference": refs.get(n)} for n, c in configs.items()}
     for r in ranges.values():
-        r["ratio"] = None if r["reference"] is None else tuple(o / p for o, p in zip(r["ours"], r["reference"]))
+        r["ratio"] = None if r["reference"] is None else tuple(o / p if p > 0 else None  # a reference of 0 µm: none
+                                                               for o, p in zip(r["ours"], r["reference"]))
     max_ratio = None
-    if reference_best is not None and len(configs) == 2 and ranges[reference_best]["ours"][1] > 0:
+    if (reference_best is not None and len(configs) == 2 and ranges[reference_best]["ours"][1] > 0
+            and refs[reference_best][1] > 0):
         other = next(n for n in configs if n != reference_best)
         max_ratio = {"ours": ranges[other]["ours"][1] / ranges[reference_best]["ours"][1],
                      "reference": refs[other][1] / refs[reference_best][1], "worse": other}
