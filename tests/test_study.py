@@ -209,7 +209,8 @@ def _line_figure(k):
 
 def test_figures_drawn_on_worker_processes_are_those_drawn_here(tmp_path):
     """rendering() on worker processes (where the system forks) and in this process: the same files and bytes."""
-    from prp3mc.reports._render import default_workers, rendering
+    from prp3mc._fork import fork_workers
+    from prp3mc.reports._render import rendering
     figures = [(f"f{k}", functools.partial(_line_figure, k)) for k in range(3)]
     written = {}
     for where, workers in (("here", 1), ("there", 2)):
@@ -220,12 +221,12 @@ def test_figures_drawn_on_worker_processes_are_those_drawn_here(tmp_path):
         written[where] = returned
     assert written["here"] == written["there"]
     assert {p.name for p in (tmp_path / "there").iterdir()} == {f"f{k}.{e}" for k in range(3) for e in ("png", "svg")}
-    assert default_workers(1) == 1
+    assert fork_workers(1) == 1
     stop = threading.Event()
     other = threading.Thread(target=stop.wait)
     other.start()
     try:
-        assert default_workers(12) == 1          # never forks while another thread runs (a notebook kernel)
+        assert fork_workers(12) == 1          # never forks while another thread runs (a notebook kernel)
     finally:
         stop.set()
         other.join()

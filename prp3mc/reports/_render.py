@@ -19,10 +19,10 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
-from .._fork import Background, fork_workers as default_workers, in_background
+from .._fork import Background, fork_workers, in_background
 from ..output import save_figure
 
-__all__ = ["rendering", "drawing_ahead", "default_workers"]
+__all__ = ["rendering", "drawing_ahead"]
 
 #: (file name, a callable that draws the figure and returns it)
 FigureTask = tuple[str, Callable[[], object]]
@@ -87,9 +87,8 @@ def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=
     formats : sequence of str
         As :func:`prp3mc.output.save_figure`.
     workers : int, optional
-        Worker processes (default :func:`default_workers`, that is
-        :func:`prp3mc._fork.fork_workers`: one per core while a core is
-        idle); 1 draws in this process, lazily, as the iterator is consumed.
+        Worker processes (default :func:`prp3mc._fork.fork_workers`: one per
+        core while a core is idle); 1 draws in this process, lazily, as the iterator is consumed.
     dpi : int
         Resolution of every format (:func:`prp3mc.output.save_figure`).
     ahead : Background, optional
@@ -101,7 +100,7 @@ def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=
     before consuming the iterator; leaving the block waits for every figure.
     """
     figures, folder = list(figures), Path(folder)
-    workers = default_workers(len(figures)) if workers is None else max(1, int(workers))
+    workers = fork_workers(len(figures)) if workers is None else max(1, int(workers))
     if ahead is not None:
         ahead.submit(figures, folder, tuple(formats), workers, dpi)
         yield _later(ahead.result)

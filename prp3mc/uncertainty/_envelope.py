@@ -211,13 +211,18 @@ def generator_signs(codes: np.ndarray, n_gen: int) -> np.ndarray:
     return out
 
 
+@njit(inline="always")
+def _end(code, n_gen, k):
+    """The end (-1, +1) of generator ``k`` of ``n_gen`` in a :func:`zonotope_maxima` code."""
+    return ((code >> (n_gen - 1 - k)) & 1) * 2 - 1
+
+
 @njit(nogil=True, cache=True)
 def _unpack(codes, out):
     n_gen = out.shape[1]
     for n in range(codes.size):
-        c = codes[n]
         for k in range(n_gen):
-            out[n, k] = ((c >> (n_gen - 1 - k)) & 1) * 2 - 1
+            out[n, k] = _end(codes[n], n_gen, k)
 
 
 @njit(inline="always", error_model="numpy")
@@ -290,9 +295,8 @@ def _range(start, stop, poses, legc, family, leg, unit, mode, box, limits, check
             f = RAD2DEG if o == 1 else 1.0
             for j in range(b1 - b0):
                 values[o, b0 + j] = vals[o, j] * f
-                c = codes[o, j]
                 for k in range(3 + G):
-                    signs[o, b0 + j, k] = ((c >> (2 + G - k)) & 1) * 2 - 1
+                    signs[o, b0 + j, k] = _end(codes[o, j], 3 + G, k)
     return refused
 
 
