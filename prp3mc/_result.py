@@ -51,7 +51,7 @@ def _frozen(value):
     if isinstance(value, np.ndarray):
         if value.flags.writeable:
             value = value.view()
-            value.flags.writeable = False
+            value.setflags(write=False)
         return value
     if isinstance(value, (FrozenDict, MappingProxyType)):
         return value
@@ -71,9 +71,15 @@ def freeze(obj) -> None:
     """
     for name in _field_names(type(obj)):
         value = getattr(obj, name)
+        if type(value) in _IMMUTABLE or (type(value) is np.ndarray and not value.flags.writeable):
+            continue            # (the common cases first: a small result's freeze is a good part of its cost)
         frozen = _frozen(value)
         if frozen is not value:
             object.__setattr__(obj, name, frozen)
+
+
+#: Field types that :func:`freeze` leaves as they are.
+_IMMUTABLE = frozenset({str, int, float, bool, type(None), FrozenDict})
 
 
 @functools.cache

@@ -69,3 +69,31 @@ def test_refuses_like_the_numpy_path(geometry, region, move):
     assert str(single.value) == str(single_expected.value)
     unchecked = worst_case_maxima(geometry, PAPER, grid, check=False)
     assert unchecked.position_mm.shape == (9, 9)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+@pytest.mark.parametrize("column", [0, 1, 2])
+@pytest.mark.parametrize("check", [True, False])
+def test_refuses_non_finite_poses_like_the_numpy_path(geometry, region, bad, column, check):
+    """A pose holding NaN or infinity is named as worst_case names it, limits tested or not, before
+    any other refusal (the kernel flags it; nothing is computed from it)."""
+    grid = region.grid(7)
+    grid[1, 2] += (0.0, 1e4, 0.0)           # refused for its stroke, earlier in the grid
+    grid[4, 3, column] = bad
+    with pytest.raises(InfeasiblePoseError) as expected:
+        worst_case(geometry, PAPER, grid)
+    with pytest.raises(InfeasiblePoseError) as got:
+        worst_case_maxima(geometry, PAPER, grid, check=check)
+    assert str(got.value) == str(expected.value)
+    assert "at index (4, 3)" in str(got.value) and "NaN or infinity" in str(got.value)
+
+
+def test_signs_are_unpacked_from_the_codes_on_access(geometry, region):
+    """The result keeps one int16 code per maximum; the signs are read from it, int8, read-only."""
+    mx = worst_case_maxima(geometry, PAPER, region.grid(5))
+    assert mx.codes.dtype == np.int16 and mx.codes.shape == (4, 5, 5)
+    signs = mx.leg_signs["position"]
+    assert signs.dtype == np.int8 and signs.shape == (5, 5, 3) and set(np.unique(signs)) <= {-1, 1}
+    assert mx.shared_signs["x"].shape == (5, 5, 0)
+    for a in (mx.maxima, mx.codes, mx.poses):
+        assert not a.flags.writeable

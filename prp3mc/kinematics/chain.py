@@ -116,13 +116,24 @@ def trig(geometry: Geometry, phi_rad, offsets: dict | None = None) -> Trig:
 
 def as_poses(poses: "np.typing.ArrayLike") -> np.ndarray:
     """Validate poses ``[x_mm, y_mm, phi_deg]`` of shape (..., 3); NaN is refused."""
+    arr = pose_array(poses)
+    if not np.isfinite(arr).all():  # (one flat pass; the pose's index only when there is one)
+        raise nonfinite_pose(arr)
+    return arr
+
+
+def pose_array(poses: "np.typing.ArrayLike") -> np.ndarray:
+    """Poses as a float array of shape (..., 3), not yet tested for NaN (see :func:`nonfinite_pose`)."""
     arr = np.asarray(poses, dtype=float)
     if arr.ndim == 0 or arr.shape[-1] != 3:
         raise InfeasiblePoseError(f"poses must have shape (..., 3) as [x_mm, y_mm, phi_deg], got {arr.shape}")
-    if not np.isfinite(arr).all():  # (one flat pass; the pose's index only when there is one)
-        idx = tuple(int(v) for v in np.argwhere(~np.all(np.isfinite(arr), axis=-1))[0])
-        raise InfeasiblePoseError(f"pose {_where(idx)}contains NaN or infinity: {arr[idx].tolist()}")
     return arr
+
+
+def nonfinite_pose(arr: np.ndarray) -> InfeasiblePoseError:
+    """The error naming the first pose of ``arr`` (..., 3) that holds NaN or infinity."""
+    idx = tuple(int(v) for v in np.argwhere(~np.all(np.isfinite(arr), axis=-1))[0])
+    return InfeasiblePoseError(f"pose {_where(idx)}contains NaN or infinity: {arr[idx].tolist()}")
 
 
 def _where(idx: tuple) -> str:

@@ -10,8 +10,8 @@ inverse kinematics, A and A^-1 by cofactors, the feasibility tests of
 budget's terms, the clearance intervals and the zonotope maxima. Poses go
 through in blocks of :data:`BLOCK`, each step a loop over the block's poses
 (it vectorises); larger batches go in chunks to a pool of threads.
-Memory is the outputs only (50 bytes a pose: the maxima, the ends of their
-generators, the refusal word) plus a few scratch rows per thread.
+Memory is the outputs only (42 bytes a pose: the four maxima, the ends of
+their generators as one bit each, the refusal word) plus one scratch array per thread.
 
 A budget's effects are terms too: known shifts are terms of zero width, a
 backlash a term of its leg, a lead scale and thermal expansion are multiplied
@@ -29,90 +29,98 @@ import numpy as np
 from numba import literal_unroll, njit
 
 from .._threads import cores
+from ..kinematics.chain import DEFAULT_LIMITS, Limits
 from ..kinematics.geometry import Geometry
 from ..kinematics.sensitivity import FAMILIES, LENGTH_FAMILIES
 from ..units import DEG2RAD, RAD2DEG
 from .budget import Budget, parse_input
 from .systematic import EFFECT_NAMES, T_REF_C
 
-__all__ = ["REASONS", "leg_constants", "term_table", "kernel_tables", "envelope_kernel", "zonotope_maxima",
+__all__ = ["REASONS", "NONFINITE", "leg_constants", "TERM_COLUMNS", "term_table", "kernel_tables", "envelope_kernel", "zonotope_maxima",
            "zonotope_scratch", "generator_signs"]
 
 #: Refusal reasons in the order :func:`~prp3mc.kinematics.chain.validated_frame` tests them;
 #: bit ``3 * reason + leg`` of the kernel's ``bad`` word.
 REASONS = ("below", "above", "d", "transmission", "condition")
+#: The bit of the ``bad`` word set for a pose holding NaN or infinity (refused whether or not limits are tested).
+NONFINITE = 1 << 15
 
 _RHO = FAMILIES.index("rho")
 
 
-def leg_constants(geometry: Geometry) -> np.ndarray:
-    """Per-leg constants (15, 3): cos, sin of i, j and of the fixed parts of k, l, m; a, c, e (mm); stroke."""
+def leg_constants(geometry: Geometry, limits: Limits = DEFAULT_LIMITS) -> np.ndarray:
+    """Per-leg constants and the limits of the feasibility tests, (16, 3).
+
+    Rows: cos, sin of i, j and of the fixed parts of k, l, m; a, c, e (mm); the
+    stroke's ends (mm) widened by the stroke tolerance; then (min transmission,
+    max condition, stroke tolerance mm), the limits :func:`~prp3mc.kinematics.chain.validated_frame` tests.
+    """
     al, be, ga, th, ps = (geometry.rad(k) for k in ("alpha", "beta", "gamma", "theta", "psi"))
     tj = al + be
     tk = tj + ga
     tl = tk + th
+    tol = limits.stroke_tol_mm
     return np.array([np.cos(al), np.sin(al), np.cos(tj), np.sin(tj), np.cos(tk), np.sin(tk),
                      np.cos(tl), np.sin(tl), np.cos(ps), np.sin(ps),
-                     *(geometry.rad(k) for k in ("a", "c", "e"))] + [geometry.stroke_mm[:, 0],
-                                                                      geometry.stroke_mm[:, 1]])
+                     *(geometry.rad(k) for k in ("a", "c", "e")),
+                     geometry.stroke_mm[:, 0] - tol, geometry.stroke_mm[:, 1] + tol,
+                     [limits.min_transmission, limits.max_condition, tol]])
 
 
 @functools.lru_cache(maxsize=16)
 def kernel_tables(geometry: Geometry, budget: Budget, k_sigma: float | None) -> tuple:
-    """``(bounds, legc, family, leg, unit, mode, box)``: the budget's bounds and the kernel's tables, read-only.
+    """``(bounds, legc, terms)``: the budget's bounds, :func:`leg_constants` and :func:`term_table`, read-only.
 
     Kept for the last few (geometry, budget, k_sigma), so that a small batch does not pay for them again.
     """
     bounds = budget.bounds(k_sigma)
-    out = (bounds, leg_constants(geometry), *term_table(budget, bounds))
+    out = (bounds, leg_constants(geometry), term_table(budget, bounds))
     for a in out:
         a.flags.writeable = False
     return out
 
 
-def term_table(budget: Budget, bounds: np.ndarray):
-    """The budget's terms as arrays for the kernel.
+#: Columns of :func:`term_table`.
+TERM_COLUMNS = ("family", "leg", "unit", "mode", "lo", "hi", "zeta_lo", "zeta_hi")
 
-    Returns ``family`` (T,) int (index in FAMILIES), ``leg`` (T,) int (-1:
-    every leg), ``unit`` (T,) (1 for lengths, rad per deg for angles, alpha_T
-    for thermal), ``mode`` (T,) int (1: the term's u_i is also multiplied by
-    the nominal slider position b_i) and ``box`` (T, 4): the term's interval,
-    or for a clearance (rho_lo, rho_hi, zeta_lo rad, zeta_hi rad) with
-    zeta_hi = inf for a full circle. ``bounds`` (D, 2) are the factors' intervals.
+
+def term_table(budget: Budget, bounds: np.ndarray) -> np.ndarray:
+    """The budget's terms for the kernel, one row each (T, 8), columns :data:`TERM_COLUMNS`.
+
+    ``family``: index in FAMILIES; ``leg``: 0-2, or -1 for a term of every leg;
+    ``unit``: 1 for lengths, rad per deg for angles, alpha_T for thermal;
+    ``mode``: 1 when the term's u_i is also multiplied by the nominal slider
+    position b_i, else 0; ``lo``, ``hi``: the term's interval, or a clearance's
+    rho interval with its contact angles ``zeta_lo``, ``zeta_hi`` (rad;
+    zeta_hi = inf for a full circle, both 0 for other terms). ``bounds`` (D, 2)
+    are the factors' intervals.
     """
     names, factors = budget.names, budget.factors
-    fam, legs, unit, mode, box = [], [], [], [], []
+    rows = []
     for k, name in enumerate(names):
         family, leg = parse_input(name)
         if family == "zeta":
             continue
-        fam.append(FAMILIES.index(family))
-        legs.append(leg)
-        unit.append(1.0 if family in LENGTH_FAMILIES else DEG2RAD)
-        mode.append(0)
+        unit = 1.0 if family in LENGTH_FAMILIES else DEG2RAD
+        zeta = (0.0, 0.0)
         if family == "rho":
             zlo, zhi = bounds[names.index(f"zeta_{leg + 1}")]
-            full = zhi - zlo >= 360.0
-            box.append((bounds[k][0], bounds[k][1], np.deg2rad(zlo), math.inf if full else np.deg2rad(zhi)))
-        else:
-            box.append((bounds[k][0], bounds[k][1], 0.0, 0.0))
+            zeta = (np.deg2rad(zlo), math.inf if zhi - zlo >= 360.0 else np.deg2rad(zhi))
+        rows.append((FAMILIES.index(family), leg, unit, 0, *bounds[k], *zeta))
     for name in (n for n in EFFECT_NAMES if n in budget.effects):
         eff = budget.effects[name]
         e = eff.effect
-        fam.append(FAMILIES.index(e.family if e.kind == "offset" else "b"))
-        legs.append(-1 if e.kind == "thermal" else e.leg)
-        mode.append(1 if e.kind in ("scale", "thermal") else 0)
         if e.kind == "offset":
-            unit.append(1.0 if e.family in LENGTH_FAMILIES else DEG2RAD)
+            unit = 1.0 if e.family in LENGTH_FAMILIES else DEG2RAD
         else:
-            unit.append(eff.value if e.kind == "thermal" else 1.0)
+            unit = eff.value if e.kind == "thermal" else 1.0
         if e.kind in ("offset", "scale"):
-            box.append((eff.value, eff.value, 0.0, 0.0))
+            lo = hi = eff.value
         else:
             lo, hi = bounds[factors.index(name)] - (T_REF_C if e.kind == "thermal" else 0.0)
-            box.append((lo, hi, 0.0, 0.0))
-    return (np.array(fam, dtype=np.int64), np.array(legs, dtype=np.int64), np.array(unit),
-            np.array(mode, dtype=np.int64), np.array(box, dtype=float).reshape(-1, 4))
+        rows.append((FAMILIES.index(e.family if e.kind == "offset" else "b"), -1 if e.kind == "thermal" else e.leg,
+                     unit, 1 if e.kind in ("scale", "thermal") else 0, lo, hi, 0.0, 0.0))
+    return np.array(rows, dtype=float).reshape(-1, len(TERM_COLUMNS))
 
 
 @njit(cache=True)
@@ -211,18 +219,20 @@ def generator_signs(codes: np.ndarray, n_gen: int) -> np.ndarray:
     return out
 
 
-@njit(inline="always")
-def _end(code, n_gen, k):
-    """The end (-1, +1) of generator ``k`` of ``n_gen`` in a :func:`zonotope_maxima` code."""
-    return ((code >> (n_gen - 1 - k)) & 1) * 2 - 1
-
-
 @njit(nogil=True, cache=True)
 def _unpack(codes, out):
     n_gen = out.shape[1]
     for n in range(codes.size):
         for k in range(n_gen):
-            out[n, k] = _end(codes[n], n_gen, k)
+            out[n, k] = ((codes[n] >> (n_gen - 1 - k)) & 1) * 2 - 1
+
+
+@njit(inline="always")
+def _nonfinite(cs, B, j):
+    """NONFINITE if pose ``j`` of a block held NaN or infinity, else 0, from its x, y and cos phi in
+    ``cs`` (cos is NaN for an infinite phi; v - v is NaN for those only, and it vectorises)."""
+    x, y, c = cs[2 * B + j], cs[3 * B + j], cs[j]
+    return np.int64(not (x - x) + (y - y) + (c - c) == 0.0) * NONFINITE
 
 
 @njit(inline="always", error_model="numpy")
@@ -246,67 +256,66 @@ THREADS_FROM = 1 << 16
 CHUNK = 1 << 15
 
 
-def envelope_kernel(poses, legc, family, leg, unit, mode, box, limits, check, values, signs, bad, workers=None) -> int:
+def envelope_kernel(poses, legc, terms, check, values, codes, bad, workers=None) -> int:
     """Maxima of the linear model over the budget's box at every pose (compiled); returns the poses refused.
 
-    poses : (N, 3) x mm, y mm, phi deg. legc : (15, 3) :func:`leg_constants`.
-    family, leg, unit, mode, box : :func:`term_table`. limits : (3,) min transmission,
-    max condition, stroke tolerance mm; check : test them (else nothing is refused).
+    poses : (N, 3) x mm, y mm, phi deg. legc : (16, 3) :func:`leg_constants` (with the
+    limits); terms : (T, 8) :func:`term_table`. check : test the limits (else only
+    non-finite poses are refused).
     values : (4, N) out, position mm, |dphi| deg, |dx| mm, |dy| mm.
-    signs : (4, N, 3 + G) int8 out, the end (-1, +1) of each generator at each maximum
-    (legs 1-3, then the G terms of all legs, leg -1), as :func:`generator_signs`.
-    bad : (N,) int16 out, bit ``3 * reason + leg`` set for each refusal (see REASONS).
+    codes : (4, N) int16 out, the end of each generator at each maximum as the bits of
+    :func:`zonotope_maxima` (legs 1-3, then the G terms of all legs, leg -1; see :func:`generator_signs`).
+    bad : (N,) uint16 out, bit ``3 * reason + leg`` set for each refusal (see REASONS), or
+    NONFINITE for a pose holding NaN or infinity (whatever ``check``).
     workers : threads for large batches (default: the cores); every pose's numbers are the same.
     """
     N = poses.shape[0]
-    args = (poses, legc, family, leg, unit, mode, box, limits, check, values, signs, bad)
-    workers = workers or cores()
     if N < THREADS_FROM or workers == 1:
-        return _range(0, N, *args)
+        return _range(0, N, poses, legc, terms, check, values, codes, bad)
+    args = (poses, legc, terms, check, values, codes, bad)
+    workers = workers or cores()
     chunk = min(CHUNK, -(-N // workers))
     with ThreadPoolExecutor(max_workers=workers) as pool:
         return sum(pool.map(lambda a: _range(a, min(N, a + chunk), *args), range(0, N, chunk)))
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
-def _range(start, stop, poses, legc, family, leg, unit, mode, box, limits, check, values, signs, bad):
-    """The envelope at poses ``start:stop``, block by block, with scratch arrays allocated once; the poses refused.
+def _range(start, stop, poses, legc, terms, check, values, codes, bad):
+    """The envelope at poses ``start:stop``, block by block, with scratch rows allocated once; the poses refused.
 
-    Scratch arrays are flat, one row of BLOCK values per quantity at a constant offset, so
-    that the compiler sees the rows a loop reads and writes cannot overlap and vectorises it.
+    Each quantity of a block is a row of BLOCK values at a constant offset of one float
+    array (one allocation: a small call pays for each), so every step is a loop over
+    a row that vectorises.
     """
-    cs = np.empty(4 * BLOCK)        # cos, sin of phi; x, y
-    A = np.empty(9 * BLOCK)         # A[i, c] in row 3 i + c
-    hb = np.empty(42 * BLOCK)       # per leg i, rows 14 i + (b, d, the h entries of the ten families, cos, sin omega)
-    Ai = np.empty(9 * BLOCK)        # A^-1[r, c] in row 3 r + c
-    um, uh = np.empty((3, BLOCK)), np.empty((3, BLOCK))  # centre and half-width of u along the legs' axes
-    G = signs.shape[2] - 3
-    ext = np.empty((G, 3, BLOCK))   # further generators of u: the terms of all legs
-    zs = zonotope_scratch(3 + G, BLOCK)
-    vals, codes = np.empty((4, BLOCK)), np.empty((4, BLOCK), np.int64)
+    G = 0
+    for k in range(terms.shape[0]):
+        G += terms[k, 1] < 0
+    B = BLOCK
+    f = np.empty((73 + 5 * G) * B)
+    cs = f[:4 * B]                  # cos, sin of phi; x, y
+    A = f[4 * B:13 * B]             # A[i, c] in row 3 i + c
+    hb = f[13 * B:55 * B]           # per leg i, rows 14 i + (b, d, the h entries of the ten families, cos, sin omega)
+    Ai = f[55 * B:64 * B]           # A^-1[r, c] in row 3 r + c
+    um, uh = f[64 * B:67 * B].reshape((3, B)), f[67 * B:70 * B].reshape((3, B))  # centre, half-width of u on the legs
+    ext = f[73 * B:(73 + 3 * G) * B].reshape((G, 3, B))                         # further generators: terms of all legs
+    zs = (f[70 * B:71 * B], f[71 * B:72 * B], f[72 * B:73 * B], np.empty(B, np.int64),   # as zonotope_scratch
+          f[(73 + 3 * G) * B:(73 + 4 * G) * B].reshape((G, B)), f[(73 + 4 * G) * B:].reshape((G, B)))
     refused = 0
     for b0 in range(start, stop, BLOCK):
         b1 = min(stop, b0 + BLOCK)
-        _block(b0, b1, poses, legc, family, leg, unit, mode, box, limits, check, vals, codes, bad, cs, A, hb, Ai,
-               um, uh, ext, zs)
-        for j in range(b1 - b0):
-            refused += bad[b0 + j] != 0
-        for o in range(4):
-            f = RAD2DEG if o == 1 else 1.0
-            for j in range(b1 - b0):
-                values[o, b0 + j] = vals[o, j] * f
-                for k in range(3 + G):
-                    signs[o, b0 + j, k] = _end(codes[o, j], 3 + G, k)
+        _block(b0, b1, poses, legc, terms, check, values, codes, bad, cs, A, hb, Ai, um, uh, ext, zs)
+        for j in range(b0, b1):
+            refused += bad[j] != 0
+            values[1, j] *= RAD2DEG
     return refused
 
 
 @njit(cache=True, error_model="numpy")
-def _block(start, stop, poses, legc, family, leg, unit, mode, box, limits, check, values, codes, bad, cs, A, hb, Ai,
-           um, uh, ext, zs):
+def _block(start, stop, poses, legc, terms, check, values, codes, bad, cs, A, hb, Ai, um, uh, ext, zs):
     """The envelope at poses ``start:stop`` (at most BLOCK), one step at a time over all of them.
 
-    The block's maxima and codes (:func:`zonotope_maxima`) go to columns ``0:stop - start`` of
-    ``values`` and ``codes``; its refusals to ``bad[start:stop]``.
+    The block's maxima (|dphi| in rad) and codes (:func:`zonotope_maxima`) go to columns
+    ``start:stop`` of ``values`` and ``codes``; its refusals to ``bad[start:stop]``.
     """
     m, B = stop - start, BLOCK
     phi_deg, cp, sp = math.nan, 1.0, 0.0
@@ -365,20 +374,21 @@ def _block(start, stop, poses, legc, family, leg, unit, mode, box, limits, check
             word = 0
             for i in literal_unroll((0, 1, 2)):
                 b, d = hb[14 * i * B + j], hb[(14 * i + 1) * B + j]
-                word |= (b < legc[13, i] - limits[2]) << i
-                word |= (b > legc[14, i] + limits[2]) << (3 + i)
+                word |= (b < legc[13, i]) << i
+                word |= (b > legc[14, i]) << (3 + i)
                 word |= (not d > 0) << (6 + i)
-                word |= (not abs(hb[(14 * i + 4) * B + j]) >= limits[0]) << (9 + i)
-                word |= (not cond <= limits[1]) << (12 + i)
-            bad[start + j] = word
+                word |= (not abs(hb[(14 * i + 4) * B + j]) >= legc[15, 0]) << (9 + i)
+                word |= (not cond <= legc[15, 1]) << (12 + i)
+            bad[start + j] = word | _nonfinite(cs, B, j)
     else:
-        bad[start:stop] = 0
+        for j in range(m):
+            bad[start + j] = _nonfinite(cs, B, j)
     um[:] = 0.0
     uh[:] = 0.0
     g = 0
-    for k in range(family.shape[0]):
-        i, fam, un, by_b = leg[k], family[k], unit[k], mode[k]
-        lo, hi = box[k, 0], box[k, 1]
+    for k in range(terms.shape[0]):
+        fam, i, un, by_b = int(terms[k, 0]), int(terms[k, 1]), terms[k, 2], terms[k, 3] != 0
+        lo, hi, zlo, zhi = terms[k, 4], terms[k, 5], terms[k, 6], terms[k, 7]
         if i < 0:  # a term of every leg: a further generator, w_l = h_l unit (b_l) on leg l
             mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
             for l in range(3):
@@ -392,21 +402,21 @@ def _block(start, stop, poses, legc, family, leg, unit, mode, box, limits, check
             continue
         mid_i, half_i = um[i, :m], uh[i, :m]
         hf, bi = hb[(14 * i + 2 + fam) * B:(14 * i + 3 + fam) * B], hb[14 * i * B:(14 * i + 1) * B]
-        if fam == _RHO and box[k, 3] != math.inf:  # part of a circle: the interval depends on omega
+        if fam == _RHO and zhi != math.inf:  # part of a circle: the interval depends on omega
             for j in range(m):
                 omega = math.atan2(hb[(14 * i + 13) * B + j], hb[(14 * i + 12) * B + j])
-                cmin, cmax = _cos_range(box[k, 2] - omega, box[k, 3] - omega)
-                lo = (box[k, 1] if cmin <= 0 else box[k, 0]) * cmin
-                hi = (box[k, 1] if cmax >= 0 else box[k, 0]) * cmax
+                cmin, cmax = _cos_range(zlo - omega, zhi - omega)
+                c_lo = (hi if cmin <= 0 else lo) * cmin  # the term rho cos(zeta - omega)'s interval
+                c_hi = (hi if cmax >= 0 else lo) * cmax
                 scale = hf[j] * un * (bi[j] if by_b else 1.0)
-                mid_i[j] += scale * (0.5 * (lo + hi))
-                half_i[j] += abs(scale) * (0.5 * (hi - lo))
+                mid_i[j] += scale * (0.5 * (c_lo + c_hi))
+                half_i[j] += abs(scale) * (0.5 * (c_hi - c_lo))
             continue
         if fam == _RHO:
-            lo, hi = -box[k, 1], box[k, 1]
+            lo, hi = -hi, hi
         mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
         for j in range(m):
             scale = hf[j] * un * (bi[j] if by_b else 1.0)
             mid_i[j] += scale * mid
             half_i[j] += abs(scale) * half
-    zonotope_maxima(Ai.reshape((3, 3, B)), um, uh, ext, values, codes, 0, m, zs)
+    zonotope_maxima(Ai.reshape((3, 3, B)), um, uh, ext, values, codes, start, m, zs)

@@ -40,9 +40,9 @@ from ..errors import InfeasiblePoseError
 from ..units import OUTPUT_UNITS, RAD2DEG
 from .budget import Budget
 from ..kinematics.geometry import Geometry
-from ..kinematics.chain import DEFAULT_LIMITS, as_poses, refusal
+from ..kinematics.chain import as_poses, nonfinite_pose, pose_array, refusal
 from .model import LinearModel, linear_model
-from ._envelope import REASONS, envelope_kernel, generator_signs, kernel_tables, zonotope_maxima, zonotope_scratch
+from ._envelope import NONFINITE, REASONS, TERM_COLUMNS, envelope_kernel, generator_signs, kernel_tables, zonotope_maxima, zonotope_scratch
 
 __all__ = ["WorstCase", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "term_bounds", "QUANTITIES"]
 
@@ -369,30 +369,28 @@ def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | No
 @dataclass(frozen=True, slots=True, repr=False)
 class WorstCaseMaxima(_Maxima):
     """The maxima of :class:`WorstCase` alone, for grids too large to keep the model (see
-    :func:`worst_case_maxima`).
+    :func:`worst_case_maxima`): the kernel's two output arrays, read through named views.
 
     Attributes
     ----------
     poses : ndarray (..., 3)
-    position_mm, phi_deg, x_mm, y_mm : ndarray (...)
-        Largest position-error norm, |dphi|, |dx| and |dy|.
-    leg_signs : dict of str to ndarray (..., 3), int8
-        As :attr:`WorstCase.leg_signs`.
+    maxima : ndarray (4, ...)
+        Rows :attr:`position_mm`, :attr:`phi_deg`, :attr:`x_mm`, :attr:`y_mm`.
+    codes : ndarray (4, ...), int16
+        For each quantity, the end of each of the 3 + ``n_shared`` generators at the
+        maximum, one bit each (unpacked on access by :attr:`leg_signs` and :attr:`shared_signs`).
+    n_shared : int
+        Terms of all legs (thermal): generators after the legs' three.
     input_bounds : ndarray (D, 2)
     k_sigma : float or None
-    shared_signs : dict of str to ndarray (..., G), int8
-        As :attr:`WorstCase.shared_signs`.
     """
 
     poses: np.ndarray
-    position_mm: np.ndarray
-    phi_deg: np.ndarray
-    x_mm: np.ndarray
-    y_mm: np.ndarray
-    leg_signs: dict
+    maxima: np.ndarray
+    codes: np.ndarray
+    n_shared: int
     input_bounds: np.ndarray
     k_sigma: float | None = None
-    shared_signs: dict = field(default_factory=dict)
     version: str = __version__
 
     def __post_init__(self):
@@ -401,10 +399,22 @@ class WorstCaseMaxima(_Maxima):
     def __repr__(self) -> str:
         return short_repr(self, "poses", "k_sigma")
 
+    position_mm = property(lambda self: self.maxima[0], doc="Largest position-error norm (...), mm.")
+    phi_deg = property(lambda self: self.maxima[1], doc="Largest |dphi| (...), deg.")
+    x_mm = property(lambda self: self.maxima[2], doc="Largest |dx| (...), mm.")
+    y_mm = property(lambda self: self.maxima[3], doc="Largest |dy| (...), mm.")
 
-#: The feasibility limits of validated_frame, as the envelope kernel reads them.
-_LIMITS = np.array([DEFAULT_LIMITS.min_transmission, DEFAULT_LIMITS.max_condition, DEFAULT_LIMITS.stroke_tol_mm])
-_LIMITS.flags.writeable = False
+    @property
+    def leg_signs(self) -> FrozenDict:
+        """As :attr:`WorstCase.leg_signs`: quantity to the legs' ends (..., 3), int8, unpacked on each access."""
+        return FrozenDict(zip(QUANTITIES, generator_signs(self.codes, 3 + self.n_shared)[..., :3]))
+
+    @property
+    def shared_signs(self) -> FrozenDict:
+        """As :attr:`WorstCase.shared_signs`: quantity to the ends (..., G) of the terms of all legs, int8,
+        unpacked on each access."""
+        return FrozenDict(zip(QUANTITIES, generator_signs(self.codes, 3 + self.n_shared)[..., 3:]))
+
 
 #: The last (geometry, budget, k_sigma) of :func:`worst_case_maxima` and its kernel tables: a loop of
 #: small batches (an allocation search, a sweep) finds them by identity, without hashing either. One
@@ -419,7 +429,7 @@ def _prepared(geometry: Geometry, budget: Budget, k_sigma: float | None) -> tupl
         return prepared
     budget.check_geometry(geometry)
     bounds, *tables = kernel_tables(geometry, budget, k_sigma)
-    prepared = bounds, tables, int((tables[2] < 0).sum())
+    prepared = bounds, tables, int((tables[1][:, TERM_COLUMNS.index("leg")] < 0).sum())
     _last[0] = geometry, budget, k_sigma, prepared
     return prepared
 
@@ -431,7 +441,8 @@ def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: flo
     Per pose the kernel computes the inverse kinematics, A^-1, the h entries
     of the budget's terms, the clearance intervals and the 8-corner maxima
     over blocks of poses, on all cores; nothing per pose is kept but the maxima and
-    their signs (about 50 bytes), so memory is that of the poses and the result.
+    the ends of their generators (42 bytes with the refusal word), so memory is that
+    of the poses and the result.
     The values equal :func:`worst_case`'s to round-off (1e-12 relative).
 
     Parameters
@@ -453,22 +464,23 @@ def worst_case_maxima(geometry: Geometry, budget: Budget, poses, *, k_sigma: flo
     (11, 11)
     """
     bounds, tables, G = _prepared(geometry, budget, k_sigma)
-    poses = as_poses(poses)
-    shape = poses.shape[:-1]
+    poses = pose_array(poses)
     flat = np.ascontiguousarray(poses.reshape(-1, 3))
-    n = flat.shape[0]
-    values, signs, bad = np.empty((4, n)), np.empty((4, n, 3 + G), dtype=np.int8), np.empty(n, dtype=np.int16)
-    if envelope_kernel(flat, *tables, _LIMITS, check, values, signs, bad):
-        for r, reason in enumerate(REASONS):
-            hit = np.flatnonzero(bad & (0b111 << 3 * r))
-            if hit.size:
-                p = int(hit[0])
-                leg = next(i for i in range(3) if bad[p] >> (3 * r + i) & 1)
-                # the flat index, as worst_case reports it
-                raise InfeasiblePoseError(refusal(geometry, flat[p], (p,), reason, leg))
-    values.flags.writeable = signs.flags.writeable = False      # every view of them is read-only: nothing to freeze
-    values, signs = values.reshape((4,) + shape), signs.reshape((4,) + shape + (3 + G,))
-    return WorstCaseMaxima(
-        poses=poses, position_mm=values[0], phi_deg=values[1], x_mm=values[2], y_mm=values[3],
-        leg_signs=FrozenDict(zip(QUANTITIES, signs[..., :3])), input_bounds=bounds, k_sigma=k_sigma,
-        shared_signs=FrozenDict(zip(QUANTITIES, signs[..., 3:])))
+    n, shape = flat.shape[0], (4,) + poses.shape[:-1]
+    maxima, codes, bad = np.empty(shape), np.empty(shape, dtype=np.int16), np.empty(n, dtype=np.uint16)
+    if envelope_kernel(flat, *tables, check, maxima.reshape(4, n), codes.reshape(4, n), bad):
+        raise _first_refusal(geometry, poses, flat, bad)
+    maxima.setflags(write=False)    # nothing for the result's freeze to copy
+    codes.setflags(write=False)
+    return WorstCaseMaxima(poses=poses, maxima=maxima, codes=codes,
+                           n_shared=G, input_bounds=bounds, k_sigma=k_sigma)
+
+
+def _first_refusal(geometry: Geometry, poses: np.ndarray, flat: np.ndarray, bad: np.ndarray) -> InfeasiblePoseError:
+    """The error :func:`worst_case` raises for the kernel's refusals ``bad`` (N,) at ``flat`` (N, 3):
+    a pose holding NaN first (as :func:`~prp3mc.kinematics.chain.as_poses`), then by reason."""
+    if (bad & NONFINITE).any():
+        return nonfinite_pose(poses)
+    r, p = next((r, hit[0]) for r in range(len(REASONS)) if (hit := np.flatnonzero(bad & (0b111 << 3 * r))).size)
+    leg = next(i for i in range(3) if bad[p] >> (3 * r + i) & 1)
+    return InfeasiblePoseError(refusal(geometry, flat[p], (int(p),), REASONS[r], leg))  # the flat index, as worst_case
