@@ -98,14 +98,16 @@ def bench_envelope(quick: bool) -> dict:
     for n in (11, 101, 1001) if quick else (11, 101, 1001, 2001):
         grid = region.grid(n)
         calls = max(1, 10_000_000 // (n * n * 40))     # ~10 ms of calls at 40 ns a pose
-        wall, cpu, load = timed(lambda: _repeat(calls, worst_case_maxima, g, budget, grid), 7 if calls > 1 else 3)
-        out[f"envelope_{n}_poses_per_s"], out[f"envelope_{n}_poses_per_cpu_s"] = calls * n * n / wall, calls * n * n / cpu
+        repeat = 7 if calls > 1 else 3
+        wall, cpu, load = timed(lambda: _repeat(calls, worst_case_maxima, g, budget, grid), repeat)
+        poses = calls * n * n
+        out[f"envelope_{n}_poses_per_s"], out[f"envelope_{n}_poses_per_cpu_s"] = poses / wall, poses / cpu
         out[f"envelope_{n}_load"] = load
         flat = np.ascontiguousarray(grid.reshape(-1, 3))
         values, codes, bad = np.empty((4, n * n)), np.empty((4, n * n), np.int16), np.empty(n * n, np.uint16)
         kernel = lambda: _repeat(calls, envelope_kernel, flat, *tables, True, values, codes, bad, workers=1)  # noqa: E731
         kernel()
-        out[f"envelope_{n}_ns_per_pose"] = 1e9 / (calls * n * n) * min(_thread_time(kernel) for _ in range(7 if calls > 1 else 3))
+        out[f"envelope_{n}_ns_per_pose"] = 1e9 / poses * min(_thread_time(kernel) for _ in range(repeat))
     one = region.grid(1)
     out["envelope_call_us"] = 1e6 / 1000 * timed(lambda: _repeat(1000, worst_case_maxima, g, budget, one), 7)[0]
     grid = region.grid(201)

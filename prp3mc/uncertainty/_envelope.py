@@ -36,8 +36,8 @@ from ..units import DEG2RAD, RAD2DEG
 from .budget import Budget, parse_input
 from .systematic import EFFECT_NAMES, T_REF_C
 
-__all__ = ["REASONS", "NONFINITE", "leg_constants", "TERM_COLUMNS", "term_table", "kernel_tables", "envelope_kernel", "zonotope_maxima",
-           "zonotope_scratch", "generator_signs"]
+__all__ = ["REASONS", "NONFINITE", "leg_constants", "TERM_COLUMNS", "term_table", "kernel_tables", "envelope_kernel",
+           "zonotope_maxima", "zonotope_scratch", "generator_signs"]
 
 #: Refusal reasons in the order :func:`~prp3mc.kinematics.chain.validated_frame` tests them;
 #: bit ``3 * reason + leg`` of the kernel's ``bad`` word.

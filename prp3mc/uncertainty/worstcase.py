@@ -42,7 +42,8 @@ from .budget import Budget
 from ..kinematics.geometry import Geometry
 from ..kinematics.chain import as_poses, nonfinite_pose, pose_array, refusal
 from .model import LinearModel, linear_model
-from ._envelope import NONFINITE, REASONS, TERM_COLUMNS, envelope_kernel, generator_signs, kernel_tables, zonotope_maxima, zonotope_scratch
+from ._envelope import (NONFINITE, REASONS, TERM_COLUMNS, envelope_kernel, generator_signs, kernel_tables,
+                        zonotope_maxima, zonotope_scratch)
 
 __all__ = ["WorstCase", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "term_bounds", "QUANTITIES"]
 
@@ -399,10 +400,10 @@ class WorstCaseMaxima(_Maxima):
     def __repr__(self) -> str:
         return short_repr(self, "poses", "k_sigma")
 
-    position_mm = property(lambda self: self.maxima[0], doc="Largest position-error norm (...), mm.")
-    phi_deg = property(lambda self: self.maxima[1], doc="Largest |dphi| (...), deg.")
-    x_mm = property(lambda self: self.maxima[2], doc="Largest |dx| (...), mm.")
-    y_mm = property(lambda self: self.maxima[3], doc="Largest |dy| (...), mm.")
+    position_mm = property(lambda self: self.maxima[0], doc="Largest position-error norm at each pose (...), mm.")
+    phi_deg = property(lambda self: self.maxima[1], doc="Largest |dphi| at each pose (...), deg.")
+    x_mm = property(lambda self: self.maxima[2], doc="Largest |dx| at each pose (...), mm.")
+    y_mm = property(lambda self: self.maxima[3], doc="Largest |dy| at each pose (...), mm.")
 
     @property
     def leg_signs(self) -> FrozenDict:
