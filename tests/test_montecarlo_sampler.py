@@ -8,6 +8,7 @@ from scipy import special
 from prp3mc import (Budget, Disc, Discrete, Geometry, Normal, Triangular, TruncNormal, Uniform, linear_model,
                     monte_carlo)
 from prp3mc.uncertainty import _sampler
+from prp3mc.uncertainty._mckernel import feature_key, padded_features, pose_values
 from prp3mc.uncertainty._sampler import LANES, draw_features, pcg_lanes, sampler_tables
 from prp3mc.uncertainty._select import count_below, order_statistics
 from prp3mc.uncertainty.budget import SAMPLE_BLOCK
@@ -140,3 +141,20 @@ def test_radix_selection_equals_sorting(kind, seed):
     np.testing.assert_array_equal(x, before)
     bounds = np.float32([0.0, 0.3, 1.0, np.inf])
     np.testing.assert_array_equal(count_below(x, bounds), [(x < b).sum() for b in bounds])
+
+
+@pytest.mark.parametrize("n_features", [1, 3, 10, 13])
+def test_padded_features_change_no_value(n_features, seed):
+    """The kernels read feature counts rounded up to FEATURE_GROUP (zero features, zero coefficients):
+    the norm and |dphi| are those of the unpadded features, to the last bit."""
+    rng = np.random.default_rng(seed)
+    FT, c = rng.normal(size=(n_features, 3000)).astype(np.float32), rng.normal(size=(3, n_features)).astype(np.float32)
+    n_pad = padded_features(n_features)
+    assert n_pad % 4 == 0 and n_features <= n_pad < n_features + 4 and len(feature_key(n_features)) == n_pad
+    FTp, cp = np.zeros((n_pad, 3000), np.float32), np.zeros((3, n_pad), np.float32)
+    FTp[:n_features], cp[:, :n_features] = FT, c
+    out = [np.empty(3000, np.float32) for _ in range(4)]
+    pose_values(FT, c, out[0], out[1], (0,) * n_features)
+    pose_values(FTp, cp, out[2], out[3], feature_key(n_features))
+    np.testing.assert_array_equal(out[0], out[2])
+    np.testing.assert_array_equal(out[1], out[3])

@@ -23,7 +23,7 @@ from numba.cpython.unsafe.numbers import trailing_zeros
 from ._sampler import draw_features
 from .budget import SAMPLE_BLOCK
 
-__all__ = ["pose_values", "scan_blocks", "feature_key", "SUB_BINS", "TILE"]
+__all__ = ["pose_values", "scan_blocks", "feature_key", "padded_features", "SUB_BINS", "TILE"]
 
 #: Sub-bins of a selection window, to narrow it when its values overflow the buffer.
 SUB_BINS = 64
@@ -54,9 +54,20 @@ def pose_values(FT, c, pos, phi, nf):
         phi[s] = abs(dz)
 
 
+#: Feature counts are rounded up to a multiple of this in the compiled pose values: the added features
+#: and their coefficients are zero (the same values, bit for bit), and budgets of 9 to 12 features share
+#: one compilation of the kernels (a few seconds each) instead of one each.
+FEATURE_GROUP = 4
+
+
+def padded_features(n_features: int) -> int:
+    """Rows of the features (and columns of the coefficients) the kernels read for ``n_features``."""
+    return -(-n_features // FEATURE_GROUP) * FEATURE_GROUP
+
+
 def feature_key(n_features: int) -> tuple:
-    """The ``nf`` argument of the kernels for ``n_features`` features."""
-    return (0,) * n_features
+    """The ``nf`` argument of the kernels for ``n_features`` features (:func:`padded_features` zeros)."""
+    return (0,) * padded_features(n_features)
 
 
 @njit(nogil=True, cache=True, fastmath=True)
@@ -218,12 +229,13 @@ def scan_blocks(k0, k1, n, lanes, consts, codes, params, cdf, values, ops, refs,
         The compiled sampler (:mod:`._sampler`): lane states at sample ``k0 * SAMPLE_BLOCK`` (updated).
     Fext : (b, F) float64
         Features of block k0 sampled by the caller (then k1 = k0 + 1), or an empty array: draw them.
-    C : (P, 3, F) float32
-        Feature coefficients of the chunk's poses.
+    C : (P, 3, Fp) float32
+        Feature coefficients of the chunk's poses, zero beyond the F features
+        (Fp = :func:`padded_features` of F).
     nf : tuple
         :func:`feature_key` of F.
     shift : (F,) float64
-        Exact feature means: the sums are about them.
+        Exact feature means: the sums are about them (its size is F).
     block_segs, seg_start, seg_stop : int64
         Segments of block k: ``block_segs[k]:block_segs[k + 1]``, with global sample bounds.
     sums : bool
@@ -250,11 +262,11 @@ def scan_blocks(k0, k1, n, lanes, consts, codes, params, cdf, values, ops, refs,
     possum : (P, S) float64, accumulated when ``main``
     exceed : (P,) int64, accumulated when ``main``
     """
-    nF, T = C.shape[2], TILE
+    nF, nP, T = shift.size, C.shape[2], TILE
     fused = Fext.shape[0] == 0
     d = codes.size
     U, X = np.empty((d, T)), np.empty((d, T))
-    F, FT = np.zeros((nF + nF % 2, T)), np.empty((nF, T), np.float32)
+    F, FT = np.zeros((nP + nF % 2, T)), np.empty((nP, T), np.float32)  # rows from nF on stay zero
     pos_t, phi_t = np.empty(T, np.float32), np.empty(T, np.float32)
     flag = np.zeros(T, np.uint8)
     for k in range(k0, k1):
@@ -269,7 +281,7 @@ def scan_blocks(k0, k1, n, lanes, consts, codes, params, cdf, values, ops, refs,
                 for f in range(nF):
                     for s in range(m):
                         F[f, s] = Fext[t0 + s, f]
-            for f in range(nF):
+            for f in range(nP):
                 for s in range(m):
                     FT[f, s] = F[f, s]
             if sums:

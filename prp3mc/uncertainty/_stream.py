@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._mckernel import SUB_BINS, TILE, feature_key, pose_values, scan_blocks
+from ._mckernel import SUB_BINS, TILE, feature_key, padded_features, pose_values, scan_blocks
 from ._select import count_below, order_statistics
 from ._sampler import LANES, draw_features, pcg_lanes, sampler_tables
 from .budget import SAMPLE_BLOCK, Budget
@@ -98,18 +98,20 @@ class Stream:
         return self.model.features(self.budget.sample_block(self.seed, k, self.n))
 
     def pilot(self, m: int) -> np.ndarray:
-        """Features (F, m) float32 of the first m samples."""
+        """Features (Fp, m) float32 of the first m samples, zero from row F on (Fp = :func:`padded_features`)."""
+        nF = self.shift.size
+        out = np.zeros((padded_features(nF), m), np.float32)
         if not self.fused:
             blocks = [self.features(k) for k in range(-(-m // SAMPLE_BLOCK))]
-            return np.ascontiguousarray(np.concatenate(blocks)[:m].T, dtype=np.float32)
-        D, nF = len(self.budget.factor_laws), self.shift.size
+            out[:nF] = np.concatenate(blocks)[:m].T
+            return out
+        D = len(self.budget.factor_laws)
         lanes, consts = pcg_lanes(self.seed, 0, D)
         U, X, F = np.empty((D, TILE)), np.empty((D, TILE)), np.empty((nF, TILE))
-        out = np.empty((nF, m), np.float32)
         for t0 in range(0, m, TILE):
             k = min(TILE, m - t0)
             draw_features(lanes, consts, *self.tables, k, U, X, F)
-            out[:, t0:t0 + k] = F[:, :k]
+            out[:nF, t0:t0 + k] = F[:, :k]
         return out
 
     def moments(self, S1: np.ndarray, S2: np.ndarray) -> Moments:
@@ -132,12 +134,13 @@ class Stream:
     # ------------------------------------------------------------------ passes
     def scan(self, C32: np.ndarray, win: "_Windows", main: bool, tol: float, sums: dict | None,
              pool: ThreadPoolExecutor) -> list[dict]:
-        """One pass over all blocks for the poses of ``C32`` (P, 3, F); per-worker accumulators.
+        """One pass over all blocks for the poses of ``C32`` (P, 3, Fp), zero from column F on (Fp =
+        :func:`padded_features`); per-worker accumulators.
 
         On the main pass ``sums`` receives the norm sums per pose and segment
         (``possum``) and, if it holds ``S1`` and ``S2``, the feature sums per segment.
         """
-        P, nF = C32.shape[0], C32.shape[2]
+        P, nF = C32.shape[0], self.shift.size
         tol32 = np.float32(-1.0 if tol is None else tol)
         with_sums = sums is not None and "S1" in sums
         S1 = sums["S1"] if with_sums else np.zeros((0, nF))

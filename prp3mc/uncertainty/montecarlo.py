@@ -36,6 +36,7 @@ from ..errors import BudgetError
 from ..kinematics.chain import inverse_kinematics
 from ..kinematics.exact import exact_pose_error
 from ..kinematics.geometry import Geometry
+from ._mckernel import padded_features
 from ._stream import Stream, pilot_fraction, select_order_statistics
 from .model import LinearModel, linear_model
 from ..progress import Progress
@@ -274,7 +275,8 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     stream = Stream(model, budget, seed, n_samples, _N_BATCHES, n_threads)
     n_seg = stream.seg_start.size
     sums = {"S1": np.zeros((n_seg, n_feat)), "S2": np.zeros((n_seg, n_feat, n_feat))}
-    C32 = C.astype(np.float32)
+    C32 = np.zeros((n_poses, 3, padded_features(n_feat)), np.float32)  # the kernels' feature count
+    C32[..., :n_feat] = C
     stats = np.empty((n_poses, 2, len(ranks)))
     vmax = np.empty((n_poses, 2))
     exceed = np.zeros(n_poses)
