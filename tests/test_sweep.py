@@ -229,7 +229,8 @@ def test_bundled_sweep_example_reads():
 def cluster():
     import distributed  # in the test extra, so that CI runs these
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, memory_limit="1GiB",
-                                  dashboard_address=None, silence_logs=logging.ERROR) as c:
+                                  dashboard_address=None, scheduler_kwargs={"dashboard_address": ":0"},
+                                  silence_logs=logging.ERROR) as c:
         yield c.scheduler_address
 
 

@@ -86,9 +86,12 @@ class DaskExecutor:
         distributed = _import_distributed()
         try:
             if self.kind == "local":
+                # no dashboard; the scheduler's own HTTP routes on a free port, so that two runs at once
+                # do not contend for 8787 (and warn about it)
                 self.cluster = distributed.LocalCluster(
                     n_workers=self.target, threads_per_worker=1, processes=True, dashboard_address=None,
-                    memory_limit=self.memory_limit, silence_logs=logging.ERROR)
+                    scheduler_kwargs={"dashboard_address": ":0"}, memory_limit=self.memory_limit,
+                    silence_logs=logging.ERROR)
                 self.client = distributed.Client(self.cluster)
             else:
                 self.client = distributed.Client(self.target, timeout=self.timeout)
