@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import multiprocessing
 import os
 import pickle
 import signal
@@ -26,14 +25,15 @@ from typing import Callable, Iterator
 
 from ._threads import cores
 
-__all__ = ["fork_workers", "in_background", "Background"]
+__all__ = ["fork_workers", "in_background", "Background", "forked_start"]
 
 _SIZE = struct.Struct("<Q")           # each message: its length, then its pickle
 _PR_SET_PDEATHSIG = 1
 
 
 def fork_workers(n_tasks: int) -> int:
-    """Processes for ``n_tasks``: one per core while some core is idle, where the system can fork; else 1.
+    """Processes for ``n_tasks``: 1 plus the idle cores (rounded), at most ``n_tasks`` and the cores, where the
+    system can fork; else 1.
 
     A core is idle when other processes leave it so: the busy time of this
     process's cores (``/proc/stat``) less this process's own CPU time (its
@@ -51,11 +51,13 @@ def fork_workers(n_tasks: int) -> int:
     4.4 (``benchmarks/bench_study.py``): with every core busy they only add
     processes competing for it.
 
-    A process with other threads running (a notebook kernel, a Dask worker)
-    never forks: a fork copies only the calling thread, and a lock another
-    thread held stays held in the child.
+    A process with other Python threads running (a notebook kernel, a Dask
+    worker) never forks: a fork copies only the calling thread, and a lock
+    another thread held stays held in the child. (Threads of native libraries
+    are not seen: OpenBLAS, the one prp3mc's processes start, mends itself at
+    a fork.)
     """
-    if not sys.platform.startswith("linux") or "fork" not in multiprocessing.get_all_start_methods():
+    if not sys.platform.startswith("linux"):
         return 1
     if threading.active_count() > 1:
         return 1
@@ -83,6 +85,8 @@ class _Meter:
             names = {f"cpu{c}" for c in os.sched_getaffinity(0)}
             with open("/proc/stat", "rb") as f:
                 rows = [line.split() for line in f.read().decode().splitlines() if line.split(" ", 1)[0] in names]
+            if len(rows) != len(names):     # numbered otherwise (a container's view of the host): unknown
+                return None
             busy = sum(int(r[1]) + int(r[2]) + int(r[3]) + int(r[6]) + int(r[7]) + int(r[8]) for r in rows)
             own = sum(os.times()[:4])
             for pid in self.children:       # user, system and waited-for children's times, in clock ticks
@@ -151,12 +155,27 @@ def _widen(fd: int) -> None:
         fcntl.fcntl(fd, fcntl.F_SETPIPE_SZ, 1 << 20)
 
 
-def _die_with(parent: int) -> None:
-    """Have the kernel end this (forked) process when its parent ends, so it never outlives the run."""
+#: The ends of the :class:`Background` pipes this process holds: a process forked from it closes them all
+#: (:func:`forked_start`), so that a pipe ends when the processes it joins end, whatever else was forked.
+_PIPES: set = set()
+
+
+def forked_start(parent: int) -> None:
+    """The start of every process forked here (a :class:`Background` job, a worker of its pool): it ends when
+    its parent ends, and closes the pipe ends it inherited from other jobs.
+
+    Without that, a worker forked by a job's process would hold the job's
+    pipe to the caller open, and the caller would wait for ever for a job
+    killed while drawing; and a worker would outlive a run interrupted there.
+    """
     with contextlib.suppress(AttributeError, OSError):
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
     if os.getppid() != parent:            # the parent ended before the request took effect
         os._exit(1)
+    for fd in _PIPES:
+        with contextlib.suppress(OSError):
+            os.close(fd)
+    _PIPES.clear()
 
 
 def _child(fn: Callable, prepare: Callable | None, parent: int, args_fd: int, value_fd: int) -> None:
@@ -165,7 +184,8 @@ def _child(fn: Callable, prepare: Callable | None, parent: int, args_fd: int, va
     global _METER
     code = 1
     try:
-        _die_with(parent)
+        forked_start(parent)
+        _PIPES.update((args_fd, value_fd))      # closed in whatever this process forks in turn
         _METER = _Meter()                       # this process's own times start at the fork
         if prepare is not None:
             prepare()
@@ -189,7 +209,15 @@ class Background:
         parent = os.getpid()
         args_read, args_write = os.pipe()
         value_read, value_write = os.pipe()
-        pid = os.fork()
+        for stream in (sys.stdout, sys.stderr):   # else what they buffer would be written twice, or lost
+            with contextlib.suppress(AttributeError, OSError, ValueError):
+                stream.flush()
+        try:
+            pid = os.fork()
+        except OSError:                           # no process to be had (a limit, memory): fn runs here
+            for fd in (args_read, args_write, value_read, value_write):
+                os.close(fd)
+            return
         if pid == 0:
             os.close(args_write)
             os.close(value_read)
@@ -198,6 +226,7 @@ class Background:
         os.close(value_write)
         _widen(args_write)
         self._pid, self._args_fd, self._value_fd = pid, args_write, value_read
+        _PIPES.update((args_write, value_read))
         _METER.children.add(pid)
 
     @property
@@ -206,7 +235,8 @@ class Background:
         return self._pid is not None
 
     def submit(self, *args) -> None:
-        """Hand ``fn`` its arguments: it starts there now (here, it waits for :meth:`result`)."""
+        """Hand ``fn`` its arguments: it starts there now (here, it waits for :meth:`result`). The call
+        returns once the pipe took them all: at once for up to 1 MiB."""
         self.args = args
         if self._args_fd is not None:
             fd, self._args_fd = self._args_fd, None
@@ -215,12 +245,14 @@ class Background:
             except Exception:       # unpicklable, or the process is gone: result() computes here
                 pass
             finally:
+                _PIPES.discard(fd)
                 os.close(fd)
 
     def result(self):
-        """``fn(*args)``: the forked process's value, or computed here where it gave none (``fn`` raised there,
-        or the process was killed: an error is then raised here, with its traceback). Warnings ``fn`` gave
-        there are given again here."""
+        """``fn(*args)``: the forked process's value, or computed here where it gave none (``fn`` raised
+        there, the process was killed, or its value did not come back whole): an error of ``fn``'s is then
+        raised here, with its traceback, after the work was done twice. Warnings ``fn`` gave there are
+        given again here."""
         if self._pid is None:
             return self.fn(*self.args)
         if self._args_fd is not None:       # never submitted: fn()
@@ -240,6 +272,7 @@ class Background:
         """Release the pipes and end the forked process (``wait``: for it to end by itself)."""
         for fd in (self._args_fd, self._value_fd):
             if fd is not None:
+                _PIPES.discard(fd)
                 os.close(fd)
         self._args_fd = self._value_fd = None
         if self._pid is not None:
@@ -247,7 +280,8 @@ class Background:
             if not wait:
                 with contextlib.suppress(ProcessLookupError):
                     os.kill(pid, signal.SIGKILL)
-            os.waitpid(pid, 0)                  # its CPU time now counts among this process's children's
+            with contextlib.suppress(ChildProcessError):    # SIGCHLD ignored: the system reaped it
+                os.waitpid(pid, 0)              # its CPU time now counts among this process's children's
             _METER.children.discard(pid)
 
 
@@ -262,7 +296,8 @@ def in_background(fn: Callable, *, prepare: Callable | None = None) -> Iterator[
     nothing back (``fn`` raised, or it was killed), ``result()`` calls
     ``fn(*args)`` here: the value is the same, and an error is raised here
     with its traceback. Leaving the block ends the process if its result was
-    not asked for; it also ends with its parent.
+    not asked for; it also ends with its parent, and so do the processes it
+    forks that call :func:`forked_start` (a pool's initializer).
     """
     job = Background(fn, prepare)
     try:

@@ -1,10 +1,12 @@
 """Drawing and saving a report's figures, on worker processes where that pays.
 
 Matplotlib draws on one core, and a report's figures are independent: where
-the operating system can fork (Linux), :func:`rendering` draws them on one
-worker process per core while a core is idle, and the caller goes on
-(writing tables). Forked workers inherit the results in memory: nothing is
-pickled but each figure's index and its PNG bytes. Elsewhere, or with one
+the operating system can fork (Linux), :func:`rendering` draws them on a
+few worker processes while cores are idle (:func:`prp3mc._fork.fork_workers`),
+and the caller goes on (writing tables). Forked workers inherit the results
+in memory: nothing is pickled but each figure's index and its PNG bytes
+(handed to a process made ready beforehand, :func:`drawing_ahead`, the
+figures' callables and what they draw are pickled once). Elsewhere, or with one
 core, the figures are drawn here, one after the other. The files and bytes
 are the same either way (``benchmarks/bench_study.py`` times both).
 """
@@ -19,7 +21,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
-from .._fork import Background, fork_workers, in_background
+from .._fork import Background, fork_workers, forked_start, in_background
 from ..output import save_figure
 
 __all__ = ["rendering", "drawing_ahead"]
@@ -35,13 +37,15 @@ def _render(k: int) -> bytes:
     return save_figure(draw(), _TASKS["folder"], name, _TASKS["formats"], _TASKS["dpi"])
 
 
-def _inherit(figures, folder, formats, dpi) -> None:
-    """A worker's start: what it draws, and every object it inherited frozen out of its garbage collector.
+def _inherit(parent, figures, folder, formats, dpi) -> None:
+    """A worker's start: it ends with ``parent`` (:func:`prp3mc._fork.forked_start`), what it draws, and
+    every object it inherited frozen out of its garbage collector.
 
     A figure leaves tens of thousands of objects in reference cycles; the
     full collections they trigger would otherwise walk every inherited
     object too (a tenth of a second each), copying their pages.
     """
+    forked_start(parent)
     gc.freeze()
     _TASKS.update(figures=figures, folder=folder, formats=formats, dpi=dpi)
 
@@ -87,8 +91,8 @@ def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=
     formats : sequence of str
         As :func:`prp3mc.output.save_figure`.
     workers : int, optional
-        Worker processes (default :func:`prp3mc._fork.fork_workers`: one per
-        core while a core is idle); 1 draws in this process, lazily, as the iterator is consumed.
+        Worker processes (default :func:`prp3mc._fork.fork_workers`: 1 plus
+        the idle cores); 1 draws in this process, lazily, as the iterator is consumed.
     dpi : int
         Resolution of every format (:func:`prp3mc.output.save_figure`).
     ahead : Background, optional
@@ -97,7 +101,8 @@ def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=
         iterator waits for all of them.
 
     With workers, drawing starts on entry and the caller can do other work
-    before consuming the iterator; leaving the block waits for every figure.
+    before consuming the iterator; leaving the block waits for every figure
+    (with ``ahead``, consuming the iterator does; leaving early ends that process).
     """
     figures, folder = list(figures), Path(folder)
     workers = fork_workers(len(figures)) if workers is None else max(1, int(workers))
@@ -110,5 +115,6 @@ def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=
         return
     _import_matplotlib()                   # once here, inherited by every worker
     with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
-                             initializer=_inherit, initargs=(figures, folder, tuple(formats), dpi)) as pool:
+                             initializer=_inherit, initargs=(os.getpid(), figures, folder, tuple(formats), dpi)
+                             ) as pool:
         yield pool.map(_render, range(len(figures)))
