@@ -34,7 +34,7 @@ import shutil
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterable, Iterator
 
 from .errors import Prp3mcError
 
@@ -76,13 +76,34 @@ def _rename(src: Path, dst: Path, flags: int) -> bool:
     raise OSError(err, os.strerror(err), str(dst))
 
 
-def check_output(path: str | os.PathLike, force: bool) -> Path:
-    """Refuse an existing output folder unless ``force``; return it as a Path."""
+#: What every folder prp3mc writes holds at its top: ``force`` replaces only such a folder, or an empty one.
+OUTPUT_MARKS = ("report.html", "summary.json", "discrepancy.json")
+
+
+def check_output(path: str | os.PathLike, force: bool, inputs: Iterable[str | os.PathLike] = ()) -> Path:
+    """Refuse an existing output folder unless ``force``; return it as a Path.
+
+    Even with ``force``, a folder is replaced only if it is empty or an
+    earlier output (:data:`OUTPUT_MARKS`), and neither the working folder nor
+    one holding it nor one holding any of ``inputs`` (the run's own files):
+    nothing the user had is lost to a mistyped ``--out``.
+    """
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise OutputExistsError(f"{path} exists and is not a folder")
     if path.exists() and not force:
         raise OutputExistsError(f"{path} exists: choose another --out or pass --force to replace it")
+    if path.exists():
+        real = path.resolve()
+        if real == Path.cwd().resolve() or real in Path.cwd().resolve().parents:
+            raise OutputExistsError(f"{path} is the working folder or holds it: --force never replaces it; "
+                                    "choose a new --out")
+        held = next((f for f in inputs if real in Path(f).resolve().parents), None)
+        if held is not None:
+            raise OutputExistsError(f"{path} holds the input {held}: --force would delete it; choose another --out")
+        if any(path.iterdir()) and not any((path / mark).exists() for mark in OUTPUT_MARKS):
+            raise OutputExistsError(f"{path} is not an earlier prp3mc output (no {' or '.join(OUTPUT_MARKS)}): "
+                                    "--force replaces only those; choose another --out")
     return path
 
 
@@ -132,8 +153,10 @@ def _lock(path: Path) -> int:
 
 
 @contextmanager
-def claim_output(path: str | os.PathLike, force: bool = False) -> Iterator[Path]:
-    """Hold the output folder ``path`` for this run; refuse it if it exists (unless ``force``).
+def claim_output(path: str | os.PathLike, force: bool = False,
+                 inputs: Iterable[str | os.PathLike] = ()) -> Iterator[Path]:
+    """Hold the output folder ``path`` for this run; refuse it if it exists (unless ``force``; see
+    :func:`check_output` for what ``force`` never replaces, ``inputs`` among it).
 
     Commands enter this before they compute, so a second run on the same
     folder, or one on an existing folder, stops before any work. Re-entrant
@@ -148,6 +171,8 @@ def claim_output(path: str | os.PathLike, force: bool = False) -> Iterator[Path]
     OutputError
         The parent folder cannot be created or written.
     """
+    if not str(path).strip():
+        raise OutputError("the output folder is empty: name a folder with --out")
     path = Path(os.path.abspath(path))
     if path in _HELD:
         check_output(path, force or _HELD[path])
@@ -163,7 +188,7 @@ def claim_output(path: str | os.PathLike, force: bool = False) -> Iterator[Path]
     _HELD[path] = force
     try:
         _clean_leftovers(path)
-        check_output(path, force)
+        check_output(path, force, inputs)
         yield path
     finally:
         del _HELD[path]

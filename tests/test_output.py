@@ -113,6 +113,7 @@ def test_existing_folder_needs_force_and_force_replaces(tmp_path):
     out = tmp_path / "out"
     out.mkdir()
     (out / "old").write_text("old")
+    (out / "summary.json").write_text("{}")          # an earlier output: --force may replace it
     with pytest.raises(OutputExistsError, match="pass --force"):
         with output_folder(out):
             pytest.fail("the block must not run")
@@ -127,12 +128,35 @@ def test_failed_block_leaves_the_old_folder(tmp_path):
     out = tmp_path / "out"
     out.mkdir()
     (out / "old").write_text("old")
+    (out / "report.html").write_text("<p>an earlier report</p>")
     with pytest.raises(RuntimeError):
         with output_folder(out, force=True) as tmp:
             (tmp / "new").write_text("new")
             raise RuntimeError("analysis failed")
-    assert sorted(p.name for p in out.iterdir()) == ["old"]
+    assert sorted(p.name for p in out.iterdir()) == ["old", "report.html"]
     assert siblings(out) == []
+
+
+@pytest.mark.parametrize("case", ["not an output", "the working folder", "holds an input", "empty name"])
+def test_force_never_replaces_what_the_user_had(tmp_path, monkeypatch, capsys, case):
+    """--force replaces an earlier output (or an empty folder), never the working folder, a folder
+    holding the run's own input files, or any other folder: a mistyped --out loses nothing."""
+    project = tmp_path / "project"
+    project.mkdir()
+    study = project / "my_study.toml"
+    study.write_text("[study]\n")
+    (project / "notes.txt").write_text("mine")
+    if case != "not an output":
+        (project / "summary.json").write_text("{}")        # even an output folder, in these cases
+    monkeypatch.chdir(project if case == "the working folder" else tmp_path)
+    out = {"not an output": str(project), "the working folder": ".", "holds an input": "project",
+           "empty name": ""}[case]
+    argv = ["study", str(study), "--out", out, "--force"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "error:" in err
+    assert sorted(p.name for p in project.iterdir()) == sorted(
+        ["my_study.toml", "notes.txt"] + ([] if case == "not an output" else ["summary.json"]))
 
 
 def test_folder_appearing_meanwhile_is_not_replaced(tmp_path):

@@ -186,6 +186,9 @@ def test_cli_refuses_existing_folder_without_force(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "exists" in err and "--force" in err
     assert (out / "keep.txt").read_text() == "mine"
+    assert main(["study", str(path), "--out", str(out), "--force", "--no-progress"]) == 1  # not an output
+    assert "not an earlier prp3mc output" in capsys.readouterr().err and (out / "keep.txt").exists()
+    (out / "summary.json").write_text("{}")                         # an earlier run's
     assert main(["study", str(path), "--out", str(out), "--force", "--no-progress"]) == 0
     assert not (out / "keep.txt").exists() and (out / "report.html").is_file()
     figures = {p.suffix for p in (out / "figures").iterdir()}

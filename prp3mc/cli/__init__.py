@@ -12,6 +12,7 @@ import contextlib
 import gc
 import importlib
 import math
+import os
 import pkgutil
 import sys
 import warnings
@@ -247,6 +248,12 @@ def main(argv: list[str] | None = None) -> int:
     return status
 
 
+def _input_files(args: argparse.Namespace) -> list[str]:
+    """The files a command's arguments name (a study, a campaign, a budget...): ``--force`` never deletes them."""
+    values = [v for value in vars(args).values() for v in (value if isinstance(value, list) else [value])]
+    return [v for v in values if isinstance(v, (str, os.PathLike)) and str(v) and os.path.isfile(v)]
+
+
 def _run(argv: list[str], own_process: bool = False) -> int:
     """Parse ``argv`` and run its command: one line on stderr for any refusal, and the exit status."""
     try:
@@ -271,7 +278,8 @@ def _run(argv: list[str], own_process: bool = False) -> int:
             warnings.simplefilter("always", Prp3mcWarning)
             warnings.showwarning = one_line_warning
             if getattr(args, "out", None) is not None:  # claimed before any work (see prp3mc.output)
-                stack.enter_context(claim_output(args.out, force=getattr(args, "force", False)))
+                stack.enter_context(claim_output(args.out, force=getattr(args, "force", False),
+                                                 inputs=_input_files(args)))
             args.run(args)
     except Prp3mcError as exc:
         print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
