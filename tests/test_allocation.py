@@ -304,3 +304,21 @@ def test_init_classes_template_runs(tmp_path, capsys):
                  "--spec-position-um", "150", "--grid", "5", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["feasible"] and doc["inputs"]["classes"]["sha256"]
+
+
+@pytest.mark.parametrize("grid", [1, 0, 2.5])
+def test_a_region_needs_a_grid_of_at_least_two(grid, capsys):
+    """A 1 x 1 grid is the region's corner: a choice checked there alone broke the spec inside the region."""
+    with pytest.raises(AllocationError, match="grid must be an integer >= 2"):
+        region_poses("u-shape", grid)
+    if grid == 1:
+        argv = ["allocate", "--geometry", "u-shape", "--region", "u-shape", "--classes", "example",
+                "--spec-position-um", "40", "--grid", "1"]
+        assert main(argv) == 1
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "grid must be an integer >= 2" in err
+
+
+def test_a_percentile_spec_typed_as_a_fraction_is_refused_with_a_hint():
+    with pytest.raises(AllocationError, match=r"a percent: 99.73, not 0.9973"):
+        allocate("u-shape", "example", "u-shape", spec_position_um=40.0, spec_percentile=0.9973, grid=3)

@@ -174,6 +174,9 @@ def region_poses(region, grid: int = 41, phi_deg: float | None = None) -> np.nda
     if isinstance(region, str):
         region = Region.from_preset(region)
     if isinstance(region, Region):
+        if not (isinstance(grid, (int, np.integer)) and grid >= 2):
+            raise AllocationError(f"grid must be an integer >= 2 (a 1 x 1 grid is the region's corner, not the "
+                                  f"region), got {grid!r}")
         if phi_deg is not None:
             region = Region(region.x_mm, region.y_mm, phi_deg)
         return region.grid(int(grid)).reshape(-1, 3)
@@ -189,8 +192,10 @@ def _spec_limits(spec_position_um, spec_phi_arcsec, spec_percentile) -> dict:
     if spec_percentile is not None:
         if spec_position_um is None:
             raise AllocationError("a percentile spec bounds the position error: give spec_position_um too")
-        if not (isinstance(spec_percentile, (int, float)) and 0 < spec_percentile < 100):
-            raise AllocationError(f"spec_percentile must lie in (0, 100), got {spec_percentile!r}")
+        if not (isinstance(spec_percentile, (int, float)) and 50 <= spec_percentile < 100):
+            hint = " (a percent: 99.73, not 0.9973)" if isinstance(spec_percentile, (int, float)) \
+                and 0 < spec_percentile < 1 else ""
+            raise AllocationError(f"spec_percentile must lie in [50, 100){hint}, got {spec_percentile!r}")
     key = "position" if spec_percentile is None else "screen"
     return {key: _scaled(spec_position_um, 1 / MM2UM), "phi": _scaled(spec_phi_arcsec, 1 / DEG2ARCSEC)}
 
