@@ -322,3 +322,10 @@ def test_a_region_needs_a_grid_of_at_least_two(grid, capsys):
 def test_a_percentile_spec_typed_as_a_fraction_is_refused_with_a_hint():
     with pytest.raises(AllocationError, match=r"a percent: 99.73, not 0.9973"):
         allocate("u-shape", "example", "u-shape", spec_position_um=40.0, spec_percentile=0.9973, grid=3)
+
+
+def test_too_few_samples_to_confirm_a_percentile_are_refused():
+    """With 2 samples the 'upper bound' of p99.73 was the sample maximum, far below the percentile, and a
+    choice was called confirmed: the samples must bound the interval."""
+    with pytest.raises(AllocationError, match="needs at least 1419 samples"):
+        allocate("u-shape", "example", "u-shape", spec_position_um=40.0, spec_percentile=99.73, grid=3, n_samples=2)

@@ -150,7 +150,7 @@ def _campaign(path, n: int = 4, visits: int = 3):
 
 @pytest.mark.parametrize("argv", [
     ["worstcase", "--geometry", "u-shape", "--pose", "0", "100", "0"],
-    ["montecarlo", "--geometry", "u-shape", "--pose", "0", "100", "0", "--samples", "500", "--seed", "4"],
+    ["montecarlo", "--geometry", "u-shape", "--pose", "0", "100", "0", "--samples", "2048", "--seed", "4"],
     ["sobol", "--geometry", "u-shape", "--pose", "0", "100", "0", "--samples", "64", "--seed", "4"],
 ], ids=lambda a: a[0])
 def test_json_outputs_record_an_incomplete_budget(argv, tmp_path, capsys):

@@ -1,13 +1,15 @@
 """Monte Carlo against closed forms, brute force and its own confidence intervals."""
 
 import json
+import warnings
 
 import numpy as np
 import pytest
 
 from prp3mc import Budget, Geometry, Uniform, linear_model, monte_carlo
-from prp3mc.errors import BudgetError
+from prp3mc.errors import BudgetError, Prp3mcWarning
 from prp3mc.cli import main
+from prp3mc.uncertainty.montecarlo import ci_samples
 
 from .conftest import random_poses
 
@@ -109,12 +111,13 @@ def test_linearization_check(geometry, region):
 
 def test_zero_budget_gives_zero_error(geometry):
     budget = Budget({"theta_1": Uniform(0.0, 0.0)})
-    r = monte_carlo(geometry, budget, [0.0, 130.0, 0.0], 1000, rng=1)
+    r = monte_carlo(geometry, budget, [0.0, 130.0, 0.0], 2048, rng=1)
     assert float(r.position_max) == 0.0 and np.all(r.std == 0.0)
 
 
 @pytest.mark.parametrize("kwargs, message", [
-    ({"n_samples": 1}, "at least 2 samples"),
+    ({"n_samples": 1}, "at least 32 samples"),
+    ({"n_samples": 31}, "at least 32 samples"),
     ({"tolerance_mm": -1.0}, "tolerance"),
     ({"percentiles": (50, 101)}, "percentiles"),
 ])
@@ -175,3 +178,25 @@ def test_sample_blocks_equal_the_sample():
         np.testing.assert_array_equal(PAPER.sample_block(5, k, n), X[k * SAMPLE_BLOCK:(k + 1) * SAMPLE_BLOCK])
     with pytest.raises(BudgetError, match="outside"):
         PAPER.sample_block(5, 3, n)
+
+
+@pytest.mark.parametrize("n", [32, 50, 1000])
+def test_few_samples_give_finite_standard_errors(n, recwarn):
+    """Below 64 x 16 samples the batch-means standard errors use fewer batches of 16 or more: finite, no
+    warning (64 batches of 0 or 1 sample gave NaN and a divide warning)."""
+    r = monte_carlo(Geometry.from_preset("u-shape"), Budget.from_preset("paper"), [0.0, 100.0, 0.0], n, rng=1)
+    for name in ("mean_se", "std_se", "cov_se", "position_mean_se"):
+        assert np.all(np.isfinite(getattr(r, name))), name
+    assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]
+
+
+def test_an_interval_the_sample_cannot_bound_is_said():
+    """p99.73's 95 % interval needs 1419 samples: with fewer its upper end is the sample maximum, and the
+    run says so (a warning the JSON outputs record), instead of presenting a bound it is not."""
+    assert ci_samples(99.73) == 1419 and ci_samples(50) == 8 and ci_samples(100) is None
+    g, b = Geometry.from_preset("u-shape"), Budget.from_preset("paper")
+    with pytest.warns(Prp3mcWarning, match=r"p99.73 \(needs 1419\)"):
+        monte_carlo(g, b, [0.0, 100.0, 0.0], 1418, rng=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", Prp3mcWarning)
+        monte_carlo(g, b, [0.0, 100.0, 0.0], 1419, rng=1)

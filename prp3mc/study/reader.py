@@ -86,7 +86,7 @@ from ..limits import check, worstcase_estimate
 from ..kinematics.chain import check_poses
 from ..kinematics.geometry import REGION_PRESETS, Geometry, Region
 from ..uncertainty.budget import Budget
-from ..uncertainty.montecarlo import PERCENTILES
+from ..uncertainty.montecarlo import MIN_SAMPLES as MIN_MC_SAMPLES, PERCENTILES
 from ..units import OUTPUTS
 from .allocation import AllocationSpec, read_allocation
 from .sweep import is_number, read_sweep
@@ -319,10 +319,10 @@ class _Reader:
             return (value[0], value[1])
         self.fail(path, f"{'.'.join(path)} must be an integer n >= 2 (n x n poses) or [nx, ny], got {value!r}")
 
-    def samples(self, table: dict, path: tuple, default: int, power_of_two: bool = False) -> int:
+    def samples(self, table: dict, path: tuple, default: int, power_of_two: bool = False, least: int = 2) -> int:
         n = self.get(table, path, "int", default)
-        if n < 2:
-            self.fail(path, f"{'.'.join(path)} must be at least 2, got {n}")
+        if n < least:
+            self.fail(path, f"{'.'.join(path)} must be at least {least}, got {n}")
         if power_of_two and n & (n - 1):
             self.fail(path, f"{'.'.join(path)} must be a power of two (Saltelli's scheme), got {n}; "
                       f"nearest: {1 << round(math.log2(n))}")
@@ -349,7 +349,7 @@ class _Reader:
         kw: dict[str, Any] = {
             "worstcase_grid": self.grid(wc, ("worstcase", "grid"), _DEFAULT["worstcase_grid"]),
             "k_sigma": self.get(wc, ("worstcase", "k_sigma"), "number"),
-            "mc_samples": self.samples(mc, ("montecarlo", "samples"), _DEFAULT["mc_samples"]),
+            "mc_samples": self.samples(mc, ("montecarlo", "samples"), _DEFAULT["mc_samples"], least=MIN_MC_SAMPLES),
             "mc_grid": self.grid(mc, ("montecarlo", "grid"), _DEFAULT["mc_grid"]),
             "tolerance_mm": self.get(mc, ("montecarlo", "tolerance_mm"), "number"),
             "sobol_samples": self.samples(so, ("sobol", "samples"), _DEFAULT["sobol_samples"], power_of_two=True),

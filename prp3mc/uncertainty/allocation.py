@@ -38,7 +38,7 @@ from ..units import DEG2ARCSEC, MM2UM
 from .allocation_classes import ClassMenu
 from .allocation_search import Problem, Search, least_cost
 from .budget import Budget
-from .montecarlo import monte_carlo
+from .montecarlo import ci_samples, monte_carlo
 from .worstcase import worst_case
 
 __all__ = ["AllocationResult", "allocate", "allocation_front", "front_records"]
@@ -234,7 +234,8 @@ def allocate(geometry, classes, region, *, spec_position_um: float | None = None
     k_sigma : float, optional
         Bound unbounded laws (normal) as mean ± k·sd for the worst case.
     n_samples : int
-        Monte Carlo samples confirming a statistical spec.
+        Monte Carlo samples confirming a statistical spec: at least
+        :func:`~prp3mc.uncertainty.montecarlo.ci_samples` of its percentile (1419 for p99.73).
     rng : None, int or numpy.random.Generator
         Randomness of the Monte Carlo confirmation (SPEC 7); its seed is recorded.
     binding_rtol : float
@@ -257,6 +258,9 @@ def allocate(geometry, classes, region, *, spec_position_um: float | None = None
     """
     t0 = time.perf_counter()
     limits = _spec_limits(spec_position_um, spec_phi_arcsec, spec_percentile)
+    if spec_percentile is not None and n_samples < (need := ci_samples(spec_percentile)):
+        raise AllocationError(f"confirming p{spec_percentile:g} needs at least {need} samples (the upper end of "
+                              f"its 95 % interval must lie below the sample's maximum), got {n_samples}")
     geometry, menu, fixed = Geometry.load(geometry), ClassMenu.load(classes), _fixed(budget)
     poses = region_poses(region, grid, phi_deg)
     problem = Problem(geometry, menu, poses, k_sigma=k_sigma, percentile=spec_percentile, fixed=fixed)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -32,7 +33,7 @@ from .._result import freeze, pose_columns, short_repr
 from ..units import OUTPUT_UNITS, POSE_OUTPUTS, RAD2DEG, Z95, z_value
 from .._version import __version__
 from .budget import Budget
-from ..errors import BudgetError
+from ..errors import BudgetError, Prp3mcWarning
 from ..kinematics.chain import inverse_kinematics
 from ..kinematics.exact import exact_pose_error
 from ..kinematics.geometry import Geometry
@@ -41,11 +42,14 @@ from ._stream import Stream, pilot_fraction, select_order_statistics
 from .model import LinearModel, linear_model
 from ..progress import Progress
 
-__all__ = ["MonteCarloResult", "monte_carlo", "PERCENTILES"]
+__all__ = ["MonteCarloResult", "monte_carlo", "PERCENTILES", "ci_samples", "MIN_SAMPLES"]
 
 #: Percentiles reported by default (p99.73 is the 3-sigma level of a normal law).
 PERCENTILES = (50.0, 95.0, 99.0, 99.73)
-_N_BATCHES = 64
+_N_BATCHES = 64  # batches of the batch-means standard errors: 64, or fewer of _MIN_BATCH samples
+_MIN_BATCH = 16
+#: The fewest samples of a Monte Carlo run: two batches, the fewest that give a standard error.
+MIN_SAMPLES = 2 * _MIN_BATCH
 _PILOT_MIN = 1 << 15  # fewest pilot samples placing the selection windows (see _stream)
 
 
@@ -202,6 +206,27 @@ def _order_ranks(n: int, percentiles) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return h, lo_rank, hi_rank, np.stack([ci_lo, ci_hi], -1)
 
 
+def ci_samples(percentile: float) -> int | None:
+    """The fewest samples whose order statistics hold both ends of the 95 % interval of ``percentile``
+    (the ranks of :func:`_order_ranks`, neither clipped to the sample's extremes); None for the minimum
+    and the maximum, whose intervals no sample bounds. 1419 for p99.73, 381 for p99."""
+    q = float(percentile) / 100.0
+    if not 0.0 < q < 1.0:
+        return None
+    v = Z95 * math.sqrt(q * (1.0 - q))
+    # sqrt(n) at which n q + v sqrt(n) reaches n, and n q - v sqrt(n) reaches 1
+    s = max(v / (1 - q), (v + math.sqrt(v * v + 4 * q)) / (2 * q))
+    n = max(2, int(s * s) - 2)                   # from just below the closed form, the first n that holds
+
+    def bounded(n):
+        half = Z95 * math.sqrt(n * q * (1 - q))
+        return math.ceil(n * q + half) <= n and math.floor(n * q - half) >= 1
+
+    while not bounded(n):
+        n += 1
+    return n
+
+
 def _wilson(k: np.ndarray, n: int, z: float = Z95) -> np.ndarray:
     """Wilson score interval (..., 2) of a proportion k / n at normal quantile ``z``."""
     p = k / n
@@ -253,13 +278,21 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     """
     t0 = time.perf_counter()
     n_samples = int(n_samples)
-    if n_samples < 2:
-        raise BudgetError(f"Monte Carlo needs at least 2 samples, got {n_samples}")
+    if n_samples < MIN_SAMPLES:
+        raise BudgetError(f"Monte Carlo needs at least {MIN_SAMPLES} samples (its standard errors come from "
+                          f"batches of {_MIN_BATCH} or more), got {n_samples}")
+    n_batches = min(_N_BATCHES, n_samples // _MIN_BATCH)
     if tolerance_mm is not None and not (math.isfinite(tolerance_mm) and tolerance_mm >= 0):
         raise BudgetError(f"tolerance must be a finite length >= 0 mm, got {tolerance_mm}")
     pct = tuple(float(p) for p in percentiles)
     if not all(0.0 <= p <= 100.0 for p in pct):
         raise BudgetError(f"percentiles must lie in [0, 100], got {pct}")
+    short = [(p, need) for p in pct if (need := ci_samples(p)) is None or n_samples < need]
+    if short:
+        warnings.warn(Prp3mcWarning(
+            "with " + f"{n_samples} samples the 95 % interval of " + ", ".join(
+                f"p{p:g} ({'no sample count bounds it' if need is None else f'needs {need}'})" for p, need in short)
+            + " reaches the sample's extreme value: it bounds that percentile on one side only"), stacklevel=2)
     seed, _ = resolve_rng(rng)
     model = linear_model(geometry, budget, poses)
     batch_shape = model.poses.shape[:-1]
@@ -272,7 +305,7 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     per_pose = 2 * 4 * 1.3 * n_samples * pilot_fraction(ranks, n_samples, pilot_m) + (16 << 10)
     chunk = max(1, min(n_poses, int(max_chunk_bytes // per_pose)))
     n_threads = workers or cores()
-    stream = Stream(model, budget, seed, n_samples, _N_BATCHES, n_threads)
+    stream = Stream(model, budget, seed, n_samples, n_batches, n_threads)
     n_seg = stream.seg_start.size
     sums = {"S1": np.zeros((n_seg, n_feat)), "S2": np.zeros((n_seg, n_feat, n_feat))}
     C32 = np.zeros((n_poses, 3, padded_features(n_feat)), np.float32)  # the kernels' feature count
@@ -297,16 +330,16 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     cov = np.einsum("pof,fg,pqg->poq", C, mom.cov, C) * np.outer(deg, deg)
     bm = np.einsum("pof,bf->pbo", C, mom.batch_means) * deg
     bc = np.einsum("pof,bfg,pqg->pboq", C, mom.batch_covs, C) * np.outer(deg, deg)
-    mean_se = bm.std(axis=1, ddof=1) / math.sqrt(_N_BATCHES)
-    cov_se = bc.std(axis=1, ddof=1) / math.sqrt(_N_BATCHES)
+    mean_se = bm.std(axis=1, ddof=1) / math.sqrt(n_batches)
+    cov_se = bc.std(axis=1, ddof=1) / math.sqrt(n_batches)
     std = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
     var_se = np.diagonal(cov_se, axis1=-2, axis2=-1)
     std_se = np.divide(var_se, 2 * std, out=np.zeros_like(std), where=std > 0)
 
-    bsum = np.zeros((n_poses, _N_BATCHES))
+    bsum = np.zeros((n_poses, n_batches))
     np.add.at(bsum.T, stream.seg_batch, possum.T)
     pos_mean = bsum.sum(axis=-1) / n_samples
-    pos_mean_se = (bsum / np.diff(stream.batch_edges)).std(axis=-1, ddof=1) / math.sqrt(_N_BATCHES)
+    pos_mean_se = (bsum / np.diff(stream.batch_edges)).std(axis=-1, ddof=1) / math.sqrt(n_batches)
     frac = h - np.floor(h)
     i_lo, i_hi, i_ci = np.searchsorted(ranks, r_lo), np.searchsorted(ranks, r_hi), np.searchsorted(ranks, r_ci)
     scale = np.array([1.0, RAD2DEG])[None, :, None]
