@@ -173,3 +173,10 @@ def test_k_sigma_is_bounded():
     for k in (0.0, -1.0, 1e300, float("nan")):
         with pytest.raises(BudgetError, match="k_sigma must lie in"):
             b.bounds(k)
+
+
+def test_a_discrete_law_of_words_is_refused_in_one_line():
+    with pytest.raises(BudgetError, match="discrete law: values and weights must be numbers"):
+        Discrete(values=["a", 0.01], weights=[0.5, 0.5])
+    with pytest.raises(BudgetError, match="must be numbers"):
+        Budget.from_dict({"inputs": {"b_3": {"law": "discrete", "values": ["a", 0.01], "weights": [0.5, 0.5]}}})

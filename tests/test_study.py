@@ -495,3 +495,13 @@ def test_reference_range_from_zero_has_no_ratio_and_renders(tmp_path):
     assert cmp["ranges"]["delta"]["ratio"][0] is None and cmp["ranges"]["delta"]["ratio"][1] > 0
     write_study(result, tmp_path / "out", workers=1)
     assert "– (paper: 0)" in (tmp_path / "out" / "report.html").read_text()
+
+
+@pytest.mark.parametrize("line, bad", [('name = "small"', 'name = "a/b"'), ('name = "small"', 'name = "x\\u0000y"'),
+                                       ('name = "small"', 'name = ".."'), ('name = "delta"', 'name = ""'),
+                                       ('name = "delta"', 'name = "../../escape"')])
+def test_names_that_name_files_are_checked_up_front(tmp_path, line, bad):
+    """A study's and a configuration's names make file names: a separator, a control character or an
+    empty name is refused at its line before any analysis runs (they failed after it, or with a traceback)."""
+    with pytest.raises(StudyError, match=r"small.toml:\d+: .*name must be a name for files"):
+        Study.load(study_file(tmp_path, SMALL.replace(line, bad)))

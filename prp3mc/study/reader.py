@@ -287,13 +287,13 @@ class _Reader:
         where = ".".join(str(p) if not isinstance(p, int) else f"[{p + 1}]" for p in path).replace(".[", "[")
         checks = {
             "str": lambda v: isinstance(v, str),
+            "name": lambda v: isinstance(v, str) and v.strip(". ") != "" and not re.search(r"[/\\\x00-\x1f]", v),
             "int": lambda v: isinstance(v, int) and not isinstance(v, bool),
             "number": is_number,
-            "table": lambda v: isinstance(v, dict),
-            "list": lambda v: isinstance(v, list),
+            "table": lambda v: isinstance(v, dict), "list": lambda v: isinstance(v, list),
         }
         names = {"str": "a string", "int": "an integer", "number": "a finite number", "table": "a table",
-                 "list": "an array"}
+                 "list": "an array", "name": "a name for files (no '/', '\\' or control characters, not only dots)"}
         if not checks[kind](value):
             self.fail(path, f"{where} must be {names[kind]}, got {value!r}")
         return value
@@ -331,7 +331,7 @@ class _Reader:
     # the document --------------------------------------------------------
     def study(self, doc: dict) -> Study:
         self.unknown(doc, self._TOP, (), "the study")
-        name = self.get(doc, ("name",), "str", self.default_name)
+        name = self.get(doc, ("name",), "name", self.default_name)
         seed = self.get(doc, ("seed",), "int")
         if seed is not None and seed < 0:
             self.fail(("seed",), f"seed must be a non-negative integer, got {seed}")
@@ -414,7 +414,7 @@ class _Reader:
             self.fail(p, f"configuration {k + 1} needs a geometry (preset name or TOML file)")
         geometry = self.load(p + ("geometry",), "geometry", Geometry.load, self.get(c, p + ("geometry",), "str"))
         self.load(p + ("geometry",), "geometry", lambda _: budget.check_geometry(geometry), geometry.name)
-        name = self.get(c, p + ("name",), "str", geometry.name)
+        name = self.get(c, p + ("name",), "name", geometry.name)
         region_spec = c.get("region", geometry.name)
         if isinstance(region_spec, str):
             if region_spec not in REGION_PRESETS:

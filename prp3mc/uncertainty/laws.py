@@ -259,8 +259,12 @@ class Discrete(Law):
     scale_params: ClassVar[tuple[str, ...]] = ("values",)
 
     def __post_init__(self):
-        values = tuple(float(v) for v in self.values)
-        weights = tuple(float(w) for w in self.weights)
+        try:
+            values = tuple(float(v) for v in self.values)
+            weights = tuple(float(w) for w in self.weights)
+        except (TypeError, ValueError):
+            raise BudgetError(f"discrete law: values and weights must be numbers, got values={self.values!r}, "
+                              f"weights={self.weights!r}") from None
         if not values or len(values) != len(weights):
             raise BudgetError("discrete law: values and weights must be non-empty and of equal length")
         if not all(math.isfinite(v) for v in values + weights) or min(weights) < 0 or sum(weights) <= 0:
