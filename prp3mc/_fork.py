@@ -176,6 +176,7 @@ def forked_start(parent: int) -> None:
         with contextlib.suppress(OSError):
             os.close(fd)
     _PIPES.clear()
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)   # a terminate() ends it: the caller's handler is the caller's
 
 
 def _child(fn: Callable, prepare: Callable | None, parent: int, args_fd: int, value_fd: int) -> None:

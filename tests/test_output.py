@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
@@ -268,3 +269,18 @@ def test_every_json_output_goes_through_the_one_writer():
     writers = {str(p.relative_to(package)) for p in package.rglob("*.py")
                if any(call in p.read_text(encoding="utf-8") for call in ("json.dump", ".to_json("))}
     assert writers == {"output.py"}
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGTERM") or os.name != "posix", reason="POSIX signals")
+def test_sigterm_leaves_nothing_behind(tmp_path):
+    """A run ended by SIGTERM (timeout, a batch system) unwinds as after Ctrl-C: no temporary folder, no lock."""
+    proc = subprocess.Popen([sys.executable, "-m", "prp3mc", "study", "paper_reproduction", "--out",
+                             str(tmp_path / "k"), "--no-progress"], stderr=subprocess.PIPE, text=True)
+    lock, end = tmp_path / ".k.lock", time.monotonic() + 60
+    while not lock.exists() and proc.poll() is None and time.monotonic() < end:   # the run holds its folder
+        time.sleep(0.05)
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGTERM)
+    err = proc.communicate(timeout=60)[1]
+    assert proc.returncode == 143 and err.strip().endswith("terminated")
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

@@ -175,6 +175,8 @@ def test_scheduler_errors_are_one_line(tmp_path, capsys, monkeypatch):
     assert parse_scheduler("local:3") == ("local", 3)
     with pytest.raises(Prp3mcError, match="local:N"):
         parse_scheduler("local:0")
+    with pytest.raises(Prp3mcError, match="would start 1000 worker processes"):   # not 1000 Pythons on a laptop
+        parse_scheduler("local:1000")
     assert main(["study", str(path), "--out", str(tmp_path / "o"), "--scheduler", "lan:2"]) != 0
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "tcp://HOST:PORT" in err

@@ -14,6 +14,7 @@ import importlib
 import math
 import os
 import pkgutil
+import signal
 import sys
 import warnings
 
@@ -254,13 +255,22 @@ def _input_files(args: argparse.Namespace) -> list[str]:
     return [v for v in values if isinstance(v, (str, os.PathLike)) and str(v) and os.path.isfile(v)]
 
 
+class _Terminated(KeyboardInterrupt):
+    """A SIGTERM, raised where the run is, so that it unwinds (temporary folders, locks) as after Ctrl-C."""
+
+
+def _terminated(signum, frame):
+    raise _Terminated()
+
+
 def _run(argv: list[str], own_process: bool = False) -> int:
     """Parse ``argv`` and run its command: one line on stderr for any refusal, and the exit status."""
     try:
         args = build_parser(_command_named(argv)).parse_args(argv)
     except SystemExit as exc:  # usage errors (exit 2, one line), --help and --version (exit 0)
         return int(exc.code or 0)
-    if own_process:  # see main()
+    if own_process:  # see main(); a SIGTERM (timeout, a batch system) ends the run as Ctrl-C does: no leftovers
+        signal.signal(signal.SIGTERM, _terminated)
         gc.freeze()
         gc.set_threshold(10_000, *gc.get_threshold()[1:])
     name = f"prp3mc {args.command}"
@@ -287,9 +297,9 @@ def _run(argv: list[str], own_process: bool = False) -> int:
     except MemoryError:
         print(f"{name}: error: out of memory: use fewer samples or poses", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print(f"{name}: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        print(f"{name}: {'terminated' if isinstance(exc, _Terminated) else 'interrupted'}", file=sys.stderr)
+        return 143 if isinstance(exc, _Terminated) else 130
     except BrokenPipeError:
         return 0
     except OSError as exc:  # the file system or the machine, not the request: still one line

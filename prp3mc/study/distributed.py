@@ -25,12 +25,17 @@ import logging
 import re
 from typing import Any, Iterable, Iterator
 
+from .._threads import cores
 from ..errors import Prp3mcError
 
 __all__ = ["DaskExecutor", "parse_scheduler"]
 
 _LOCAL = re.compile(r"^local:([0-9]+)$")
 _ADDRESS = re.compile(r"^(tcp|tls|inproc|ucx|ws|wss)://\S+$")
+
+
+#: Local worker processes per core at most (each holds a Python with numpy, about 0.15 GB).
+_MAX_LOCAL = 4
 
 
 def parse_scheduler(spec: str) -> tuple[str, Any]:
@@ -42,6 +47,9 @@ def parse_scheduler(spec: str) -> tuple[str, Any]:
     ('address', 'tcp://10.0.0.5:8786')
     """
     match = _LOCAL.match(spec)
+    if match and int(match.group(1)) > _MAX_LOCAL * cores():
+        raise Prp3mcError(f"--scheduler {spec} would start {int(match.group(1))} worker processes on {cores()} "
+                          f"cores: at most {_MAX_LOCAL * cores()} (a cluster's address for more)")
     if match and int(match.group(1)) >= 1:
         return "local", int(match.group(1))
     if _ADDRESS.match(spec):
