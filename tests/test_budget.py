@@ -180,3 +180,9 @@ def test_a_discrete_law_of_words_is_refused_in_one_line():
         Discrete(values=["a", 0.01], weights=[0.5, 0.5])
     with pytest.raises(BudgetError, match="must be numbers"):
         Budget.from_dict({"inputs": {"b_3": {"law": "discrete", "values": ["a", 0.01], "weights": [0.5, 0.5]}}})
+
+
+def test_the_disc_law_is_for_clearances_only():
+    with pytest.raises(BudgetError, match="rho_i only"):
+        Budget({"b_3": Disc(0.01)})
+    assert Budget({"rho_1": Disc(0.01), "zeta_1": Uniform(0.0, 360.0)}).inputs["rho_1"] == Disc(0.01)

@@ -58,6 +58,7 @@ def test_any_labels_unequal_repeats_optional_columns(frame, setup):
     (lambda f: f.assign(dir_2=np.where(f.index == 6, 0, f["dir_2"])), "row 7 (line 8), column dir_2: an approach direction must be +1 or -1"),
     (lambda f: f.assign(y_meas=np.where(f.index == 1, f["y_meas"] * 1000, f["y_meas"])), "row 2 (line 3), column y_meas"),
     (lambda f: f.assign(pose_id=np.where(f.index == 0, "", f["pose_id"])), "row 1 (line 2), column pose_id"),
+    (lambda f: f.assign(temp_C=np.where(f.index == 3, 293.15 + 20, 20.0)), "row 4 (line 5), column temp_C: 313.15 degrees C"),
 ])
 def test_bad_campaigns_name_row_and_column(frame, setup, tmp_path, edit, expected):
     path = tmp_path / "bad.csv"

@@ -29,6 +29,7 @@ from .._result import freeze, short_repr
 from ..errors import CampaignError, InputFileError
 from ..kinematics.chain import check_poses, feasible
 from ..kinematics.geometry import Geometry
+from ..uncertainty.systematic import TEMP_LIMITS_C
 
 __all__ = ["Campaign", "read_campaign", "REQUIRED_COLUMNS", "CMD_COLUMNS", "MEAS_COLUMNS", "DIR_COLUMNS",
            "MAX_ERROR", "MIN_POSES", "require_testable", "count_rows"]
@@ -208,6 +209,10 @@ class Campaign:
                     raise CampaignError(f"{where(r, c)}: an approach direction must be +1 or -1, got {d[r]:g}")
                 direction[:, k] = d
         temp = numeric("temp_C") if "temp_C" in frame.columns else None
+        if temp is not None and ((temp < TEMP_LIMITS_C[0]) | (temp > TEMP_LIMITS_C[1])).any():
+            r = int(np.flatnonzero((temp < TEMP_LIMITS_C[0]) | (temp > TEMP_LIMITS_C[1]))[0])
+            raise CampaignError(f"{where(r, 'temp_C')}: {temp[r]:g} degrees C is outside the operating temperatures "
+                                f"[{TEMP_LIMITS_C[0]:g}, {TEMP_LIMITS_C[1]:g}] (degrees C, not K or F?)")
 
         labels, first, index = np.unique(pose_id, return_index=True, return_inverse=True)
         order = np.argsort(first)                        # poses in order of first appearance

@@ -110,6 +110,8 @@ class Budget:
                 raise BudgetError(f"input {key!r}: expected a law, got {law!r}")
             if family == "rho" and law.support[0] < 0:
                 raise BudgetError(f"input {key!r}: a clearance cannot be negative (law support {law.support})")
+            if law.kind == "disc" and family != "rho":
+                raise BudgetError(f"input {key!r}: the disc law is the radial size of a clearance, rho_i only")
             unit = input_unit(key)
             lo, hi = law.span()
             if not max(abs(lo), abs(hi)) <= SANITY_LIMITS[unit]:
