@@ -231,6 +231,16 @@ def test_linearity_guard_sees_the_effects(geometry, region):
         check_linearity(geometry, large, poses)
 
 
+def test_an_output_the_budget_does_not_move_is_not_judged_on_round_off(geometry, region):
+    """Equal slider offsets on every leg translate the platform: its linear |dphi| is round-off (1e-19 rad)
+    and the exact chain's too (5e-16): their ratio is no departure (it was reported as 1.3e5 %)."""
+    from prp3mc import Budget, Uniform
+    from prp3mc.uncertainty.validity import linearity_departure
+    offsets = Budget({f"b_{i}": Uniform(0.01, 0.01) for i in (1, 2, 3)})
+    poses = random_poses(region, 3, np.random.default_rng(8), phi_deg=(0.0, 0.0))
+    assert linearity_departure(geometry, offsets, poses) < 0.01
+
+
 def test_monte_carlo_exact_check_includes_the_effects(geometry):
     pose = [10.0, 100.0, 1.0] if geometry.name == "u-shape" else [10.0, 160.0, 1.0]
     budget = small_budget(geometry)

@@ -38,6 +38,11 @@ def _probe_inputs(budget: Budget, n_samples: int) -> np.ndarray:
     return budget.ppf(u)
 
 
+#: Linear errors below this (mm, rad) are round-off, not errors: an output that small (say the |dphi| of
+#: equal slider offsets, 1e-19 rad) is not compared with the exact chain's own round-off (5e-16 rad).
+_ROUND_OFF = 1e-12
+
+
 def linearity_departure(geometry: Geometry, budget: Budget, poses, *, n_poses: int = 3,
                         n_samples: int = 32) -> float:
     """Largest relative departure of the linear model from the exact chain at probe poses.
@@ -76,7 +81,7 @@ def linearity_departure(geometry: Geometry, budget: Budget, poses, *, n_poses: i
     for diff, size in ((np.hypot(*(exact - linear)[..., :2].transpose(2, 0, 1)), np.hypot(linear[..., 0], linear[..., 1])),
                        (np.abs(exact - linear)[..., 2], np.abs(linear[..., 2]))):
         scale = size.max(axis=-1)
-        ok = scale > 0
+        ok = scale > _ROUND_OFF
         if ok.any():
             worst = max(worst, float((diff.max(axis=-1)[ok] / scale[ok]).max()))
     return worst
