@@ -204,6 +204,7 @@ CASES = [
     _case("montecarlo", *G, *B, *P, "--progress", "--no-progress", status=2, message="not allowed with"),
     _case("montecarlo", *G, *B, "--pose", "0", "300", "0", "--json", message="stroke"),
     # ----------------------------------------------------------- sobol
+    _case("sobol", *G, *B, *P, "--samples", "256", "--group", "a=rho_1", "--group", "a=zeta_1", message="names a group twice"),
     _case("sobol", *G, *B, *P, "--samples", "1000", message="power of two"),
     _case("sobol", *G, *B, *P, "--samples", str(2**40), message="of memory, this machine has"),
     _case("sobol", *G, *B, *P, "--samples", "256", "--resamples", "0", status=2, message="positive integer"),

@@ -74,7 +74,10 @@ class SobolCommand:
     @staticmethod
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
-        groups = dict(_group(text) for text in args.group)
+        pairs = [_group(text) for text in args.group]
+        if len({name for name, _ in pairs}) < len(pairs):
+            raise BudgetError(f"--group names a group twice: {', '.join(name for name, _ in pairs)}")
+        groups = dict(pairs)
         d = len(budget.factors)
         within_limits(args, sobol_estimate(args.samples, 1, d, d + len(budget.groups) + len(groups),
                                            len(OUTPUTS), args.resamples, salib=args.method != "vectorised"))
