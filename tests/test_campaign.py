@@ -1,5 +1,7 @@
 """Campaign files (SPEC §4): validation with row/column messages, round trip, and the simulator."""
 
+import warnings
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -10,7 +12,7 @@ from prp3mc.measurement.campaign import Campaign, count_rows, read_campaign
 from prp3mc.measurement.prediction import predict
 from prp3mc.measurement.simulate import SETTLE_S, SLIDER_SPEED_MM_S, simulate_campaign
 from prp3mc.measurement.effects import EFFECT_NAMES, effect, library
-from prp3mc.errors import BudgetError, InputFileError
+from prp3mc.errors import BudgetError, InputFileError, Prp3mcWarning
 
 
 @pytest.fixture(scope="module")
@@ -263,3 +265,16 @@ def test_rows_are_counted_without_reading_the_file(tmp_path):
     assert count_rows(tmp_path / "h.csv") == count_rows(tmp_path / "e.csv") == 0
     with pytest.raises(InputFileError, match="does not exist"):
         count_rows(tmp_path / "none.csv")
+
+
+def test_rows_repeated_with_their_time_are_said(frame, setup, tmp_path):
+    """A campaign pasted twice (the same time_s and readings) is read, with a warning naming the rows."""
+    path = tmp_path / "twice.csv"
+    stamped = frame.assign(time_s=np.arange(len(frame), dtype=float))
+    pd.concat([stamped, stamped]).to_csv(path, index=False)
+    with pytest.warns(Prp3mcWarning, match=rf"rows {len(frame) + 1}, .*pasted twice"):
+        assert len(read_campaign(path, setup[0]).to_frame()) == 2 * len(frame)
+    stamped.to_csv(path, index=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", Prp3mcWarning)
+        read_campaign(path, setup[0])

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import csv
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -26,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from .._result import freeze, short_repr
-from ..errors import CampaignError, InputFileError
+from ..errors import CampaignError, InputFileError, Prp3mcWarning
 from ..kinematics.chain import check_poses, feasible
 from ..kinematics.geometry import Geometry
 from ..uncertainty.systematic import TEMP_LIMITS_C
@@ -173,6 +174,11 @@ class Campaign:
                                 f"(a campaign needs {', '.join(REQUIRED_COLUMNS)})")
         if len(frame) == 0:
             raise CampaignError(f"{source}: the campaign has no rows")
+        repeated = frame.duplicated().to_numpy()
+        if "time_s" in frame.columns and repeated.any():   # the same time and readings twice: pasted, not measured
+            warnings.warn(f"{where(np.flatnonzero(repeated), 'time_s')}: the same time and values as an earlier "
+                          f"row ({int(repeated.sum())} such rows; a campaign pasted twice?): they count as "
+                          "measurements", Prp3mcWarning, stacklevel=2)
         ids = frame["pose_id"]
         blank = ids.isna() | (ids.astype(str).str.strip() == "")
         if blank.any():
