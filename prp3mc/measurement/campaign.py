@@ -215,8 +215,9 @@ class Campaign:
                     raise CampaignError(f"{where(r, c)}: an approach direction must be +1 or -1, got {d[r]:g}")
                 direction[:, k] = d
         temp = numeric("temp_C") if "temp_C" in frame.columns else None
-        if temp is not None and ((temp < TEMP_LIMITS_C[0]) | (temp > TEMP_LIMITS_C[1])).any():
-            r = int(np.flatnonzero((temp < TEMP_LIMITS_C[0]) | (temp > TEMP_LIMITS_C[1]))[0])
+        hot_or_cold = np.zeros(0) if temp is None else (temp < TEMP_LIMITS_C[0]) | (temp > TEMP_LIMITS_C[1])
+        if hot_or_cold.any():
+            r = int(np.flatnonzero(hot_or_cold)[0])
             raise CampaignError(f"{where(r, 'temp_C')}: {temp[r]:g} degrees C is outside the operating temperatures "
                                 f"[{TEMP_LIMITS_C[0]:g}, {TEMP_LIMITS_C[1]:g}] (degrees C, not K or F?)")
 

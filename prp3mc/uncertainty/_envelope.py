@@ -125,9 +125,12 @@ def term_table(budget: Budget, bounds: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def zonotope_scratch(n_gen, size):
-    """Scratch arrays of :func:`zonotope_maxima` for ``n_gen`` generators and ``size`` poses."""
-    return (np.empty(size), np.empty(size), np.empty(size), np.empty(size, np.int64), np.empty((n_gen - 3, size)),
-            np.empty((n_gen - 3, size)))
+    """Scratch arrays of :func:`zonotope_maxima` for ``n_gen`` generators and ``size`` poses (two allocations:
+    its float rows are slices of one)."""
+    G = n_gen - 3
+    f = np.empty((3 + 2 * G) * size)
+    return (f[:size], f[size:2 * size], f[2 * size:3 * size], np.empty(size, np.int64),
+            f[3 * size:(3 + G) * size].reshape((G, size)), f[(3 + G) * size:].reshape((G, size)))
 
 
 @njit(inline="always")
@@ -284,22 +287,21 @@ def _range(start, stop, poses, legc, terms, check, values, codes, bad):
     """The envelope at poses ``start:stop``, block by block, with scratch rows allocated once; the poses refused.
 
     Each quantity of a block is a row of BLOCK values at a constant offset of one float
-    array (one allocation: a small call pays for each), so every step is a loop over
+    array (few allocations: a small call pays for each), so every step is a loop over
     a row that vectorises.
     """
     G = 0
     for k in range(terms.shape[0]):
         G += terms[k, 1] < 0
     B = BLOCK
-    f = np.empty((73 + 5 * G) * B)
+    f = np.empty((70 + 3 * G) * B)
     cs = f[:4 * B]                  # cos, sin of phi; x, y
     A = f[4 * B:13 * B]             # A[i, c] in row 3 i + c
     hb = f[13 * B:55 * B]           # per leg i, rows 14 i + (b, d, the h entries of the ten families, cos, sin omega)
     Ai = f[55 * B:64 * B]           # A^-1[r, c] in row 3 r + c
     um, uh = f[64 * B:67 * B].reshape((3, B)), f[67 * B:70 * B].reshape((3, B))  # centre, half-width of u on the legs
-    ext = f[73 * B:(73 + 3 * G) * B].reshape((G, 3, B))                         # further generators: terms of all legs
-    zs = (f[70 * B:71 * B], f[71 * B:72 * B], f[72 * B:73 * B], np.empty(B, np.int64),   # as zonotope_scratch
-          f[(73 + 3 * G) * B:(73 + 4 * G) * B].reshape((G, B)), f[(73 + 4 * G) * B:].reshape((G, B)))
+    ext = f[70 * B:].reshape((G, 3, B))                                         # further generators: terms of all legs
+    zs = zonotope_scratch(3 + G, B)
     refused = 0
     for b0 in range(start, stop, BLOCK):
         b1 = min(stop, b0 + BLOCK)

@@ -200,10 +200,13 @@ def _order_ranks(n: int, percentiles) -> tuple[np.ndarray, np.ndarray, np.ndarra
     h = q * (n - 1)
     lo_rank = np.floor(h).astype(int)
     hi_rank = np.minimum(lo_rank + 1, n - 1)
+    return h, lo_rank, hi_rank, np.clip(_ci_ranks(n, q), 0, n - 1)
+
+
+def _ci_ranks(n: int, q) -> np.ndarray:
+    """Ranks (0-based, not clipped to 0 .. n - 1) of the ends of the 95 % intervals (..., 2) of quantiles ``q``."""
     half = Z95 * np.sqrt(n * q * (1 - q))
-    ci_lo = np.clip(np.floor(n * q - half).astype(int) - 1, 0, n - 1)
-    ci_hi = np.clip(np.ceil(n * q + half).astype(int) - 1, 0, n - 1)
-    return h, lo_rank, hi_rank, np.stack([ci_lo, ci_hi], -1)
+    return np.stack([np.floor(n * q - half).astype(int) - 1, np.ceil(n * q + half).astype(int) - 1], -1)
 
 
 def ci_samples(percentile: float) -> int | None:
@@ -217,12 +220,7 @@ def ci_samples(percentile: float) -> int | None:
     # sqrt(n) at which n q + v sqrt(n) reaches n, and n q - v sqrt(n) reaches 1
     s = max(v / (1 - q), (v + math.sqrt(v * v + 4 * q)) / (2 * q))
     n = max(2, int(s * s) - 2)                   # from just below the closed form, the first n that holds
-
-    def bounded(n):
-        half = Z95 * math.sqrt(n * q * (1 - q))
-        return math.ceil(n * q + half) <= n and math.floor(n * q - half) >= 1
-
-    while not bounded(n):
+    while not (0 <= (ranks := _ci_ranks(n, q))[0] and ranks[1] <= n - 1):
         n += 1
     return n
 
