@@ -266,7 +266,7 @@ def scan_blocks(k0, k1, n, lanes, consts, codes, params, cdf, values, ops, refs,
     fused = Fext.shape[0] == 0
     d = codes.size
     U, X = np.empty((d, T)), np.empty((d, T))
-    F, FT = np.zeros((nP + nF % 2, T)), np.empty((nP, T), np.float32)  # rows from nF on stay zero
+    F, FT = np.zeros((nP, T)), np.zeros((nP, T), np.float32)  # rows from nF on stay zero (nP is even)
     pos_t, phi_t = np.empty(T, np.float32), np.empty(T, np.float32)
     flag = np.zeros(T, np.uint8)
     for k in range(k0, k1):
@@ -281,7 +281,7 @@ def scan_blocks(k0, k1, n, lanes, consts, codes, params, cdf, values, ops, refs,
                 for f in range(nF):
                     for s in range(m):
                         F[f, s] = Fext[t0 + s, f]
-            for f in range(nP):
+            for f in range(nF):
                 for s in range(m):
                     FT[f, s] = F[f, s]
             if sums:
