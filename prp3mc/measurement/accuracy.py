@@ -104,18 +104,18 @@ def predicted_accuracy(geometry: Geometry, budget: Budget, model: UpdatedModel, 
     figures: list = []                       # (what the analyses read of a model, its figures)
     for label, (g, b) in pairs.items():
         key = _content(g, b)
-        known = [f for k, f in figures if k == key]     # models that differ in names only: computed once
-        if not known:
+        known = next((f for k, f in figures if k == key), None)   # models that differ in names only: once
+        if known is None:
             wc = worst_case(g, b, poses)     # the numpy path: at 49 poses it beats loading the fused kernel
             mc = monte_carlo(g, b, poses, n_samples, rng=mc_seed, percentiles=(95.0, 99.0), progress=False,
                              workers=1)
-            known = [{"worst_case_position_mm": float(wc.position_mm.max()),
-                      "worst_case_phi_deg": float(wc.phi_deg.max()),
-                      "p95_position_mm": float(mc.position_pct[:, 0].max()),
-                      "p99_position_mm": float(mc.position_pct[:, 1].max()),
-                      "p95_phi_deg": float(mc.phi_pct[:, 0].max()), "p99_phi_deg": float(mc.phi_pct[:, 1].max())}]
-            figures.append((key, known[0]))
-        out[label] = {"geometry": g.name, "budget": b.name, **known[0]}
+            known = {"worst_case_position_mm": float(wc.position_mm.max()),
+                     "worst_case_phi_deg": float(wc.phi_deg.max()),
+                     "p95_position_mm": float(mc.position_pct[:, 0].max()),
+                     "p99_position_mm": float(mc.position_pct[:, 1].max()),
+                     "p95_phi_deg": float(mc.phi_pct[:, 0].max()), "p99_phi_deg": float(mc.phi_pct[:, 1].max())}
+            figures.append((key, known))
+        out[label] = {"geometry": g.name, "budget": b.name, **known}
     return out
 
 

@@ -309,11 +309,7 @@ _CAPTIONS = {
 
 def _report_figure(name: str, result: DiscrepancyResult):
     """Figure ``name`` of the report on its own Agg canvas, with its fixed margins (rendered once where saved)."""
-    draw, size = _FIGURES[name]
-    fig = agg_figure(size(result), _MARGINS[name], dpi=DPI)
-    draw(result, fig)
-    lighten(fig)
-    return fig
+    return _plot(name, result, agg_figure(_FIGURES[name][1](result), _MARGINS[name], dpi=DPI))
 
 
 def _table(frame) -> str:
@@ -407,8 +403,8 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
         The warnings a command gave (see :func:`report_document`); the report shows them.
     workers : int, optional
         Processes drawing the figures (:func:`prp3mc.reports._render.rendering`;
-        default one per core while a core is idle, where the system can fork;
-        1 draws them here). The files are the same either way.
+        default :func:`prp3mc._fork.fork_workers`: 1 plus the idle cores, where the
+        system can fork; 1 draws them here). The files are the same either way.
     ahead : Background, optional
         A process readied for the figures while the analysis ran
         (:func:`prp3mc.reports._render.drawing_ahead`); it draws them.

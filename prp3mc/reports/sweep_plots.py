@@ -73,11 +73,9 @@ def merit_plot(frame: pd.DataFrame, parameter: str, merit: tuple[str, str, str],
     matplotlib.figure.Figure
     """
     ax = _axes(ax)
-    rows = frame[(frame["analysis"] == merit[0]) & (frame["output"] == merit[1])
-                 & (frame["statistic"] == merit[2])].reset_index(drop=True)
-    label, factor = _merit_label(*merit)
+    rows, y = _merit_values(frame, merit)
+    label = _merit_label(*merit)[0]
     x, ticks = _positions(rows[parameter])
-    y = factor * rows["value"].to_numpy(dtype=float)
     if merit[2] == "ST_top":  # colour the dots by the input with the largest ST
         for k, name in enumerate(sorted(set(rows["input"]))):
             sel = (rows["input"] == name).to_numpy()
@@ -137,12 +135,18 @@ def design_space_figure(frame: pd.DataFrame, *, best: list | None = None, fig=No
     return fig
 
 
+def _merit_values(frame: pd.DataFrame, merit) -> tuple[pd.DataFrame, np.ndarray]:
+    """The rows of ``frame`` of figure of merit ``merit`` (analysis, output, statistic) and their values as plotted."""
+    rows = frame[(frame["analysis"] == merit[0]) & (frame["output"] == merit[1])
+                 & (frame["statistic"] == merit[2])].reset_index(drop=True)
+    return rows, _merit_label(*merit)[1] * rows["value"].to_numpy(dtype=float)
+
+
 def _tick_room(frame: pd.DataFrame, rows) -> float:
     """Width (inches) of the widest y tick label of the merits' rows: each row's values with matplotlib's 5 % margins."""
     widths = []
     for merit in rows:
-        sel = (frame["analysis"] == merit[0]) & (frame["output"] == merit[1]) & (frame["statistic"] == merit[2])
-        values = _merit_label(*merit)[1] * frame.loc[sel, "value"].to_numpy(dtype=float)
+        values = _merit_values(frame, merit)[1]
         if len(values) and np.isfinite(values).any():
             lo, hi = float(np.nanmin(values)), float(np.nanmax(values))
             widths.append(tick_width(lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo)))
