@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import special
 
-__all__ = ["chi2_sf", "chi2_isf", "chi2_ppf", "chi2_logsf", "chi2_logcdf", "norm_logsf", "bh_adjusted"]
+__all__ = ["chi2_sf", "chi2_isf", "chi2_ppf", "chi2_logsf", "chi2_logcdf", "norm_logsf", "bh_adjusted", "chi2_equivalent"]
 
 
 def _tail(x, df, kernel, below: float, above: float):
@@ -118,3 +118,34 @@ def bh_adjusted(p) -> np.ndarray:
     out = np.empty_like(q)
     out[order] = q
     return np.clip(out, 0.0, 1.0)
+
+
+def chi2_equivalent(x, df, k=1):
+    """The chi2(``k``) value with the upper tail of chi2(``df``) at ``x``: ``chi2.isf(chi2.sf(x, df), k)``.
+
+    Puts likelihood ratios with different degrees of freedom on one scale (a
+    two-parameter effect's LR on that of one-parameter effects) with their
+    p-values kept. Far in the tail, where the p-value underflows, the
+    chi-square tails' leading terms ``-x/2 + (df/2 - 1) log(x/2) - lgamma(df/2)``
+    are equated instead (monotone in ``x``). Identity when ``df == k``.
+    """
+    x, df, k = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(df, dtype=np.float64),
+                                   np.asarray(k, dtype=np.float64))
+    out = np.array(x, dtype=np.float64, copy=True)
+    todo = (df != k) & (x > 0)
+    if todo.any():
+        xs, d, kk = x[todo], df[todo], k[todo]
+        logp = np.asarray(chi2_logsf(xs, d), dtype=np.float64)
+        y = np.empty_like(xs)
+        near = logp > -600.0
+        y[near] = special.chdtri(kk[near], np.exp(logp[near]))
+        far = ~near
+        if far.any():
+            target = (-xs[far] / 2 + (d[far] / 2 - 1) * np.log(xs[far] / 2) - special.gammaln(d[far] / 2)
+                      + special.gammaln(kk[far] / 2))
+            yf = xs[far].copy()
+            for _ in range(4):                       # y = -2 target + (k - 2) log(y / 2), a contraction here
+                yf = -2.0 * target + (kk[far] - 2.0) * np.log(yf / 2.0)
+            y[far] = yf
+        out[todo] = y
+    return out[()] if out.ndim == 0 else out

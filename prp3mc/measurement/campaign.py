@@ -327,19 +327,18 @@ def _check_header(path: Path) -> None:
 def require_testable(campaign: Campaign) -> Campaign:
     """Refuse a campaign too small for the discrepancy workflow to test anything.
 
-    It needs at least :data:`MIN_POSES` distinct poses and at least one pose
-    measured twice (the dispersion channel compares repeats).
+    It needs at least :data:`MIN_POSES` distinct poses. A campaign that
+    measures no pose twice is accepted: its systematic channels are tested,
+    its dispersion channels (which compare repeats) are not.
 
     Raises
     ------
     CampaignError
         One line saying what the campaign has and what it would need.
     """
-    repeated = int(np.sum(campaign.repeats >= 2))
-    if campaign.n_poses < MIN_POSES or repeated == 0:
+    if campaign.n_poses < MIN_POSES:
         raise CampaignError(
             f"{campaign.source}: too small to test anything: {campaign.n_measurements} measurement(s) of "
-            f"{campaign.n_poses} pose(s), {repeated} of them repeated; the discrepancy workflow needs at least "
-            f"{MIN_POSES} distinct poses (one is held out, the registration takes 3 degrees of freedom) and at least "
-            "one pose measured twice (the dispersion test compares repeats)")
+            f"{campaign.n_poses} pose(s); the discrepancy workflow needs at least {MIN_POSES} distinct poses (one is "
+            "held out, the registration takes 3 degrees of freedom)")
     return campaign

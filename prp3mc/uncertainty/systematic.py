@@ -66,7 +66,7 @@ from .laws import Discrete, Law, Uniform
 __all__ = ["Effect", "EFFECT_NAMES", "OFFSET_FAMILIES", "SPREAD_FAMILIES", "T_REF_C", "effect",
            "slider_error", "offset_errors", "SystematicEffect", "effects_from_dict", "EFFECT_LIMITS",
            "effect_factors", "FittedOn", "FIT_TOLERANCE", "phasor", "amplitude_phase", "components",
-           "check_leads"]
+           "check_leads", "effect_value"]
 
 #: Parameters whose constant offset is a library effect (``b``: encoder zero offset).
 OFFSET_FAMILIES = ("a", "alpha", "beta", "gamma", "theta", "c", "e", "psi", "b")
@@ -165,6 +165,32 @@ def phasor(amplitude_mm: float, phase_deg: float) -> complex:
 def amplitude_phase(z: complex) -> tuple[float, float]:
     """Amplitude (mm) and phase (deg, in [0, 360)) of a cyclic error's phasor ``z``."""
     return float(abs(z)), float(np.rad2deg(np.angle(z)) % 360.0)
+
+
+def effect_value(name: str, value) -> float | complex:
+    """An effect's value as ``{name: value}`` tables take it: a float, or a cyclic error's phasor (mm).
+
+    A cyclic error may be given as its phasor (complex), its amplitude (phase
+    0) or the pair ``(amplitude_mm, phase_deg)``.
+
+    Raises
+    ------
+    BudgetError
+        A value that is not a finite number (or such a pair).
+    """
+    eff = effect(name)
+    try:
+        if eff.kind == "cyclic" and isinstance(value, (tuple, list)):
+            amplitude, phase = (float(v) for v in value)
+            out = phasor(amplitude, phase)
+        else:
+            out = complex(value) if eff.kind == "cyclic" else float(value)
+    except (TypeError, ValueError):
+        form = "a phasor, an amplitude or (amplitude_mm, phase_deg)" if eff.kind == "cyclic" else "a number"
+        raise BudgetError(f"effect {name!r} takes {form}, got {value!r}") from None
+    if not np.isfinite(out):
+        raise BudgetError(f"effect {name!r}: value must be finite, got {value!r}")
+    return out
 
 
 def components(effects, values) -> np.ndarray:
