@@ -52,14 +52,13 @@ def cyclic_error(leg: int, amplitude_mm: float, lead_mm: float = LEAD_MM, phase_
     return fn
 
 
-def bowed_rail(geometry, leg: int, end_mm: float):
-    """A ``slider_error_fn``: slider ``leg`` (1-3) off by ``end_mm`` (2 (b - mid) / stroke)^2, quadratic in b
-    (0 at the stroke's middle, ``end_mm`` at its ends). First-order equivalents: ``b_i`` and ``scale_i``."""
-    lo, hi = geometry.stroke[leg - 1]
-
+def bowed_rail(leg: int, end_mm: float, b_lo: float, b_hi: float):
+    """A ``slider_error_fn``: slider ``leg`` (1-3) off by ``end_mm (2 (b - mid) / (b_hi - b_lo))^2``, quadratic
+    in b (0 at the middle of [b_lo, b_hi], ``end_mm`` at its ends: give the campaign's range of b).
+    First-order equivalents: ``b_i`` and ``scale_i``."""
     def fn(cmd, b, direction, temp):
         out = np.zeros_like(b)
-        out[:, leg - 1] = end_mm * (2 * (b[:, leg - 1] - 0.5 * (lo + hi)) / (hi - lo)) ** 2
+        out[:, leg - 1] = end_mm * (2 * (b[:, leg - 1] - 0.5 * (b_lo + b_hi)) / (b_hi - b_lo)) ** 2
         return out
     return fn
 

@@ -507,12 +507,31 @@ class Engine:
                 "ci": amplitude_interval(c, V, level), "cov": V}
 
     def nuisances(self, fit: Fit, level: float = 0.95) -> dict:
-        """The nuisances of ``fit``, name -> ``{value, unit, ci95}`` (Wald intervals at ``level``)."""
+        """The nuisances of ``fit``, name -> ``{value, unit, ci95}`` at ``level``.
+
+        Wald intervals of the generalized least squares, widened by the
+        uncertainty of the spread factors: a spread scales its input's mean
+        too (a one-sided encoder law's mean moves with its bound), which the
+        registration partly takes up. Each factor's standard error on the log
+        scale (from its profile interval) times the nuisances' derivative in
+        it (central difference over that standard error) adds in quadrature.
+        """
+        var = np.clip(np.diagonal(fit.theta_cov)[:len(fit.nuis)], 0.0, None).copy()
+        for name, f in fit.factors.items():
+            lo, hi = self.spread_interval(fit, name)
+            se = (np.log(hi) - np.log(lo)) / (2.0 * z_value(0.95))
+            if not se > 0:
+                continue
+            ends = [self.fit(fit.sys, {**fit.factors, name: f * np.exp(d)}, fit.r, fit.nuis).theta[:len(fit.nuis)]
+                    for d in (se, -se)]
+            var += (0.5 * (ends[0] - ends[1])) ** 2
+        half = z_value(level) * np.sqrt(var)
         out = {}
         for j, col in enumerate(fit.nuis):
-            value, ci = self.wald(fit, j, level)
             name = NUISANCE_NAMES[col]
-            out[name] = {"value": value, "unit": NUISANCE_UNITS[name], "ci95": list(ci)}
+            value = float(fit.theta[j])
+            out[name] = {"value": value, "unit": NUISANCE_UNITS[name],
+                         "ci95": [value - float(half[j]), value + float(half[j])]}
         return out
 
     def estimate(self, fit: Fit, name: str, level: float = 0.95) -> tuple[float, tuple[float, float]]:

@@ -80,7 +80,10 @@ class UpdatedModel:
         One per effect of the model (named by this campaign or carried over):
         ``name, kind, value, unit, ci95, named`` (by this campaign),
         ``compensable`` and ``how`` (compensable: how a controller does it,
-        and ``residual95``, the interval less the value) or ``why`` (not).
+        and ``residual95``, the interval less the value) or ``why`` (not);
+        ``phase_deg`` for a cyclic error, and ``aliases`` (each one's value,
+        unit and interval) for a named effect the campaign cannot tell from
+        others: the files hold the named one.
     """
 
     geometry: Geometry
@@ -141,6 +144,15 @@ def _compensable(kind: str, temperature_sensor: bool, approach_known: bool) -> t
     return True, COMPENSATION[kind]
 
 
+def _aliases(named) -> dict:
+    """``{"aliases": {name: {value, unit, ci95}}}`` of a named effect the campaign cannot tell from others (the
+    model files hold the named one), or ``{}``."""
+    if named is None or not named.aliases:
+        return {}
+    fits = named.evidence["alias_fits"]
+    return {"aliases": {a: {k: fits[a][k] for k in ("value", "unit", "ci95")} for a in named.aliases}}
+
+
 def updated_model(geometry: Geometry, budget: Budget, named_effects, campaign: Campaign, *,
                   temperature_sensor: bool = True, approach_known: bool = True) -> UpdatedModel:
     """The updated model of a discrepancy analysis (see the module notes).
@@ -199,7 +211,8 @@ def updated_model(geometry: Geometry, budget: Budget, named_effects, campaign: C
         if not effect(e.name).systematic:
             ok, text = _compensable("spread", temperature_sensor, approach_known)
             entries.append({"name": e.name, "kind": "spread", "value": e.value, "unit": e.unit,
-                            "ci95": list(e.ci95), "named": True, "compensable": ok, "why": text})
+                            "ci95": list(e.ci95), "named": True, "compensable": ok, "why": text,
+                            **_aliases(e)})
     for key, eff in updated.effects.items():
         kind = eff.effect.kind
         ok, text = _compensable(kind, temperature_sensor, approach_known)
@@ -207,6 +220,7 @@ def updated_model(geometry: Geometry, budget: Budget, named_effects, campaign: C
                  "ci95": None if eff.ci95 is None else list(eff.ci95), "named": key in named, "compensable": ok}
         if eff.phase_deg is not None:
             entry["phase_deg"] = eff.phase_deg
+        entry.update(_aliases(next((e for e in named_effects if e.name == key), None)))
         if ok:
             entry.update(how=text, residual95=None if eff.ci95 is None else [eff.ci95[0] - eff.value,
                                                                              eff.ci95[1] - eff.value])
