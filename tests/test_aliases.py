@@ -89,11 +89,11 @@ def test_a_named_encoder_spread_is_one_sided_in_the_model_files(tmp_path):
                                                        ("u-shape", True, {"spread_b_3": 0.0625}),
                                                        ("delta-shape", False, {"beta_2": 0.05})])
 def test_registration_coverage_under_aliases(preset, vary_phi, hidden):
-    """Over 12 seeds every registration component within its interval in at least 10 (three components of
-    one campaign are correlated: binomial slack on campaigns, 95 % nominal per component)."""
+    """Over 12 seeds, the registration's three components within their intervals in at least 30 of 36 (95 %
+    nominal per component: 34.2 expected; the slack allows for the components of one campaign being correlated)."""
     covered = 0
     for seed in range(12):
         r = run(preset, vary_phi, 200 + seed, hidden)
-        covered += all(n["ci95"][0] <= REGISTRATION[k] <= n["ci95"][1]
+        covered += sum(n["ci95"][0] <= REGISTRATION[k] <= n["ci95"][1]
                        for k, n in enumerate(x for x in r.nuisance if x["name"].startswith("registration")))
-    assert covered >= 10, covered
+    assert covered >= 30, covered

@@ -6,6 +6,13 @@ phi_meas``, a ``pose_id`` shared by the repeats of one commanded pose, and
 optionally the approach direction ``dir_1, dir_2, dir_3`` (+-1) of each
 actuator and the temperature ``temp_C``. Other columns are kept and ignored.
 
+Repeats are optional. A campaign that visits every pose once (a laser
+tracker's sweep) is enough for the systematic channels of the discrepancy
+workflow; repeats buy its dispersion channels (spreads, the repeatable
+fraction, the repeat scatter), which compare the visits of a pose. The
+workflow needs at least :data:`MIN_POSES` distinct poses
+(:func:`require_testable`).
+
 Reading refuses, with the row and the column in the message, anything it
 would otherwise have to guess: missing columns, empty or non-numeric cells,
 repeats of one ``pose_id`` with different commands, directions other than

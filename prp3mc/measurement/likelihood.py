@@ -392,14 +392,12 @@ class Engine:
         the share is ``|rest|^2 / |A|^2``, for a block the smallest generalized
         eigenvalue of ``(rest' rest, A' A)``.
         """
-        out = np.empty(len(self.blocks))
-        for j, cols in enumerate(self.blocks):
-            a, r = A[:, cols], rest[:, cols]
-            total = a.T @ a
-            if len(cols) == 1:
-                out[j] = (r[:, 0] @ r[:, 0]) / total[0, 0] if total[0, 0] > 0 else 0.0
-                continue
-            w, U = np.linalg.eigh(total)
+        first = np.array([cols[0] for cols in self.blocks], dtype=int)
+        total, kept = np.sum(A[:, first] ** 2, axis=0), np.sum(rest[:, first] ** 2, axis=0)
+        out = np.where(total > 0, kept / np.where(total > 0, total, 1.0), 0.0)
+        for j in (j for j, cols in enumerate(self.blocks) if len(cols) > 1):
+            a, r = A[:, self.blocks[j]], rest[:, self.blocks[j]]
+            w, U = np.linalg.eigh(a.T @ a)
             if not w[0] > 1e-300:
                 out[j] = 0.0
                 continue

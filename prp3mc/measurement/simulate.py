@@ -9,7 +9,7 @@ hidden effects of the library (:mod:`prp3mc.measurement.effects`), several at
 once if wanted.
 
 Randomness (one seed, recorded in ``metadata["seed"]``): the root generator
-draws, in this order, the visiting order, the approach directions (``both``),
+draws, in this order, the visiting order (``visit_order="random"``), the approach directions (``both``),
 the budget errors of every visit and the instrument noise; the per-pose
 errors (``repeatable_fraction``) come from the stream
 ``child_seed(seed, 1)`` and the outliers from ``child_seed(seed, 2)``. So a
