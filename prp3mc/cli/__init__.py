@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import gc
 import importlib
 import math
 import os
@@ -232,21 +231,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``prp3mc`` console script; returns the exit status.
 
-    Without ``argv`` (the process's own command line, which ends when the
-    command does) the garbage collector is told so: once the command's
-    modules are imported their objects are frozen out of it, and young
-    objects are collected every 10 000 allocations rather than 700 (a
-    discrepancy analysis spent 0.15-0.35 s of its 3-4 s in collections that
-    walked numba's, scipy's and pandas's objects again and again and freed
-    little); every object alive is frozen again before returning, since the
-    interpreter's collections at exit would walk all of them, about 0.4 s.
-    Objects are still released, files closed and ``atexit`` handlers run as usual.
+    Without ``argv`` (the process's own command line) a SIGTERM ends the run as Ctrl-C does.
     """
-    if argv is not None:
-        return _run(argv)
-    status = _run(sys.argv[1:], own_process=True)
-    gc.freeze()
-    return status
+    return _run(argv) if argv is not None else _run(sys.argv[1:], own_process=True)
 
 
 def _input_files(args: argparse.Namespace) -> list[str]:
@@ -269,10 +256,8 @@ def _run(argv: list[str], own_process: bool = False) -> int:
         args = build_parser(_command_named(argv)).parse_args(argv)
     except SystemExit as exc:  # usage errors (exit 2, one line), --help and --version (exit 0)
         return int(exc.code or 0)
-    if own_process:  # see main(); a SIGTERM (timeout, a batch system) ends the run as Ctrl-C does: no leftovers
+    if own_process:  # a SIGTERM (timeout, a batch system) ends the run as Ctrl-C does: no leftovers
         signal.signal(signal.SIGTERM, _terminated)
-        gc.freeze()
-        gc.set_threshold(10_000, *gc.get_threshold()[1:])
     name = f"prp3mc {args.command}"
     WARNINGS.clear()
     show = warnings.showwarning

@@ -9,7 +9,7 @@ the figures as PNG (SVG too on request), per-pose / per-measurement
 tables as CSV and the updated model in ``model/``
 (:mod:`~prp3mc.measurement.fit.updated`); it draws on its own Agg canvases, outside pyplot, and renders
 each figure once (fixed margins, no layout engine, no tight bounding box),
-on worker processes while a core is idle (:mod:`~prp3mc.reports._render`),
+on worker processes where the system forks (:mod:`~prp3mc.reports._render`),
 and writes the JSON, tables and model files meanwhile.
 
 The report shows what the measurement carries besides the machine: the
@@ -384,7 +384,7 @@ def report_document(result: DiscrepancyResult, inputs: dict | None = None, warni
 
 def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bool = False,
                  formats: tuple = ("png",), inputs: dict | None = None, warnings=None,
-                 workers: int | None = None, ahead=None) -> Path:
+                 workers: int | None = None) -> Path:
     """Write ``discrepancy.json``, ``report.html``, figures, tables and ``model/`` into ``folder`` (atomically).
 
     Parameters
@@ -403,11 +403,7 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
         The warnings a command gave (see :func:`report_document`); the report shows them.
     workers : int, optional
         Processes drawing the figures (:func:`prp3mc.reports._render.rendering`;
-        default :func:`prp3mc._fork.fork_workers`: 1 plus the idle cores, where the
-        system can fork; 1 draws them here). The files are the same either way.
-    ahead : Background, optional
-        A process readied for the figures while the analysis ran
-        (:func:`prp3mc.reports._render.drawing_ahead`); it draws them.
+        default the cores, where the system can fork; 1 draws them here). The files are the same either way.
 
     Returns
     -------
@@ -418,7 +414,7 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
     figures = [(name, functools.partial(_report_figure, name, result)) for name in _REPORT_FIGURES
                if _FIGURES[name][1](result) is not None]
     with output_folder(folder, force) as tmp:
-        with rendering(figures, tmp, formats, workers, DPI, ahead) as pngs:
+        with rendering(figures, tmp, formats, workers, DPI) as pngs:
             write_json(tmp / "discrepancy.json", doc)   # while the figures are drawn
             result.model.write(tmp / "model")
             for label, d in (("before", result.before), ("after", result.after)):
