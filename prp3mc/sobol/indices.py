@@ -29,7 +29,7 @@ from .._result import freeze, interval_frame, pose_columns, short_repr
 from .._rng import MAX_SEED, resolve_rng
 from .._threads import cores, single_threaded_blas
 from .._version import __version__
-from ..errors import BudgetError
+from ..errors import ParameterError
 from ..kinematics.geometry import Geometry
 from ..progress import Progress
 from ..units import OUTPUTS, RAD2DEG, z_value
@@ -135,7 +135,7 @@ class SobolResult:
     def se(self, statistic: str) -> np.ndarray:
         """Bootstrap standard error of ``S1`` or ``ST``, (..., O, K): the half-width over ``z(conf_level)``."""
         if statistic not in _STATISTICS:
-            raise BudgetError(f"no standard error for {statistic!r} (known: {', '.join(_STATISTICS)})")
+            raise ParameterError(f"no standard error for {statistic!r} (known: {', '.join(_STATISTICS)})")
         return getattr(self, f"{statistic}_conf") / z_value(self.conf_level)
 
     def conf_int(self, level: float = 0.95) -> pd.DataFrame:
@@ -155,7 +155,7 @@ class SobolResult:
             output, name and statistic.
         """
         if not 0.0 < level < 1.0:
-            raise BudgetError(f"level must lie in (0, 1), got {level}")
+            raise ParameterError(f"level must lie in (0, 1), got {level}")
         z = z_value(level)
         frames = []
         for statistic in _STATISTICS:
@@ -174,7 +174,7 @@ class SobolResult:
 def _check_power_of_two(n: int, what: str) -> int:
     n = int(n)
     if n < 2 or n & (n - 1):
-        raise BudgetError(f"{what} must be a power of two >= 2 (Sobol' sequences), got {n}")
+        raise ParameterError(f"{what} must be a power of two >= 2 (Sobol' sequences), got {n}")
     return n
 
 
@@ -237,13 +237,13 @@ def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     outputs = tuple(outputs)
     unknown = [o for o in outputs if o not in OUTPUTS]
     if unknown or not outputs or len(set(outputs)) < len(outputs):
-        raise BudgetError(f"bad outputs {list(outputs)}: choose distinct ones among {', '.join(OUTPUTS)}")
+        raise ParameterError(f"bad outputs {list(outputs)}: choose distinct ones among {', '.join(OUTPUTS)}")
     if method not in _METHODS:
-        raise BudgetError(f"unknown method {method!r} (known: {', '.join(_METHODS)})")
+        raise ParameterError(f"unknown method {method!r} (known: {', '.join(_METHODS)})")
     if int(num_resamples) < 2:
-        raise BudgetError(f"the bootstrap needs at least 2 resamples, got {num_resamples}")
+        raise ParameterError(f"the bootstrap needs at least 2 resamples, got {num_resamples}")
     if not 0.0 < conf_level < 1.0:
-        raise BudgetError(f"conf_level must lie in (0, 1), got {conf_level}")
+        raise ParameterError(f"conf_level must lie in (0, 1), got {conf_level}")
     seed, _ = resolve_rng(rng)
     seed = seed % MAX_SEED             # leaves room for the bootstrap seed, seed + 1
     num_resamples, bootstrap_seed = int(num_resamples), seed + 1
@@ -339,11 +339,11 @@ def sobol_converge(geometry: Geometry, budget: Budget, poses, *, target_width: f
     n = _check_power_of_two(n_start, "n_start")
     n_max = _check_power_of_two(n_max, "n_max")
     if n > n_max:
-        raise BudgetError(f"n_start = {n} exceeds n_max = {n_max}")
+        raise ParameterError(f"n_start = {n} exceeds n_max = {n_max}")
     if which not in ("ST", "S1", "both"):
-        raise BudgetError(f"which must be 'ST', 'S1' or 'both', got {which!r}")
+        raise ParameterError(f"which must be 'ST', 'S1' or 'both', got {which!r}")
     if not target_width > 0:
-        raise BudgetError(f"target_width must be > 0, got {target_width}")
+        raise ParameterError(f"target_width must be > 0, got {target_width}")
     seed, _ = resolve_rng(rng)
     rows = []
     while True:

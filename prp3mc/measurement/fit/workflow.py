@@ -27,7 +27,7 @@ from scipy import optimize
 
 from ..._rng import child_seed, resolve_rng
 from ..._threads import single_threaded_blas
-from ...errors import BudgetError
+from ...errors import ParameterError
 from ...kinematics.geometry import Geometry
 from ...progress import Progress
 from ...model.budget import Budget
@@ -103,7 +103,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     seed, rng = resolve_rng(rng)
     for name, value in (("alpha", alpha), ("alpha_unexplained", alpha_unexplained), ("outlier_rate", outlier_rate)):
         if not 0 < value < 1:
-            raise BudgetError(f"{name} must lie in (0, 1), got {value}")
+            raise ParameterError(f"{name} must lie in (0, 1), got {value}")
     budget.check_geometry(geometry)
     campaign = require_testable(read_campaign(campaign, geometry))
     # the predicted accuracy needs the named effects only: on a thread of its own (its kernels release the
@@ -262,7 +262,7 @@ def detectable_effect(geometry: Geometry, budget: Budget, campaign: Campaign, na
     """
     eff = effect(name)
     if not eff.systematic:
-        raise BudgetError(f"{name}: detectable_effect handles systematic effects; simulate spreads instead")
+        raise ParameterError(f"{name}: detectable_effect handles systematic effects; simulate spreads instead")
     engine = Engine(geometry, budget, read_campaign(campaign, geometry),
                     noise_cov(instrument_sigma_mm, instrument_sigma_deg), registration=registration)
     if name not in [e.name for e in engine.systematic] or name in engine.confounded:
