@@ -22,7 +22,7 @@ import numpy as np
 from .._rng import check_seed
 from .._version import __version__
 from ..errors import Prp3mcError, Prp3mcWarning
-from ..limits import Estimate, check
+from ..limits import Estimate, check, format_seconds
 from ..output import claim_output, dumps_json
 from ..provenance import spec_record, versions
 
@@ -71,8 +71,8 @@ def add_output(p: argparse.ArgumentParser, help: str = "output folder (must not 
 
 
 def within_limits(args, estimate: Estimate) -> Estimate:
-    """Refuse a request that cannot finish on this machine (see :mod:`prp3mc.limits`)."""
-    return check(estimate, max_hours=args.max_hours)
+    """Refuse a request that will not fit in this machine's memory (see :mod:`prp3mc.limits`)."""
+    return check(estimate)
 
 
 def add_progress(p: argparse.ArgumentParser) -> None:
@@ -218,7 +218,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     parser = _Parser(prog="prp3mc", description="Error analysis of planar 3-PRP parallel manipulators.")
     parser.add_argument("--version", action="version", version=f"prp3mc {__version__}")
     parser.add_argument("--max-hours", type=positive_float, default=None, metavar="H",
-                        help="refuse requests estimated to take longer (default 24)")
+                        help="stop the run after H hours of wall time, writing nothing (default: no limit)")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     for name, (help_text, cls) in COMMANDS.items():
         if command in (None, name):
@@ -250,6 +250,26 @@ def _terminated(signum, frame):
     raise _Terminated()
 
 
+class _TimeUp(KeyboardInterrupt):
+    """The ``--max-hours`` limit, raised where the run is, so that it unwinds as after Ctrl-C."""
+
+
+def _time_up(signum, frame):
+    raise _TimeUp()
+
+
+@contextlib.contextmanager
+def _stopping_after(seconds: float):
+    """Raise :class:`_TimeUp` in this (the main) thread after ``seconds`` of wall time inside the block."""
+    previous = signal.signal(signal.SIGALRM, _time_up)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
 def _run(argv: list[str], own_process: bool = False) -> int:
     """Parse ``argv`` and run its command: one line on stderr for any refusal, and the exit status."""
     try:
@@ -275,12 +295,18 @@ def _run(argv: list[str], own_process: bool = False) -> int:
             if getattr(args, "out", None) is not None:  # claimed before any work (see prp3mc.output)
                 stack.enter_context(claim_output(args.out, force=getattr(args, "force", False),
                                                  inputs=_input_files(args)))
+            if args.max_hours is not None:  # entered last, left first: the unwinding is not cut short
+                stack.enter_context(_stopping_after(3600 * args.max_hours))
             args.run(args)
     except Prp3mcError as exc:
         print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
         return 1
     except MemoryError:
         print(f"{name}: error: out of memory: use fewer samples or poses", file=sys.stderr)
+        return 1
+    except _TimeUp:
+        print(f"{name}: error: stopped at the --max-hours limit ({format_seconds(3600 * args.max_hours)} of wall "
+              "time): nothing was written", file=sys.stderr)
         return 1
     except KeyboardInterrupt as exc:
         print(f"{name}: {'terminated' if isinstance(exc, _Terminated) else 'interrupted'}", file=sys.stderr)

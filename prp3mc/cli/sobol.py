@@ -80,7 +80,7 @@ class SobolCommand:
         groups = dict(pairs)
         d = len(budget.factors)
         within_limits(args, sobol_estimate(args.samples, 1, d, d + len(budget.groups) + len(groups),
-                                           len(OUTPUTS), args.resamples, salib=args.method != "vectorised"))
+                                           len(OUTPUTS), args.resamples))
         check_linearity(geometry, budget, args.pose)
         r = sobol_indices(geometry, budget, args.pose, args.samples, rng=args.seed, groups=groups,
                           num_resamples=args.resamples, conf_level=args.conf_level, method=args.method,
