@@ -38,7 +38,7 @@ from ._layout import agg_figure, lighten
 from ._render import rendering
 
 __all__ = ["plot_workspace", "plot_actuators", "plot_temperature", "plot_gap", "plot_candidates", "plot_iso9283",
-           "write_report", "report_document", "render_html"]
+           "write_report", "report_document"]
 
 #: Resolution of the report's figures (dots per inch); one render per figure.
 DPI = 90
@@ -334,11 +334,6 @@ def _iso_summary(iso: dict) -> list[dict]:
         rows.append({"name": stat.replace("_phi", " φ"), "unit": shown,
                      "measured": None if m is None else f * m, "predicted": None if p is None else f * p})
     return rows
-
-
-def render_html(result: DiscrepancyResult, figures: dict, doc: dict | None = None) -> str:
-    """The HTML report; ``figures`` maps figure names to data URIs, ``doc`` is discrepancy.json (default: the result's)."""
-    return _page(result, doc)(figures)
 
 
 def _page(result: DiscrepancyResult, doc: dict | None):

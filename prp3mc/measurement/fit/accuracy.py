@@ -35,7 +35,7 @@ from .updated import UpdatedModel, base_name
 
 __all__ = ["predicted_accuracy", "accuracy_region", "GRID", "N_SAMPLES", "MODELS"]
 
-#: Grid points per side of the region (7 x 7 keeps the three models' Monte Carlo to about 0.3 s; on the u-shape
+#: Grid points per side of the region (7 x 7 keeps the three models' Monte Carlo short; on the u-shape
 #: region its maxima were within 1 % of an 11 x 11 grid's with 16384 samples).
 GRID = 7
 #: Monte Carlo samples per model (shared by the grid's poses).
