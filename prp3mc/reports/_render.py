@@ -17,6 +17,7 @@ import multiprocessing
 import os
 import signal
 import threading
+import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
@@ -37,10 +38,18 @@ def _render(k: int) -> bytes:
     return save_figure(draw(), _TASKS["folder"], name, _TASKS["formats"], _TASKS["dpi"])
 
 
-def _worker_start() -> None:
-    """A worker leaves interruptions to the caller, which ends the pool: Ctrl-C is ignored, SIGTERM ends it."""
+def _worker_start(parent: int) -> None:
+    """A worker leaves interruptions to the caller, which ends the pool (Ctrl-C is ignored, SIGTERM ends it),
+    and ends when ``parent`` does: a caller killed outright leaves no worker holding its output folder's lock."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    threading.Thread(target=_end_with, args=(parent,), daemon=True).start()
+
+
+def _end_with(parent: int) -> None:
+    while os.getppid() == parent:
+        time.sleep(0.5)
+    os._exit(1)
 
 
 def _can_fork() -> bool:
@@ -72,12 +81,13 @@ def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=
     """
     figures, folder, formats = list(figures), Path(folder), tuple(formats)
     workers = min(len(figures), cores()) if workers is None else max(1, int(workers))
-    if workers == 1 or not _can_fork():
+    if workers <= 1 or not _can_fork():
         yield (save_figure(draw(), folder, name, formats, dpi) for name, draw in figures)
         return
     import matplotlib.backends.backend_agg  # noqa: F401  once here, inherited by every worker
     _TASKS.update(figures=figures, folder=folder, formats=formats, dpi=dpi)
-    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"), initializer=_worker_start)
+    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"), initializer=_worker_start,
+                               initargs=(os.getpid(),))
     try:
         futures = [pool.submit(_render, k) for k in range(len(figures))]
         yield (future.result() for future in futures)
