@@ -8,7 +8,7 @@ at most). Every pass is a linear scan, so the cost is a few nanoseconds per
 value whatever the ranks, ties included (all keys equal ends at once).
 
 Why kept rather than ``np.percentile``: with the streamed kernel, exact
-percentiles of 441 poses x 2^20 samples run 6.2x the numpy code that sorts
+percentiles of 441 poses x 2^20 samples run 6.2-10.6x the numpy code that sorts
 each pose's errors (``benchmarks/bench_montecarlo.py``, 2 shared cores).
 """
 
