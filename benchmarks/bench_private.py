@@ -9,7 +9,7 @@ run, turn about, each command in a fresh process:
   (``Study.load``) from a fresh interpreter, wall time;
 - **study**: ``prp3mc study paper_reproduction --out X --force`` (``--quick``:
   its reduced grids), wall time, and whether both trees write the same
-  ``summary.json`` but for timings;
+  ``summary.json`` but for timings (and the study file's path, each tree's own);
 - **discrepancy**: ``prp3mc discrepancy`` on a simulated campaign of 392 rows
   (49 poses x 8 visits, registration error, as ``bench_discrepancy --speed``),
   report included, wall time, and whether ``discrepancy.json`` is the same
@@ -120,8 +120,8 @@ def bench_private(before: Path, after: Path, repeat: int = 3, quick: bool = Fals
             "-m", "prp3mc", "study", "paper_reproduction", "--out", str(tmp / f"study_{label}"), "--force",
             "--no-progress", *study])
         docs = [json.loads((tmp / f"study_{label}" / "summary.json").read_text()) for label in trees]
-        out["study_summary_same_but_timings"] = _without(docs[0], ("timings_s", "wall_time_s", "versions")) == \
-            _without(docs[1], ("timings_s", "wall_time_s", "versions"))
+        skip = ("timings_s", "wall_time_s", "versions", "file", "source")    # timings, and the trees' own paths
+        out["study_summary_same_but_timings"] = _without(docs[0], skip) == _without(docs[1], skip)
         out["load_after_study"] = os.getloadavg()[0]
         data = tmp / "campaign.csv"
         subprocess.run([sys.executable, "-c", _CAMPAIGN, str(data), str(after / "benchmarks")], cwd=after,
