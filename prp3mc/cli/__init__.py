@@ -155,6 +155,8 @@ def provenance(args, geometry=None, budget=None, **inputs) -> dict:
         record["budget"] = spec_record(args.budget, budget) | budget.effects_record()
         if budget.missing_inputs:
             record["budget"]["missing_inputs"] = list(budget.missing_inputs)
+        if budget.correlated:
+            record["budget"]["correlation"] = dict(budget.correlation)
     if getattr(args, "pose", None) is not None:
         record["pose"] = dict(zip(("x_mm", "y_mm", "phi_deg"), map(float, args.pose)))
     out = {"inputs": record | inputs, "versions": versions()}
