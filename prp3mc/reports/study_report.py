@@ -232,7 +232,8 @@ def _figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
         for output, frame in r.ranking.items():
             basis = plots.ranking_basis(frame)[0]
             figs.append((f"sobol_{r.name}_{output}",
-                         f"{r.name}, output {output}: Sobol indices with 95 % bootstrap intervals (left, ranked "
+                         f"{r.name}, output {output}: Sobol indices with 95 % Student t intervals over "
+                         f"{r.sobol.replicates} independently scrambled replicates (left, ranked "
                          f"by ST) and each input's share of the exact worst case (right, ranked by share); "
                          f"both the {basis} of the Sobol grid.{undefined}",
                          _draw(plots.ranking_figure, frame, f"{r.name}: {output}")))
