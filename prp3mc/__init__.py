@@ -38,6 +38,7 @@ _API = {
     **dict.fromkeys(("WorstCase", "WorstCaseMaxima", "worst_case", "worst_case_maxima"), "uncertainty.worstcase"),
     "AllocationResult": "uncertainty.allocation", "allocate": "uncertainty.allocation",
     "SobolResult": "uncertainty.sobol", "sobol_indices": "uncertainty.sobol",
+    "ShapleyResult": "uncertainty.shapley", "shapley_effects": "uncertainty.shapley",
     "sobol_ranking": "uncertainty.ranking:ranking",
     "Study": "study.reader", "StudyResult": "study.results", "run_study": "study.runner",
     "build_summary": "study.summary",
@@ -57,7 +58,7 @@ __all__ = [
     "Budget", "Catalogue", "Uniform", "Normal", "TruncNormal", "Triangular", "Disc", "Discrete",
     "linear_model", "LinearModel", "monte_carlo", "MonteCarloResult", "worst_case", "WorstCase", "worst_case_maxima", "WorstCaseMaxima",
     "allocate", "AllocationResult",
-    "sobol_indices", "SobolResult", "sobol_ranking",
+    "sobol_indices", "SobolResult", "sobol_ranking", "shapley_effects", "ShapleyResult",
     # studies
     "Study", "StudyResult", "run_study", "build_summary",
     # measurements

@@ -150,8 +150,7 @@ class Budget:
             if gname in factors:
                 raise BudgetError(f"group {gname!r} has the name of an input")
             groups[gname] = members
-        user = {k: v for k, v in groups.items() if not k.startswith("clearance_")}
-        object.__setattr__(self, "copula", parse_correlation(dict(self.correlation), factors, user))
+        object.__setattr__(self, "copula", parse_correlation(dict(self.correlation), factors, groups))
         object.__setattr__(self, "inputs", FrozenDict(inputs))
         object.__setattr__(self, "groups", FrozenDict(groups))
         object.__setattr__(self, "sources", FrozenDict(self.sources))

@@ -161,8 +161,8 @@ def parse_correlation(table, factors: tuple, groups: dict, where: str = "[correl
     BudgetError
         One line naming the key: an unknown name, a contact angle, a value
         outside (-1, 1), a pair given twice, or a set of correlations that no
-        joint law has (the latent matrix not positive definite: the key whose
-        pairs make it so, in the order written, is named).
+        joint law has (the latent matrix not positive definite: the pair
+        whose removal raises its smallest eigenvalue most is named, with its key).
     """
     if not isinstance(table, dict):
         raise BudgetError(f"{where} must be a table of \"input,input\" = rank correlation, got {table!r}")
@@ -216,17 +216,27 @@ def parse_correlation(table, factors: tuple, groups: dict, where: str = "[correl
     index = tuple(sorted({k for pair in seen for k in pair}))
     pos = {k: n for n, k in enumerate(index)}
     spearman = np.eye(len(index))
-    for key, value, idx in keyed:                            # in the order written: name the key that breaks it
+    value_of = {}
+    for key, value, idx in keyed:
         for i, j in idx:
             spearman[pos[i], pos[j]] = spearman[pos[j], pos[i]] = value
-        latent = latent_from_spearman(spearman)
-        np.fill_diagonal(latent, 1.0)
-        low = float(np.linalg.eigvalsh(latent)[0])
-        if low <= _PD_TOL:
-            raise BudgetError(f"{where} {key!r} = {value:g}: with the correlations before it no joint law has "
-                              f"these rank correlations (the latent correlation matrix is not positive definite, "
-                              f"smallest eigenvalue {low:.3g}; pairs not given are uncorrelated); weaken it, or "
-                              "give the pairs it leaves at 0")
+            value_of[(i, j)] = value
+    latent = latent_from_spearman(spearman)
+    np.fill_diagonal(latent, 1.0)
+    low = float(np.linalg.eigvalsh(latent)[0])
+    if low <= _PD_TOL:                     # name the pair whose removal raises the smallest eigenvalue most
+
+        def without(pair):
+            m = latent.copy()
+            m[pos[pair[0]], pos[pair[1]]] = m[pos[pair[1]], pos[pair[0]]] = 0.0
+            return float(np.linalg.eigvalsh(m)[0])
+
+        i, j = max(seen, key=without)
+        raise BudgetError(f"{where} {seen[(i, j)]!r}: no joint law has these rank correlations together (the "
+                          f"latent correlation matrix is not positive definite, smallest eigenvalue {low:.3g}; "
+                          f"pairs not given are uncorrelated); the pair {factors[i]},{factors[j]} = "
+                          f"{value_of[(i, j)]:g} is the one whose removal helps most: weaken it, or give the pairs "
+                          "it leaves at 0")
     return GaussianCopula(index=index, names=tuple(factors[k] for k in index), spearman=spearman, latent=latent,
                           chol=np.linalg.cholesky(latent))
 

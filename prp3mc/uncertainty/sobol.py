@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from .._result import freeze, interval_frame, pose_columns, short_repr
+from .._result import freeze, interval_frame, name_columns, short_repr
 from .._rng import MAX_SEED, child_seed, resolve_rng
 from .._threads import cores, single_threaded_blas
 from .._version import __version__
@@ -143,11 +143,7 @@ class SobolResult:
         return ("S1", "ST") + (("Sh",) if self.Sh is not None else ())
 
     def _keys(self) -> dict:
-        """Pose, output, name and kind columns, one row per pose, output and name (C order of S1)."""
-        n = int(np.prod(self.poses.shape[:-1], dtype=int))
-        O, K = len(self.outputs), len(self.names)
-        return {**pose_columns(self.poses, O * K), "output": np.tile(np.repeat(self.outputs, K), n),
-                "name": np.tile(self.names, n * O), "kind": np.tile(self.kinds, n * O)}
+        return name_columns(self.poses, self.outputs, self.names, self.kinds)
 
     def to_frame(self) -> pd.DataFrame:
         """Tidy table, one row per pose, output and name.
