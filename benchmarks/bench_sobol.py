@@ -11,7 +11,7 @@ At one pose (``bench_sobol_pose``) prp3mc's Sobol path (Saltelli design in 16
 replicates, model, first and total indices of four outputs with their
 intervals; no Shapley effects) is timed against OpenTURNS'
 ``SaltelliSensitivityAlgorithm`` on the same problem (the budget as
-:func:`~prp3mc.uncertainty.interop.openturns_distribution`, the same linear
+:func:`~prp3mc.model.interop.openturns_distribution`, the same linear
 model, the same N, its intervals by a bootstrap of 100), when OpenTURNS is
 installed. OpenTURNS estimates the 12 inputs only; prp3mc adds the three
 clearance groups (15 columns of the design instead of 12). Wall and CPU
@@ -30,8 +30,8 @@ import time
 import numpy as np
 
 from prp3mc import Budget, Geometry, Region, linear_model, worst_case
-from prp3mc.uncertainty.ranking import ranking
-from prp3mc.uncertainty.sobol import sobol_indices
+from prp3mc.sobol.ranking import ranking
+from prp3mc.sobol.indices import sobol_indices
 
 PRESETS = ("u-shape", "delta-shape")
 
@@ -97,7 +97,7 @@ def bench_sobol_pose(quick: bool) -> dict:
         import openturns as ot
     except ImportError:
         return result
-    from prp3mc.uncertainty.interop import openturns_distribution
+    from prp3mc.model.interop import openturns_distribution
     model, dist = linear_model(geometry, budget, pose), openturns_distribution(budget)
 
     def four_outputs(X):

@@ -3,8 +3,8 @@
 For each case (a geometry, a pose and a budget) the analysis runs once per
 seed; every interval is checked against a reference value:
 
-- S1, ST of x, y, phi: the closed forms (:func:`~prp3mc.uncertainty.sobol_closed_form.analytic_indices`);
-- Sh of x, y, phi: the closed form (:func:`~prp3mc.uncertainty.sobol_closed_form.analytic_shapley`),
+- S1, ST of x, y, phi: the closed forms (:func:`~prp3mc.sobol.closed_form.analytic_indices`);
+- Sh of x, y, phi: the closed form (:func:`~prp3mc.sobol.closed_form.analytic_shapley`),
   also for the correlated case, whose correlated inputs are normal (a joint normal law);
 - every index of the position norm (no closed form): one run 16 times (S1, ST)
   8 times (S1, ST) or 128 times (Sh) larger than the runs checked, whose own
@@ -34,9 +34,9 @@ import time
 import numpy as np
 
 from prp3mc import Budget, Geometry, Normal
-from prp3mc.uncertainty.shapley import shapley_effects
-from prp3mc.uncertainty.sobol import sobol_indices
-from prp3mc.uncertainty.sobol_closed_form import analytic_indices, analytic_shapley
+from prp3mc.sobol.shapley import shapley_effects
+from prp3mc.sobol.indices import sobol_indices
+from prp3mc.sobol.closed_form import analytic_indices, analytic_shapley
 
 OUTPUTS = ("x", "y", "phi", "position")
 

@@ -10,9 +10,9 @@ from prp3mc import (Budget, Disc, Discrete, Geometry, Normal, Triangular, TruncN
                     monte_carlo, worst_case)
 from prp3mc.cli import main
 from prp3mc.errors import BudgetError
-from prp3mc.uncertainty.copula import latent_from_spearman, pair_covariance, spearman_from_latent
-from prp3mc.uncertainty.systematic import SystematicEffect
-from prp3mc.uncertainty.worstcase import CORRELATION_NOTE
+from prp3mc.model.copula import latent_from_spearman, pair_covariance, spearman_from_latent
+from prp3mc.model.effects import SystematicEffect
+from prp3mc.worstcase.envelope import CORRELATION_NOTE
 
 PAPER = Budget.from_preset("paper")
 GROUPS = {"bearings": ["rho_1", "rho_2", "rho_3"], "plays": ["theta_1", "theta_2"]}
@@ -162,7 +162,7 @@ def test_pair_covariance_closed_forms_and_sampling(seed):
 def test_openturns_normal_copula_cross_check(seed):
     """OpenTURNS' NormalCopula of the same rank correlations: its draws' covariance is the budget's."""
     ot = pytest.importorskip("openturns")
-    from prp3mc.uncertainty.interop import openturns_distribution
+    from prp3mc.model.interop import openturns_distribution
     b = mixed()
     dist = openturns_distribution(b)
     np.testing.assert_allclose(np.array(dist.getSpearmanCorrelation()),

@@ -11,10 +11,10 @@ from scipy import special
 from prp3mc import Budget, Disc, Geometry, Normal, Triangular, Uniform, linear_model, worst_case
 from prp3mc.cli import main
 from prp3mc.errors import BudgetError, Prp3mcWarning
-from prp3mc.uncertainty.ranking import ranking
-from prp3mc.uncertainty.shapley import shapley_effects
-from prp3mc.uncertainty.sobol import DEPENDENT_NOTE, sobol_indices
-from prp3mc.uncertainty.sobol_closed_form import analytic_indices, analytic_shapley
+from prp3mc.sobol.ranking import ranking
+from prp3mc.sobol.shapley import shapley_effects
+from prp3mc.sobol.indices import DEPENDENT_NOTE, sobol_indices
+from prp3mc.sobol.closed_form import analytic_indices, analytic_shapley
 
 PAPER = Budget.from_preset("paper")
 POSE = [5.0, 110.0, 1.0]
@@ -236,7 +236,7 @@ def test_sobol_of_a_correlated_budget_reports_shapley(capsys, tmp_path):
 
 def test_exact_shapley_by_enumeration_matches_permutation_average():
     """The closed form's 2^g subset sum equals the average over all g! orders (g = 4), for a random covariance."""
-    from prp3mc.uncertainty.sobol_closed_form import _gaussian_shapley
+    from prp3mc.sobol.closed_form import _gaussian_shapley
     rng = np.random.default_rng(0)
     A = rng.standard_normal((4, 4))
     cov = A @ A.T + 0.1 * np.eye(4)

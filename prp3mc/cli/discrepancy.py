@@ -2,13 +2,13 @@
 
 from ..kinematics.geometry import Geometry
 from ..limits import discrepancy_estimate
-from ..measurement.accuracy import MODELS
-from ..measurement.campaign import count_rows, read_campaign
-from ..measurement.workflow import STAGES, discrepancy
+from ..measurement.fit.accuracy import MODELS
+from ..measurement.campaign.data import count_rows, read_campaign
+from ..measurement.fit.workflow import STAGES, discrepancy
 from ..progress import Progress
 from ..reports._render import drawing_ahead
 from ..reports.discrepancy_report import report_document, write_report
-from ..uncertainty.budget import Budget
+from ..model.budget import Budget
 from ..units import MM2UM
 from . import (WARNINGS, add_budget, add_geometry, add_json, add_progress, add_seed, command, emit_json,
                nonnegative_float, probability, provenance, within_limits)

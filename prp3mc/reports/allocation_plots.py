@@ -1,8 +1,8 @@
 """Figures of a tolerance allocation: the cost-accuracy Pareto front and the binding poses.
 
 :func:`allocation_front_plot` takes the tidy front of
-:func:`prp3mc.uncertainty.allocation.allocation_front`;
-:func:`allocation_map` the :class:`~prp3mc.uncertainty.allocation.AllocationResult`
+:func:`prp3mc.allocation.optimum.allocation_front`;
+:func:`allocation_map` the :class:`~prp3mc.allocation.optimum.AllocationResult`
 of a gridded region. Both take an ``ax=`` (a new figure when None) and
 return the Figure; pyplot is imported lazily and the backend is never
 switched. Shows µm and arcsec.

@@ -399,7 +399,7 @@ def sobol_ranking(frame, *, ax=None, title: str = ""):
     Parameters
     ----------
     frame : DataFrame
-        :func:`prp3mc.uncertainty.ranking.ranking` (columns name, kind, S1, S1_conf, ST, ST_conf).
+        :func:`prp3mc.sobol.ranking.ranking` (columns name, kind, S1, S1_conf, ST, ST_conf).
 
     Returns
     -------

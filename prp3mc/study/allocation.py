@@ -5,7 +5,7 @@ accuracy spec; for every configuration it applies to, the study runs
 :func:`prp3mc.allocate` over the configuration's geometry and test region
 (gridded like the worst case unless the table gives a grid, at the region's
 orientation, unbounded laws bounded by ``[worstcase] k_sigma``) and, with
-``front = true``, :func:`~prp3mc.uncertainty.allocation.allocation_front`
+``front = true``, :func:`~prp3mc.allocation.optimum.allocation_front`
 on the same poses. The allocation's budget is the classes' laws, as in
 ``prp3mc allocate``, with the study budget's ``[effects]`` held fixed (its
 inputs play no part).
@@ -24,8 +24,8 @@ import pandas as pd
 
 from ..errors import Prp3mcError
 from ..kinematics.chain import check_poses
-from ..uncertainty.allocation import AllocationResult, allocate, allocation_front, front_records
-from ..uncertainty.allocation_classes import ClassMenu
+from ..allocation.optimum import AllocationResult, allocate, allocation_front, front_records
+from ..allocation.classes import ClassMenu
 from ..units import MM2UM, Z95
 
 __all__ = ["AllocationSpec", "ALLOCATION_STREAM", "read_allocation", "run_allocation", "allocation_summary"]

@@ -16,9 +16,9 @@ import pandas as pd
 from .._result import freeze, short_repr
 from .._version import __version__
 from ..units import OUTPUT_UNITS, Z95
-from ..uncertainty.allocation import AllocationResult
-from ..uncertainty.montecarlo import MonteCarloResult
-from ..uncertainty.worstcase import WorstCase
+from ..allocation.optimum import AllocationResult
+from ..montecarlo.propagation import MonteCarloResult
+from ..worstcase.envelope import WorstCase
 from .reader import Study, StudyConfiguration
 
 __all__ = ["PoseSamples", "ConfigurationResult", "SkippedConfiguration", "StudyResult", "pct_se", "over_grid"]
@@ -118,11 +118,11 @@ class ConfigurationResult:
     sobol : SobolResult or None
         On the Sobol grid.
     ranking : mapping of str to DataFrame
-        Per Sobol output, :func:`prp3mc.uncertainty.ranking.ranking` over the Sobol grid.
+        Per Sobol output, :func:`prp3mc.sobol.ranking.ranking` over the Sobol grid.
     allocation : AllocationResult or None
         The least-cost tolerance classes (the study's ``[allocation]``), on the allocation grid.
     allocation_front : DataFrame or None
-        Its cost-accuracy Pareto front (tidy, :func:`~prp3mc.uncertainty.allocation.allocation_front`).
+        Its cost-accuracy Pareto front (tidy, :func:`~prp3mc.allocation.optimum.allocation_front`).
     """
 
     configuration: StudyConfiguration

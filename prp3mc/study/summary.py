@@ -80,9 +80,9 @@ import numpy as np
 from ..errors import Prp3mcError, Prp3mcWarning
 from ..kinematics.geometry import Geometry
 from ..provenance import file_record, spec_record, versions
-from ..uncertainty.budget import Budget
+from ..model.budget import Budget
 from ..units import DEG2ARCSEC, MM2UM, t_value
-from ..uncertainty.sobol import DEPENDENT_NOTE
+from ..sobol.indices import DEPENDENT_NOTE
 from .allocation import allocation_summary
 from .results import ConfigurationResult, StudyResult, over_grid, pct_se
 
