@@ -43,9 +43,9 @@ _MC_SECONDS_PER_SAMPLE = 1e-7          # sampling, features, moments (measured: 
 _MC_SECONDS_PER_SAMPLE_POSE = 1e-8      # streamed order statistics per pose (measured: 441 poses x 2^20, 2.4-3.1 s)
 # Sobol: the design and its features for (K + 2) N model runs, and per pose in flight the outputs of
 # every run; the Shapley effects' draws (3 d runs per order) and their latent normals.
-_SOBOL_SECONDS_SALIB = 1e-4             # per N x K x output: SALib's analyze with 2 resamples
+_SOBOL_SECONDS_SALIB = 1e-5             # per N x K x output: SALib's analyze (measured: N 8192, 3.7 s CPU)
 _SOBOL_SECONDS_RUN_POSE = 3e-8          # per model run and pose, vectorised estimators
-_SHAPLEY_SECONDS_RUN = 5e-6             # per Shapley run (measured: 147 456 runs at one pose, 0.74 s)
+_SHAPLEY_SECONDS_RUN = 5e-6             # per Shapley run (measured: 147 456 runs at one pose, 0.24 s CPU, 0.74 s loaded)
 # Exact worst case: the kept linear model and term bounds per pose (measured: 601^2 poses, 331 MiB, 1 s).
 _WC_BYTES_PER_POSE_TERM = 100
 _WC_BYTES_PER_POSE = 200
@@ -216,7 +216,7 @@ def study_estimate(study) -> Estimate:
     if "sobol" in study.outputs:
         n_poses = study.sobol_grid[0] * study.sobol_grid[1]
         so = sobol_estimate(study.sobol_samples, n_poses, d, d + len(study.budget.groups) + len(study.sobol_groups),
-                            len(study.sobol_outputs), 100, salib=n_poses == 1)
+                            len(study.sobol_outputs), salib=False, shapley_permutations=study.sobol_samples // 2)
         total = total.then(Estimate(so.what, so.bytes, n_conf * so.seconds))
     return Estimate(f"study {study.name!r} ({total.what})", total.bytes, total.seconds)
 
