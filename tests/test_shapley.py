@@ -215,6 +215,11 @@ def test_sobol_of_a_correlated_budget_reports_shapley(capsys, tmp_path):
     assert np.isfinite(r.Sh).all() and np.allclose(r.Sh[..., :12].sum(-1), 1.0)
     df = ranking(r, worst_case(g, b, POSE), "position")
     assert df.attrs["sorted_by"] == "Sh" and df["Sh"].dropna().is_monotonic_decreasing
+    from matplotlib.figure import Figure
+    from prp3mc.reports import plots
+    left = plots.ranking_figure(df, fig=Figure()).axes[0]                # the report draws Sh, not empty S1/ST
+    assert left.get_xlabel() == "Shapley effect (95 % CI)" and "correlated inputs" in left.get_title()
+    assert left.get_yticklabels()[0].get_text().removesuffix(" (group)") == df["name"].iloc[0]
     path = tmp_path / "b.toml"
     b.to_toml(path)
     code = main(["sobol", "--geometry", "u-shape", "--budget", str(path), "--pose", *map(str, POSE),
@@ -256,3 +261,14 @@ def test_exact_shapley_by_enumeration_matches_permutation_average():
     got = np.einsum("f,ifg,g->i", c, _gaussian_shapley(cov), c)
     np.testing.assert_allclose(got, want, rtol=1e-10)
     assert got.sum() == pytest.approx(c @ cov @ c, rel=1e-12)
+
+
+def test_converge_on_shapley_for_a_correlated_budget():
+    from prp3mc.sobol.indices import sobol_converge
+    g = Geometry.from_preset("u-shape")
+    b = normal_budget()
+    with pytest.warns(Prp3mcWarning):
+        result, history = sobol_converge(g, b, POSE, target_width=0.08, n_start=256, rng=1, outputs=("x",))
+    assert history["converged"].iloc[-1] and 2 * result.Sh_conf[result.Sh > 0.05].max() < 0.08
+    with pytest.raises(BudgetError, match="no Sobol indices to converge"):
+        sobol_converge(g, b, POSE, which="ST", rng=1)

@@ -371,13 +371,14 @@ def _sobol_replicates(budget, model, factors, outputs, n_rep, replicates, seed, 
 
 def sobol_converge(geometry: Geometry, budget: Budget, poses, *, target_width: float = 0.05,
                    n_start: int = 1024, n_max: int = 2**16,
-                   rng: "None | int | np.random.Generator" = None, which: str = "ST",
+                   rng: "None | int | np.random.Generator" = None, which: str | None = None,
                    min_index: float = 0.05, **kwargs) -> tuple[SobolResult, pd.DataFrame]:
     """Double N until the widest interval of the indices that matter is below ``target_width``.
 
-    An index matters where its ST exceeds ``min_index`` (any pose and
-    output); an interval's width is its full width, 2 x the half-width.
-    The seed is kept, so each run extends the previous Sobol' points.
+    An index matters where its ST (Sh when ``which`` is ``"Sh"``) exceeds
+    ``min_index`` (any pose and output); an interval's width is its full
+    width, 2 x the half-width. The seed is kept, so each run extends the
+    previous Sobol' points.
 
     Parameters
     ----------
@@ -390,8 +391,9 @@ def sobol_converge(geometry: Geometry, budget: Budget, poses, *, target_width: f
     rng : None, int or numpy.random.Generator
         As in :func:`sobol_indices`; one seed serves every run, so each run
         extends the previous Sobol' points.
-    which : {"ST", "S1", "both"}
-        The intervals checked.
+    which : {"ST", "S1", "both", "Sh"}, optional
+        The intervals checked (default ``"ST"``; ``"Sh"`` for a correlated
+        budget, which has no Sobol indices).
     min_index : float
     **kwargs
         Passed to :func:`sobol_indices` (groups, outputs, method, ...).
@@ -408,16 +410,22 @@ def sobol_converge(geometry: Geometry, budget: Budget, poses, *, target_width: f
     n_max = _check_power_of_two(n_max, "n_max")
     if n > n_max:
         raise BudgetError(f"n_start = {n} exceeds n_max = {n_max}")
-    if which not in ("ST", "S1", "both"):
-        raise BudgetError(f"which must be 'ST', 'S1' or 'both', got {which!r}")
+    which = which or ("Sh" if budget.correlated else "ST")
+    if which not in ("ST", "S1", "both", "Sh"):
+        raise BudgetError(f"which must be 'ST', 'S1', 'both' or 'Sh', got {which!r}")
+    if which != "Sh" and budget.correlated:
+        raise BudgetError(f"budget {budget.name!r} correlates inputs: it has no Sobol indices to converge; "
+                          "use which='Sh'")
+    if which == "Sh" and kwargs.get("shapley_permutations") == 0:
+        raise BudgetError("which='Sh' needs the Shapley effects: shapley_permutations must not be 0")
     if not target_width > 0:
         raise BudgetError(f"target_width must be > 0, got {target_width}")
     seed, _ = resolve_rng(rng)
     rows = []
     while True:
         result = sobol_indices(geometry, budget, poses, n, rng=seed, **kwargs)
-        matters = result.ST > min_index
-        conf = {"ST": result.ST_conf, "S1": result.S1_conf,
+        matters = (result.Sh if which == "Sh" else result.ST) > min_index
+        conf = {"ST": result.ST_conf, "S1": result.S1_conf, "Sh": result.Sh_conf,
                 "both": np.maximum(result.ST_conf, result.S1_conf)}[which]
         width = float(2 * conf[matters].max()) if matters.any() else 0.0
         done = width < target_width
