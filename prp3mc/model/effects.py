@@ -5,18 +5,18 @@ the discrepancy workflow). Systematic effects add a deterministic pose error
 that is linear in one parameter; dispersion effects (spreads) change the law of
 one budget input.
 
-======================= ====================================== ===========
-effect                  what it changes                         unit
-======================= ====================================== ===========
-``q_i`` (q in a, alpha, constant offset of parameter q of leg i  mm or deg
-beta, gamma, theta, c,  (``b_i``: encoder zero offset)
-e, psi, b)
-``scale_i``             slider error delta b_i = kappa_i b_i    1
-``backlash_i``          delta b_i = dir_i h_i / 2, h_i >= 0     mm
-``thermal``             delta b_i = alpha_T (temp_C - 20) b_i   1/K
-``spread_q_i`` (q in    the law of budget input q_i, scaled      mm or deg
-rho, theta, b)          about 0 to a new bound
-======================= ====================================== ===========
+=============== ================================================ ===========
+effect          what it changes                                  unit
+=============== ================================================ ===========
+``q_i``         constant offset of parameter q of leg i, q in a, mm or deg
+                alpha, beta, gamma, theta, c, e, psi, b
+                (``b_i``: encoder zero offset)
+``scale_i``     slider error delta b_i = kappa_i b_i             1
+``backlash_i``  delta b_i = dir_i h_i / 2, h_i >= 0              mm
+``thermal``     delta b_i = alpha_T (temp_C - 20) b_i            1/K
+``spread_q_i``  the law of budget input q_i (q in rho, theta,    mm or deg
+                b), scaled about 0 to a new bound
+=============== ================================================ ===========
 
 A budget's ``[effects]`` table holds fitted systematic effects
 (:class:`SystematicEffect`): each with its value, an optional 95 % interval and

@@ -245,7 +245,7 @@ def _iso9283(engine: Engine, fit: Fit, seed: int):
 def detectable_effect(geometry: Geometry, budget: Budget, campaign: Campaign, name: str, *,
                       power: float = 0.9, alpha: float = 0.01, instrument_sigma_mm: float = 0.0,
                       instrument_sigma_deg: float = 0.0, registration: bool = True) -> float:
-    """Smallest |value| of a systematic effect that a campaign names with probability ``power``.
+    """Smallest ``|value|`` of a systematic effect that a campaign names with probability ``power``.
 
     For planning: simulate a campaign without effects (only its layout
     matters: poses, repeats, directions, temperatures) and ask how large an
