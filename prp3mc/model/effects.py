@@ -1,6 +1,6 @@
 """Systematic effects: the library's effect names and the ``[effects]`` table of a budget.
 
-An *effect* is something a model may be missing (README, *File formats*, and
+An *effect* is something a model may be missing (docs, *File formats*, and
 the discrepancy workflow). Systematic effects add a deterministic pose error
 that is linear in one parameter; dispersion effects (spreads) change the law of
 one budget input.
@@ -25,7 +25,7 @@ effects of that table: a fitted spread is written as the input's new law.
 Thermal expansion needs the operating temperature range ``temp_range_C`` the
 analyses bound it over.
 
-At an analysis pose (README, *File formats*), offsets and lead scales are
+At an analysis pose (docs, *File formats*), offsets and lead scales are
 known shifts of the pose error; a backlash and the thermal expansion have a
 driver that is not known there (the approach direction, the temperature), so
 they enter as bounded random *factors* (:func:`effect_factors`): backlash_i is

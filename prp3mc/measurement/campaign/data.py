@@ -1,4 +1,4 @@
-"""Measurement campaigns (CSV, README *File formats*): reading with validation.
+"""Measurement campaigns (CSV, docs, *File formats*): reading with validation.
 
 A campaign is a table with one row per measurement: the commanded pose
 ``x_cmd, y_cmd, phi_cmd`` (mm, mm, deg), the measured pose ``x_meas, y_meas,

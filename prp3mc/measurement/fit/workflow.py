@@ -70,7 +70,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
         one named again is a correction to it). A budget whose effects were
         fitted on another geometry is refused.
     campaign : Campaign, DataFrame or path
-        A campaign (README, *File formats*), measured in the instrument's frame; validated against ``geometry``.
+        A campaign (docs, *File formats*), measured in the instrument's frame; validated against ``geometry``.
     instrument_sigma_mm, instrument_sigma_deg : float
         Standard deviation of the measurement noise per coordinate.
     registration : bool
