@@ -54,7 +54,8 @@ nb_execution_mode = "off"
 html_theme = "pydata_sphinx_theme"
 html_title = f"prp3mc {release}"
 html_theme_options = {"show_toc_level": 2, "navigation_with_keys": False, "secondary_sidebar_items": ["page-toc"]}
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+html_css_files = ["wide.css"]
 
 
 def _copy_notebooks() -> None:
@@ -68,7 +69,7 @@ def _copy_notebooks() -> None:
 
 def _write_cli_help() -> None:
     """``prp3mc COMMAND --help`` of every registered command: the page api/commands.md."""
-    os.environ["COLUMNS"] = "100"      # argparse wraps at the terminal's width
+    os.environ["COLUMNS"] = "86"       # argparse wraps at the terminal's width: fit the page
     parser = build_parser()
     commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
     parts = ["# Command reference", "", "Every command's `--help`, as this version prints it (the",
