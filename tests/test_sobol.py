@@ -257,14 +257,14 @@ def test_ranking_per_pose_and_region(geometry, region):
 def test_converge_doubles_until_target():
     g = Geometry.from_preset("u-shape")
     result, history = sobol_converge(g, PAPER, [0, 100, 0], target_width=0.03, n_start=256, rng=1,
-                                     outputs=("x", "position"), method="vectorised")
+                                     outputs=("x", "position"), method="vectorised", shapley_permutations=0)
     assert history["converged"].iloc[-1] and not history["converged"].iloc[:-1].any()
     assert list(history["n_samples"]) == [256 * 2**k for k in range(len(history))]
     assert result.n_samples == history["n_samples"].iloc[-1]
     matters = result.ST > 0.05
     assert 2 * result.ST_conf[matters].max() < 0.03
     _, short = sobol_converge(g, PAPER, [0, 100, 0], target_width=1e-4, n_start=64, n_max=128, rng=1,
-                              method="vectorised")
+                              method="vectorised", shapley_permutations=0)
     assert list(short["n_samples"]) == [64, 128] and not short["converged"].any()
 
 
