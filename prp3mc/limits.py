@@ -41,11 +41,11 @@ _MC_BYTES_PER_POSE = lambda f: 8 * 64 + 1000 + 40 * f  # noqa: E731
 _MC_CHUNK_BYTES = 256 << 20
 _MC_SECONDS_PER_SAMPLE = 1e-7          # sampling, features, moments (measured: 1e9 samples at one pose, 90 s loaded)
 _MC_SECONDS_PER_SAMPLE_POSE = 1e-8      # streamed order statistics per pose (measured: 441 poses x 2^20, 2.4-3.1 s)
-# Sobol: the design and its features for (K + 2) N model runs, SALib's bootstrap index
-# arrays (N x R, about ten of them alive), and per pose in flight the outputs of every run.
-_SOBOL_BOOTSTRAP_BYTES = 80
-_SOBOL_SECONDS_SALIB = 1e-6             # per N x R x K x output (measured: N 4096-65536, 17-615 s)
+# Sobol: the design and its features for (K + 2) N model runs, and per pose in flight the outputs of
+# every run; the Shapley effects' draws (3 d runs per order) and their latent normals.
+_SOBOL_SECONDS_SALIB = 1e-5             # per N x K x output: SALib's analyze (measured: N 8192, 3.7 s CPU)
 _SOBOL_SECONDS_RUN_POSE = 3e-8          # per model run and pose, vectorised estimators
+_SHAPLEY_SECONDS_RUN = 5e-6             # per Shapley run (measured: 147 456 runs at one pose, 0.24 s CPU, 0.74 s loaded)
 # Exact worst case: the kept linear model and term bounds per pose (measured: 601^2 poses, 331 MiB, 1 s).
 _WC_BYTES_PER_POSE_TERM = 100
 _WC_BYTES_PER_POSE = 200
@@ -172,15 +172,18 @@ def montecarlo_estimate(n_samples: int, n_poses: int, n_inputs: int, workers: in
 
 
 def sobol_estimate(n_samples: int, n_poses: int, n_inputs: int, n_factors: int, n_outputs: int,
-                   num_resamples: int, salib: bool) -> Estimate:
-    """Memory and time of :func:`prp3mc.sobol.indices.sobol_indices` (N base samples, K factors)."""
+                   salib: bool, shapley_permutations: int = 0) -> Estimate:
+    """Memory and time of :func:`prp3mc.sobol.indices.sobol_indices` (N base samples, K factors,
+    and the Shapley effects' 3 d runs per random order)."""
     n, runs = float(n_samples), float(n_samples) * (n_factors + 2)
-    per_pose = 8 * runs * 3 * (1 + n_outputs)
-    memory = runs * 16 * n_inputs + n * num_resamples * _SOBOL_BOOTSTRAP_BYTES + min(n_poses, 4) * per_pose
+    shapley = 3.0 * n_inputs * shapley_permutations
+    per_pose = 8 * (runs + shapley) * 3 * (1 + n_outputs)
+    memory = (runs + 2 * shapley) * 16 * n_inputs + min(n_poses, 4) * per_pose
     if salib:
-        seconds = _SOBOL_SECONDS_SALIB * n * num_resamples * n_factors * n_outputs * n_poses
+        seconds = _SOBOL_SECONDS_SALIB * n * n_factors * n_outputs * n_poses
     else:
-        seconds = _SOBOL_SECONDS_RUN_POSE * runs * n_poses * n_outputs + _SOBOL_SECONDS_SALIB * n * num_resamples
+        seconds = _SOBOL_SECONDS_RUN_POSE * runs * n_poses * n_outputs
+    seconds += _SHAPLEY_SECONDS_RUN * shapley + _SOBOL_SECONDS_RUN_POSE * shapley * n_poses
     return Estimate(f"Sobol indices of N = {n_samples} at {n_poses} pose(s)", memory, seconds)
 
 
@@ -213,7 +216,7 @@ def study_estimate(study) -> Estimate:
     if "sobol" in study.outputs:
         n_poses = study.sobol_grid[0] * study.sobol_grid[1]
         so = sobol_estimate(study.sobol_samples, n_poses, d, d + len(study.budget.groups) + len(study.sobol_groups),
-                            len(study.sobol_outputs), 100, salib=n_poses == 1)
+                            len(study.sobol_outputs), salib=False, shapley_permutations=study.sobol_samples // 2)
         total = total.then(Estimate(so.what, so.bytes, n_conf * so.seconds))
     return Estimate(f"study {study.name!r} ({total.what})", total.bytes, total.seconds)
 

@@ -84,12 +84,20 @@ def add_progress(p: argparse.ArgumentParser) -> None:
 
 
 def positive_int(text: str) -> int:
+    return _integer(text, 1, "a positive integer")
+
+
+def nonnegative_int(text: str) -> int:
+    return _integer(text, 0, "an integer >= 0")
+
+
+def _integer(text: str, least: int, what: str) -> int:
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+    if value < least:
+        raise argparse.ArgumentTypeError(f"expected {what}, got {value}")
     return value
 
 
@@ -155,6 +163,8 @@ def provenance(args, geometry=None, budget=None, **inputs) -> dict:
         record["budget"] = spec_record(args.budget, budget) | budget.effects_record()
         if budget.missing_inputs:
             record["budget"]["missing_inputs"] = list(budget.missing_inputs)
+        if budget.correlated:
+            record["budget"]["correlation"] = dict(budget.correlation)
     if getattr(args, "pose", None) is not None:
         record["pose"] = dict(zip(("x_mm", "y_mm", "phi_deg"), map(float, args.pose)))
     out = {"inputs": record | inputs, "versions": versions()}
