@@ -40,9 +40,8 @@ _MC_BYTES_PER_SAMPLE = lambda d, f: 4 * f / 1024 + 8 * f * (f + 1) / 65536  # no
 _MC_BYTES_PER_SAMPLE_POSE = 8 / 65536
 _MC_BYTES_PER_POSE = lambda f: 8 * 64 + 1000 + 40 * f  # noqa: E731
 _MC_CHUNK_BYTES = 256 << 20
-# Sobol: the design and its features for (K + 2) N model runs, SALib's bootstrap index
-# arrays (N x R, about ten of them alive), and per pose in flight the outputs of every run.
-_SOBOL_BOOTSTRAP_BYTES = 80
+# Sobol: the design and its features for (K + 2) N model runs, and per pose in flight the outputs of
+# every run; the Shapley effects' draws (3 d runs per order) and their latent normals.
 # Exact worst case: the kept linear model and term bounds per pose (601^2 poses held 331 MiB).
 _WC_BYTES_PER_POSE_TERM = 100
 _WC_BYTES_PER_POSE = 200
@@ -152,11 +151,13 @@ def montecarlo_estimate(n_samples: int, n_poses: int, n_inputs: int, workers: in
 
 
 def sobol_estimate(n_samples: int, n_poses: int, n_inputs: int, n_factors: int, n_outputs: int,
-                   num_resamples: int) -> Estimate:
-    """Memory of :func:`prp3mc.sobol.indices.sobol_indices` (N base samples, K factors)."""
+                   shapley_permutations: int = 0) -> Estimate:
+    """Memory of :func:`prp3mc.sobol.indices.sobol_indices` (N base samples, K factors, and the Shapley
+    effects' 3 d runs per random order)."""
     n, runs = float(n_samples), float(n_samples) * (n_factors + 2)
-    per_pose = 8 * runs * 3 * (1 + n_outputs)
-    memory = runs * 16 * n_inputs + n * num_resamples * _SOBOL_BOOTSTRAP_BYTES + min(n_poses, 4) * per_pose
+    shapley = 3.0 * n_inputs * shapley_permutations
+    per_pose = 8 * (runs + shapley) * 3 * (1 + n_outputs)
+    memory = (runs + 2 * shapley) * 16 * n_inputs + min(n_poses, 4) * per_pose
     return Estimate(f"Sobol indices of N = {n_samples} at {n_poses} pose(s)", memory)
 
 
@@ -188,7 +189,7 @@ def study_estimate(study) -> Estimate:
         n_poses = study.sobol_grid[0] * study.sobol_grid[1]
         total = total.then(sobol_estimate(study.sobol_samples, n_poses, d,
                                           d + len(study.budget.groups) + len(study.sobol_groups),
-                                          len(study.sobol_outputs), 100))
+                                          len(study.sobol_outputs), shapley_permutations=study.sobol_samples // 2))
     return Estimate(f"study {study.name!r} ({total.what})", total.bytes)
 
 

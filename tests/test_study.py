@@ -148,7 +148,7 @@ def test_cli_writes_report_folder(tmp_path, capsys):
     assert set(u["worst_case_position_um"]) == {"min", "max", "mean"}
     assert set(u["montecarlo"]["position_um"]["p99"]["max"]) == {"value", "se"}
     assert u["montecarlo"]["exceed"]["tolerance_mm"] == 0.08
-    assert set(u["sobol"]["position"]["clearance_1"]) == {"kind", "S1", "ST", "worst_case_share"}
+    assert set(u["sobol"]["position"]["clearance_1"]) == {"kind", "S1", "ST", "Sh", "worst_case_share"}
     meta = summary["metadata"]
     assert meta["seed"] == 3 and meta["montecarlo_samples"] == 4096 and meta["wall_time_s"] > 0
     inputs = summary["inputs"]   # what the run was made from

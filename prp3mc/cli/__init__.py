@@ -1,4 +1,4 @@
-"""Command-line interface: ``prp3mc <command> ...`` (README, *Command line*).
+"""Command-line interface: ``prp3mc <command> ...`` (docs, *The command line*).
 
 A thin wrapper over the Python API, one module per command in this package;
 each registers itself with :func:`command`. Bad input ends with a one-line
@@ -83,12 +83,20 @@ def add_progress(p: argparse.ArgumentParser) -> None:
 
 
 def positive_int(text: str) -> int:
+    return _integer(text, 1, "a positive integer")
+
+
+def nonnegative_int(text: str) -> int:
+    return _integer(text, 0, "an integer >= 0")
+
+
+def _integer(text: str, least: int, what: str) -> int:
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+    if value < least:
+        raise argparse.ArgumentTypeError(f"expected {what}, got {value}")
     return value
 
 
@@ -154,6 +162,8 @@ def provenance(args, geometry=None, budget=None, **inputs) -> dict:
         record["budget"] = spec_record(args.budget, budget) | budget.effects_record()
         if budget.missing_inputs:
             record["budget"]["missing_inputs"] = list(budget.missing_inputs)
+        if budget.correlated:
+            record["budget"]["correlation"] = dict(budget.correlation)
     if getattr(args, "pose", None) is not None:
         record["pose"] = dict(zip(("x_mm", "y_mm", "phi_deg"), map(float, args.pose)))
     out = {"inputs": record | inputs, "versions": versions()}
@@ -167,7 +177,7 @@ def emit_json(obj: dict) -> None:
     sys.stdout.write(dumps_json(obj) + "\n")
 
 
-#: How Monte Carlo and Sobol take a budget's [effects] (README, File formats), said under their tables.
+#: How Monte Carlo and Sobol take a budget's [effects] (docs, File formats), said under their tables.
 EFFECTS_NOTE = ("Effects: backlash_i and thermal are factors (the approach direction is unknown: delta b_i = "
                 "±h_i/2 with probability 1/2 each; one temperature, uniform over temp_range_C); offsets "
                 "(offset_q_i) and lead scales (scale_i) are known shifts: no variance share, a systematic part "

@@ -19,7 +19,7 @@ class DiscrepancyCommand:
     def add_arguments(p):
         add_geometry(p)
         add_budget(p)
-        p.add_argument("--data", required=True, metavar="CSV", help="measurement campaign CSV (README, File formats)")
+        p.add_argument("--data", required=True, metavar="CSV", help="measurement campaign CSV (docs, File formats)")
         add_output(p, help="report folder (discrepancy.json, report.html)")
         p.add_argument("--instrument-sigma-mm", type=nonnegative_float, default=0.0, metavar="S",
                        help="instrument noise sd of x and y, mm (default 0)")

@@ -8,7 +8,8 @@
   methods do not change under such monotone input transforms (elementary
   effects are then per unit of probability).
 - :func:`openturns_distribution`: the budget as an OpenTURNS joint
-  distribution of independent marginals (needs ``pip install openturns``).
+  distribution: its marginals, independent or joined by a ``NormalCopula``
+  (needs ``pip install openturns``).
 - :func:`to_xarray`: a result's tidy frame as an xarray Dataset over the
   poses (needs ``pip install xarray``).
 """
@@ -91,11 +92,14 @@ def _openturns_marginal(ot, law):
 
 
 def openturns_distribution(budget: Budget):
-    """The budget as an OpenTURNS joint distribution of independent marginals, in factor order.
+    """The budget as an OpenTURNS joint distribution, in factor order.
 
     Each marginal carries the factor's name as its description (the inputs,
-    then the backlash_i and thermal effects). Requires the optional
-    ``openturns`` package.
+    then the backlash_i and thermal effects). The marginals are independent,
+    or, for a correlated budget, joined by OpenTURNS' ``NormalCopula`` of the
+    budget's rank correlations (converted to the latent correlation by
+    OpenTURNS' own ``GetCorrelationFromSpearmanCorrelation``). Requires the
+    optional ``openturns`` package.
     """
     try:
         import openturns as ot
@@ -107,7 +111,16 @@ def openturns_distribution(budget: Budget):
         m.setDescription([name])
         marginals.append(m)
     joint = getattr(ot, "JointDistribution", None) or ot.ComposedDistribution
-    dist = joint(marginals)
+    copula = budget.copula
+    if copula is None:
+        dist = joint(marginals)
+    else:
+        D = len(marginals)
+        spearman = ot.CorrelationMatrix(D)
+        for a, i in enumerate(copula.index):
+            for b, j in enumerate(copula.index[:a]):
+                spearman[i, j] = float(copula.spearman[a, b])
+        dist = joint(marginals, ot.NormalCopula(ot.NormalCopula.GetCorrelationFromSpearmanCorrelation(spearman)))
     dist.setDescription(list(budget.factors))
     return dist
 

@@ -231,10 +231,14 @@ def _figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
                      "no variance to share." if constant else "")
         for output, frame in r.ranking.items():
             basis = plots.ranking_basis(frame)[0]
+            left = (f"Shapley effects with 95 % Student t intervals over {r.sobol.replicates} batches of random "
+                    f"orders (left, ranked by Sh; the budget correlates inputs, so Sobol indices are not defined)"
+                    if plots.shapley_only(frame) else
+                    f"Sobol indices with 95 % Student t intervals over {r.sobol.replicates} independently "
+                    f"scrambled replicates (left, ranked by ST)")
             figs.append((f"sobol_{r.name}_{output}",
-                         f"{r.name}, output {output}: Sobol indices with 95 % bootstrap intervals (left, ranked "
-                         f"by ST) and each input's share of the exact worst case (right, ranked by share); "
-                         f"both the {basis} of the Sobol grid.{undefined}",
+                         f"{r.name}, output {output}: {left} and each input's share of the exact worst case "
+                         f"(right, ranked by share); both the {basis} of the Sobol grid.{undefined}",
                          _draw(plots.ranking_figure, frame, f"{r.name}: {output}")))
     return figs + _allocation_figures(result)
 
