@@ -10,7 +10,7 @@ from scipy import special
 
 from prp3mc import Budget, Disc, Geometry, Normal, Triangular, Uniform, linear_model, worst_case
 from prp3mc.cli import main
-from prp3mc.errors import BudgetError, Prp3mcWarning
+from prp3mc.errors import BudgetError, ParameterError, Prp3mcWarning
 from prp3mc.sobol.ranking import ranking
 from prp3mc.sobol.shapley import shapley_effects
 from prp3mc.sobol.indices import DEPENDENT_NOTE, sobol_indices
@@ -200,7 +200,7 @@ def test_constant_inputs_have_no_effect():
 ])
 def test_bad_arguments(kwargs, message):
     args = dict(n_permutations=64, rng=1) | kwargs
-    with pytest.raises(BudgetError, match=message):
+    with pytest.raises(ParameterError, match=message):
         shapley_effects(Geometry.from_preset("u-shape"), PAPER, POSE, args.pop("n_permutations"), **args)
 
 

@@ -8,7 +8,7 @@ import pytest
 from SALib.sample import sobol as sobol_sample
 
 from prp3mc import Budget, Disc, Geometry, Normal, Region, Triangular, Uniform, linear_model, worst_case
-from prp3mc.errors import BudgetError, InfeasiblePoseError
+from prp3mc.errors import BudgetError, InfeasiblePoseError, ParameterError
 from prp3mc.cli import main
 from prp3mc.sobol.ranking import ranking
 from prp3mc.sobol.saltelli import design_factors as _factors, saltelli_design as _design
@@ -209,24 +209,24 @@ def test_result_is_read_only_with_labelled_intervals():
     ratio = 3.4994832973505026 / 1.894578605090005                    # t(0.99, 7) / t(0.9, 7)
     np.testing.assert_allclose(wide["ci_high"] - wide["ci_low"], ratio * (ci["ci_high"] - ci["ci_low"]),
                                rtol=1e-12, atol=1e-15)
-    with pytest.raises(BudgetError, match="level"):
+    with pytest.raises(ParameterError, match="level"):
         r.conf_int(1.0)
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    (dict(n_samples=1000), "power of two"),
-    (dict(outputs=("z",)), "bad outputs"),
-    (dict(method="fast"), "unknown method"),
-    (dict(groups={"g": ["rho_9"]}), "unknown input"),
-    (dict(groups={"g": "rho_1"}), "list of inputs"),
-    (dict(conf_level=1.0), "conf_level"),
-    (dict(replicates=12), "power of two"),
-    (dict(replicates=64), "too small for 64 replicates"),
-    (dict(shapley_permutations=-1), "shapley_permutations"),
+@pytest.mark.parametrize("kwargs, error, message", [
+    (dict(n_samples=1000), ParameterError, "power of two"),
+    (dict(outputs=("z",)), ParameterError, "bad outputs"),
+    (dict(method="fast"), ParameterError, "unknown method"),
+    (dict(groups={"g": ["rho_9"]}), BudgetError, "unknown input"),
+    (dict(groups={"g": "rho_1"}), BudgetError, "list of inputs"),
+    (dict(conf_level=1.0), ParameterError, "conf_level"),
+    (dict(replicates=12), ParameterError, "power of two"),
+    (dict(replicates=64), ParameterError, "too small for 64 replicates"),
+    (dict(shapley_permutations=-1), ParameterError, "shapley_permutations"),
 ])
-def test_bad_arguments(kwargs, message):
+def test_bad_arguments(kwargs, error, message):
     args = dict(n_samples=64, rng=1) | kwargs
-    with pytest.raises(BudgetError, match=message):
+    with pytest.raises(error, match=message):
         sobol_indices(Geometry.from_preset("u-shape"), PAPER, [0, 100, 0], args.pop("n_samples"), **args)
 
 
@@ -250,7 +250,7 @@ def test_ranking_per_pose_and_region(geometry, region):
     row = area.set_index("name").loc["theta_2"]
     k = r.names.index("theta_2")
     assert row["ST"] == pytest.approx(r.ST[..., 3, k].mean()) and row["ST_max"] == r.ST[..., 3, k].max()
-    with pytest.raises(BudgetError, match="same poses"):
+    with pytest.raises(ParameterError, match="same poses"):
         ranking(r, worst_case(geometry, PAPER, grid[:2]), "position")
 
 

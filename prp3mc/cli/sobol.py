@@ -94,8 +94,7 @@ class SobolCommand:
         d = len(budget.factors)
         perms = args.samples // 2 if args.shapley_permutations is None else args.shapley_permutations
         within_limits(args, sobol_estimate(args.samples, 1, d, d + len(budget.groups) + len(groups),
-                                           len(OUTPUTS), salib=args.method != "vectorised",
-                                           shapley_permutations=perms))
+                                           len(OUTPUTS), shapley_permutations=perms))
         check_linearity(geometry, budget, args.pose)
         r = sobol_indices(geometry, budget, args.pose, args.samples, rng=args.seed, groups=groups,
                           replicates=args.replicates, conf_level=args.conf_level, method=args.method,

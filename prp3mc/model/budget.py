@@ -21,7 +21,7 @@ import numpy as np
 from .._toml import dumps_toml, load_spec, load_toml
 from ..output import write_text
 from .._result import FrozenDict
-from ..errors import BudgetError, IncompleteBudgetWarning, UnknownPresetError
+from ..errors import BudgetError, IncompleteBudgetWarning, ParameterError, UnknownPresetError
 from .catalogue import Catalogue
 from .copula import GaussianCopula, parse_correlation
 from .laws import Law, law_from_dict
@@ -297,7 +297,7 @@ class Budget:
         u = np.asarray(u, dtype=float)
         laws = self.factor_laws
         if u.ndim != 2 or u.shape[1] != len(laws):
-            raise BudgetError(f"expected uniforms of shape (n, {len(laws)}), got {u.shape}")
+            raise ParameterError(f"expected uniforms of shape (n, {len(laws)}), got {u.shape}")
         return self.marginal_ppf(u if self.copula is None else self.copula.correlate(u))
 
     def marginal_ppf(self, u: np.ndarray) -> np.ndarray:
@@ -318,7 +318,7 @@ class Budget:
         """
         rng = np.random.default_rng(rng)
         if n < 1:
-            raise BudgetError(f"sample count must be positive, got {n}")
+            raise ParameterError(f"sample count must be positive, got {n}")
         D = len(self.factor_laws)
         out = np.empty((n, D))
         for start in range(0, n, SAMPLE_BLOCK):
@@ -335,7 +335,7 @@ class Budget:
         """
         start = k * SAMPLE_BLOCK
         if not 0 <= start < n:
-            raise BudgetError(f"block {k} is outside a sample of {n}")
+            raise ParameterError(f"block {k} is outside a sample of {n}")
         D = len(self.factor_laws)
         bits = np.random.PCG64(seed)
         bits.advance(start * D)
@@ -370,7 +370,7 @@ class Budget:
                 slider[:, e.leg] += X[:, factors.index(name)]
         if kinds & {"scale", "thermal"}:
             if b is None:
-                raise BudgetError("lead scale and thermal effects need the nominal slider positions b")
+                raise ParameterError("lead scale and thermal effects need the nominal slider positions b")
             strain = np.zeros((X.shape[0], 3))
             for name, eff in self.effects.items():
                 if eff.effect.kind == "scale":

@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from .._result import POSE_COLUMNS
-from ..errors import BudgetError
+from ..errors import BudgetError, MissingDependencyError, ParameterError
 from ..units import OUTPUTS, RAD2DEG
 from .budget import Budget
 from .laws import Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
@@ -61,7 +61,7 @@ def salib_model(geometry, budget: Budget, poses, output: str = "position"):
         the output, shape (..., n): (n,) for one pose.
     """
     if output not in OUTPUTS:
-        raise BudgetError(f"unknown output {output!r} (choose from {', '.join(OUTPUTS)})")
+        raise ParameterError(f"unknown output {output!r} (choose from {', '.join(OUTPUTS)})")
     model = linear_model(geometry, budget, poses)
 
     def f(U: np.ndarray) -> np.ndarray:
@@ -104,7 +104,7 @@ def openturns_distribution(budget: Budget):
     try:
         import openturns as ot
     except ImportError:
-        raise BudgetError("openturns is not installed: pip install openturns") from None
+        raise MissingDependencyError("openturns", "pip install openturns") from None
     marginals = []
     for name, law in budget.factor_laws.items():
         m = _openturns_marginal(ot, law)
@@ -139,7 +139,7 @@ def to_xarray(result):
     try:
         import xarray  # noqa: F401  (pandas' to_xarray needs it)
     except ImportError:
-        raise BudgetError("xarray is not installed: pip install xarray") from None
+        raise MissingDependencyError("xarray", "pip install xarray") from None
     frame: pd.DataFrame = result.to_frame()
     index = [c for c in POSE_COLUMNS + _LABELS if c in frame.columns]
     return frame.set_index(index).to_xarray()

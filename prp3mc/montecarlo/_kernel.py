@@ -12,6 +12,10 @@ maxima, and, for each selection window ``[lo, hi)``, the count below it, the
 values inside it (up to a capacity) and a histogram over the window's
 sub-bin edges of the values beyond the capacity. Kernels release the GIL so
 that ranges of blocks run in parallel threads.
+
+Why kept rather than numpy products and ``np.percentile``: 6.2-10.6x the numpy
+code on 441 poses x 2^20 samples, 11.6x at one pose x 2^24, and 1e8 samples
+in 0.28 GB instead of 21.6 GB (``benchmarks/bench_montecarlo.py``, 2 shared cores).
 """
 
 from __future__ import annotations

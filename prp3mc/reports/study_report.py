@@ -14,8 +14,8 @@ it is readable without prp3mc installed. Figures are drawn on figures of
 their own with an Agg canvas: writing a report never touches pyplot or the
 matplotlib backend. Each is laid out once with margins in inches and drawn
 once, without a layout engine (:mod:`prp3mc.reports._layout`). They are drawn
-on worker processes (1 plus the idle cores: :func:`prp3mc._fork.fork_workers`) while the tables are
-written (:mod:`prp3mc.reports._render`).
+on worker processes where the system forks, while the tables are written
+(:mod:`prp3mc.reports._render`).
 """
 
 from __future__ import annotations
@@ -415,8 +415,8 @@ def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = Fa
     ``formats`` (``png``, ``svg`` or both, a sequence or ``"png,svg"``) are
     the files written per figure; each is rendered once and the report
     embeds the same PNG. ``workers``: processes drawing the figures
-    (:func:`prp3mc.reports._render.rendering`; default 1 plus the idle cores,
-    where the system can fork, 1 draws them here). ``warnings`` (the
+    (:func:`prp3mc.reports._render.rendering`; default the cores, where the
+    system can fork, 1 draws them here). ``warnings`` (the
     messages a command gave while it ran, which include the budget's) replace
     the summary's own when given and not empty; the report shows them.
     Returns the path of ``report.html``.

@@ -40,7 +40,7 @@ from .._result import freeze, interval_frame, name_columns, short_repr
 from .._rng import MAX_SEED, child_seed, resolve_rng
 from .._threads import cores, single_threaded_blas
 from .._version import __version__
-from ..errors import BudgetError, Prp3mcWarning
+from ..errors import BudgetError, ParameterError, Prp3mcWarning
 from ..kinematics.geometry import Geometry
 from ..progress import Progress
 from ..units import OUTPUTS, RAD2DEG, t_value
@@ -160,7 +160,7 @@ class SobolResult:
     def se(self, statistic: str) -> np.ndarray:
         """Standard error of ``S1``, ``ST`` or ``Sh``, (..., O, K): the half-width over ``t(conf_level, R - 1)``."""
         if statistic not in self.statistics:
-            raise BudgetError(f"no standard error for {statistic!r} (known: {', '.join(self.statistics)})")
+            raise ParameterError(f"no standard error for {statistic!r} (known: {', '.join(self.statistics)})")
         return getattr(self, f"{statistic}_conf") / t_value(self.conf_level, self.replicates - 1)
 
     def conf_int(self, level: float = 0.95) -> pd.DataFrame:
@@ -180,7 +180,7 @@ class SobolResult:
             output, name and statistic.
         """
         if not 0.0 < level < 1.0:
-            raise BudgetError(f"level must lie in (0, 1), got {level}")
+            raise ParameterError(f"level must lie in (0, 1), got {level}")
         t = t_value(level, self.replicates - 1)
         frames = []
         for statistic in self.statistics:
@@ -198,7 +198,7 @@ class SobolResult:
 def _check_power_of_two(n: int, what: str) -> int:
     n = int(n)
     if n < 2 or n & (n - 1):
-        raise BudgetError(f"{what} must be a power of two >= 2 (Sobol' sequences), got {n}")
+        raise ParameterError(f"{what} must be a power of two >= 2 (Sobol' sequences), got {n}")
     return n
 
 
@@ -271,20 +271,20 @@ def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     n_samples = _check_power_of_two(n_samples, "the Sobol base sample size N")
     replicates = _check_power_of_two(replicates, "the number of replicates")
     if n_samples < 2 * replicates:
-        raise BudgetError(f"N = {n_samples} is too small for {replicates} replicates: each needs at least "
+        raise ParameterError(f"N = {n_samples} is too small for {replicates} replicates: each needs at least "
                           f"2 points (N >= {2 * replicates})")
     n_rep = n_samples // replicates
     outputs = tuple(outputs)
     unknown = [o for o in outputs if o not in OUTPUTS]
     if unknown or not outputs or len(set(outputs)) < len(outputs):
-        raise BudgetError(f"bad outputs {list(outputs)}: choose distinct ones among {', '.join(OUTPUTS)}")
+        raise ParameterError(f"bad outputs {list(outputs)}: choose distinct ones among {', '.join(OUTPUTS)}")
     if method not in _METHODS:
-        raise BudgetError(f"unknown method {method!r} (known: {', '.join(_METHODS)})")
+        raise ParameterError(f"unknown method {method!r} (known: {', '.join(_METHODS)})")
     if not 0.0 < conf_level < 1.0:
-        raise BudgetError(f"conf_level must lie in (0, 1), got {conf_level}")
+        raise ParameterError(f"conf_level must lie in (0, 1), got {conf_level}")
     perms = n_samples // 2 if shapley_permutations is None else int(shapley_permutations)
     if perms < 0:
-        raise BudgetError(f"shapley_permutations must be >= 0, got {shapley_permutations}")
+        raise ParameterError(f"shapley_permutations must be >= 0, got {shapley_permutations}")
     seed, _ = resolve_rng(rng)
     seed = seed % (MAX_SEED + 1)
     factors = design_factors(budget, groups)
@@ -409,17 +409,17 @@ def sobol_converge(geometry: Geometry, budget: Budget, poses, *, target_width: f
     n = _check_power_of_two(n_start, "n_start")
     n_max = _check_power_of_two(n_max, "n_max")
     if n > n_max:
-        raise BudgetError(f"n_start = {n} exceeds n_max = {n_max}")
+        raise ParameterError(f"n_start = {n} exceeds n_max = {n_max}")
     which = which or ("Sh" if budget.correlated else "ST")
     if which not in ("ST", "S1", "both", "Sh"):
-        raise BudgetError(f"which must be 'ST', 'S1', 'both' or 'Sh', got {which!r}")
+        raise ParameterError(f"which must be 'ST', 'S1', 'both' or 'Sh', got {which!r}")
     if which != "Sh" and budget.correlated:
         raise BudgetError(f"budget {budget.name!r} correlates inputs: it has no Sobol indices to converge; "
                           "use which='Sh'")
     if which == "Sh" and kwargs.get("shapley_permutations") == 0:
-        raise BudgetError("which='Sh' needs the Shapley effects: shapley_permutations must not be 0")
+        raise ParameterError("which='Sh' needs the Shapley effects: shapley_permutations must not be 0")
     if not target_width > 0:
-        raise BudgetError(f"target_width must be > 0, got {target_width}")
+        raise ParameterError(f"target_width must be > 0, got {target_width}")
     seed, _ = resolve_rng(rng)
     rows = []
     while True:

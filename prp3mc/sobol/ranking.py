@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from ..errors import BudgetError
+from ..errors import ParameterError
 from ..units import OUTPUT_UNITS
 from .indices import SobolResult
 from ..worstcase.envelope import WorstCase
@@ -97,11 +97,11 @@ def ranking(sobol_result: SobolResult, worst_case_result: WorstCase, output: str
     """
     r, wc = sobol_result, worst_case_result
     if output not in r.outputs:
-        raise BudgetError(f"output {output!r} is not in the Sobol result (has {', '.join(r.outputs)})")
+        raise ParameterError(f"output {output!r} is not in the Sobol result (has {', '.join(r.outputs)})")
     if r.poses.shape != wc.poses.shape or not np.allclose(r.poses, wc.poses):
-        raise BudgetError("ranking needs the Sobol result and the worst case at the same poses")
+        raise ParameterError("ranking needs the Sobol result and the worst case at the same poses")
     if tuple(wc.inputs) != tuple(r.names[:len(wc.inputs)]):
-        raise BudgetError("ranking needs the Sobol result and the worst case of the same budget")
+        raise ParameterError("ranking needs the Sobol result and the worst case of the same budget")
     o = r.outputs.index(output)
     term_map, shifts = _term_map(r, wc)
     contrib = np.einsum("...t,kt->...k", wc.contribution[output], term_map)    # (..., K + S)

@@ -65,7 +65,7 @@ from .._result import freeze, interval_frame, name_columns, short_repr
 from .._rng import child_seed, resolve_rng
 from .._threads import single_threaded_blas
 from .._version import __version__
-from ..errors import BudgetError
+from ..errors import ParameterError
 from ..kinematics.geometry import Geometry
 from ..progress import Progress
 from ..units import OUTPUTS, POSE_OUTPUTS, RAD2DEG, t_value
@@ -151,7 +151,7 @@ class ShapleyResult:
     def conf_int(self, level: float = 0.95) -> pd.DataFrame:
         """Student t intervals ``Sh ± t(level, batches - 1) se`` in the long form (statistic ``Sh``)."""
         if not 0.0 < level < 1.0:
-            raise BudgetError(f"level must lie in (0, 1), got {level}")
+            raise ParameterError(f"level must lie in (0, 1), got {level}")
         value, se = self.Sh.reshape(-1), self.se().reshape(-1)
         half = t_value(level, self.batches - 1) * se
         frame = pd.DataFrame({**self._keys(), "statistic": "Sh", "value": value, "unit": "1", "se": se})
@@ -302,15 +302,15 @@ def shapley_effects(geometry: Geometry, budget: Budget, poses, n_permutations: i
     outputs = tuple(outputs)
     unknown = [o for o in outputs if o not in OUTPUTS]
     if unknown or not outputs or len(set(outputs)) < len(outputs):
-        raise BudgetError(f"bad outputs {list(outputs)}: choose distinct ones among {', '.join(OUTPUTS)}")
+        raise ParameterError(f"bad outputs {list(outputs)}: choose distinct ones among {', '.join(OUTPUTS)}")
     batches = int(batches)
     if batches < 2:
-        raise BudgetError(f"Shapley intervals need at least 2 batches, got {batches}")
+        raise ParameterError(f"Shapley intervals need at least 2 batches, got {batches}")
     if int(n_permutations) < 2 * batches:
-        raise BudgetError(f"Shapley effects need at least 2 orders per batch ({2 * batches} for {batches} "
+        raise ParameterError(f"Shapley effects need at least 2 orders per batch ({2 * batches} for {batches} "
                           f"batches), got {n_permutations}")
     if not 0.0 < conf_level < 1.0:
-        raise BudgetError(f"conf_level must lie in (0, 1), got {conf_level}")
+        raise ParameterError(f"conf_level must lie in (0, 1), got {conf_level}")
     seed, _ = resolve_rng(rng)
     factors = design_factors(budget, groups)
     model = linear_model(geometry, budget, poses)
