@@ -10,7 +10,7 @@ every thread and worker process):
   inside prp3mc's worker threads);
 - the report (``write_study``), the figures drawn on one worker process per
   core while the tables are written, and drawn one after the other in this
-  process, as before (the command picks between them by the idle cores).
+  process, as before (the command draws on one worker per core where it can fork).
 
 The sample counts and grids are the study's own (``--quick``: its reduced
 version). The same seed gives the same summary.json from the command and from
@@ -39,7 +39,7 @@ from prp3mc.reports.study_report import write_study
 from prp3mc.study.summary import build_summary
 from prp3mc.study import runner
 from prp3mc.study.reader import Study
-from prp3mc.uncertainty import sobol
+from prp3mc.sobol import indices as sobol
 
 STUDY = "paper_reproduction"
 

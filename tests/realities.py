@@ -1,7 +1,7 @@
 """The campaign layout and instrument of the discrepancy tests.
 
 The realities an instrument adds (registration, drift, gross errors, errors
-that repeat) are :func:`~prp3mc.measurement.simulate.simulate_campaign`'s
+that repeat) are :func:`~prp3mc.measurement.campaign.simulate.simulate_campaign`'s
 keyword arguments.
 """
 

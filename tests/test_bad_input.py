@@ -22,9 +22,9 @@ from prp3mc import Budget, Geometry
 from prp3mc._toml import dumps_toml, loads_toml
 from prp3mc.cli import main
 from prp3mc.errors import Prp3mcError, Prp3mcWarning
-from prp3mc.measurement.campaign import read_campaign
+from prp3mc.measurement.campaign.data import read_campaign
 from prp3mc.study.reader import Study
-from prp3mc.uncertainty.systematic import SystematicEffect
+from prp3mc.model.effects import SystematicEffect
 
 G, B, P = ["--geometry", "u-shape"], ["--budget", "paper"], ["--pose", "0", "100", "0"]
 PAPER_LEGS = "".join(f'theta_{i} = {{ law = "uniform", lo = -0.04, hi = 0.04 }}\n' for i in (1, 2, 3))
@@ -133,7 +133,8 @@ CASES = [
     _case("wobble", status=2, message="invalid choice"),
     _case("--max-hours", "0", "sensitivity", *G, *P, status=2, message="expected a number > 0"),
     _case("--max-hours", "nan", "sensitivity", *G, *P, status=2, message="finite number"),
-    _case("--max-hours", "1e-9", "montecarlo", *G, *B, *P, "--samples", "1000000", message="would take"),
+    _case("--max-hours", "1e-9", "montecarlo", *G, *B, *P, "--samples", "1000000",
+          message="stopped at the --max-hours limit"),
     # ----------------------------------------------------------- sensitivity
     _case("sensitivity", status=2, message="required"),
     _case("sensitivity", *G, "--pose", "nan", "100", "0", status=2, message="finite number, got 'nan'"),
@@ -206,9 +207,11 @@ CASES = [
     _case("sobol", *G, *B, *P, "--samples", "256", "--group", "a=rho_1", "--group", "a=zeta_1", message="names a group twice"),
     _case("sobol", *G, *B, *P, "--samples", "1000", message="power of two"),
     _case("sobol", *G, *B, *P, "--samples", str(2**40), message="of memory, this machine has"),
-    _case("sobol", *G, *B, *P, "--samples", "256", "--resamples", "0", status=2, message="positive integer"),
-    _case("sobol", *G, *B, *P, "--samples", "256", "--resamples", "1", message="at least 2 resamples"),
-    _case("sobol", *G, *B, *P, "--samples", "1024", "--resamples", str(10**9), message="of memory"),
+    _case("sobol", *G, *B, *P, "--samples", "256", "--replicates", "0", status=2, message="positive integer"),
+    _case("sobol", *G, *B, *P, "--samples", "256", "--replicates", "1", message="replicates must be a power of two"),
+    _case("sobol", *G, *B, *P, "--samples", "256", "--replicates", "256", message="too small for 256 replicates"),
+    _case("sobol", *G, *B, *P, "--samples", "256", "--shapley-permutations", "-1", status=2, message="integer >= 0"),
+    _case("sobol", *G, *B, *P, "--samples", "1024", "--shapley-permutations", str(10**12), message="of memory"),
     _case("sobol", *G, *B, *P, "--conf-level", "1", status=2, message="between 0 and 1"),
     _case("sobol", *G, *B, *P, "--conf-level", "0", status=2, message="between 0 and 1"),
     _case("sobol", *G, *B, *P, "--conf-level", "nan", status=2, message="finite"),
@@ -226,7 +229,8 @@ CASES = [
     _case("study", "{study_bad_toml}", "--out", "{root}/o3", message="malformed TOML"),
     _case("study", "{study_huge_samples}", "--out", "{root}/o4", message="of memory, this machine has"),
     _case("study", "{study_huge_grid}", "--out", "{root}/o5", message="of memory, this machine has"),
-    _case("--max-hours", "0.1", "study", "{study_long}", "--out", "{root}/o6", message="would take"),
+    _case("--max-hours", "1e-9", "study", "{study_long}", "--out", "{root}/o6",
+          message="stopped at the --max-hours limit"),
     _case("study", "{study_unknown_key}", "--out", "{root}/o7", message="unknown key 'wobble'"),
     _case("study", "{study_seed_negative}", "--out", "{root}/o8", message="seed must be a non-negative"),
     _case("study", "{study_budget_hi}", "--out", "{root}/o9", message="beyond any error"),
@@ -274,8 +278,8 @@ CASES = [
           message="unknown effect 'wobble_1'"),
     _case("discrepancy", *G, "--budget", "{budget_delta_model}", "--data", "{csv_no_dir}", "--out", "{root}/d22",
           message="holds effects fitted on geometry 'delta-shape', not on geometry 'u-shape'"),
-    _case("--max-hours", "1e-6", "discrepancy", *G, *B, "--data", "{csv_nan}", "--out", "{root}/d23",
-          message="discrepancy analysis of 8 measurements would take"),   # sized before the file is read
+    _case("--max-hours", "1e-9", "discrepancy", *G, *B, "--data", "{csv_nan}", "--out", "{root}/d23",
+          message="stopped at the --max-hours limit"),   # 3.6 µs: stopped before the file is read
     _case("discrepancy", *G, "--budget", "{budget_zero}", "--data", "{csv_small}", "--out", "{root}/d24",
           message="has a zero law"),
     # ----------------------------------------------------------- allocate
@@ -283,8 +287,8 @@ CASES = [
           "100000", message="of memory, this machine has"),
     _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150",
           "--spec-percentile", "95", "--samples", "1000000000000", message="of memory, this machine has"),
-    _case("--max-hours", "0.01", "allocate", *G, "--region", "u-shape", "--classes", "example",
-          "--spec-position-um", "150", "--grid", "301", message="would take"),
+    _case("--max-hours", "1e-9", "allocate", *G, "--region", "u-shape", "--classes", "example",
+          "--spec-position-um", "150", "--grid", "301", message="stopped at the --max-hours limit"),
     _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150", "--seed",
           "-1", status=2, message="non-negative integer"),
     _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150",

@@ -13,13 +13,13 @@ from prp3mc.cli import main
 from prp3mc.errors import BudgetError, GeometryError
 from prp3mc.kinematics.chain import inverse_kinematics
 from prp3mc.kinematics.sensitivity import sensitivity
-from prp3mc.measurement.cyclic import ISOTROPY_LIMIT, _critical, amplitude_interval, profile_lr
-from prp3mc.measurement.effects import signatures
-from prp3mc.measurement.simulate import simulate_campaign
-from prp3mc.measurement.workflow import discrepancy
-from prp3mc.uncertainty.systematic import (SystematicEffect, amplitude_phase, components, effect_value, phasor,
+from prp3mc.measurement.fit.cyclic import ISOTROPY_LIMIT, _critical, amplitude_interval, profile_lr
+from prp3mc.measurement.fit.signatures import signatures
+from prp3mc.measurement.campaign.simulate import simulate_campaign
+from prp3mc.measurement.fit.workflow import discrepancy
+from prp3mc.model.effects import (SystematicEffect, amplitude_phase, components, effect_value, phasor,
                                            slider_error)
-from prp3mc.uncertainty.worstcase import worst_case_maxima
+from prp3mc.worstcase.envelope import worst_case_maxima
 from prp3mc.units import RAD2DEG
 
 from .conftest import random_poses
@@ -188,7 +188,7 @@ def test_monte_carlo_mean_is_shifted_by_the_cyclic_errors(geometry, region, seed
 
 
 def test_exact_checks_and_sobol_take_the_cyclic_errors(tmp_path, capsys):
-    from prp3mc.uncertainty.validity import linearity_departure
+    from prp3mc.model.validity import linearity_departure
     g = with_leads(Geometry.from_preset("u-shape"))
     budget = cyclic_budget(g)
     pose = [10.0, 100.0, 1.0]

@@ -1,9 +1,10 @@
-"""``prp3mc init KIND FILE``: write a commented template that runs as it is (README, *File formats*)."""
+"""``prp3mc init KIND FILE``: write a commented template that runs as it is (docs, *File formats*)."""
 
 from importlib import resources
 from pathlib import Path
 
-from ..output import OutputExistsError, write_text
+from ..errors import OutputExistsError
+from ..output import write_text
 from . import command
 
 KINDS = ("geometry", "budget", "study", "classes")

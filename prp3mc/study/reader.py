@@ -85,8 +85,8 @@ from ..errors import Prp3mcError, ResourceError, StudyError, UnknownPresetError
 from ..limits import check, worstcase_estimate
 from ..kinematics.chain import check_poses
 from ..kinematics.geometry import REGION_PRESETS, Geometry, Region
-from ..uncertainty.budget import Budget
-from ..uncertainty.montecarlo import MIN_SAMPLES as MIN_MC_SAMPLES, PERCENTILES
+from ..model.budget import Budget
+from ..montecarlo.propagation import MIN_SAMPLES as MIN_MC_SAMPLES, PERCENTILES
 from ..units import OUTPUTS
 from .allocation import AllocationSpec, read_allocation
 from .sweep import is_number, read_sweep
@@ -313,7 +313,7 @@ class _Reader:
             value = [value, value]
         if isinstance(value, list) and len(value) == 2 and all(ok_int(v) for v in value):
             try:  # the configurations' grids are checked for feasibility below: refuse what cannot be built
-                check(worstcase_estimate(value[0] * value[1], 0), max_hours=math.inf)
+                check(worstcase_estimate(value[0] * value[1], 0))
             except ResourceError as exc:
                 self.fail(path, f"{'.'.join(path)}: {exc}")
             return (value[0], value[1])

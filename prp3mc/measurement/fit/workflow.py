@@ -1,0 +1,317 @@
+"""The discrepancy workflow: where model and measurement disagree, which effect is missing, the gap.
+
+:func:`discrepancy` fits the instrument's registration and drift as
+nuisances (:mod:`~prp3mc.measurement.fit.nuisance`) and the repeatable fraction
+of the budget's errors in every model (:mod:`~prp3mc.measurement.fit.likelihood`),
+sets gross errors aside (:mod:`~prp3mc.measurement.fit.outliers`), names missing
+effects (:mod:`~prp3mc.measurement.fit.selection`), and diagnoses the
+disagreement before and after and measures the gap
+(:mod:`~prp3mc.measurement.fit.diagnostics`). :func:`detectable_effect` plans a
+campaign: how large an effect its layout can name.
+
+Drift is fitted in every model and *listed* under ``nuisance`` only when a
+likelihood-ratio test (chi2(3) at ``alpha``) shows it. When a named effect
+has aliases, the nuisances fitted with each alias in its place differ (the
+registration takes up what tells them apart); each listed nuisance's
+interval is the union of its intervals over the named model and those
+(``by_alias`` lists each), so that it covers whichever alias is true.
+
+A campaign that visits every pose once (a laser tracker's sweep) is
+analysed too: the systematic channels need no repeats; the dispersion
+channels (spreads, the repeatable fraction, the repeat scatter) compare
+repeats and are reported as not tested (``gap.not_tested``,
+``repeatability.not_testable``, spreads under ``not_testable``). Fitting it always
+(rather than adding it only when significant) keeps the null law of every
+other test free of a pre-test, at a cost of three of the campaign's 3M
+degrees of freedom.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+from scipy import optimize
+
+from ..._rng import child_seed, resolve_rng
+from ..._threads import single_threaded_blas
+from ...errors import ParameterError
+from ...kinematics.geometry import Geometry
+from ...progress import Progress
+from ...model.budget import Budget
+from . import outliers as gross
+from ..campaign.data import Campaign, read_campaign, require_testable
+from .diagnostics import diagnose, gap, gap_value, null_variances
+from .signatures import effect
+from ...model.effects import amplitude_phase
+from .holdout import held_out_gap
+from .likelihood import Engine, Fit
+from .nuisance import DRIFT, NUISANCE_NAMES, REGISTRATION
+from .prediction import noise_cov, predict
+from .results import DiscrepancyResult
+from .selection import name_effects, names_in, select
+from .updated import updated_model
+from .accuracy import predicted_accuracy
+from ..campaign.iso9283 import iso9283_figures
+
+__all__ = ["discrepancy", "detectable_effect", "STAGES"]
+
+#: The stages of :func:`discrepancy`, one progress step each.
+STAGES = ("fit and gross errors", "selection", "diagnoses", "with the gross errors", "ISO 9283")
+
+
+@single_threaded_blas()  # the analysis's products are small: a second BLAS thread only spun (0.2 CPU-s a run)
+def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigma_mm: float = 0.0,
+                instrument_sigma_deg: float = 0.0, registration: bool = True, alpha: float = 0.01,
+                alpha_unexplained: float = 0.05, outlier_rate: float = 0.01, max_effects: int = 6,
+                n_bootstrap: int = 400, progress: "bool | None | Progress" = None,
+                rng: "None | int | np.random.Generator" = None) -> DiscrepancyResult:
+    """Find where model and campaign disagree, name the missing effects, close the gap.
+
+    Parameters
+    ----------
+    geometry : Geometry
+    budget : Budget
+        The model's random errors and, in its ``[effects]`` table, systematic
+        errors already known (part of every model, null and alternative,
+        driven by the campaign's ``dir_i``, ``temp_C`` and slider positions;
+        one named again is a correction to it). A budget whose effects were
+        fitted on another geometry is refused.
+    campaign : Campaign, DataFrame or path
+        A campaign (docs, *File formats*), measured in the instrument's frame; validated against ``geometry``.
+    instrument_sigma_mm, instrument_sigma_deg : float
+        Standard deviation of the measurement noise per coordinate.
+    registration : bool
+        Fit the instrument's planar registration (False when it is known to be registered).
+    alpha : float
+        Family-wise level of the naming steps (Bonferroni over candidates)
+        and of the drift test.
+    alpha_unexplained : float
+        Family-wise level (Bonferroni over the seven channels of
+        :mod:`~prp3mc.measurement.fit.diagnostics`) of the verdict that
+        disagreement remains unexplained; the gap closes at ``-ln`` of it.
+    outlier_rate : float
+        Family-wise false-alarm rate of the gross-error test over all rows.
+    max_effects : int
+        Most effects named.
+    n_bootstrap : int
+        Parametric-bootstrap replicates for the null variances of the tests.
+    progress : bool, None or Progress
+        Report the stages (:data:`STAGES`) on stderr: True, False, None
+        (when stderr is a terminal), or a :class:`~prp3mc.progress.Progress`
+        to advance by one per stage (left open, for a caller with more stages).
+    rng : None, int or numpy.random.Generator
+        Randomness of the bootstrap (Scientific Python SPEC 7); the integer
+        seed used is recorded in the result.
+
+    Returns
+    -------
+    DiscrepancyResult
+    """
+    t0 = time.perf_counter()
+    seed, rng = resolve_rng(rng)
+    for name, value in (("alpha", alpha), ("alpha_unexplained", alpha_unexplained), ("outlier_rate", outlier_rate)):
+        if not 0 < value < 1:
+            raise ParameterError(f"{name} must lie in (0, 1), got {value}")
+    budget.check_geometry(geometry)
+    campaign = require_testable(read_campaign(campaign, geometry))
+    # the predicted accuracy needs the named effects only: on a thread of its own (its kernels release the
+    # GIL) while the rest is diagnosed
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
+        full = Engine(geometry, budget, campaign, noise, registration=registration)
+        bar = progress if isinstance(progress, Progress) else Progress(len(STAGES), "discrepancy", progress)
+        stages = iter(STAGES)
+
+        def done():
+            bar.update(label=f"discrepancy: {next(stages)}")
+
+        def engine_for(keep):
+            return full if keep.all() else Engine(geometry, budget, campaign, noise, registration=registration,
+                                                  keep=keep)
+
+        def base_fit(keep):
+            engine = engine_for(keep)
+            return engine, engine.refit((), {})
+
+        def named_model(keep):
+            engine, base = base_fit(keep)
+            return (engine, base, *select(engine, base, alpha, max_effects))
+
+        keep, _ = gross.flag(full, base_fit, outlier_rate)
+        done()
+        engine, base, fit, accepted, steps = named_model(keep)
+        # every row tested again under the named model: rows set aside only for a missing spread come back
+        limit = gross.threshold(campaign.n_measurements, outlier_rate)
+        d2 = gross.distances(full, keep, engine.values(fit), fit.factors, fit.r)
+        if ((d2 <= limit) != keep).any() and (d2 <= limit).sum() > 3:
+            keep = d2 <= limit
+            engine, base, fit, accepted, steps = named_model(keep)
+            d2 = gross.distances(full, keep, engine.values(fit), fit.factors, fit.r)
+        named = name_effects(engine, fit, accepted)
+        model = updated_model(geometry, budget, named, campaign)
+        accuracy = pool.submit(predicted_accuracy, geometry, budget, model, campaign, seed)
+        done()
+        null_before = null_variances(engine, base, n_bootstrap, rng)
+        before = diagnose(engine, base, null=null_before)
+        null_after = null_variances(engine, fit, n_bootstrap, rng)
+        after = diagnose(engine, fit, null=null_after)
+        gap_doc = gap(before, after, alpha_unexplained)
+        gap_doc["held_out"] = held_out_gap(engine, {"before": (base, null_before), "after": (fit, null_after)}, seed)
+        done()
+        outlier_rows = tuple({"row": int(m), "pose_id": str(campaign.pose_id[m]), "z": float(np.sqrt(d2[m]))}
+                             for m in np.flatnonzero(~keep))
+        with_outliers = None
+        if outlier_rows:
+            engine_all, base_all, fit_all, accepted_all, _ = named_model(np.ones(campaign.n_measurements, bool))
+            n_boot = max(n_bootstrap // 4, 50)               # for the comparison only
+            g_before, _ = gap_value(diagnose(engine_all, base_all, n_boot, rng))
+            g_after, _ = gap_value(diagnose(engine_all, fit_all, n_boot, rng))
+            with_outliers = {
+                "named_effects": [_value_entry(n, v) for n, v in _effect_values(engine_all, fit_all).items()],
+                "gap_before": g_before, "gap_after": g_after, "unexplained": bool(g_after > gap_doc["closed_at"]),
+                "repeatable_fraction": fit_all.r}
+        done()
+        nuisance, drift_test = _nuisance(engine, fit, alpha, named)
+        repeatability = {"repeatable_fraction": fit.r, "ci95": list(engine.r_interval(fit))}
+        if not engine.repeats:
+            repeatability = {"repeatable_fraction": None, "ci95": None, "not_testable": _ONE_VISIT}
+            gap_doc["not_tested"] = {ch: _ONE_VISIT for ch in ("dispersion", "dispersion_pose")}
+        effects_after = _effect_values(engine, fit)
+        systematic = {n: v for n, v in effects_after.items() if effect(n).systematic}
+        prediction = predict(geometry, budget, campaign, effects=effects_after, instrument_sigma_mm=instrument_sigma_mm,
+                             instrument_sigma_deg=instrument_sigma_deg, repeatable_fraction=fit.r)
+        iso, iso_poses = _iso9283(engine, fit, child_seed(seed, 9283))
+        done()
+        if bar is not progress:
+            bar.close()
+        confounded = tuple(n for n, with_ in engine.confounded.items() if "registration" in with_)
+        not_testable = dict(engine.not_testable)
+        not_testable.update({n: f"confounded with {with_}" for n, with_ in engine.confounded.items()})
+        if engine.time_source != "time_s":
+            not_testable["drift"] = "no time_s column: drift fitted against row order"
+        if not engine.repeats:
+            not_testable["repeatability"] = _ONE_VISIT
+        return DiscrepancyResult(
+            named_effects=named, unexplained=not gap_doc["closed"], gap=gap_doc, before=before, after=after,
+            steps=steps, prediction_after=prediction, budget_after=prediction.budget, systematic=systematic,
+            nuisance=nuisance, drift_test=drift_test, registration=registration, outliers=outlier_rows,
+            outlier_rule={"family_wise_rate": outlier_rate,
+                          "per_measurement_level": float(-np.expm1(np.log1p(-outlier_rate) / campaign.n_measurements)),
+                          "z_threshold": float(np.sqrt(limit)),
+                          "statistic": "squared standardised error of each measurement predicted from the other visits "
+                                       "of its pose under the fitted model, chi2(3), Sidak over all rows"},
+            with_outliers=with_outliers,
+            repeatability=repeatability,
+            iso9283=iso, iso9283_poses=iso_poses, invisible=engine.invisible,
+            confounded_with_registration=confounded,
+            structural_aliases=tuple(tuple(g) for g in engine.structural_aliases()), not_testable=not_testable,
+            model=model, accuracy=accuracy.result(),
+            campaign=campaign, geometry=geometry, budget=budget, seed=seed, n_bootstrap=n_bootstrap, alpha=alpha,
+            alpha_unexplained=alpha_unexplained, instrument_sigma_mm=instrument_sigma_mm,
+            instrument_sigma_deg=instrument_sigma_deg, wall_time_s=time.perf_counter() - t0)
+
+
+#: Why a one-visit campaign tests no dispersion.
+_ONE_VISIT = ("no pose measured twice: the dispersion channels (spreads, the repeatable fraction, the repeat "
+              "scatter) compare repeats; visit some poses again to test them")
+
+
+def _value_entry(name: str, value) -> dict:
+    """``{name, value}`` of an effect's value (a cyclic error's phasor as its amplitude, with ``phase_deg``)."""
+    if isinstance(value, complex):
+        amplitude, phase = amplitude_phase(value)
+        return {"name": name, "value": amplitude, "phase_deg": phase}
+    return {"name": name, "value": float(value)}
+
+
+def _effect_values(engine: Engine, fit: Fit) -> dict:
+    """Named effects of ``fit``: systematic values (a cyclic error's phasor) and spread bounds, name -> value in
+    the effect's unit."""
+    values = engine.values(fit)
+    return {n: (fit.factors[n] * engine.spread_ref[n] if n in fit.factors else values[n])
+            for n in names_in(engine, fit)}
+
+
+def _nuisance(engine: Engine, fit: Fit, alpha: float, named=()) -> tuple[tuple, dict]:
+    """The ``nuisance`` entries (registration when fitted, drift when its LR test rejects) and the drift test.
+
+    A nuisance that an alias of a named effect fits differently has the
+    union of the intervals as its ``ci95``, the named model's own as
+    ``ci95_named_model`` and each alias's fit under ``by_alias`` (module notes).
+    """
+    entries = {}
+    for name, entry in engine.nuisances(fit).items():
+        entries[name] = {"name": name, **entry}
+        alias = [{"effect": a, **f["nuisance"][name]} for e in named for a, f in e.evidence["alias_fits"].items()
+                 if name in f.get("nuisance", {})]
+        if alias:
+            ci = entry["ci95"]
+            lo = min([ci[0]] + [f["ci95"][0] for f in alias])
+            hi = max([ci[1]] + [f["ci95"][1] for f in alias])
+            entries[name].update(ci95=[lo, hi], ci95_named_model=list(ci), by_alias=alias)
+    no_drift = engine.refit(fit.sys, fit.factors, start_r=fit.r,
+                            nuis=tuple(j for j in fit.nuis if NUISANCE_NAMES[j] not in DRIFT))
+    lr = max(2.0 * (fit.loglik - no_drift.loglik), 0.0)
+    from scipy.stats import chi2  # imported when used: prp3mc --help imports this module
+    p = float(chi2.sf(lr, 3))
+    drift_test = {"lr": lr, "df": 3, "p": p, "significant": bool(p < alpha), "time": engine.time_source,
+                  "values": {n: entries[n]["value"] for n in DRIFT}}
+    listed = [n for n in REGISTRATION if n in entries] + (list(DRIFT) if drift_test["significant"] else [])
+    return tuple(entries[n] for n in listed), drift_test
+
+
+def _iso9283(engine: Engine, fit: Fit, seed: int):
+    """ISO 9283 figures of the kept rows in the machine frame (nuisances removed), measured and predicted.
+
+    Predicted by the fitted model: its mean per pose, visit-to-visit
+    covariance ``W`` and repeating covariance ``r Sigma``; the Monte Carlo
+    of :func:`~prp3mc.measurement.campaign.iso9283.iso9283_figures` draws from ``seed``.
+    """
+    n = len(fit.nuis)
+    corrected = engine.campaign.measured - engine.H[:, :, list(fit.nuis)] @ fit.theta[:n]
+    campaign = dataclasses.replace(engine.campaign, measured=corrected)
+    mean, W, R = engine.moments(fit.factors, fit.r)
+    mean = mean + engine.pose_mean(engine.known + engine.columns(fit.sys, ()) @ fit.theta[n:])
+    figures = iso9283_figures(campaign, mean, W, predicted_repeat_cov=R, rng=seed)
+    return {"measured": dict(figures["measured"]), "predicted": dict(figures["predicted"])}, figures["per_pose"]
+
+
+def detectable_effect(geometry: Geometry, budget: Budget, campaign: Campaign, name: str, *,
+                      power: float = 0.9, alpha: float = 0.01, instrument_sigma_mm: float = 0.0,
+                      instrument_sigma_deg: float = 0.0, registration: bool = True) -> float:
+    """Smallest ``|value|`` of a systematic effect that a campaign names with probability ``power``.
+
+    For planning: simulate a campaign without effects (only its layout
+    matters: poses, repeats, directions, temperatures) and ask how large an
+    effect it would detect, with the nuisances (registration unless
+    ``registration`` is False, drift) profiled out and errors drawn afresh
+    at every visit. Uses the non-central chi2(1) law of the LR at the
+    Bonferroni threshold over the library's testable candidates; aliasing
+    is not accounted for. A cyclic error's value is its amplitude, at its
+    least detectable phase, with the non-central chi2(2) law.
+
+    Returns
+    -------
+    float
+        In the effect's unit; inf if the campaign cannot see it.
+    """
+    eff = effect(name)
+    if not eff.systematic:
+        raise ParameterError(f"{name}: detectable_effect handles systematic effects; simulate spreads instead")
+    engine = Engine(geometry, budget, read_campaign(campaign, geometry),
+                    noise_cov(instrument_sigma_mm, instrument_sigma_deg), registration=registration)
+    if name not in [e.name for e in engine.systematic] or name in engine.confounded:
+        return float("inf")
+    K = len(engine.systematic) - len(engine.confounded) + len(engine.spreads)
+    from scipy.stats import chi2, ncx2  # imported when used: prp3mc --help imports this module
+    threshold = chi2.isf(alpha / K, eff.dof)
+    fit = engine.fit((), {}, 0.0)
+    g = engine.whitened_candidates(fit)[:, engine.blocks[engine.sys_index(name)]]
+    Q, _ = np.linalg.qr(engine.whitened(fit, (), engine.nuisance)[1])
+    g = g - Q @ (Q.T @ g)
+    info = float(np.linalg.eigvalsh(g.T @ g)[0])                   # Fisher information per unit^2 (least: phase)
+    lam = optimize.brentq(lambda nc: ncx2.sf(threshold, eff.dof, nc) - power, 1e-6, 1e4)
+    return float(np.sqrt(lam / info))
