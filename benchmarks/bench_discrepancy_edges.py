@@ -31,8 +31,6 @@ Usage: ``python benchmarks/bench_discrepancy_edges.py [--seeds N] [--quick] [--j
 
 from __future__ import annotations
 
-import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -41,12 +39,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # the campaign makers of tests/realities.py
 
-import prp3mc  # noqa: E402
 from prp3mc import Budget, Geometry  # noqa: E402
 from prp3mc.kinematics.chain import inverse_kinematics  # noqa: E402
 from prp3mc.measurement.campaign.simulate import simulate_campaign  # noqa: E402
 from prp3mc.measurement.fit.workflow import discrepancy  # noqa: E402
-from bench_discrepancy import wilson  # noqa: E402
+from bench_discrepancy import rates_parser, run_cases, wilson  # noqa: E402
 from tests.realities import (bowed_rail, campaign_poses, cyclic_error, sagging_guide, saturated,  # noqa: E402
                              sweep_poses, thermal_error, with_leads)
 
@@ -180,25 +177,9 @@ def table(results: list[dict]) -> str:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--seeds", type=int, default=20, help="campaigns per case and geometry (default 20)")
-    p.add_argument("--quick", action="store_true", help="4 seeds per case")
-    p.add_argument("--first-seed", type=int, default=0)
-    p.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES), metavar="CASE")
-    p.add_argument("--geometries", nargs="+", default=["u-shape", "delta-shape"])
-    p.add_argument("--json", action="store_true", help="one JSON object on stdout")
-    args = p.parse_args(argv)
-    n = 4 if args.quick else args.seeds
-    seeds = range(args.first_seed, args.first_seed + n)
-    t0 = time.perf_counter()
-    results = []
-    for preset in args.geometries:
-        for case in args.cases:
-            results.append(run_case(preset, case, seeds))
-            print(table(results[-1:]).splitlines()[-1], file=sys.stderr, flush=True)
-    doc = {"prp3mc": prp3mc.__version__, "seeds": [seeds.start, seeds.stop], "results": results,
-           "wall_s": time.perf_counter() - t0}
-    print(json.dumps(doc, indent=2) if args.json else table(results))
+    args = rates_parser(__doc__.splitlines()[0], CASES, 20, 4).parse_args(argv)
+    run_cases(run_case, table, args.geometries, args.cases,
+              range(args.first_seed, args.first_seed + (4 if args.quick else args.seeds)), args.json)
     return 0
 
 

@@ -24,7 +24,7 @@ from prp3mc.units import RAD2DEG
 
 from .conftest import random_poses
 from .realities import BUDGET, LEAD_MM, SIGMA, campaign_poses, cyclic_error, with_leads
-from .test_effects import brute_force
+from .test_effects import check_worst_case
 
 N_SE = 5.0
 LEADS = (5.0, 10.0, 4.0)
@@ -157,15 +157,7 @@ def test_worst_case_with_cyclic_errors_equals_brute_force(geometry, region, with
               "scale_2": SystematicEffect("scale_2", 2e-4)} if with_others else None)
     budget = cyclic_budget(g, extra=extra)
     poses = random_poses(region, 5, np.random.default_rng(5))
-    wc = worst_case(g, budget, poses)
-    model = linear_model(g, budget, poses)
-    for q, (corner_max, dense_max) in brute_force(model, budget).items():
-        np.testing.assert_allclose(wc.value(q), corner_max, rtol=1e-12)
-        assert np.all(dense_max <= wc.value(q) * (1 + 1e-12))
-    mx = worst_case_maxima(g, budget, poses)                   # the fused kernel's mode 2
-    for q in ("position", "phi", "x", "y"):
-        np.testing.assert_allclose(mx.value(q), wc.value(q), rtol=1e-12)
-        np.testing.assert_array_equal(mx.leg_signs[q], wc.leg_signs[q])
+    wc = check_worst_case(g, budget, poses)                   # brute force, and the fused kernel's mode 2
     # without the cyclic errors the worst case differs: they are in it
     assert np.abs(worst_case(g, budget.without_effects(), poses).position_mm - wc.position_mm).max() > 1e-4
     assert {"cyclic_2", "cyclic_3"} <= set(wc.contributions_frame("position")["term"])
