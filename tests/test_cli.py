@@ -88,7 +88,7 @@ def test_json_outputs_describe_themselves(argv, tmp_path, capsys):
         assert doc["inputs"]["budget"] == {"name": "paper", "preset": "paper"}
     if "--seed" in argv:
         assert doc["inputs"]["seed"] == 4
-    assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib"}
+    assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib", "numba", "matplotlib"}
 
 
 def test_init_templates_run_as_written(tmp_path, capsys):
@@ -127,7 +127,7 @@ def test_discrepancy_json_describes_itself(tmp_path, capsys):
     for doc in (printed, written):
         assert doc["inputs"]["data"]["sha256"] == hashlib.sha256(data.read_bytes()).hexdigest()
         assert doc["inputs"]["seed"] == 5 and doc["inputs"]["budget"] == {"name": "paper", "preset": "paper"}
-        assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib"}
+        assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib", "numba", "matplotlib"}
     report = (tmp_path / "out" / "report.html").read_text()
     assert "<h2>Run</h2>" in report and written["inputs"]["data"]["sha256"] in report
 

@@ -159,7 +159,7 @@ def test_cli_writes_report_folder(tmp_path, capsys):
     assert inputs["configurations"]["delta"]["geometry"] == {"name": "delta-shape", "preset": "delta-shape"}
     assert inputs["configurations"]["delta"]["region"]["x_mm"] == [-20.0, 20.0]
     assert inputs["seed"] == 3 and inputs["montecarlo_samples"] == 4096 and inputs["sobol_grid"] == [2, 2]
-    assert set(summary["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib"}
+    assert set(summary["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib", "numba", "matplotlib"}
     html = (out / "report.html").read_text()
     assert "<h2>7. Run</h2>" in html and inputs["study"]["sha256"] in html and "SALib" in html
     text = re.sub(r"data:image/png;base64,[A-Za-z0-9+/=]+", "", html)  # base64 may spell anything

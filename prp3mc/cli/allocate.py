@@ -7,7 +7,7 @@ from ..kinematics.geometry import REGION_PRESETS
 from ..provenance import spec_record
 from ..allocation.optimum import allocate, allocation_front, front_records
 from ..model.budget import Budget
-from ..units import DEG2ARCSEC, MM2UM
+from ..units import DEG2ARCSEC, MM2UM, quantity_text
 from ..limits import allocate_estimate
 from . import (add_geometry, add_json, add_progress, add_seed, command, emit_json, finite_float, positive_float, positive_int,
                provenance, within_limits)
@@ -90,7 +90,7 @@ def _text(r, args, front) -> str:
         lines.append(f"  {row.input:9s} {row._2:16s} cost {row.cost:8g}   {row.source}")
     if r.fixed is not None:
         lines += ["", f"held fixed (budget {r.fixed.name}): " + ", ".join(
-            f"{k} = {e.value:g} {e.unit}" for k, e in r.fixed.effects.items())]
+            f"{k} = {quantity_text(e.value, e.unit, 'g')}" for k, e in r.fixed.effects.items())]
     lines += ["", f"worst case over the region: position {MM2UM * r.worst_case_position_mm:.3f} µm, "
                   f"|dphi| {DEG2ARCSEC * r.worst_case_phi_deg:.3f} arcsec",
               f"binding: {r.binding} at " + "; ".join(

@@ -9,7 +9,7 @@ from ..progress import Progress
 from ..reports._render import drawing_ahead
 from ..reports.discrepancy_report import report_document, write_report
 from ..model.budget import Budget
-from ..units import MM2UM
+from ..units import MM2UM, quantity_text
 from . import (WARNINGS, add_budget, add_geometry, add_json, add_progress, add_seed, command, emit_json,
                nonnegative_float, probability, provenance, within_limits)
 
@@ -82,7 +82,7 @@ def headline(result) -> list[str]:
                  f"{rep['ci95'][1]:.2f}]")
     for e in result.named_effects:
         alias = f" (not separable from {', '.join(e.aliases)})" if e.aliases else ""
-        lines.append(f"named {e.name} = {e.value:.4g} {e.unit}  95% CI [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]{alias}")
+        lines.append(f"named {e.name} = {quantity_text(e.value, e.unit)}  95% CI [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]{alias}")
     if not result.named_effects:
         lines.append("named nothing: the model misses nothing this campaign can see")
     if result.confounded_with_registration:

@@ -5,6 +5,7 @@ from ..model.budget import Budget
 from ..kinematics.geometry import Geometry
 from ..limits import montecarlo_estimate
 from ..montecarlo.propagation import monte_carlo
+from ..units import probability_text
 from ..model.validity import check_linearity
 from . import (EFFECTS_NOTE, provenance, add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
                emit_json, nonnegative_float, within_limits)
@@ -80,9 +81,8 @@ class MonteCarloCommand:
                          f"{3600 * r.phi_pct[q]:16.3f}")
         lines.append(f"{'max':14s}{1e3 * r.position_max:14.3f}{'':25s}{3600 * r.phi_max:13.3f}")
         if r.exceed_prob is not None:
-            lo, hi = r.exceed_ci
-            lines.append(f"\nP(position error > {args.tolerance_mm:g} mm) = {float(r.exceed_prob):.4g} "
-                         f"[{lo:.4g}, {hi:.4g}]")
+            lines.append(f"\nP(position error > {args.tolerance_mm:g} mm) = "
+                         f"{probability_text(float(r.exceed_prob), r.exceed_ci)} (95% CI)")
         if budget.effects:
             lines.append("\n" + EFFECTS_NOTE)
         if r.linearization is not None:
