@@ -27,7 +27,7 @@ from .._rng import check_seed
 from .._version import __version__
 from ..errors import Prp3mcError, Prp3mcWarning
 from ..limits import Estimate, check
-from ..output import claim_output, dumps_json
+from ..output import OutputExistsError, claim_output, dumps_json
 from ..provenance import spec_record, versions
 
 __all__ = ["main"]
@@ -53,6 +53,70 @@ def add_geometry(p: argparse.ArgumentParser) -> None:
 def add_pose(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pose", required=True, nargs=3, type=finite_float, metavar=("X", "Y", "PHI"),
                    help="pose: x mm, y mm, phi deg")
+
+
+def add_pose_or_region(p: argparse.ArgumentParser) -> None:
+    """``--pose X Y PHI``, or ``--region R [--grid N]`` for every pose of a grid, written as a tidy table.
+
+    The table (one row per pose; :func:`emit_table`) goes to stdout as CSV,
+    to ``--out FILE.csv``, or into the ``--json`` object as ``rows``.
+    """
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--pose", nargs=3, type=finite_float, metavar=("X", "Y", "PHI"),
+                       help="one pose: x mm, y mm, phi deg")
+    where.add_argument("--region", metavar="R",
+                       help="every pose of an N x N grid over a test region: a preset (u-shape, delta-shape) or a "
+                            "region TOML file (prp3mc init region); writes a table, one row per pose")
+    p.add_argument("--grid", type=positive_int, default=None, metavar="N",
+                   help=f"grid size per side with --region (default {DEFAULT_GRID})")
+    p.add_argument("--out", dest="out_file", default=None, metavar="FILE.csv",
+                   help="with --region: write the table to FILE.csv (default: CSV on stdout)")
+    p.add_argument("--force", action="store_true", help="replace FILE.csv if it exists")
+
+
+#: Grid size per side of ``--region`` when ``--grid`` is not given.
+DEFAULT_GRID = 21
+
+
+def grid_poses(args) -> tuple[np.ndarray, dict]:
+    """The poses (N, 3) of ``--region R --grid N`` and their record for ``inputs``.
+
+    Raises
+    ------
+    Prp3mcError
+        ``--grid`` or ``--out`` without ``--region``, or a region that cannot be read.
+    """
+    from ..kinematics.geometry import Region
+
+    if args.region is None:
+        if args.grid is not None or args.out_file is not None:
+            raise Prp3mcError("--grid and --out go with --region (a table over a grid), not with --pose")
+        return np.asarray(args.pose, dtype=float)[None, :], {}
+    region = Region.load(args.region)
+    n = DEFAULT_GRID if args.grid is None else args.grid
+    record = {"region": spec_record(args.region, region) | {"x_mm": list(region.x_mm), "y_mm": list(region.y_mm),
+                                                          "phi_deg": region.phi_deg}, "grid": n}
+    return region.grid(n).reshape(-1, 3), record
+
+
+def emit_table(args, frame, doc: dict) -> None:
+    """A tidy table (one row per pose, units in the column names): CSV on stdout or ``--out``, or in ``--json``.
+
+    ``doc`` (the command's provenance) goes into the JSON object beside the
+    ``rows``; a CSV carries the table alone.
+    """
+    if args.json:
+        emit_json({"columns": list(frame.columns), "rows": frame.to_dict("records"), **doc})
+    elif args.out_file is not None:
+        from ..output import write_csv
+
+        path = Path(args.out_file)
+        if path.exists() and not args.force:
+            raise OutputExistsError(f"{path} exists: choose another name or pass --force to replace it")
+        write_csv(frame, path)
+        print(f"wrote {path} ({len(frame)} rows)", file=sys.stderr)
+    else:
+        frame.to_csv(sys.stdout, index=False, lineterminator="\n")
 
 
 def add_budget(p: argparse.ArgumentParser) -> None:
@@ -256,8 +320,9 @@ def _unknown_options(argv: list[str], parser: argparse.ArgumentParser) -> None:
         option = word.split("=", 1)[0]
         if not option.startswith("--") or option in known or any(k.startswith(option) for k in known):
             continue
-        near = difflib.get_close_matches(option, sorted(k for k in known if k.startswith("--")), n=2, cutoff=0.6)
-        hint = f": did you mean {' or '.join(near)}?" if near else f" (see {prog} --help)"
+        names = sorted(k[2:] for k in known if k.startswith("--"))     # compared without the dashes all share
+        near = difflib.get_close_matches(option[2:], names, n=2, cutoff=0.7)
+        hint = f": did you mean {' or '.join('--' + n for n in near)}?" if near else f" (see {prog} --help)"
         raise SystemExit(_usage_error(f"unknown option {option}{hint}", prog))
 
 
