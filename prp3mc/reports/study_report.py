@@ -29,8 +29,10 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from ..output import check_output, figure_formats, output_folder, png_data_uri, write_csv, write_json, write_text
-from ..study.results import StudyResult
+from ..output import (check_output, figure_formats, output_folder, png_data_uri, table_formats, write_csv,
+                      write_json, write_text, write_workbook)
+from ..progress import Progress
+from ..study.results import StudyResult, over_grid, pct_se
 from ..study.summary import build_summary
 from ..study.sweep import best_configurations, design_frame
 from ..units import DEG2ARCSEC, DISPLAY, MM2UM
@@ -151,7 +153,7 @@ def _summary_display(frame: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for key, g in frame.groupby(keys, sort=False):
         by = g.set_index("aggregate")
-        factor, unit = DISPLAY[key[2]]
+        factor, unit = (1e6, "ppm") if key[3].startswith("exceed_") else DISPLAY[key[2]]
         rows.append({"configuration": key[0], "analysis": key[1], "output": "|δφ|" if key[2] == "phi" else key[2],
                      "statistic": key[3].replace("_", " "), "unit": unit,
                      **{a: factor * by.at[a, "value"] for a in ("min", "max", "mean")},
@@ -246,7 +248,7 @@ _ALLOCATION_FRONT = ((6.4, 4.4), Margins(0.85, 0.25, 0.55, 0.4))
 
 def _allocation_figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
     """The binding-pose map and the Pareto front of every configuration's allocation."""
-    from .allocation_plots import allocation_front_plot, allocation_map
+    from .allocation_plots import allocation_front_plot, allocation_map, labels_points
     spec = result.study.allocation
     figs = []
     for c in result.configurations:
@@ -263,8 +265,11 @@ def _allocation_figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
             limit = spec.spec_phi_arcsec if output == "phi" else (
                 spec.spec_position_um if spec.spec_percentile is None else None)
             figs.append((f"allocation_{c.name}_front", f"{c.name}: the least cost of every reachable worst-case "
-                         f"{'|δφ|' if output == 'phi' else 'position error'} (the Pareto front); each point is "
-                         "labelled with the classes that changed from the previous one; ★ the chosen classes."
+                         f"{'|δφ|' if output == 'phi' else 'position error'} (the Pareto front); "
+                         + ("each point is labelled with the classes that changed from the previous one"
+                            if labels_points(front, output) else f"{front['point'].nunique()} points, too many to "
+                            "label: the classes that change at each step are in the table below")
+                         + "; ★ the chosen classes."
                          + (" The front is of the worst case: the percentile spec is not drawn, and the chosen "
                             "classes are marked only where they lie on it." if limit is None else ""),
                          _draw_axes(allocation_front_plot, *_ALLOCATION_FRONT, front, output, spec=limit,
@@ -272,9 +277,23 @@ def _allocation_figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
     return figs
 
 
+def _summary_frame(result: StudyResult) -> pd.DataFrame:
+    """The summary table (:meth:`StudyResult.to_frame`) and, with a Monte Carlo tolerance, the exceedance:
+    statistic ``exceed_<T>mm``, P(position error > T) over the grid, unit ``1`` (as ``summary.json``'s ``exceed``)."""
+    rows = []
+    for c in result.configurations:
+        mc = c.montecarlo
+        if mc is None or mc.exceed_prob is None:
+            continue
+        for aggregate, (value, se) in over_grid(mc.exceed_prob, pct_se(mc.exceed_ci)).items():
+            rows.append((c.name, "montecarlo", "position", f"exceed_{mc.tolerance_mm:g}mm", aggregate, value, se, "1"))
+    frame = result.to_frame()
+    return pd.concat([frame, pd.DataFrame(rows, columns=frame.columns)], ignore_index=True) if rows else frame
+
+
 def _tables(result: StudyResult) -> dict[str, pd.DataFrame]:
     contributions = {c.name: _contributions(c) for c in result.configurations}
-    tables = {"summary": result.to_frame(), "worstcase_families": _family_shares(result, contributions),
+    tables = {"summary": _summary_frame(result), "worstcase_families": _family_shares(result, contributions),
               "budget": result.study.budget.to_frame()}
     if result.study.budget.effects:
         tables["effects"] = result.study.budget.effects_frame()
@@ -342,8 +361,13 @@ def _allocations(result: StudyResult, tables: dict[str, pd.DataFrame]) -> list[d
 
 
 def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tables: dict[str, pd.DataFrame],
-                  summary: dict) -> str:
-    """The report as one HTML string; ``figures`` are (name, caption, data URI)."""
+                  summary: dict, formats=("png",), table_types=("csv",)) -> str:
+    """The report as one HTML string; ``figures`` are (name, caption, data URI); ``formats`` those written per figure.
+
+    A caption names a figure's files (``figures/NAME.png``, ``.svg`` only
+    when written) and the Run section lists every file of the folder the
+    report describes.
+    """
     import jinja2
     env = jinja2.Environment(loader=jinja2.PackageLoader("prp3mc.reports", "templates"),
                              autoescape=jinja2.select_autoescape(["html", "j2"]))
@@ -351,6 +375,8 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
     meta = result.metadata()
     meta.update(platform=platform.platform(), date=_dt.datetime.now().astimezone().isoformat(timespec="seconds"))
     configs = [{"name": c.name, "geometry": c.configuration.geometry.name,
+                "parameters": ", ".join(f"{k} = {v:g}" if isinstance(v, (int, float)) else f"{k} = {v}"
+                                        for k, v in c.configuration.parameters),
                 "region": f"x ∈ [{c.configuration.region.x_mm[0]:g}, {c.configuration.region.x_mm[1]:g}] mm, "
                           f"y ∈ [{c.configuration.region.y_mm[0]:g}, {c.configuration.region.y_mm[1]:g}] mm, "
                           f"φ = {c.configuration.region.phi_deg:g}°",
@@ -371,7 +397,17 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
         budget_table=_html_table(tables["budget"]), cmp=comparison(result, summary),
         effects_table=_html_table(tables["effects"].drop(columns=["campaign_sha256"])) if "effects" in tables else None,
         summary=summary, mc_percentile=f"p{_MC_PERCENTILE:g}", tables=sorted(tables),
-        inputs=summary["inputs"], versions=summary["versions"], allocations=_allocations(result, tables))
+        inputs=summary["inputs"], versions=summary["versions"], allocations=_allocations(result, tables),
+        formats=tuple(formats), extras=[ext for ext in formats if ext != "png"],
+        written=_written(figures, tables, formats, table_types))
+
+
+def _written(figures, tables: dict, formats, table_types) -> dict[str, list[str]]:
+    """The files a report's folder holds, by kind (what the Run section lists)."""
+    return {"report": ["report.html", "summary.json"],
+            "figures": [f"figures/{name}.{ext}" for name, *_ in figures for ext in formats],
+            "tables": [f"tables/{name}.csv" for name in sorted(tables)]
+            + (["tables/tables.xlsx"] if "xlsx" in table_types else [])}
 
 
 def _design(result: StudyResult, tables: dict) -> dict | None:
@@ -383,7 +419,8 @@ def _design(result: StudyResult, tables: dict) -> dict | None:
     wide = frame.assign(merit=lambda d: [_merit_name(*m) for m in zip(d.analysis, d.output, d.statistic)],
                         shown=lambda d: [v * DISPLAY[o][0] if s != "ST_top" else v
                                          for v, o, s in zip(d.value, d.output, d.statistic)])
-    table = wide.pivot_table(index=["configuration", *keys], columns="merit", values="shown", sort=False)
+    table = (wide.pivot_table(index=["configuration", *keys], columns="merit", values="shown", sort=False)
+             .rename_axis(columns=None))                 # else the columns' name shows as an empty column
     first = _merit_name("worstcase", "position", "worst_case")
     table = table.sort_values(first).reset_index() if first in table else table.reset_index()
     tops = frame[frame["statistic"] == "ST_top"].set_index("configuration")["input"]
@@ -404,33 +441,43 @@ def _merit_name(analysis: str, output: str, statistic: str) -> str:
 
 
 def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = False,
-                formats=("png",), workers: int | None = None, warnings=None) -> Path:
+                formats=("png",), workers: int | None = None, warnings=None, progress: bool | None = False) -> Path:
     """Write the report, figures, tables and summary.json of ``result`` into the folder ``out``.
 
     ``out`` must not exist unless ``force``; it is replaced atomically.
-    ``formats`` (``png``, ``svg`` or both, a sequence or ``"png,svg"``) are
-    the files written per figure; each is rendered once and the report
-    embeds the same PNG. ``workers``: processes drawing the figures
+    ``formats`` (a sequence or ``"png,svg,xlsx"``) are the files written:
+    ``png`` and/or ``svg`` per figure (``png`` when none is named; each is
+    rendered once and the report embeds the same PNG), and ``xlsx``:
+    ``tables.xlsx`` besides the CSV files, one sheet per table
+    (:func:`prp3mc.output.write_workbook`). ``progress`` shows the figures
+    and tables as they are written (None: when stderr is a terminal). ``workers``: processes drawing the figures
     (:func:`prp3mc.reports._render.rendering`; default 1 plus the idle cores,
     where the system can fork, 1 draws them here). ``warnings`` (the
     messages a command gave while it ran, which include the budget's) replace
     the summary's own when given and not empty; the report shows them.
     Returns the path of ``report.html``.
     """
-    formats = figure_formats(formats)
+    formats, table_types = figure_formats(formats), table_formats(formats)
     check_output(out, force)
     summary = build_summary(result)
     if warnings:
         summary["warnings"] = list(warnings)
     figures = _figures(result)
-    with output_folder(out, force) as tmp:
+    with output_folder(out, force) as tmp, Progress(len(figures) + 2, "report: tables", progress) as bar:
         (tmp / "figures").mkdir()
         (tmp / "tables").mkdir()
         with rendering([(name, draw) for name, _, draw in figures], tmp / "figures", formats, workers) as pngs:
             tables = _tables(result)                # while the figures are drawn
             for name, frame in tables.items():
                 write_csv(frame, tmp / "tables" / f"{name}.csv")
+            if "xlsx" in table_types:
+                write_workbook(tables, tmp / "tables" / "tables.xlsx")
             write_json(tmp / "summary.json", summary)
-            embedded = [(name, caption, png_data_uri(png)) for (name, caption, _), png in zip(figures, pngs)]
-        write_text(tmp / "report.html", render_report(result, embedded, tables, summary))
+            bar.update(label="report: figures")
+            embedded = []
+            for (name, caption, _), png in zip(figures, pngs):
+                embedded.append((name, caption, png_data_uri(png)))
+                bar.update()
+        write_text(tmp / "report.html", render_report(result, embedded, tables, summary, formats, table_types))
+        bar.update(label="report")
     return Path(out) / "report.html"
