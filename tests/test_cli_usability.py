@@ -204,3 +204,12 @@ def test_readme_example_campaign_line_works(tmp_path, monkeypatch, capsys):
     doc = json.loads((tmp_path / "results" / "example_campaign" / "discrepancy.json").read_text())
     assert {e["name"] for e in doc["named_effects"]} == {"scale_2", "backlash_1"}
     assert not doc["unexplained"]
+
+
+def test_xlsx_without_openpyxl_is_one_line_with_the_pip_line(capsys, tmp_path, monkeypatch):
+    import importlib.util
+    find = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "openpyxl" else find(name, *a))
+    code, _, err = run(capsys, "study", "quick", "--quick", "--formats", "png,xlsx", "--out", str(tmp_path / "o"))
+    assert code == 1 and "pip install 'prp3mc[xlsx]'" in err and err.count("\n") == 1
+    assert not (tmp_path / "o").exists()

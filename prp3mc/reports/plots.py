@@ -115,6 +115,12 @@ def within_noise(values: np.ndarray, se: np.ndarray, level: float = 0.95) -> boo
     return float(np.ptp(v)) <= noise_range(v.size, level) * float(s.max())
 
 
+def _with_se(value: float, se: float) -> str:
+    """``value ± se`` to the decimal of the standard error's first digit (``115.9 ± 0.2``)."""
+    decimals = max(0, -int(np.floor(np.log10(se)))) if se > 0 else 3
+    return f"{value:.{decimals}f} ± {round(se, decimals):.{decimals}f}"
+
+
 def shared_levels(*arrays: np.ndarray, n: int = 12) -> np.ndarray:
     """Round contour levels spanning all ``arrays`` (one colour scale for several maps)."""
     from matplotlib.ticker import MaxNLocator
@@ -147,7 +153,7 @@ def region_map(poses: np.ndarray, values: np.ndarray, *, ax=None, levels=None, c
     ax.set(xlabel="x (mm)", ylabel="y (mm)", aspect="equal")
     ax.set_title(title, y=1.0)
     if flat:
-        text = (f"constant within Monte Carlo noise:\n{float(np.mean(values)):.4g} ± {float(np.max(se)):.1g} {unit}"
+        text = (f"constant within Monte Carlo noise:\n{_with_se(float(np.mean(values)), float(np.max(se)))} {unit}"
                 if noise else f"constant: {float(np.mean(values)):.4g} {unit}")
         ax.text(0.5, 0.5, text.rstrip(), transform=ax.transAxes, ha="center", va="center", fontsize=10,
                 bbox={"boxstyle": "round", "fc": "white", "ec": "0.6"})

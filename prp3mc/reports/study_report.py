@@ -153,9 +153,13 @@ def _summary_display(frame: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for key, g in frame.groupby(keys, sort=False):
         by = g.set_index("aggregate")
-        factor, unit = (1e6, "ppm") if key[3].startswith("exceed_") else DISPLAY[key[2]]
+        factor, unit = DISPLAY[key[2]]
+        statistic = key[3].replace("_", " ")
+        if key[3].startswith("exceed_"):          # a probability: % from 1 % up, else ppm
+            factor, unit = (100.0, "%") if by["value"].max() >= 0.01 else (1e6, "ppm")
+            statistic = f"P(> {key[3][len('exceed_'):-2]} mm)"
         rows.append({"configuration": key[0], "analysis": key[1], "output": "|δφ|" if key[2] == "phi" else key[2],
-                     "statistic": key[3].replace("_", " "), "unit": unit,
+                     "statistic": statistic, "unit": unit,
                      **{a: factor * by.at[a, "value"] for a in ("min", "max", "mean")},
                      "se of max": factor * by.at["max", "se"]})
     return pd.DataFrame(rows)
@@ -213,9 +217,12 @@ def _figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
              _draw(plots.compare_maps_figure, res, "worstcase", "phi"))]
     if all(r.montecarlo is not None for r in res):
         pct = _MC_PERCENTILE if _MC_PERCENTILE in res[0].montecarlo.percentiles else res[0].montecarlo.percentiles[-1]
-        figs += [("montecarlo_position", f"Monte Carlo p{pct:g} of the position error (µm). {scale}",
+        noise = (" A map that varies no more than its Monte Carlo noise (range within the 95 % quantile of the range "
+                 "of as many independent estimates with the largest standard error) is labelled constant within "
+                 "Monte Carlo noise, its mean ± that standard error.")
+        figs += [("montecarlo_position", f"Monte Carlo p{pct:g} of the position error (µm). {scale}{noise}",
                   _draw(plots.compare_maps_figure, res, "montecarlo", "position", pct)),
-                 ("montecarlo_phi", f"Monte Carlo p{pct:g} of |δφ| (arcsec). {scale}",
+                 ("montecarlo_phi", f"Monte Carlo p{pct:g} of |δφ| (arcsec). {scale}{noise}",
                   _draw(plots.compare_maps_figure, res, "montecarlo", "phi", pct)),
                  ("histograms_position", "Distribution of the position error at chosen poses; dashed: the exact "
                   f"worst case at that pose, dotted: p{pct:g}.",
