@@ -10,9 +10,9 @@ over the u-shape test region, 8 visits each. Run from the repository root::
 It runs ``prp3mc simulate`` with seed 2026, so the file is what that command writes.
 """
 
+import subprocess
+import sys
 from pathlib import Path
-
-from prp3mc.cli import main
 
 SEED = 2026
 
@@ -26,4 +26,4 @@ def command(out: Path) -> list[str]:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main(command(Path(__file__).with_name("example.csv"))))
+    sys.exit(subprocess.run([sys.executable, "-m", "prp3mc", *command(Path(__file__).with_name("example.csv"))]).returncode)
