@@ -165,7 +165,7 @@ def _draw_iso9283(result: DiscrepancyResult, fig) -> None:
         ax.scatter(rank[~out], meas[~out], s=12, color="tab:blue", label="measured")
         ax.scatter(rank[out], meas[out], s=16, color="tab:red", label="measured, above the band")
         ax.set(ylim=(0, None), title=f"{stat.replace('_phi', ' φ')} ({shown})", xlabel="pose, by predicted value")
-    axes[0].legend(loc="upper left", fontsize=7)
+    axes[0].legend(loc="best", fontsize=7)
 
 
 def _n_steps(result: DiscrepancyResult) -> int:

@@ -332,7 +332,7 @@ def error_histogram(samples, index: int, quantity: str = "position", *, ax=None,
     ax.axvline(p, ls=":", lw=1.2, color=color, label=f"p{percentile:g} {p:.4g} {unit}")
     ax.set_ylabel("density")
     ax.set_xlabel(f"{name} ({unit})", visible=_labelled(ax.xaxis))
-    ax.legend(fontsize=7, loc="upper right")
+    ax.legend(fontsize=7, loc="best")
     return ax.figure
 
 
