@@ -39,18 +39,24 @@ def z_value(level: float = 0.95) -> float:
 Z95 = z_value(0.95)
 
 
-def probability_text(p: float, ci=None) -> str:
-    """A probability as a reader of tolerance reports reads it: ppm below 1 %, % above.
+def probability_text(p: float, ci=None, se: float | None = None) -> str:
+    """A probability as a reader of tolerance reports reads it: ppm below 1 %, % above; an interval ``ci``
+    or a standard error ``se`` in the same unit.
 
     >>> probability_text(0.000815)
     '815 ppm'
     >>> probability_text(0.0528, (0.05, 0.055))
     '5.28 % [5, 5.5]'
+    >>> probability_text(0.0528, se=0.0018)
+    '5.28 ± 0.18 %'
     """
     scale, unit = (1e6, "ppm") if p < 0.01 else (100.0, "%")
 
     def number(v: float) -> str:  # three significant digits, never an exponent
         return f"{v:.0f}" if abs(v) >= 100 else f"{v:.3g}"
+    if se is not None:
+        spread = scale * se
+        return f"{number(scale * p)} ± {spread:.0f} {unit}" if spread >= 10 else f"{number(scale * p)} ± {spread:.2g} {unit}"
     text = f"{number(scale * p)} {unit}"
     if ci is not None:
         text += f" [{number(scale * ci[0])}, {number(scale * ci[1])}]"

@@ -25,7 +25,7 @@ from ._layout import (ROUND_STEPS, fix_layout, grid, lighten, number_inches, set
 
 __all__ = ["is_constant", "within_noise", "noise_range", "shared_levels", "region_map", "worst_case_map", "montecarlo_map", "compare_maps_figure",
            "error_histogram", "histograms_figure", "ecdf_steps", "error_ecdf", "ecdf_figure", "sobol_ranking",
-           "worst_case_shares", "ranking_figure"]
+           "worst_case_shares", "ranking_figure", "contributors_pareto"]
 
 _LABEL = {"position": "position error", "phi": "|δφ|"}
 _QUANTITY = {q: (label, DISPLAY[q][1], DISPLAY[q][0]) for q, label in _LABEL.items()}  # (label, unit, scale)
@@ -549,3 +549,32 @@ def ranking_figure(frame, title: str = "", *, fig=None):
     lighten(fig, ROUND_STEPS)
     set_title(fig, title)
     return fig
+
+
+def contributors_pareto(contributions, *, ax=None, title: str = ""):
+    """Pareto chart of a worst case's contributors: shares (%) as bars, largest first, and their running total.
+
+    Parameters
+    ----------
+    contributions : DataFrame
+        :meth:`~prp3mc.worstcase.envelope.WorstCase.contributions_frame` at one pose (``term``, ``share``).
+    ax : matplotlib Axes, optional
+    title : str
+
+    Returns
+    -------
+    Figure
+    """
+    ax = _axes(ax, (6.4, 3.4))
+    frame = contributions.sort_values("share", ascending=False, kind="stable")
+    share = 100 * frame["share"].to_numpy(dtype=float)
+    x = np.arange(share.size)
+    ax.bar(x, share, color="C0", width=0.7, label="share of the worst case")
+    ax.plot(x, np.cumsum(share), "o-", color="C3", ms=3.5, lw=1.2, label="running total")
+    ax.set_xticks(x, frame["term"], rotation=45, ha="right", fontsize=8)
+    ax.set(ylim=(0, 105), ylabel="share of the worst case (%)")
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=7, frameon=False, loc="center right")         # under the total, over the smallest bars
+    ax.set_title(f"{title}: contributors to the worst-case position error" if title else
+                 "contributors to the worst-case position error", fontsize=10, y=1.0)
+    return ax.figure

@@ -35,7 +35,7 @@ from ..progress import Progress
 from ..study.results import StudyResult, over_grid, pct_se
 from ..study.summary import build_summary
 from ..study.sweep import best_configurations, design_frame
-from ..units import DEG2ARCSEC, DISPLAY, MM2UM
+from ..units import DEG2ARCSEC, DISPLAY, MM2UM, probability_text
 from ._layout import ROUND_STEPS, Margins, agg_figure, lighten
 from ._render import rendering
 from .plots import LEGEND_DROP
@@ -133,6 +133,21 @@ def _contributions(c) -> pd.DataFrame:
     return c.worst_case.contributions_frame("position", _worst_index(c))
 
 
+#: Unit of a term's value in a contributions table, by family (the budget's inputs and effects).
+_TERM_UNITS = {**dict.fromkeys(("a", "b", "c", "e", "rho", "backlash"), "mm"),
+               **dict.fromkeys(("alpha", "beta", "gamma", "theta", "psi", "zeta"), "deg"),
+               "thermal": "deg C", "scale": "1"}
+
+
+def _contributions_display(frame: pd.DataFrame) -> pd.DataFrame:
+    """Worst-case contributions for the report: largest share first, the term's value with its unit, µm and %."""
+    family = frame["term"].str.replace(r"_\d$", "", regex=True)
+    return (frame.assign(**{"value": frame["term_value"], "unit": family.map(_TERM_UNITS).fillna(""),
+                            "contribution (µm)": MM2UM * frame["contribution"], "share (%)": 100 * frame["share"]})
+            .sort_values("share (%)", ascending=False, kind="stable")
+            [["term", "value", "unit", "contribution (µm)", "share (%)"]])
+
+
 def _grid_frame(c) -> pd.DataFrame:
     wc = c.worst_case
     flat = wc.poses.reshape(-1, 3)
@@ -210,6 +225,10 @@ def _figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
     scale = ("Panels share one colour scale when that helps the comparison, else each has its own "
              "(the title says which); a field constant over a region is labelled so, without extrema.")
     figs = _design_figures(result)
+    figs += [(f"pareto_{r.name}", f"{r.name}: what builds the worst case at its worst pose ({_worst_pose(r)}): each "
+              "term's share of the exact worst-case position error, largest first, and their running total (at this one "
+              "pose; the table above compares both rankings as means over the Sobol grid).",
+              _draw_axes(plots.contributors_pareto, *_PARETO, _contributions(r), title=r.name)) for r in res]
     figs += [("worstcase_position", "Exact worst-case position error (µm) over each test region (the paper's "
              f"Figs. 4-5, computed exactly). ✕ marks the maximum, ○ the minimum. {scale}",
              _draw(plots.compare_maps_figure, res, "worstcase", "position")),
@@ -248,6 +267,8 @@ def _figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
     return figs + _allocation_figures(result)
 
 
+#: Size and margins (inches) of a Pareto chart of contributors.
+_PARETO = ((6.4, 3.4), Margins(0.75, 0.2, 0.75, 0.35))
 #: Size and margins (inches) of an allocation's map (its legend below it) and of its Pareto front.
 _ALLOCATION_MAP = ((5.2, 5.6), Margins(0.8, 0.3, LEGEND_DROP + 0.5, 0.6))
 _ALLOCATION_FRONT = ((6.4, 4.4), Margins(0.85, 0.25, 0.55, 0.4))
@@ -389,10 +410,7 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
                           f"φ = {c.configuration.region.phi_deg:g}°",
                 "reference": c.configuration.reference,
                 "worst_pose": _worst_pose(c),
-                "contributions": _html_table(tables[f"contributions_{c.name}"].drop(columns=["output"]).assign(
-                    **{"contribution (µm)": lambda d: MM2UM * d["contribution"],
-                       "share (%)": lambda d: 100 * d["share"]})
-                    .drop(columns=["contribution", "share"]))}
+                "contributions": _html_table(_contributions_display(tables[f"contributions_{c.name}"]))}
                for c in result.configurations]
     summary_table = _summary_display(tables["summary"])
     families = (tables["worstcase_families"].pivot(index="family", columns="configuration", values="share_pct")
@@ -405,6 +423,7 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
         effects_table=_html_table(tables["effects"].drop(columns=["campaign_sha256"])) if "effects" in tables else None,
         summary=summary, mc_percentile=f"p{_MC_PERCENTILE:g}", tables=sorted(tables),
         inputs=summary["inputs"], versions=summary["versions"], allocations=_allocations(result, tables),
+        glance=_glance(result, summary),
         formats=tuple(formats), extras=[ext for ext in formats if ext != "png"],
         written=_written(figures, tables, formats, table_types))
 
@@ -437,6 +456,36 @@ def _design(result: StudyResult, tables: dict) -> dict | None:
                 "parameters": ", ".join(f"{k} = {v}" for k, v in s.parameters)} for s in result.skipped]
     return {"table": _html_table(table), "skipped": skipped, "keys": keys, "n_run": len(result.configurations),
             "best": table["configuration"].iloc[0] if len(table) else None}
+
+
+def _glance(result: StudyResult, summary: dict) -> list[dict]:
+    """The answer first, per configuration shown: the worst case, the Monte Carlo p99.73, P(> tolerance) and the
+    dominant input by Sobol total index and by worst-case share (sorted contributions at the worst pose below)."""
+    from .plots import ranking_basis
+    key = f"p{_MC_PERCENTILE:g}"
+    rows = []
+    for c in _shown(result):
+        s = summary["configurations"][c.name]
+        row = {"name": c.name, "worst_um": s["worst_case_position_um"]["max"], "worst_phi": s["worst_case_phi_arcsec"]["max"],
+               "p_um": None, "p_se": None, "exceed": None, "tolerance_um": None, "st": None, "share": None}
+        mc = s.get("montecarlo", {})
+        if key in mc.get("position_um", {}):
+            row["p_um"], row["p_se"] = mc["position_um"][key]["max"]["value"], mc["position_um"][key]["max"]["se"]
+        if "exceed" in mc:
+            p = mc["exceed"]["probability"]["max"]
+            row["exceed"] = probability_text(p["value"], se=p["se"])
+            row["tolerance_um"] = MM2UM * mc["exceed"]["tolerance_mm"]
+        frame = c.ranking.get("position") if c.ranking else None
+        if frame is not None and len(frame):
+            basis, share = ranking_basis(frame)
+            st = frame.dropna(subset=["ST"]).sort_values("ST", ascending=False)
+            wc = frame.sort_values(share, ascending=False)
+            if len(st):
+                row["st"] = (st["name"].iloc[0], float(st["ST"].iloc[0]))
+            row["share"] = (wc["name"].iloc[0], float(wc[share].iloc[0]))
+            row["basis"] = basis
+        rows.append(row)
+    return rows
 
 
 def _merit_name(analysis: str, output: str, statistic: str) -> str:
