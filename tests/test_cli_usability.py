@@ -196,8 +196,8 @@ def test_example_campaign_is_what_its_script_writes(tmp_path):
 def test_readme_example_campaign_line_works(tmp_path, monkeypatch, capsys):
     """The README's line runs `prp3mc discrepancy` on the bundled campaign and names the two hidden effects."""
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
-    line = readme.split("<!-- example-campaign -->`", 1)[1].split("`", 1)[0]
-    argv = shlex.split(line)
+    line = next(t for t in readme.splitlines() if t.startswith("prp3mc discrepancy") and "--data example" in t)
+    argv = shlex.split(line, comments=True)
     assert argv[:2] == ["prp3mc", "discrepancy"] and "example" in argv
     monkeypatch.chdir(tmp_path)
     assert main(argv[1:]) == 0
