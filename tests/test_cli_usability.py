@@ -201,7 +201,7 @@ def test_readme_example_campaign_line_works(tmp_path, monkeypatch, capsys):
     assert argv[:2] == ["prp3mc", "discrepancy"] and "example" in argv
     monkeypatch.chdir(tmp_path)
     assert main(argv[1:]) == 0
-    doc = json.loads((tmp_path / "results" / "example_campaign" / "discrepancy.json").read_text())
+    doc = json.loads((tmp_path / argv[argv.index("--out") + 1] / "discrepancy.json").read_text())
     assert {e["name"] for e in doc["named_effects"]} == {"scale_2", "backlash_1"}
     assert not doc["unexplained"]
 
