@@ -36,23 +36,10 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterable, Iterator
 
-from .errors import Prp3mcError
+from .errors import FigureFormatError, OutputBusyError, OutputError, OutputExistsError, Prp3mcError
 
-__all__ = ["OutputError", "OutputExistsError", "OutputBusyError", "claim_output", "output_folder",
-           "check_output", "dumps_json", "write_json", "write_text", "write_csv", "check_json", "FigureFormatError",
-           "save_figure", "png_data_uri", "figure_formats", "FIGURE_FORMATS"]
-
-
-class OutputError(Prp3mcError, OSError):
-    """An output folder cannot be created, claimed or written."""
-
-
-class OutputExistsError(OutputError, FileExistsError):
-    """The output folder exists and ``force`` was not given."""
-
-
-class OutputBusyError(OutputError):
-    """Another live run holds the claim on the output folder."""
+__all__ = ["claim_output", "output_folder", "check_output", "dumps_json", "write_json", "write_text", "write_csv",
+           "check_json", "save_figure", "png_data_uri", "figure_formats", "FIGURE_FORMATS"]
 
 
 #: Folders claimed by this process (resolved path -> force), so that nested
@@ -297,10 +284,6 @@ def dumps_json(obj: Any) -> str:
 def write_json(path: str | os.PathLike, obj) -> None:
     """Write JSON (no NaN allowed) atomically."""
     write_text(path, dumps_json(obj) + "\n")
-
-
-class FigureFormatError(Prp3mcError, ValueError):
-    """A figure format that reports cannot write."""
 
 
 #: Figure formats a report can write.

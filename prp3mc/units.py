@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import math
 
-from scipy.special import ndtri
+from scipy.special import ndtri, stdtrit
 
 __all__ = ["RAD2DEG", "DEG2RAD", "MM2UM", "DEG2ARCSEC", "POSE_OUTPUTS", "OUTPUTS", "OUTPUT_UNITS",
-           "DISPLAY", "z_value", "Z95"]
+           "DISPLAY", "z_value", "t_value", "Z95"]
 
 RAD2DEG = 180.0 / math.pi
 DEG2RAD = math.pi / 180.0
@@ -33,6 +33,13 @@ def z_value(level: float = 0.95) -> float:
     if not 0.0 < level < 1.0:
         raise ValueError(f"confidence level must lie in (0, 1), got {level}")
     return float(ndtri(0.5 + level / 2))  # scipy.stats.norm.ppf's own kernel, without importing scipy.stats
+
+
+def t_value(level: float, df: int) -> float:
+    """Two-sided Student t quantile with ``df`` degrees of freedom for a confidence ``level`` in (0, 1)."""
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"confidence level must lie in (0, 1), got {level}")
+    return float(stdtrit(df, 0.5 + level / 2))  # scipy.stats.t.ppf's kernel, without importing scipy.stats
 
 
 #: The 95 % two-sided normal quantile, 1.959964...

@@ -192,15 +192,16 @@ def test_discrepancy_records_an_incomplete_budget(tmp_path, capsys):
 
 
 def test_discrepancy_refuses_what_cannot_finish(tmp_path, capsys, monkeypatch):
-    """Sized before it starts: one line with the estimate and the limit, exit 1, nothing written."""
+    """Stopped at its time limit, or refused by its memory before it starts: one line, exit 1, nothing written."""
     import prp3mc.cli.discrepancy as command
     import prp3mc.limits as limits
     data, out = _campaign(tmp_path / "campaign.csv"), tmp_path / "out"
     argv = ["discrepancy", "--geometry", "u-shape", "--budget", "paper", "--data", str(data), "--out", str(out)]
-    assert main(["--max-hours", "1e-6", *argv]) == 1
+    assert main(["--max-hours", "2e-5", *argv]) == 1          # 72 ms: stopped while it runs
     err = capsys.readouterr().err.splitlines()
-    assert len(err) == 1 and "discrepancy analysis of 48 measurements would take ~" in err[0]
-    assert "more than the limit of 0.0036 s" in err[0] and not out.exists()
+    assert err == ["prp3mc discrepancy: error: stopped at the --max-hours limit (0.072 s of wall time): "
+                   "nothing was written"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["campaign.csv"]      # no folder, no lock, no leftovers
     # memory, from the row count alone: the file is not even read
     monkeypatch.setattr(limits, "available_memory", lambda: 1 << 20)
     monkeypatch.setattr(command, "read_campaign", lambda *a, **k: pytest.fail("read before it was sized"))

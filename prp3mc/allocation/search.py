@@ -46,7 +46,6 @@ import heapq
 import itertools
 
 import numpy as np
-from scipy import stats
 
 from ..units import RAD2DEG
 from ..kinematics.geometry import Geometry
@@ -110,7 +109,8 @@ class Problem:
         self.Ainv = model.Ainv                                                # (N, 3, 3)
         self._absWu = np.abs(model.scale[:, :J].T[:, :, None] * (legs[:, None] == np.arange(3))[:, None, :])  # (J, N, 3)
         self.fixed = _fixed_parts(model, J, k_sigma)
-        self.kq = None if percentile is None else float(np.sqrt(stats.chi2.ppf(percentile / 100.0, 2)))
+        from scipy.stats import chi2  # imported when used: parsing a study imports this module
+        self.kq = None if percentile is None else float(np.sqrt(chi2.ppf(percentile / 100.0, 2)))
         self.n_classes = np.array([len(menu.classes_of(n)) for n in self.inputs])
         M = int(self.n_classes.max())
         table = np.empty((5, J, M))

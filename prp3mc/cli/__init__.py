@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import gc
 import importlib
 import math
 import os
@@ -23,7 +22,7 @@ import numpy as np
 from .._rng import check_seed
 from .._version import __version__
 from ..errors import Prp3mcError, Prp3mcWarning
-from ..limits import Estimate, check
+from ..limits import Estimate, check, format_seconds
 from ..output import claim_output, dumps_json
 from ..provenance import spec_record, versions
 
@@ -72,8 +71,8 @@ def add_output(p: argparse.ArgumentParser, help: str = "output folder (must not 
 
 
 def within_limits(args, estimate: Estimate) -> Estimate:
-    """Refuse a request that cannot finish on this machine (see :mod:`prp3mc.limits`)."""
-    return check(estimate, max_hours=args.max_hours)
+    """Refuse a request that will not fit in this machine's memory (see :mod:`prp3mc.limits`)."""
+    return check(estimate)
 
 
 def add_progress(p: argparse.ArgumentParser) -> None:
@@ -84,12 +83,20 @@ def add_progress(p: argparse.ArgumentParser) -> None:
 
 
 def positive_int(text: str) -> int:
+    return _integer(text, 1, "a positive integer")
+
+
+def nonnegative_int(text: str) -> int:
+    return _integer(text, 0, "an integer >= 0")
+
+
+def _integer(text: str, least: int, what: str) -> int:
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+    if value < least:
+        raise argparse.ArgumentTypeError(f"expected {what}, got {value}")
     return value
 
 
@@ -155,6 +162,8 @@ def provenance(args, geometry=None, budget=None, **inputs) -> dict:
         record["budget"] = spec_record(args.budget, budget) | budget.effects_record()
         if budget.missing_inputs:
             record["budget"]["missing_inputs"] = list(budget.missing_inputs)
+        if budget.correlated:
+            record["budget"]["correlation"] = dict(budget.correlation)
     if getattr(args, "pose", None) is not None:
         record["pose"] = dict(zip(("x_mm", "y_mm", "phi_deg"), map(float, args.pose)))
     out = {"inputs": record | inputs, "versions": versions()}
@@ -219,7 +228,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     parser = _Parser(prog="prp3mc", description="Error analysis of planar 3-PRP parallel manipulators.")
     parser.add_argument("--version", action="version", version=f"prp3mc {__version__}")
     parser.add_argument("--max-hours", type=positive_float, default=None, metavar="H",
-                        help="refuse requests estimated to take longer (default 24)")
+                        help="stop the run after H hours of wall time, writing nothing (default: no limit)")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     for name, (help_text, cls) in COMMANDS.items():
         if command in (None, name):
@@ -232,21 +241,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``prp3mc`` console script; returns the exit status.
 
-    Without ``argv`` (the process's own command line, which ends when the
-    command does) the garbage collector is told so: once the command's
-    modules are imported their objects are frozen out of it, and young
-    objects are collected every 10 000 allocations rather than 700 (a
-    discrepancy analysis spent 0.15-0.35 s of its 3-4 s in collections that
-    walked numba's, scipy's and pandas's objects again and again and freed
-    little); every object alive is frozen again before returning, since the
-    interpreter's collections at exit would walk all of them, about 0.4 s.
-    Objects are still released, files closed and ``atexit`` handlers run as usual.
+    Without ``argv`` (the process's own command line) a SIGTERM ends the run as Ctrl-C does.
     """
-    if argv is not None:
-        return _run(argv)
-    status = _run(sys.argv[1:], own_process=True)
-    gc.freeze()
-    return status
+    return _run(argv) if argv is not None else _run(sys.argv[1:], own_process=True)
 
 
 def _input_files(args: argparse.Namespace) -> list[str]:
@@ -263,16 +260,34 @@ def _terminated(signum, frame):
     raise _Terminated()
 
 
+class _TimeUp(KeyboardInterrupt):
+    """The ``--max-hours`` limit, raised where the run is, so that it unwinds as after Ctrl-C."""
+
+
+def _time_up(signum, frame):
+    raise _TimeUp()
+
+
+@contextlib.contextmanager
+def _stopping_after(seconds: float):
+    """Raise :class:`_TimeUp` in this (the main) thread after ``seconds`` of wall time inside the block."""
+    previous = signal.signal(signal.SIGALRM, _time_up)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
 def _run(argv: list[str], own_process: bool = False) -> int:
     """Parse ``argv`` and run its command: one line on stderr for any refusal, and the exit status."""
     try:
         args = build_parser(_command_named(argv)).parse_args(argv)
     except SystemExit as exc:  # usage errors (exit 2, one line), --help and --version (exit 0)
         return int(exc.code or 0)
-    if own_process:  # see main(); a SIGTERM (timeout, a batch system) ends the run as Ctrl-C does: no leftovers
+    if own_process:  # a SIGTERM (timeout, a batch system) ends the run as Ctrl-C does: no leftovers
         signal.signal(signal.SIGTERM, _terminated)
-        gc.freeze()
-        gc.set_threshold(10_000, *gc.get_threshold()[1:])
     name = f"prp3mc {args.command}"
     WARNINGS.clear()
     show = warnings.showwarning
@@ -290,12 +305,18 @@ def _run(argv: list[str], own_process: bool = False) -> int:
             if getattr(args, "out", None) is not None:  # claimed before any work (see prp3mc.output)
                 stack.enter_context(claim_output(args.out, force=getattr(args, "force", False),
                                                  inputs=_input_files(args)))
+            if args.max_hours is not None:  # entered last, left first: the unwinding is not cut short
+                stack.enter_context(_stopping_after(3600 * args.max_hours))
             args.run(args)
     except Prp3mcError as exc:
         print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
         return 1
     except MemoryError:
         print(f"{name}: error: out of memory: use fewer samples or poses", file=sys.stderr)
+        return 1
+    except _TimeUp:
+        print(f"{name}: error: stopped at the --max-hours limit ({format_seconds(3600 * args.max_hours)} of wall "
+              "time): nothing was written", file=sys.stderr)
         return 1
     except KeyboardInterrupt as exc:
         print(f"{name}: {'terminated' if isinstance(exc, _Terminated) else 'interrupted'}", file=sys.stderr)

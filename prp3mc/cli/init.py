@@ -3,7 +3,8 @@
 from importlib import resources
 from pathlib import Path
 
-from ..output import OutputExistsError, write_text
+from ..errors import OutputExistsError
+from ..output import write_text
 from . import command
 
 KINDS = ("geometry", "budget", "study", "classes")

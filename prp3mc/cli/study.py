@@ -12,7 +12,7 @@ from ..study.distributed import parse_scheduler
 from ..study.reader import Study, bundled_studies
 from ..study.runner import run_study
 from ..model.validity import check_linearity
-from . import WARNINGS, add_progress, add_seed, command, within_limits
+from . import WARNINGS, add_output, add_progress, add_seed, command, within_limits
 
 #: Configurations named in the closing line; a sweep's best ones beyond that are in the report.
 _NAMED = 4
@@ -24,8 +24,7 @@ class StudyCommand:
     def add_arguments(p):
         p.add_argument("study", metavar="FILE.toml",
                        help=f"study file, or a bundled study: {', '.join(bundled_studies())}")
-        p.add_argument("--out", required=True, metavar="DIR", help="output folder (must not exist)")
-        p.add_argument("--force", action="store_true", help="replace DIR if it exists")
+        add_output(p)
         add_seed(p, help="override the study's seed")
         p.add_argument("--quick", action="store_true",
                        help="reduced grids and sample sizes (a smoke test, as the golden regression files)")

@@ -4,7 +4,7 @@ from .._version import __version__
 from ..model.budget import Budget
 from ..kinematics.geometry import Geometry
 from ..model.validity import check_linearity
-from ..worstcase.envelope import worst_case
+from ..worstcase.envelope import CORRELATION_NOTE, worst_case
 from . import provenance, add_budget, add_geometry, add_json, add_pose, command, emit_json, positive_float
 
 
@@ -32,6 +32,7 @@ class WorstCaseCommand:
                 "maximizer": {q: wc.maximizer(q) for q in ("position", "phi", "x", "y")},
                 "position_contributions_mm": dict(zip(frame["term"], frame["contribution"].astype(float))),
                 "k_sigma": args.k_sigma, "prp3mc_version": __version__,
+                **({"correlation": CORRELATION_NOTE} if budget.correlated else {}),
                 **provenance(args, geometry, budget, k_sigma=args.k_sigma),
             })
             return
@@ -57,6 +58,8 @@ class WorstCaseCommand:
                          f"({100 * row['share']:5.1f} %)")
         if args.k_sigma is not None:
             lines.append(f"Unbounded laws bounded at mean ± {args.k_sigma:g} sd.")
+        if budget.correlated:
+            lines.append(CORRELATION_NOTE)
         if budget.effects:
             lines.append("Effects: backlash_i over ±h_i/2 and thermal over temp_range_C (their drivers are "
                          "unknown at a pose); offsets (offset_q_i) and lead scales (scale_i) are known shifts.")

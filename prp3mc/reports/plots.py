@@ -393,30 +393,38 @@ def ranking_basis(frame) -> tuple[str, str]:
     return f"at (x={x:.4g} mm, y={y:.4g} mm, φ={phi:.4g}°)", "worst_case_share"
 
 
+def shapley_only(frame) -> bool:
+    """Whether a ranking frame has Shapley effects and no Sobol indices (a correlated budget)."""
+    return "Sh" in frame and bool(frame["ST"].isna().all()) and bool(frame["Sh"].notna().any())
+
+
 def sobol_ranking(frame, *, ax=None, title: str = ""):
-    """First-order and total Sobol indices with their 95 % intervals, ranked by ST.
+    """First-order and total Sobol indices with their 95 % intervals, ranked by ST; for a correlated
+    budget (:func:`shapley_only`) its Shapley effects, ranked by Sh.
 
     Parameters
     ----------
     frame : DataFrame
-        :func:`prp3mc.sobol.ranking.ranking` (columns name, kind, S1, S1_conf, ST, ST_conf).
+        :func:`prp3mc.sobol.ranking.ranking` (columns name, kind, S1, S1_conf, ST, ST_conf, and Sh, Sh_conf).
 
     Returns
     -------
     Figure
         The figure holding ``ax`` (a new pyplot figure when ``ax`` is None).
     """
-    frame = frame.sort_values("ST", ascending=False, kind="stable")
+    shapley = shapley_only(frame)
+    frame = frame.sort_values("Sh" if shapley else "ST", ascending=False, kind="stable")
     ax = _axes(ax, figsize=(5.0, 0.32 * len(frame) + 1.2))
     y = np.arange(len(frame))
     h = 0.38
-    ax.barh(y - h / 2, frame["ST"], height=h, xerr=frame["ST_conf"], label="total ST", color="#4c72b0",
-            error_kw={"lw": 1, "capsize": 2})
-    ax.barh(y + h / 2, frame["S1"], height=h, xerr=frame["S1_conf"], label="first order S1", color="#dd8452",
-            error_kw={"lw": 1, "capsize": 2})
+    bars = ((("Sh", "Shapley effect Sh", "#8172b2", 0.0, 2 * h),) if shapley else
+            (("ST", "total ST", "#4c72b0", -h / 2, h), ("S1", "first order S1", "#dd8452", h / 2, h)))
+    for key, label, color, shift, height in bars:
+        ax.barh(y + shift, frame[key], height=height, xerr=frame[f"{key}_conf"], label=label, color=color,
+                error_kw={"lw": 1, "capsize": 2})
     ax.set_yticks(y, _bar_labels(frame))
     ax.invert_yaxis()
-    ax.set_xlabel("Sobol index (95 % CI)")
+    ax.set_xlabel(("Shapley effect" if shapley else "Sobol index") + " (95 % CI)")
     ax.set_title(title, fontsize=10, y=1.0)
     ax.legend(fontsize=7, loc="lower right")
     return ax.figure
@@ -469,7 +477,9 @@ def ranking_figure(frame, title: str = "", *, fig=None):
     """
     basis, column = ranking_basis(frame)
     (wa, wb), shares = _RANKING_PANELS, frame.dropna(subset=[column])
-    heads = (wrap(f"Sobol indices (variance shares),\n{basis}", wa + 0.3, 10),
+    kind = "Shapley effects (variance shares; correlated inputs)" if shapley_only(frame) else \
+        "Sobol indices (variance shares)"
+    heads = (wrap(f"{kind},\n{basis}", wa + 0.3, 10),
              wrap(f"share of the exact worst case,\n{basis}", wb + 0.3, 10))
     left = max(text_inches(t)[0] for t in _bar_labels(frame)) + 0.2          # the y tick labels of each panel
     middle = max((text_inches(t)[0] for t in _bar_labels(shares)), default=0.0) + 0.3

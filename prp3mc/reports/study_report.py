@@ -14,8 +14,8 @@ it is readable without prp3mc installed. Figures are drawn on figures of
 their own with an Agg canvas: writing a report never touches pyplot or the
 matplotlib backend. Each is laid out once with margins in inches and drawn
 once, without a layout engine (:mod:`prp3mc.reports._layout`). They are drawn
-on worker processes (1 plus the idle cores: :func:`prp3mc._fork.fork_workers`) while the tables are
-written (:mod:`prp3mc.reports._render`).
+on worker processes where the system forks, while the tables are written
+(:mod:`prp3mc.reports._render`).
 """
 
 from __future__ import annotations
@@ -231,10 +231,14 @@ def _figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
                      "no variance to share." if constant else "")
         for output, frame in r.ranking.items():
             basis = plots.ranking_basis(frame)[0]
+            left = (f"Shapley effects with 95 % Student t intervals over {r.sobol.replicates} batches of random "
+                    f"orders (left, ranked by Sh; the budget correlates inputs, so Sobol indices are not defined)"
+                    if plots.shapley_only(frame) else
+                    f"Sobol indices with 95 % Student t intervals over {r.sobol.replicates} independently "
+                    f"scrambled replicates (left, ranked by ST)")
             figs.append((f"sobol_{r.name}_{output}",
-                         f"{r.name}, output {output}: Sobol indices with 95 % bootstrap intervals (left, ranked "
-                         f"by ST) and each input's share of the exact worst case (right, ranked by share); "
-                         f"both the {basis} of the Sobol grid.{undefined}",
+                         f"{r.name}, output {output}: {left} and each input's share of the exact worst case "
+                         f"(right, ranked by share); both the {basis} of the Sobol grid.{undefined}",
                          _draw(plots.ranking_figure, frame, f"{r.name}: {output}")))
     return figs + _allocation_figures(result)
 
@@ -411,8 +415,8 @@ def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = Fa
     ``formats`` (``png``, ``svg`` or both, a sequence or ``"png,svg"``) are
     the files written per figure; each is rendered once and the report
     embeds the same PNG. ``workers``: processes drawing the figures
-    (:func:`prp3mc.reports._render.rendering`; default 1 plus the idle cores,
-    where the system can fork, 1 draws them here). ``warnings`` (the
+    (:func:`prp3mc.reports._render.rendering`; default the cores, where the
+    system can fork, 1 draws them here). ``warnings`` (the
     messages a command gave while it ran, which include the budget's) replace
     the summary's own when given and not empty; the report shows them.
     Returns the path of ``report.html``.
