@@ -20,6 +20,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import ConvergenceError, InfeasiblePoseError
+from .formulas import a_row, adjugate3, dot, leg_ik, offset_vector, perp_dot, turn
 from .geometry import Geometry
 
 __all__ = [
@@ -71,11 +72,15 @@ class Trig(NamedTuple):
 
     def dot(self, u: str, v: str) -> np.ndarray:
         """``u . v`` for two of the vectors named by letter, e.g. ``dot("l", "k")``."""
-        return getattr(self, "c" + u) * getattr(self, "c" + v) + getattr(self, "s" + u) * getattr(self, "s" + v)
+        return dot(*self.of(u), *self.of(v))
 
     def perp_dot(self, u: str, v: str) -> np.ndarray:
         """``(E u) . v`` = sin(angle(v) - angle(u))."""
-        return getattr(self, "c" + u) * getattr(self, "s" + v) - getattr(self, "s" + u) * getattr(self, "c" + v)
+        return perp_dot(*self.of(u), *self.of(v))
+
+    def of(self, u: str) -> tuple[np.ndarray, np.ndarray]:
+        """Cosine and sine of the vector named by letter."""
+        return getattr(self, "c" + u), getattr(self, "s" + u)
 
 
 def legs_first(v, ndim: int) -> np.ndarray:
@@ -105,8 +110,8 @@ def trig(geometry: Geometry, phi_rad, offsets: dict | None = None) -> Trig:
         return np.broadcast_to(np.cos(t), shape), np.broadcast_to(np.sin(t), shape)
 
     def turned(t0):  # cos and sin of t0 + phi by the addition formulas: trig only on t0
-        c0, s0 = np.cos(t0), np.sin(t0)
-        return np.broadcast_to(c0 * cp - s0 * sp, shape), np.broadcast_to(s0 * cp + c0 * sp, shape)
+        c, s = turn(np.cos(t0), np.sin(t0), cp, sp)
+        return np.broadcast_to(c, shape), np.broadcast_to(s, shape)
 
     t_j = ang["alpha"] + ang["beta"]
     t_k = t_j + ang["gamma"]
@@ -145,16 +150,13 @@ def _offset_vector(geometry: Geometry, tr: Trig, off: dict | None = None):
     off = off or {}
     nd = tr.cl.ndim - 1
     a, c, e = (legs_first(geometry.rad(k), nd) + legs_first(off.get(k, 0.0), nd) for k in ("a", "c", "e"))
-    return a * tr.ci + c * tr.ck + e * tr.cm, a * tr.si + c * tr.sk + e * tr.sm
+    return offset_vector(a, c, e, tr.ci, tr.si, tr.ck, tr.sk, tr.cm, tr.sm)
 
 
 def ik_trig(geometry: Geometry, x: np.ndarray, y: np.ndarray, tr: Trig) -> tuple[np.ndarray, np.ndarray]:
     """Eq. (2): slider positions b and guide lengths d (3, ...) at positions x, y (...) in mm."""
     ox, oy = _offset_vector(geometry, tr)
-    rx, ry = x - ox, y - oy
-    b = (rx * tr.sl - ry * tr.cl) / (tr.cj * tr.sl - tr.sj * tr.cl)
-    d = (rx * tr.sj - ry * tr.cj) / (tr.cl * tr.sj - tr.sl * tr.cj)
-    return b, d
+    return leg_ik(x - ox, y - oy, tr.cj, tr.sj, tr.cl, tr.sl)
 
 
 class Frame(NamedTuple):
@@ -175,12 +177,8 @@ class Frame(NamedTuple):
 
 def _inv3(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Inverse and determinant of 3x3 matrices stored as (3, 3, ...), by cofactors."""
-    (a, b, c), (d, e, f), (g, h, i) = A
-    inv = np.empty_like(A)
-    inv[0, 0], inv[1, 0], inv[2, 0] = e * i - f * h, f * g - d * i, d * h - e * g
-    inv[0, 1], inv[1, 1], inv[2, 1] = c * h - b * i, a * i - c * g, b * g - a * h
-    inv[0, 2], inv[1, 2], inv[2, 2] = b * f - c * e, c * d - a * f, a * e - b * d
-    det = a * inv[0, 0] + b * inv[1, 0] + c * inv[2, 0]
+    *adj, det = adjugate3(*A.reshape((9,) + A.shape[2:]))
+    inv = np.stack(adj).reshape(A.shape)
     with np.errstate(divide="ignore", invalid="ignore"):
         inv /= det
     return inv, det
@@ -191,10 +189,8 @@ def frame(geometry: Geometry, poses: np.ndarray) -> Frame:
     phi = np.deg2rad(poses[..., 2])
     tr = trig(geometry, phi)
     b, d = ik_trig(geometry, poses[..., 0], poses[..., 1], tr)
-    nd = phi.ndim
-    w = -(d + legs_first(geometry.rad("c"), nd) * tr.dot("l", "k")
-          + legs_first(geometry.rad("e"), nd) * tr.dot("l", "m"))
-    A = np.stack([-tr.sl, tr.cl, w], axis=1)                        # (3 legs, 3 columns, ...)
+    c, e = (legs_first(geometry.rad(k), phi.ndim) for k in ("c", "e"))
+    A = np.stack(a_row(c, d, e, tr.ck, tr.sk, tr.cl, tr.sl, tr.cm, tr.sm), axis=1)  # (3 legs, 3 columns, ...)
     Ainv, _ = _inv3(A)
     # condition of A D^-1 (unit columns): ||A D^-1||_F ||D A^-1||_F = sqrt(3) ||D A^-1||_F
     col = np.sqrt(np.sum(A * A, axis=0))                             # (3 columns, ...)
