@@ -131,7 +131,7 @@ def _case(*argv, status: int = 1, message: str = ""):
 CASES = [
     # ----------------------------------------------------------- top level
     _case(status=2, message="required: command"),
-    _case("wobble", status=2, message="invalid choice"),
+    _case("wobble", status=2, message="unknown command 'wobble'"),
     _case("--max-hours", "0", "sensitivity", *G, *P, status=2, message="expected a number > 0"),
     _case("--max-hours", "nan", "sensitivity", *G, *P, status=2, message="finite number"),
     _case("--max-hours", "1e-9", "montecarlo", *G, *B, *P, "--samples", "1000000",
@@ -153,7 +153,7 @@ CASES = [
     _case("sensitivity", "--geometry", "{binary}", *P, message="cannot read"),
     _case("sensitivity", "--geometry", "{existing_dir}", *P, message="existing_dir"),
     _case("sensitivity", "--geometry", "{geometry_nan}", *P, message="geometry_nan.toml"),
-    _case("sensitivity", *G, *P, "--wobble", status=2, message="unrecognized arguments"),
+    _case("sensitivity", *G, *P, "--wobble", status=2, message="unknown option --wobble"),
     # ----------------------------------------------------------- worstcase
     _case("worstcase", *G, *P, status=2, message="--budget"),
     _case("worstcase", *G, "--budget", "nope", *P, message="unknown budget preset 'nope'"),
@@ -302,8 +302,8 @@ CASES = [
           message="spec_position_um must be a finite number > 0"),
     _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150",
           "--spec-percentile", "150", message="spec_percentile must lie in"),
-    _case("allocate", *G, "--region", "nowhere", "--classes", "example", "--spec-position-um", "150", status=2,
-          message="invalid choice"),
+    _case("allocate", *G, "--region", "nowhere", "--classes", "example", "--spec-position-um", "150",
+          message="no test region for 'nowhere'"),
     _case("allocate", *G, "--region", "u-shape", "--classes", "{root}/none.toml", "--spec-position-um", "150",
           message="none.toml"),
     _case("allocate", *G, "--region", "u-shape", "--classes", "{bad_toml}", "--spec-position-um", "150",
