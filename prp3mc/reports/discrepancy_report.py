@@ -9,7 +9,7 @@ the figures as PNG (SVG too on request), per-pose / per-measurement
 tables as CSV and the updated model in ``model/``
 (:mod:`~prp3mc.measurement.fit.updated`); it draws on its own Agg canvases, outside pyplot, and renders
 each figure once (fixed margins, no layout engine, no tight bounding box),
-on worker processes where the system forks (:mod:`~prp3mc.reports._render`),
+here or on worker processes on request (:mod:`~prp3mc.reports._render`),
 and writes the JSON, tables and model files meanwhile.
 
 The report shows what the measurement carries besides the machine: the
@@ -380,7 +380,7 @@ def report_document(result: DiscrepancyResult, inputs: dict | None = None, warni
 
 def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bool = False,
                  formats: tuple = ("png",), inputs: dict | None = None, warnings=None,
-                 workers: int | None = None) -> Path:
+                 workers: int = 1) -> Path:
     """Write ``discrepancy.json``, ``report.html``, figures, tables and ``model/`` into ``folder`` (atomically).
 
     Parameters
@@ -399,7 +399,7 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
         The warnings a command gave (see :func:`report_document`); the report shows them.
     workers : int, optional
         Processes drawing the figures (:func:`prp3mc.reports._render.rendering`;
-        default the cores, where the system can fork; 1 draws them here). The files are the same either way.
+        1, the default, draws them here). The files are the same either way.
 
     Returns
     -------

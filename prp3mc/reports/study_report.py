@@ -13,8 +13,8 @@ The report is built from a :class:`~prp3mc.study.results.StudyResult` only;
 it is readable without prp3mc installed. Figures are drawn on figures of
 their own with an Agg canvas: writing a report never touches pyplot or the
 matplotlib backend. Each is laid out once with margins in inches and drawn
-once, without a layout engine (:mod:`prp3mc.reports._layout`). They are drawn
-on worker processes where the system forks, while the tables are written
+once, without a layout engine (:mod:`prp3mc.reports._layout`), in this
+process or, on request, on worker processes while the tables are written
 (:mod:`prp3mc.reports._render`).
 """
 
@@ -501,7 +501,7 @@ def _merit_name(analysis: str, output: str, statistic: str) -> str:
 
 
 def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = False,
-                formats=("png",), workers: int | None = None, warnings=None, progress: bool | None = False) -> Path:
+                formats=("png",), workers: int = 1, warnings=None, progress: bool | None = False) -> Path:
     """Write the report, figures, tables and summary.json of ``result`` into the folder ``out``.
 
     ``out`` must not exist unless ``force``; it is replaced atomically.
@@ -511,8 +511,8 @@ def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = Fa
     ``tables.xlsx`` besides the CSV files, one sheet per table
     (:func:`prp3mc.output.write_workbook`). ``progress`` shows the figures
     and tables as they are written (None: when stderr is a terminal). ``workers``: processes drawing the figures
-    (:func:`prp3mc.reports._render.rendering`; default the cores, where the
-    system can fork, 1 draws them here). ``warnings`` (the
+    (:func:`prp3mc.reports._render.rendering`; 1, the default, draws them
+    here). ``warnings`` (the
     messages a command gave while it ran, which include the budget's) replace
     the summary's own when given and not empty; the report shows them.
     Returns the path of ``report.html``.
