@@ -427,3 +427,51 @@ def test_campaign_bytes_fuzz(tmp_path_factory, data):
     path = tmp_path_factory.mktemp("csv") / "c.csv"
     path.write_bytes(data)
     _only_our_errors(read_campaign, path, Geometry.from_preset("u-shape"))
+
+
+# ------------------------------------------------------------------ the issue 25 corpus (tests/bad_corpus.py)
+from pathlib import Path  # noqa: E402
+
+from . import bad_corpus  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def corpus_files(tmp_path_factory):
+    return bad_corpus.prepare(tmp_path_factory.mktemp("corpus"))
+
+
+def _corpus_param(case):
+    marks = [pytest.mark.slow] if case.slow else []
+    if case.left:
+        marks.append(pytest.mark.xfail(reason=case.left, strict=True))
+    return pytest.param(case, id=f"{case.cls}: {case.id}"[:100], marks=marks)
+
+
+@pytest.mark.parametrize("case", [_corpus_param(c) for c in bad_corpus.cases()])
+def test_corpus_case(case, corpus_files, tmp_path, monkeypatch, capsys):
+    """Each corpus case ends as it must: a one-line refusal naming the fragment (nothing written), or a run
+    whose output passes the case's check (see tests/bad_corpus.py; ``python -m tests.bad_corpus`` runs them
+    in real processes and counts them by class)."""
+    monkeypatch.chdir(tmp_path)
+    if case.setup:
+        case.setup(tmp_path)
+    argv = [os.fsdecode(a) for a in bad_corpus.expand(case.argv, corpus_files, str(tmp_path))]
+    out_dir = bad_corpus._out_of(argv)
+    existed = out_dir is not None and os.path.lexists(out_dir)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", Prp3mcWarning)   # the one-line warnings are the CLI's, on stderr
+        code = main(argv)
+    out, err = capsys.readouterr()
+    if case.expect == "refuse":  # a warning would be a second line: the refusal must come first and alone
+        err = "\n".join(line for line in err.splitlines() if ": warning: " not in line) + "\n"
+    problem = bad_corpus.judge(case, code, out, err, tmp_path, existed, out_dir)
+    assert problem is None, problem
+
+
+def test_corpus_size():
+    """Issue 25 asks for at least 150 new cases across every command (the signal loops add theirs)."""
+    cases = bad_corpus.cases()
+    assert len(cases) >= 150
+    commands = {a for c in cases for a in c.argv[:3] if isinstance(a, str) and not a.startswith(("-", "{"))}
+    assert {"sensitivity", "worstcase", "montecarlo", "sobol", "study", "discrepancy", "init", "allocate"} <= commands
+    assert {c.cls for c in cases} == set(bad_corpus.CLASSES) - {"signals"}

@@ -22,9 +22,9 @@ import numpy as np
 
 from .._rng import check_seed
 from .._version import __version__
-from ..errors import Prp3mcError, Prp3mcWarning
-from ..limits import Estimate, check
-from ..output import claim_output, dumps_json
+from ..errors import Prp3mcError, Prp3mcWarning, ResourceError
+from ..limits import MEMORY_MARGIN, Estimate, available_memory, check, format_bytes
+from ..output import COMMITTED, claim_output, dumps_json
 from ..provenance import spec_record, versions
 
 __all__ = ["main"]
@@ -72,7 +72,13 @@ def add_output(p: argparse.ArgumentParser, help: str = "output folder (must not 
 
 
 def within_limits(args, estimate: Estimate) -> Estimate:
-    """Refuse a request that cannot finish on this machine (see :mod:`prp3mc.limits`)."""
+    """Refuse a request that cannot finish on this machine or within ``--max-hours``/``--max-gb`` (:mod:`prp3mc.limits`)."""
+    max_gb = getattr(args, "max_gb", None)
+    if max_gb is None or max_gb * (1 << 30) >= MEMORY_MARGIN * available_memory():
+        return check(estimate, max_hours=args.max_hours)
+    if not estimate.bytes <= max_gb * (1 << 30):
+        raise ResourceError(f"{estimate.what} needs ~{format_bytes(estimate.bytes)} of memory, more than "
+                            f"--max-gb {max_gb:g}: {estimate.hint}")
     return check(estimate, max_hours=args.max_hours)
 
 
@@ -187,7 +193,8 @@ def matrix_table(M: np.ndarray, rows=("dx", "dy", "dphi"), cols=LEGS) -> str:
 
 
 def _one_line(text: str) -> str:
-    return " ".join(str(text).split())
+    """``text`` on one line, printable on any stream (a file name that is not UTF-8 shows as escapes)."""
+    return " ".join(str(text).encode("utf-8", "backslashreplace").decode("utf-8").split())
 
 
 class _Parser(argparse.ArgumentParser):
@@ -199,7 +206,7 @@ def _command_named(argv: list[str]) -> str | None:
     """The command ``argv`` names (its first word that is no global option), if it is one of ours."""
     words = iter(argv)
     for word in words:
-        if word == "--max-hours":
+        if word in ("--max-hours", "--max-gb"):
             next(words, None)
         elif not word.startswith("-"):
             return word if word in {info.name for info in pkgutil.iter_modules(__path__)} else None
@@ -220,6 +227,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"prp3mc {__version__}")
     parser.add_argument("--max-hours", type=positive_float, default=None, metavar="H",
                         help="refuse requests estimated to take longer (default 24)")
+    parser.add_argument("--max-gb", type=positive_float, default=None, metavar="GB",
+                        help="refuse requests estimated to need more memory, GiB (default: what the machine has)")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     for name, (help_text, cls) in COMMANDS.items():
         if command in (None, name):
@@ -245,6 +254,7 @@ def main(argv: list[str] | None = None) -> int:
     if argv is not None:
         return _run(argv)
     status = _run(sys.argv[1:], own_process=True)
+    _quiet_exit()
     gc.freeze()
     return status
 
@@ -260,7 +270,28 @@ class _Terminated(KeyboardInterrupt):
 
 
 def _terminated(signum, frame):
-    raise _Terminated()
+    """SIGTERM and SIGINT of a command's own process: interrupt the run, unless its output is being installed.
+
+    Once the finished folder is moving into place (:data:`prp3mc.output.COMMITTED`)
+    the run is complete: the signal is let pass, and the run ends with exit 0
+    and its folder whole, never with a folder installed and exit 130/143.
+    """
+    if COMMITTED["value"]:
+        return
+    raise _Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+
+def _quiet_exit() -> None:
+    """Ignore SIGINT and SIGTERM from here to the process's end (interpreter finalisation).
+
+    A signal handled while the interpreter tears down (threads, weak sets,
+    a figure's draw) ended in tracebacks or a fatal error; the command has
+    decided its exit status by now. ``signal.signal`` runs the handler of a
+    signal already pending before it replaces it, so none is lost half-way.
+    """
+    COMMITTED["value"] = True
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, signal.SIG_IGN)
 
 
 def _run(argv: list[str], own_process: bool = False) -> int:
@@ -271,10 +302,13 @@ def _run(argv: list[str], own_process: bool = False) -> int:
         return int(exc.code or 0)
     if own_process:  # see main(); a SIGTERM (timeout, a batch system) ends the run as Ctrl-C does: no leftovers
         signal.signal(signal.SIGTERM, _terminated)
+        signal.signal(signal.SIGINT, _terminated)
+        sys.stdout.reconfigure(errors="surrogateescape")  # a file name that is not UTF-8 prints as its own bytes
         gc.freeze()
         gc.set_threshold(10_000, *gc.get_threshold()[1:])
     name = f"prp3mc {args.command}"
     WARNINGS.clear()
+    COMMITTED["value"] = False
     show = warnings.showwarning
 
     def one_line_warning(message, category, filename, lineno, file=None, line=None):

@@ -6,6 +6,7 @@ from .._version import __version__
 from ..kinematics.geometry import REGION_PRESETS
 from ..provenance import spec_record
 from ..allocation.optimum import allocate, allocation_front, front_records
+from ..allocation.search import search_limits
 from ..model.budget import Budget
 from ..units import DEG2ARCSEC, MM2UM
 from ..limits import allocate_estimate
@@ -48,6 +49,11 @@ class AllocateCommand:
 
     @staticmethod
     def run(args) -> None:
+        with search_limits(args.max_hours):   # the search's work cannot be told before it runs: it stops itself
+            AllocateCommand._run(args)
+
+    @staticmethod
+    def _run(args) -> None:
         budget = None if args.budget is None else Budget.load(args.budget)
         within_limits(args, allocate_estimate(args.grid ** 2, 12,  # rho, zeta, theta and b of each leg
                                               args.samples if args.spec_percentile is not None else 0))

@@ -4,13 +4,15 @@ import sys
 import time
 
 from ..errors import Prp3mcError
-from ..limits import study_estimate
+from ..allocation.search import search_limits
+from ..limits import Estimate, allocate_estimate, study_estimate
 from ..output import figure_formats
 from ..units import MM2UM
 from ..reports.study_report import write_study
 from ..study.distributed import parse_scheduler
 from ..study.reader import Study, bundled_studies
 from ..study.runner import run_study
+from ..study.sweep import expand
 from ..model.validity import check_linearity
 from . import WARNINGS, add_progress, add_seed, command, within_limits
 
@@ -48,10 +50,18 @@ class StudyCommand:
             study = study.reduced()
         formats = figure_formats(args.formats)
         within_limits(args, study_estimate(study))
+        if study.allocation is not None:   # each configuration's allocation, one after another
+            nx, ny = study.allocation.grid or study.worstcase_grid
+            one = allocate_estimate(nx * ny, len(study.budget.factors), study.allocation.samples
+                                    if study.allocation.spec_percentile is not None else 0)
+            n = len(expand(study))
+            within_limits(args, Estimate(f"the study's tolerance allocations ({n} x {one.what})", one.bytes,
+                                         n * one.seconds))
         if not study.sweep:  # a sweep's base configuration need not be feasible: its combinations are checked
             for c in study.configurations:
                 check_linearity(c.geometry, study.budget, c.region.grid((3, 3)))
-        result = run_study(study, rng=args.seed, progress=args.progress, scheduler=args.scheduler)
+        with search_limits(args.max_hours):   # an allocation's search stops itself past the time
+            result = run_study(study, rng=args.seed, progress=args.progress, scheduler=args.scheduler)
         if not result.configurations:
             first = result.skipped[0]
             raise Prp3mcError(f"study {study.name}: none of its {len(result.skipped)} configurations ran; "
