@@ -44,6 +44,7 @@ class Case:
     slow: bool = False                # an accepted analysis (seconds): in process only in the slow run
     setup: Callable | None = None     # (root) -> None: what the folder holds before the run
     left: str = ""                    # why this case still ends badly (counted so, an expected failure in tests)
+    process: bool = False             # run in a real process in the tests too (its stdout takes any file name)
     id: str = field(default="")
 
     def __post_init__(self):
@@ -338,7 +339,7 @@ def cases() -> list[Case]:
              check=_wrote("d_nonutf8"), slow=True))
     add(Case(T, ["sensitivity", "--geometry", "{g_nonutf8}", *P, "--json"], expect="accept"))
     add(Case(T, ["worstcase", "--geometry", "{g_nonutf8}", *B, *P, "--json"], expect="accept"))
-    add(Case(T, ["study", "{s_ok}", "--out", "{out_nonutf8}"], expect="accept", slow=True,
+    add(Case(T, ["study", "{s_ok}", "--out", "{out_nonutf8}"], expect="accept", slow=True, process=True,
              check=lambda root: None if any(n.startswith(b"out") for n in os.listdir(os.fsencode(str(root))))
              else "the folder was not written"))
     for spec in ("ucx://127.0.0.1:8786", "tls://127.0.0.1:8786", "inproc://x", "ws://127.0.0.1:1", "wss://h:1",
@@ -383,8 +384,7 @@ def cases() -> list[Case]:
              expect="accept"))
     add(Case(RB, ["sobol", *G, "--budget", "{b_unicode_group}", *P, "--samples", "256", "--seed", "1", "--json"],
              expect="accept"))
-    add(Case(RB, ["study", "{s_ctrl_name}", "--out", "{tmp}/rb3"], expect="accept", slow=True,
-             check=lambda root: None if json.loads((root / "rb3" / "summary.json").read_text()) else "empty"))
+    add(Case(RB, ["study", "{s_ctrl_name}", "--out", "{tmp}/rb3"], message="control characters"))  # names files
     add(Case(RB, ["sobol", *G, "--budget", "{b_ctrl_name}", *P, "--samples", "256", "--seed", "1", "--json"],
              expect="accept"))
     add(Case("messages", ["montecarlo", *G, "--budget", "{b_bom}", *P, "--samples", "1024", "--seed", "1", "--json"],
@@ -551,6 +551,20 @@ def _out_of(argv: list):
     return argv[argv.index("--out") + 1] if "--out" in argv else None
 
 
+def run_one(case: Case, argv: list, tmp: Path, timeout: float = 300.0) -> str | None:
+    """Run one case (its argv expanded) in a real process in the folder ``tmp``; what went wrong, or None."""
+    if case.setup:
+        case.setup(tmp)
+    out_dir = _out_of(argv)
+    existed = out_dir is not None and os.path.lexists(out_dir)
+    try:
+        r = subprocess.run([sys.executable, "-m", "prp3mc", *argv], capture_output=True, timeout=timeout, cwd=tmp)
+        code, out, err = r.returncode, r.stdout.decode(errors="replace"), r.stderr.decode(errors="replace")
+    except subprocess.TimeoutExpired:
+        code, out, err = None, "", ""
+    return judge(case, code, out, err, tmp, existed, out_dir)
+
+
 def run(only: str | None = None, timeout: float = 300.0, root: Path | None = None, jobs: int = 1) -> dict:
     """Run the corpus in real processes; return {class: [total, bad]} and print each bad case."""
     from concurrent.futures import ThreadPoolExecutor
@@ -563,19 +577,8 @@ def run(only: str | None = None, timeout: float = 300.0, root: Path | None = Non
         tmp = str(root / f"run{k}")
         os.makedirs(tmp, exist_ok=True)
         argv = expand(case.argv, paths, tmp)
-        if case.setup:
-            case.setup(Path(tmp))
-        out_dir = _out_of(argv)
-        existed = out_dir is not None and os.path.lexists(out_dir)
         t0 = time.time()
-        try:
-            r = subprocess.run([sys.executable, "-m", "prp3mc", *argv], capture_output=True, timeout=timeout,
-                               cwd=tmp)
-            code, out, err = r.returncode, r.stdout.decode(errors="replace"), r.stderr.decode(errors="replace")
-        except subprocess.TimeoutExpired:
-            code, out, err = None, "", ""
-        problem = judge(case, code, out, err, Path(tmp), existed, out_dir)
-        return case, problem, time.time() - t0
+        return case, run_one(case, argv, Path(tmp), timeout), time.time() - t0
 
     counts = {c: [0, 0] for c in CLASSES}
     with ThreadPoolExecutor(jobs) as pool:
@@ -587,6 +590,62 @@ def run(only: str | None = None, timeout: float = 300.0, root: Path | None = Non
     return counts
 
 
+def signal_loop(root: Path, n: int, seed: int = 0, paths: dict | None = None) -> dict:
+    """Send SIGTERM or SIGINT at a random time near the end of a study and of a discrepancy, ``n`` runs.
+
+    Each run is timed once undisturbed; the signal comes at 60-110 % of that
+    time. A run ends well when it completed (exit 0, its folder whole, no
+    traceback) or did not and changed nothing (exit 130 or 143, no folder,
+    no traceback, no leftovers). Returns ``{"total", "bad", "outcomes", "problems"}``.
+    """
+    import random
+    import shutil
+    import signal
+    paths = paths or prepare(root / "files")
+    rng = random.Random(seed)
+    commands = {"study": ["study", paths["s_ok"], "--out", "OUT"],
+                "discrepancy": [*D, "--data", paths["c_good"], "--out", "OUT", "--seed", "1"]}
+    marks = {"study": "summary.json", "discrepancy": "discrepancy.json"}
+
+    def start(argv, out):
+        return subprocess.Popen([sys.executable, "-m", "prp3mc", *[str(out) if a == "OUT" else a for a in argv]],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=root)
+
+    took = {}
+    for kind, argv in commands.items():
+        out = root / f"calibrate_{kind}"
+        shutil.rmtree(out, ignore_errors=True)
+        t0 = time.time()
+        start(argv, out).communicate()
+        took[kind] = time.time() - t0
+    result = {"total": 0, "bad": 0, "outcomes": {}, "problems": [], "calibration_s": took}
+    for t in range(n):
+        kind = ("study", "discrepancy")[t % 2]
+        sig = signal.SIGTERM if rng.random() < 0.6 else signal.SIGINT
+        out = root / f"sig{t}"
+        shutil.rmtree(out, ignore_errors=True)
+        run = start(commands[kind], out)
+        when = took[kind] * rng.uniform(0.6, 1.1)
+        try:
+            run.wait(timeout=when)
+        except subprocess.TimeoutExpired:
+            run.send_signal(sig)
+        _, err = run.communicate(timeout=600)
+        err = err.decode(errors="replace")
+        whole = (out / marks[kind]).is_file() and (out / "report.html").is_file()
+        left = [p.name for p in root.iterdir() if p.name.startswith(f".sig{t}.")]
+        clean = not any(m in err for m in ("Traceback", "Fatal Python error", "Exception ignored"))
+        ok = clean and not left and ((run.returncode == 0 and whole)
+                                     or (run.returncode in (130, 143) and not os.path.lexists(out)))
+        key = f"{kind} {sig.name} exit {run.returncode}{' folder whole' if whole else ''}"
+        result["outcomes"][key] = result["outcomes"].get(key, 0) + 1
+        result["total"] += 1
+        if not ok:
+            result["bad"] += 1
+            result["problems"].append(f"{key} at {when:.1f} s: leftovers {left}; {err.strip()[-300:]}")
+    return result
+
+
 if __name__ == "__main__":
     import argparse
     parser = argparse.ArgumentParser()
@@ -594,6 +653,12 @@ if __name__ == "__main__":
     parser.add_argument("--jobs", type=int, default=1)
     parser.add_argument("--root", type=Path, default=None)
     parser.add_argument("--timeout", type=float, default=300.0)
+    parser.add_argument("--signals", type=int, default=0, help="run the signal loop this many times instead")
     a = parser.parse_args()
-    result = run(a.only, timeout=a.timeout, root=a.root, jobs=a.jobs)
+    if a.signals:
+        root = a.root or Path(os.environ.get("TMPDIR", "/tmp")) / f"prp3mc_signals_{os.getpid()}"
+        root.mkdir(parents=True, exist_ok=True)
+        result = signal_loop(root, a.signals)
+    else:
+        result = run(a.only, timeout=a.timeout, root=a.root, jobs=a.jobs)
     print(json.dumps(result))

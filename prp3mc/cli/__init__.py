@@ -278,7 +278,20 @@ def _terminated(signum, frame):
     """
     if COMMITTED["value"]:
         return
+    _SIGNALLED["signum"] = signum
     raise _Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+
+#: The signal that interrupted the current run, if one did: an error raised on the interrupt's way out
+#: (a figure half drawn, a file half written) is reported as the interruption, not as an error of its own.
+_SIGNALLED = {"signum": None}
+
+
+def _stopped(name: str, signum) -> int:
+    """The one line and the exit status of a run stopped by ``signum`` (130 for SIGINT, 143 for SIGTERM)."""
+    terminated = signum == signal.SIGTERM
+    print(f"{name}: {'terminated' if terminated else 'interrupted'}", file=sys.stderr)
+    return 143 if terminated else 130
 
 
 def _quiet_exit() -> None:
@@ -308,7 +321,7 @@ def _run(argv: list[str], own_process: bool = False) -> int:
         gc.set_threshold(10_000, *gc.get_threshold()[1:])
     name = f"prp3mc {args.command}"
     WARNINGS.clear()
-    COMMITTED["value"] = False
+    COMMITTED["value"], _SIGNALLED["signum"] = False, None
     show = warnings.showwarning
 
     def one_line_warning(message, category, filename, lineno, file=None, line=None):
@@ -325,20 +338,20 @@ def _run(argv: list[str], own_process: bool = False) -> int:
                 stack.enter_context(claim_output(args.out, force=getattr(args, "force", False),
                                                  inputs=_input_files(args)))
             args.run(args)
-    except Prp3mcError as exc:
-        print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
-        return 1
-    except MemoryError:
-        print(f"{name}: error: out of memory: use fewer samples or poses", file=sys.stderr)
-        return 1
     except KeyboardInterrupt as exc:
-        print(f"{name}: {'terminated' if isinstance(exc, _Terminated) else 'interrupted'}", file=sys.stderr)
-        return 143 if isinstance(exc, _Terminated) else 130
-    except BrokenPipeError:
-        return 0
-    except OSError as exc:  # the file system or the machine, not the request: still one line
-        print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
-        return 1
+        return _stopped(name, signal.SIGTERM if isinstance(exc, _Terminated) else signal.SIGINT)
+    except Exception as exc:
+        if _SIGNALLED["signum"] is not None:   # raised by what the signal interrupted
+            return _stopped(name, _SIGNALLED["signum"])
+        if isinstance(exc, BrokenPipeError):
+            return 0
+        if isinstance(exc, MemoryError):
+            print(f"{name}: error: out of memory: use fewer samples or poses", file=sys.stderr)
+            return 1
+        if isinstance(exc, (Prp3mcError, OSError)):  # OSError: the file system or the machine, still one line
+            print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
+            return 1
+        raise
     return 0
 
 

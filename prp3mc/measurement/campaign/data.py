@@ -133,7 +133,7 @@ class Campaign:
 
     def to_csv(self, path: str | os.PathLike) -> None:
         """Write the campaign as a campaign CSV file (full float precision)."""
-        self.to_frame().to_csv(path, index=False, float_format="%.12g")
+        self.to_frame().to_csv(path, index=False)   # shortest repr of each float: reads back exactly
 
     @classmethod
     def from_frame(cls, frame: pd.DataFrame, geometry: Geometry | None = None,
