@@ -161,7 +161,7 @@ def main(argv=None) -> int:
 
 
 def table(r: dict) -> str:
-    """The README's benchmark table: each figure, the alternative, the ratio and the limit."""
+    """The table of benchmarks/README.md: each figure, the alternative, the ratio and the limit."""
     g = lambda v: f"{v:.3g}"  # noqa: E731
     rows = [
         ("Monte Carlo, 21x21 poses x %d samples (pose-samples/s)" % r["mc_grid_samples"],

@@ -1,4 +1,4 @@
-"""The menu of tolerance classes an allocation chooses from (the classes file: README, *File formats*).
+"""The menu of tolerance classes an allocation chooses from (the classes file: docs, *File formats*).
 
 A classes file lists, per input family, the classes every leg may take, each
 with a law (from the catalogue or written inline) and the user's cost::

@@ -228,7 +228,7 @@ def allocate(geometry, classes, region, *, spec_position_um: float | None = None
         Bound on the exact worst-case position error (µm) at every pose, or,
         with ``spec_percentile``, on that percentile of the position error.
     spec_phi_arcsec : float, optional
-        Bound on the exact worst-case |dphi| (arcsec) at every pose.
+        Bound on the exact worst-case ``|dphi|`` (arcsec) at every pose.
     spec_percentile : float, optional
         Percentile (e.g. 99.73) of the position error the position spec bounds.
     k_sigma : float, optional

@@ -2,7 +2,7 @@
 
 Every input's class sets its term's interval (mm or deg; a clearance term
 rho cos(zeta - omega) with zeta on the full turn spans [-rho_max, rho_max]).
-The exact worst case of the linear model (:mod:`.worstcase`) is the largest
+The exact worst case of the linear model (:mod:`~prp3mc.worstcase`) is the largest
 norm over the 8 corners of the box the three legs' u_i fill, and that box
 only grows when an interval grows: the envelope over the region is monotone
 under interval inclusion. :class:`Problem` evaluates it for a batch of K
@@ -36,7 +36,7 @@ covariance of the position error: a normal-approximation bound
 ``|mu| + sqrt(lambda_max(Sigma) chi2_2(q))`` on its q-quantile (under
 normality the ellipse of probability q lies in that disc), capped by the
 exact worst case (a quantile never exceeds the maximum). For open inputs it
-uses the smallest variance and a triangle-inequality bound on |mu|, again a
+uses the smallest variance and a triangle-inequality bound on ``|mu|``, again a
 lower bound of every completion's screen.
 """
 
@@ -62,7 +62,7 @@ from ..worstcase.envelope import term_bounds
 
 __all__ = ["Problem", "Search", "least_cost", "QUANTITIES", "search_limits"]
 
-#: Constrained quantities: worst-case position (mm), worst-case |dphi| (deg), screened position quantile (mm).
+#: Constrained quantities: worst-case position (mm), worst-case ``|dphi|`` (deg), screened position quantile (mm).
 QUANTITIES = ("position", "phi", "screen")
 _CHUNK_ELEMENTS = 1 << 21   # K x N elements per evaluated block
 

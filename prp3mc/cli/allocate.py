@@ -22,7 +22,7 @@ class AllocateCommand:
         p.add_argument("--region", required=True, choices=tuple(REGION_PRESETS), metavar="R",
                        help=f"test region preset ({', '.join(REGION_PRESETS)})")
         p.add_argument("--classes", required=True, metavar="FILE.toml",
-                       help="classes file (README, File formats), or the bundled example: example")
+                       help="classes file (docs, File formats), or the bundled example: example")
         p.add_argument("--budget", default=None, metavar="B",
                        help="a budget whose [effects] (fitted offsets, lead scales, backlash, thermal) stay fixed "
                             "in every bound and check; its inputs play no part (the classes choose them)")

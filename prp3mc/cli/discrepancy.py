@@ -20,7 +20,7 @@ class DiscrepancyCommand:
     def add_arguments(p):
         add_geometry(p)
         add_budget(p)
-        p.add_argument("--data", required=True, metavar="CSV", help="measurement campaign CSV (README, File formats)")
+        p.add_argument("--data", required=True, metavar="CSV", help="measurement campaign CSV (docs, File formats)")
         p.add_argument("--out", required=True, metavar="DIR", help="report folder (discrepancy.json, report.html)")
         p.add_argument("--force", action="store_true", help="replace an existing --out folder")
         p.add_argument("--instrument-sigma-mm", type=nonnegative_float, default=0.0, metavar="S",

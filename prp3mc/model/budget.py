@@ -4,7 +4,7 @@ Inputs are named ``<family>_<leg>`` with the ten error families of the model
 (``a, alpha, b, beta, rho, c, gamma, theta, e, psi``) and ``zeta_<leg>``, the
 contact angle of clearance ``rho_<leg>``. Lengths are in mm and angles in
 degrees. The preset ``paper`` is the source paper's non-compensable budget
-(clearances, guide play, encoder least counts; README, *File formats*).
+(clearances, guide play, encoder least counts; docs, *File formats*).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Catalogues: named laws of error inputs with their sources (README, *File formats*).
+"""Catalogues: named laws of error inputs with their sources (docs, *File formats*).
 
 A budget or a classes file refers to an entry by its dotted key
 (``{ catalogue = "bearing_radial_clearance.bore_10_18.CN" }``); the bundled

@@ -1,22 +1,22 @@
 """Systematic effects: the library's effect names and the ``[effects]`` table of a budget.
 
-An *effect* is something a model may be missing (README, *File formats*, and
+An *effect* is something a model may be missing (docs, *File formats*, and
 the discrepancy workflow). Systematic effects add a deterministic pose error
 that is linear in one parameter; dispersion effects (spreads) change the law of
 one budget input.
 
-======================= ====================================== ===========
-effect                  what it changes                         unit
-======================= ====================================== ===========
-``q_i`` (q in a, alpha, constant offset of parameter q of leg i  mm or deg
-beta, gamma, theta, c,  (``b_i``: encoder zero offset)
-e, psi, b)
-``scale_i``             slider error delta b_i = kappa_i b_i    1
-``backlash_i``          delta b_i = dir_i h_i / 2, h_i >= 0     mm
-``thermal``             delta b_i = alpha_T (temp_C - 20) b_i   1/K
-``spread_q_i`` (q in    the law of budget input q_i, scaled      mm or deg
-rho, theta, b)          about 0 to a new bound
-======================= ====================================== ===========
+=============== ================================================ ===========
+effect          what it changes                                  unit
+=============== ================================================ ===========
+``q_i``         constant offset of parameter q of leg i, q in a, mm or deg
+                alpha, beta, gamma, theta, c, e, psi, b
+                (``b_i``: encoder zero offset)
+``scale_i``     slider error delta b_i = kappa_i b_i             1
+``backlash_i``  delta b_i = dir_i h_i / 2, h_i >= 0              mm
+``thermal``     delta b_i = alpha_T (temp_C - 20) b_i            1/K
+``spread_q_i``  the law of budget input q_i (q in rho, theta,    mm or deg
+                b), scaled about 0 to a new bound
+=============== ================================================ ===========
 
 A budget's ``[effects]`` table holds fitted systematic effects
 (:class:`SystematicEffect`): each with its value, an optional 95 % interval and
@@ -25,7 +25,7 @@ effects of that table: a fitted spread is written as the input's new law.
 Thermal expansion needs the operating temperature range ``temp_range_C`` the
 analyses bound it over.
 
-At an analysis pose (README, *File formats*), offsets and lead scales are
+At an analysis pose (docs, *File formats*), offsets and lead scales are
 known shifts of the pose error; a backlash and the thermal expansion have a
 driver that is not known there (the approach direction, the temperature), so
 they enter as bounded random *factors* (:func:`effect_factors`): backlash_i is

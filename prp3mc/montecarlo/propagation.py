@@ -10,7 +10,7 @@ at 1e9 samples) and the numbers do not depend on the chunking or the
 threads. Means and covariances of the pose error are linear images of the
 features' sample moments (:class:`prp3mc.model.linear.LinearModel`),
 summed in float64 per block and batch, with standard errors from 64 batch
-means. The position-error norm and |dphi| are evaluated per pose and sample
+means. The position-error norm and ``|dphi|`` are evaluated per pose and sample
 in float32 by the kernel and summarised by EXACT order statistics of those
 float32 values (the values a full sort would give), found in streamed passes
 (:mod:`._stream`), with distribution-free confidence intervals.
@@ -71,7 +71,7 @@ class MonteCarloResult:
         Covariance of (dx mm, dy mm, dphi deg) and its standard error.
     percentiles : tuple of float
     position_pct, phi_pct : ndarray (..., Q)
-        Percentiles of the position-error norm (mm) and of |dphi| (deg).
+        Percentiles of the position-error norm (mm) and of ``|dphi|`` (deg).
     position_pct_ci, phi_pct_ci : ndarray (..., Q, 2)
         Distribution-free 95 % confidence intervals (order statistics).
     position_max, phi_max : ndarray (...)
@@ -123,7 +123,7 @@ class MonteCarloResult:
 
         Columns: x_mm, y_mm, phi_deg, output, statistic, value, unit, se,
         ci_low, ci_high, level, method. ``phi`` percentiles and maxima are
-        of |dphi|; ``method`` says how the interval was made ("normal" from
+        of ``|dphi|``; ``method`` says how the interval was made ("normal" from
         batch-means standard errors, "order statistics" distribution-free,
         "wilson" for exceedance, "none" for the sample maximum).
         """
@@ -255,7 +255,7 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
         drawn from it) or None (a fresh seed). The integer seed used is
         recorded in the result as ``seed``.
     percentiles : sequence of float
-        Percentiles of the position-error norm and of |dphi|.
+        Percentiles of the position-error norm and of ``|dphi|``.
     tolerance_mm : float, optional
         Report P(position error > tolerance_mm).
     exact_check_poses : int

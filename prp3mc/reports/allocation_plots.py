@@ -101,7 +101,7 @@ def _room_right(ax, x: np.ndarray, labels: list, fontsize: float) -> None:
 def allocation_map(result, shape: tuple, *, ax=None, title: str = ""):
     """Map of the chosen classes' worst case over the region, the binding poses and the spec marked.
 
-    Shows the position error, or |δφ| when the orientation spec binds; the
+    Shows the position error, or ``|δφ|`` when the orientation spec binds; the
     spec's level is drawn as a red contour when it is a worst-case bound.
 
     Parameters

@@ -49,7 +49,7 @@ class AllocationSpec:
         The menu as the file names it (a preset name or a path).
     spec_position_um, spec_phi_arcsec : float or None
         Bounds on the worst-case position error (µm; with ``spec_percentile``
-        on that percentile) and on the worst-case |δφ| (arcsec).
+        on that percentile) and on the worst-case ``|δφ|`` (arcsec).
     spec_percentile : float or None
     samples : int
         Monte Carlo samples confirming a percentile spec.
@@ -77,7 +77,7 @@ class AllocationSpec:
 
     @property
     def front_output(self) -> str:
-        """The output the front is swept in: the position error, or |δφ| with only a phi spec."""
+        """The output the front is swept in: the position error, or ``|δφ|`` with only a phi spec."""
         return "position" if self.spec_position_um is not None else "phi"
 
     def reduced(self) -> "AllocationSpec":

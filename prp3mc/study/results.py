@@ -56,7 +56,7 @@ class PoseSamples:
     labels : tuple of str
         What each pose is (``centre``, ``worst-case max``...).
     position_mm, phi_deg : ndarray (P, n)
-        Position-error norm (mm) and |dphi| (deg) of each sample.
+        Position-error norm (mm) and ``|dphi|`` (deg) of each sample.
     worst_position_mm, worst_phi_deg : ndarray (P,)
         Exact worst case at each pose.
     seed, n_samples : int
@@ -82,7 +82,7 @@ class PoseSamples:
         """Tidy samples and worst cases, one row per pose, output and value.
 
         Columns: ``pose`` (label), ``x_mm``, ``y_mm``, ``phi_deg``, ``output``
-        (``position`` or ``phi``, the latter |δφ|), ``statistic`` (``sample``
+        (``position`` or ``phi``, the latter ``|δφ|``), ``statistic`` (``sample``
         or ``worst_case``), ``sample`` (index of the draw; <NA> for the worst
         case), ``value``, ``unit`` (mm, deg).
         """
@@ -154,7 +154,7 @@ class ConfigurationResult:
         """Summary over the analyses' grids: one row per analysis, output, statistic and aggregate.
 
         Columns: ``configuration``, ``analysis`` (``worstcase``, ``montecarlo``),
-        ``output`` (``position``, ``phi``: |δφ|), ``statistic`` (``worst_case``,
+        ``output`` (``position``, ``phi``: ``|δφ|``), ``statistic`` (``worst_case``,
         ``p50`` ...), ``aggregate`` (``min``, ``max``, ``mean`` over the grid),
         ``value``, ``se`` (0 where exact; see :func:`over_grid`), ``unit`` (mm, deg).
         """

@@ -47,7 +47,7 @@ from ._kernel import (NONFINITE, REASONS, TERM_COLUMNS, envelope_kernel, generat
 
 __all__ = ["WorstCase", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "term_bounds", "QUANTITIES"]
 
-#: Quantities maximised: the position-error norm, |dphi|, |dx| and |dy|.
+#: Quantities maximised: the position-error norm, ``|dphi|``, ``|dx|`` and ``|dy|``.
 QUANTITIES = ("position", "phi", "x", "y")
 
 
@@ -81,7 +81,7 @@ class WorstCase(_Maxima):
         Interval of every term, mm or deg (the clearance term's is
         pose-dependent when its contact angle is restricted).
     position_mm, phi_deg, x_mm, y_mm : ndarray (...)
-        Largest position-error norm, |dphi|, |dx| and |dy|.
+        Largest position-error norm, ``|dphi|``, ``|dx|`` and ``|dy|``.
     leg_signs : dict of str to ndarray (..., 3)
         For each quantity, the sign of each leg's u_i (-1 lower end, +1
         upper end of its interval) at the maximiser.
@@ -155,7 +155,7 @@ class WorstCase(_Maxima):
         """Each term's part (..., T) of the maximum of each quantity, mm or deg; sums to it.
 
         For the norm, the projection of the term's error on the maximal error
-        vector; for |dx|, |dy|, |dphi|, the term's signed share.
+        vector; for ``|dx|``, ``|dy|``, ``|dphi|``, the term's signed share.
         """
         out = {}
         columns = self.model.columns
@@ -401,9 +401,9 @@ class WorstCaseMaxima(_Maxima):
         return short_repr(self, "poses", "k_sigma")
 
     position_mm = property(lambda self: self.maxima[0], doc="Largest position-error norm at each pose (...), mm.")
-    phi_deg = property(lambda self: self.maxima[1], doc="Largest |dphi| at each pose (...), deg.")
-    x_mm = property(lambda self: self.maxima[2], doc="Largest |dx| at each pose (...), mm.")
-    y_mm = property(lambda self: self.maxima[3], doc="Largest |dy| at each pose (...), mm.")
+    phi_deg = property(lambda self: self.maxima[1], doc="Largest ``|dphi|`` at each pose (...), deg.")
+    x_mm = property(lambda self: self.maxima[2], doc="Largest ``|dx|`` at each pose (...), mm.")
+    y_mm = property(lambda self: self.maxima[3], doc="Largest ``|dy|`` at each pose (...), mm.")
 
     @property
     def leg_signs(self) -> FrozenDict:

@@ -1,4 +1,4 @@
-"""Measurement campaigns (CSV, README *File formats*): reading with validation.
+"""Measurement campaigns (CSV, docs, *File formats*): reading with validation.
 
 A campaign is a table with one row per measurement: the commanded pose
 ``x_cmd, y_cmd, phi_cmd`` (mm, mm, deg), the measured pose ``x_meas, y_meas,
@@ -43,7 +43,7 @@ CMD_COLUMNS, MEAS_COLUMNS = ("x_cmd", "y_cmd", "phi_cmd"), ("x_meas", "y_meas", 
 REQUIRED_COLUMNS = ("pose_id", *CMD_COLUMNS, *MEAS_COLUMNS)
 #: Optional approach-direction columns.
 DIR_COLUMNS = ("dir_1", "dir_2", "dir_3")
-#: Largest |measured - commanded| accepted (mm, mm, deg): beyond it a row is a unit or sign mistake.
+#: Largest ``|measured - commanded|`` accepted (mm, mm, deg): beyond it a row is a unit or sign mistake.
 MAX_ERROR = (5.0, 5.0, 5.0)
 _SAME_CMD_TOL = 1e-6  # mm or deg: repeats of a pose must command the same pose
 #: Fewest distinct poses a campaign must visit for the discrepancy workflow to test anything: one pose

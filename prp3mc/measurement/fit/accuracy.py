@@ -17,7 +17,7 @@ propagated with the analyses that understand a budget's ``[effects]``:
 - **compensated**: the identified geometry and the compensated budget.
 
 Each gives the exact worst case and Monte Carlo p95 and p99 of the position
-error and of |dphi|, each the largest over the grid (the three Monte Carlo
+error and of ``|dphi|``, each the largest over the grid (the three Monte Carlo
 runs share their seed, so models that differ in their names only, as all
 three do when nothing was named, are computed once).
 """
@@ -87,7 +87,7 @@ def predicted_accuracy(geometry: Geometry, budget: Budget, model: UpdatedModel, 
         ``n_samples``, ``seed``, and per model of :data:`MODELS` its
         ``geometry`` and ``budget`` names, ``worst_case_position_mm``,
         ``worst_case_phi_deg``, ``p95_position_mm``, ``p99_position_mm``,
-        ``p95_phi_deg``, ``p99_phi_deg`` (largest over the region; phi of |dphi|).
+        ``p95_phi_deg``, ``p99_phi_deg`` (largest over the region; phi of ``|dphi|``).
     """
     monte_carlo, worst_case = load_propagation()
     region, source = accuracy_region(geometry, campaign)

@@ -1,7 +1,7 @@
 """The updated model: the named effects as a geometry and a budget every command reads.
 
 A discrepancy analysis ends with the model the campaign supports
-(README, *File formats*):
+(docs, *File formats*):
 
 - **the budget** (``model/budget.toml``): the fitted spreads as the inputs'
   new laws, and in its ``[effects]`` table every systematic error of the

@@ -70,7 +70,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
         one named again is a correction to it). A budget whose effects were
         fitted on another geometry is refused.
     campaign : Campaign, DataFrame or path
-        A campaign (README, *File formats*), measured in the instrument's frame; validated against ``geometry``.
+        A campaign (docs, *File formats*), measured in the instrument's frame; validated against ``geometry``.
     instrument_sigma_mm, instrument_sigma_deg : float
         Standard deviation of the measurement noise per coordinate.
     registration : bool
@@ -246,7 +246,7 @@ def _iso9283(engine: Engine, fit: Fit, seed: int):
 def detectable_effect(geometry: Geometry, budget: Budget, campaign: Campaign, name: str, *,
                       power: float = 0.9, alpha: float = 0.01, instrument_sigma_mm: float = 0.0,
                       instrument_sigma_deg: float = 0.0, registration: bool = True) -> float:
-    """Smallest |value| of a systematic effect that a campaign names with probability ``power``.
+    """Smallest ``|value|`` of a systematic effect that a campaign names with probability ``power``.
 
     For planning: simulate a campaign without effects (only its layout
     matters: poses, repeats, directions, temperatures) and ask how large an
