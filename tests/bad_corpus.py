@@ -565,12 +565,14 @@ def run_one(case: Case, argv: list, tmp: Path, timeout: float = 300.0) -> str | 
     return judge(case, code, out, err, tmp, existed, out_dir)
 
 
-def run(only: str | None = None, timeout: float = 300.0, root: Path | None = None, jobs: int = 1) -> dict:
-    """Run the corpus in real processes; return {class: [total, bad]} and print each bad case."""
+def run(only: str | None = None, timeout: float = 300.0, root: Path | None = None, jobs: int = 1,
+        ids: set | None = None) -> dict:
+    """Run the corpus (or the cases of class ``only``, or of ``ids``) in real processes; return
+    {class: [total, bad]} and print each case."""
     from concurrent.futures import ThreadPoolExecutor
     root = root or Path(os.environ.get("TMPDIR", "/tmp")) / f"prp3mc_corpus_{os.getpid()}"
     paths = prepare(root / "files")
-    selected = [c for c in cases() if only in (None, c.cls)]
+    selected = [c for c in cases() if only in (None, c.cls) and (ids is None or c.id in ids)]
 
     def one(k_case):
         k, case = k_case
@@ -654,11 +656,17 @@ if __name__ == "__main__":
     parser.add_argument("--root", type=Path, default=None)
     parser.add_argument("--timeout", type=float, default=300.0)
     parser.add_argument("--signals", type=int, default=0, help="run the signal loop this many times instead")
+    parser.add_argument("--rerun-bad", type=Path, default=None, help="run only the cases a log of this runner "
+                        "printed as BAD")
     a = parser.parse_args()
+    rerun = None
+    if a.rerun_bad:
+        rerun = {line.split("] ", 1)[1] for line in a.rerun_bad.read_text(errors="replace").splitlines()
+                 if line.startswith("BAD ")}
     if a.signals:
         root = a.root or Path(os.environ.get("TMPDIR", "/tmp")) / f"prp3mc_signals_{os.getpid()}"
         root.mkdir(parents=True, exist_ok=True)
         result = signal_loop(root, a.signals)
     else:
-        result = run(a.only, timeout=a.timeout, root=a.root, jobs=a.jobs)
+        result = run(a.only, timeout=a.timeout, root=a.root, jobs=a.jobs, ids=rerun)
     print(json.dumps(result))

@@ -5,6 +5,7 @@ from ..model.budget import Budget
 from ..kinematics.geometry import Geometry
 from ..limits import montecarlo_estimate
 from ..montecarlo.propagation import monte_carlo
+from ..kinematics.chain import check_poses
 from ..model.validity import check_linearity
 from . import (EFFECTS_NOTE, provenance, add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
                emit_json, nonnegative_float, within_limits)
@@ -33,6 +34,7 @@ class MonteCarloCommand:
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         within_limits(args, montecarlo_estimate(args.samples, 1, len(budget.factors) + 1))
+        check_poses(geometry, args.pose)   # a refused pose before any warning about the analysis
         check_linearity(geometry, budget, args.pose)
         r = monte_carlo(geometry, budget, args.pose, args.samples, rng=args.seed,
                         tolerance_mm=args.tolerance_mm, exact_check_poses=1 if args.exact_check else 0,

@@ -8,6 +8,7 @@ from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
 from ..sobol.ranking import ranking
 from ..sobol.indices import sobol_indices
+from ..kinematics.chain import check_poses
 from ..model.validity import check_linearity
 from ..units import DISPLAY, OUTPUTS
 from ..worstcase.envelope import worst_case
@@ -81,6 +82,7 @@ class SobolCommand:
         d = len(budget.factors)
         within_limits(args, sobol_estimate(args.samples, 1, d, d + len(budget.groups) + len(groups),
                                            len(OUTPUTS), args.resamples, salib=args.method != "vectorised"))
+        check_poses(geometry, args.pose)   # a refused pose before any warning about the analysis
         check_linearity(geometry, budget, args.pose)
         r = sobol_indices(geometry, budget, args.pose, args.samples, rng=args.seed, groups=groups,
                           num_resamples=args.resamples, conf_level=args.conf_level, method=args.method,

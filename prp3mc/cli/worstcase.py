@@ -3,6 +3,7 @@
 from .._version import __version__
 from ..model.budget import Budget
 from ..kinematics.geometry import Geometry
+from ..kinematics.chain import check_poses
 from ..model.validity import check_linearity
 from ..worstcase.envelope import worst_case
 from . import provenance, add_budget, add_geometry, add_json, add_pose, command, emit_json, positive_float
@@ -22,6 +23,7 @@ class WorstCaseCommand:
     @staticmethod
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
+        check_poses(geometry, args.pose)   # a refused pose before any warning about the analysis
         check_linearity(geometry, budget, args.pose)
         wc = worst_case(geometry, budget, args.pose, k_sigma=args.k_sigma)
         frame = wc.contributions_frame("position")
