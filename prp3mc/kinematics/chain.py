@@ -269,7 +269,8 @@ def _reasons(geometry: Geometry, fr: Frame, limits: Limits) -> dict[str, np.ndar
     masks = {   # singular first: there b, d and A are round-off or infinite, and the other reasons nonsense
         "parallel": ~(np.abs(fr.transmission) > _SINGULAR),
         "singular": np.broadcast_to((~(fr.condition < 1.0 / _SINGULAR) | _guides_parallel(fr.tr))
-                                    & np.isfinite(fr.b).all(axis=0), fr.b.shape),
+                                    & (np.abs(fr.b) < _FAR).all(axis=0) & (np.abs(fr.d) < _FAR).all(axis=0),
+                                    fr.b.shape),   # a pose far out (1e300 mm) leaves the stroke: said so
         "below": fr.b < lo - tol,
         "above": fr.b > hi + tol,
         "d": ~(fr.d > 0),
@@ -281,6 +282,8 @@ def _reasons(geometry: Geometry, fr: Frame, limits: Limits) -> dict[str, np.ndar
 
 #: |sin| of the angle between a guide and its slider, or 1 / cond(A), below which a pose is singular (not near one).
 _SINGULAR = 1e-9
+#: Joint values (mm) beyond any machine: a pose that needs them is out of stroke, whatever A's round-off says.
+_FAR = 1e12
 
 
 def _guides_parallel(tr: Trig) -> np.ndarray:
@@ -334,13 +337,14 @@ def refusal(geometry: Geometry, pose: np.ndarray, index: tuple, reason: str, leg
     """
     with np.errstate(all="ignore"):
         fr = frame(geometry, np.asarray(pose, dtype=float))
+        why = _dependent_legs(fr.A) if reason == "singular" else ""
     x, y, phi = pose
     at = f"pose ({x:g} mm, {y:g} mm, {phi:g} deg) {_where(index)}"
     lo, hi = geometry.stroke_mm[leg]
     msg = {
         "parallel": (f"is singular: leg {leg + 1}'s guide is parallel to its slider (l_{leg + 1} along "
                      f"j_{leg + 1}), so b_{leg + 1} is undetermined: change theta_{leg + 1}, gamma_{leg + 1} or phi"),
-        "singular": f"is singular: A is not invertible ({_dependent_legs(fr.A)}): check the geometry",
+        "singular": f"is singular: A is not invertible ({why}): check the geometry",
         "below": f"leaves leg {leg + 1}'s stroke: b_{leg + 1} = {fr.b[leg]:.6g} mm < {lo:g} mm",
         "above": f"leaves leg {leg + 1}'s stroke: b_{leg + 1} = {fr.b[leg]:.6g} mm > {hi:g} mm",
         "d": f"has d_{leg + 1} = {fr.d[leg]:.6g} mm <= 0 on leg {leg + 1}",
