@@ -230,7 +230,7 @@ def prepare(root: Path) -> dict:
     paths["g_nonutf8"] = os.fsencode(str(root)) + b"/g\xff.toml"
     with open(paths["g_nonutf8"], "wb") as f:
         f.write(_geometry_text().encode())
-    paths["out_nonutf8"] = os.fsencode(str(root)) + b"/out\xe9"
+    paths["out_nonutf8"] = b"out\xe9"   # relative: the run's own folder
     # a dangling symlink, a symlink to an earlier output, a read-only folder
     dangling = root / "dangling"
     if not dangling.is_symlink():
