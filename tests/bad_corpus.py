@@ -355,11 +355,13 @@ def cases() -> list[Case]:
                  "--spec-position-um", "30", "--grid", "5", "--front"], message="--max-hours", slow=True))
     add(Case(H, ["--max-hours", "0.005", "study", "{s_allocation_big}", "--out", "{tmp}/h1"], message="--max-hours",
              slow=True))
-    add(Case(H, ["--max-hours", "0.05", "study", "{s_multiply}", "--out", "{tmp}/h2"], message="would take"))
-    add(Case(H, ["--max-hours", "0.05", "study", "{s_sweep_sizes}", "--out", "{tmp}/h3"], message="would take"))
+    add(Case(H, ["--max-hours", "0.005", "study", "{s_multiply}", "--out", "{tmp}/h2"], message="--max-hours",
+             slow=True))
+    add(Case(H, ["--max-hours", "0.005", "study", "{s_sweep_sizes}", "--out", "{tmp}/h3"], message="--max-hours",
+             slow=True))
     add(Case(H, ["--max-gb", "0.01", "study", "{s_multiply}", "--out", "{tmp}/h4"], message="GiB"))
     add(Case(H, ["--max-gb", "0.0001", "montecarlo", *G, *B, *P, "--samples", "1048576"], message="--max-gb"))
-    add(Case(H, ["--max-hours", "0.0001", "sobol", *G, *B, *P, "--samples", "65536"], message="would take"))
+    add(Case(H, ["--max-hours", "0.0001", "sobol", *G, *B, *P, "--samples", "65536"], message="--max-hours"))
     add(Case(H, ["--max-gb", "0", "sensitivity", *G, *P], status=(2,), message="> 0"))
     add(Case(H, ["--max-gb", "nan", "sensitivity", *G, *P], status=(2,), message="finite"))
     # ------------------------------------------------------------------ row order

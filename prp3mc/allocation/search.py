@@ -42,17 +42,14 @@ lower bound of every completion's screen.
 
 from __future__ import annotations
 
-import contextlib
 import heapq
 import itertools
 import math
-import time
 
 import numpy as np
-from scipy import stats
 
 from ..errors import ResourceError
-from ..limits import MAX_HOURS, MEMORY_MARGIN, available_memory, format_bytes
+from ..limits import MEMORY_MARGIN, available_memory, format_bytes
 from ..units import RAD2DEG
 from ..kinematics.geometry import Geometry
 from .classes import ClassMenu
@@ -60,52 +57,34 @@ from ..model.budget import Budget
 from ..model.linear import linear_model
 from ..worstcase.envelope import term_bounds
 
-__all__ = ["Problem", "Search", "least_cost", "QUANTITIES", "search_limits"]
+__all__ = ["Problem", "Search", "least_cost", "QUANTITIES"]
 
 #: Constrained quantities: worst-case position (mm), worst-case ``|dphi|`` (deg), screened position quantile (mm).
 QUANTITIES = ("position", "phi", "screen")
 _CHUNK_ELEMENTS = 1 << 21   # K x N elements per evaluated block
 
 
-#: Seconds every search may still take (the whole allocation's), set by :func:`search_limits`.
-_WORK = {"deadline": None, "hours": MAX_HOURS}
 #: Bytes a queued node holds (its class indices, key and tuple): the queue is refused past the memory.
 _NODE_BYTES = 120
 
 
-@contextlib.contextmanager
-def search_limits(max_hours: float | None = None):
-    """Bound every branch-and-bound search inside the block to ``max_hours`` (default 24) in all.
-
-    The number of choices of a menu (the product of every input's classes:
-    6^27 for nine families of six classes on three legs) says nothing of
-    what branch and bound examines, which cannot be told before it runs; so
-    the search itself stops past the time (and before its queue outgrows
-    the memory), refusing in one line with the choices and the work done.
-    """
-    hours = MAX_HOURS if max_hours is None else float(max_hours)
-    saved = dict(_WORK)
-    _WORK.update(deadline=time.monotonic() + 3600.0 * hours, hours=hours)
-    try:
-        yield
-    finally:
-        _WORK.update(saved)
-
-
 def _over_limits(search: "Search", queued: int) -> None:
-    """Refuse (ResourceError) a search past its deadline or whose queue outgrows the memory."""
-    deadline = _WORK["deadline"]
-    late = deadline is not None and time.monotonic() > deadline
-    memory = queued * (_NODE_BYTES + 8 * len(search.pb.inputs))
-    full = memory > MEMORY_MARGIN * available_memory() if queued and queued % 4096 == 0 else False
-    if not (late or full):
+    """Refuse (ResourceError) a search whose queue outgrows the memory.
+
+    The number of choices of a menu (6^27 for nine families of six classes
+    on three legs) says nothing of what branch and bound examines, which
+    cannot be told before it runs; time is bounded by ``prp3mc --max-hours``
+    (a wall-clock stop), memory here.
+    """
+    if not queued or queued % 4096:
         return
-    choices = math.prod(int(n) for n in search.pb.n_classes)
-    what = (f"took more than --max-hours {_WORK['hours']:g}" if late
-            else f"needs more than this machine's memory ({format_bytes(memory)} queued)")
-    raise ResourceError(f"tolerance allocation over {len(search.pb.inputs)} inputs ({choices:.3g} choices of "
-                        f"classes) {what}: the search examined {search.nodes} candidates without proving the "
-                        "least cost; give fewer classes or families, or a looser spec")
+    memory = queued * (_NODE_BYTES + 8 * len(search.pb.inputs))
+    if memory > MEMORY_MARGIN * available_memory():
+        choices = math.prod(int(n) for n in search.pb.n_classes)
+        raise ResourceError(f"tolerance allocation over {len(search.pb.inputs)} inputs ({choices:.3g} choices of "
+                            f"classes) needs more than this machine's memory ({format_bytes(memory)} queued): the "
+                            f"search examined {search.nodes} candidates without proving the least cost; give fewer "
+                            "classes or families, or a looser spec")
 
 
 class Problem:
@@ -156,7 +135,8 @@ class Problem:
         self.Ainv = model.Ainv                                                # (N, 3, 3)
         self._absWu = np.abs(model.scale[:, :J].T[:, :, None] * (legs[:, None] == np.arange(3))[:, None, :])  # (J, N, 3)
         self.fixed = _fixed_parts(model, J, k_sigma)
-        self.kq = None if percentile is None else float(np.sqrt(stats.chi2.ppf(percentile / 100.0, 2)))
+        from scipy.stats import chi2  # imported when used: parsing a study imports this module
+        self.kq = None if percentile is None else float(np.sqrt(chi2.ppf(percentile / 100.0, 2)))
         self.n_classes = np.array([len(menu.classes_of(n)) for n in self.inputs])
         M = int(self.n_classes.max())
         table = np.empty((5, J, M))

@@ -6,11 +6,10 @@ from ..measurement.fit.accuracy import MODELS
 from ..measurement.campaign.data import count_rows, read_campaign
 from ..measurement.fit.workflow import STAGES, discrepancy
 from ..progress import Progress
-from ..reports._render import drawing_ahead
 from ..reports.discrepancy_report import report_document, write_report
 from ..model.budget import Budget
-from ..units import MM2UM
-from . import (WARNINGS, add_budget, add_geometry, add_json, add_progress, add_seed, command, emit_json,
+from ..units import MM2UM, quantity_text
+from . import (WARNINGS, add_budget, add_geometry, add_json, add_output, add_progress, add_seed, command, emit_json,
                nonnegative_float, probability, provenance, within_limits)
 
 
@@ -20,9 +19,9 @@ class DiscrepancyCommand:
     def add_arguments(p):
         add_geometry(p)
         add_budget(p)
-        p.add_argument("--data", required=True, metavar="CSV", help="measurement campaign CSV (docs, File formats)")
-        p.add_argument("--out", required=True, metavar="DIR", help="report folder (discrepancy.json, report.html)")
-        p.add_argument("--force", action="store_true", help="replace an existing --out folder")
+        p.add_argument("--data", required=True, metavar="CSV",
+                       help="measurement campaign CSV (docs, File formats), or the bundled one: example")
+        add_output(p, help="report folder (discrepancy.json, report.html)")
         p.add_argument("--instrument-sigma-mm", type=nonnegative_float, default=0.0, metavar="S",
                        help="instrument noise sd of x and y, mm (default 0)")
         p.add_argument("--instrument-sigma-deg", type=nonnegative_float, default=0.0, metavar="S",
@@ -47,15 +46,14 @@ class DiscrepancyCommand:
         campaign = read_campaign(args.data, geometry)
         within_limits(args, discrepancy_estimate(campaign.n_measurements, campaign.n_poses,
                                                  int(campaign.repeats.max()), n_inputs=d))
-        # the figures' process imports matplotlib while the analysis runs, where a core is idle
-        with Progress(len(STAGES) + 1, "discrepancy", args.progress) as bar, drawing_ahead() as ahead:
+        with Progress(len(STAGES) + 1, "discrepancy", args.progress) as bar:
             result = discrepancy(geometry, budget, campaign, instrument_sigma_mm=args.instrument_sigma_mm,
                                  instrument_sigma_deg=args.instrument_sigma_deg,
                                  registration=not args.no_registration, alpha=args.alpha,
                                  alpha_unexplained=args.alpha_unexplained, outlier_rate=args.outlier_rate,
                                  progress=bar, rng=args.seed)
             record = provenance(args, geometry, budget)["inputs"]
-            folder = write_report(result, args.out, force=args.force, inputs=record, warnings=WARNINGS, ahead=ahead)
+            folder = write_report(result, args.out, force=args.force, inputs=record, warnings=WARNINGS)
             bar.update(label="discrepancy: report")
         if args.json:
             emit_json(report_document(result, record, WARNINGS))
@@ -82,7 +80,7 @@ def headline(result) -> list[str]:
                  f"{rep['ci95'][1]:.2f}]")
     for e in result.named_effects:
         alias = f" (not separable from {', '.join(e.aliases)})" if e.aliases else ""
-        lines.append(f"named {e.name} = {e.value:.4g} {e.unit}  95% CI [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]{alias}")
+        lines.append(f"named {e.name} = {quantity_text(e.value, e.unit)}  95% CI [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]{alias}")
     if not result.named_effects:
         lines.append("named nothing: the model misses nothing this campaign can see")
     if result.confounded_with_registration:

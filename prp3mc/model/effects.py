@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import BudgetError
+from ..errors import BudgetError, ParameterError
 from ..kinematics.geometry import Geometry
 from ..kinematics.sensitivity import LENGTH_FAMILIES
 from .._result import FrozenDict
@@ -167,11 +167,11 @@ def slider_error(values: dict, b: np.ndarray, direction: np.ndarray | None = Non
             out[:, eff.leg] += value * b[:, eff.leg]
         elif eff.kind == "backlash":
             if direction is None:
-                raise BudgetError(f"{eff.name} needs approach directions dir_{eff.leg + 1}")
+                raise ParameterError(f"{eff.name} needs approach directions dir_{eff.leg + 1}")
             out[:, eff.leg] += 0.5 * value * direction[:, eff.leg]
         elif eff.kind == "thermal":
             if temp_C is None:
-                raise BudgetError("thermal needs temperatures temp_C")
+                raise ParameterError("thermal needs temperatures temp_C")
             out += value * (np.asarray(temp_C)[:, None] - T_REF_C) * b
     return out
 

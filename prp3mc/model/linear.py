@@ -191,18 +191,24 @@ class LinearModel:
     def feature_moments(self) -> tuple[np.ndarray, np.ndarray]:
         """Exact mean (F,) and covariance (F, F) of the sample features (see :meth:`features`).
 
-        Non-clearance features are independent factors; a clearance's features
-        (rho cos zeta, rho sin zeta) have moments E[rho^k] times the
-        trigonometric moments of zeta (:func:`~prp3mc.model.laws.angle_moments`);
-        the constant of the shifts has mean 1 and no variance.
+        A value feature is its factor; a clearance's features (rho cos zeta,
+        rho sin zeta) have moments E[rho^k] times the trigonometric moments of
+        zeta (:func:`~prp3mc.model.laws.angle_moments`); the constant of
+        the shifts has mean 1 and no variance. Features of different factors
+        are independent unless the budget correlates their factors; then, as a
+        contact angle is never correlated, they covary through the factors'
+        covariance (:meth:`Budget.covariance`) times E[cos zeta] or E[sin zeta]
+        for a clearance's features.
         """
         laws = list(self.budget.factor_laws.values())
-        fmean, blocks = [], []
+        fmean, blocks, factor, loading = [], [], [], []
         for kind, *args in self._plan:
             if kind == "value":
                 k, ref = args
                 fmean.append(laws[k].mean - ref)
                 blocks.append(np.array([[laws[k].var]]))
+                factor.append(k)
+                loading.append(1.0)
             elif kind == "clearance":
                 (k, kz), = args
                 rho, zeta = laws[k], laws[kz]
@@ -211,13 +217,19 @@ class LinearModel:
                 m = np.array([r1 * ec, r1 * es])
                 fmean.extend(m)
                 blocks.append(r2 * np.array([[ecc, ecs], [ecs, ess]]) - np.outer(m, m))
+                factor += [k, k]
+                loading += [ec, es]
         if self.has_shift:
             fmean.append(1.0)
             blocks.append(np.zeros((1, 1)))
         nf = len(fmean)
         fcov = np.zeros((nf, nf))
+        if self.budget.copula is not None:           # across the factors the copula correlates
+            cov = self.budget.covariance()
+            idx, load = np.array(factor, dtype=int), np.array(loading)
+            fcov[:idx.size, :idx.size] = np.outer(load, load) * cov[np.ix_(idx, idx)]
         pos = 0
-        for block in blocks:
+        for block in blocks:                          # within one factor (a clearance: rho with its zeta)
             k = block.shape[0]
             fcov[pos:pos + k, pos:pos + k] = block
             pos += k

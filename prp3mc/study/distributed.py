@@ -29,7 +29,7 @@ import re
 from typing import Any, Iterable, Iterator
 
 from .._threads import cores
-from ..errors import Prp3mcError
+from ..errors import MissingDependencyError, Prp3mcError
 
 __all__ = ["DaskExecutor", "parse_scheduler"]
 
@@ -75,7 +75,7 @@ def _import_distributed():
     try:
         import distributed
     except ImportError:
-        raise Prp3mcError("--scheduler needs Dask, which is not installed: pip install 'prp3mc[dask]'") from None
+        raise MissingDependencyError("Dask", "pip install 'prp3mc[dask]'", "--scheduler") from None
     return distributed
 
 

@@ -313,7 +313,7 @@ class _Reader:
             value = [value, value]
         if isinstance(value, list) and len(value) == 2 and all(ok_int(v) for v in value):
             try:  # the configurations' grids are checked for feasibility below: refuse what cannot be built
-                check(worstcase_estimate(value[0] * value[1], 0), max_hours=math.inf)
+                check(worstcase_estimate(value[0] * value[1], 0))
             except ResourceError as exc:
                 self.fail(path, f"{'.'.join(path)}: {exc}")
             return (value[0], value[1])

@@ -45,7 +45,13 @@ from ..model.linear import LinearModel, linear_model
 from ._kernel import (NONFINITE, REASONS, TERM_COLUMNS, envelope_kernel, generator_signs, kernel_tables,
                         zonotope_maxima, zonotope_scratch)
 
-__all__ = ["WorstCase", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "term_bounds", "QUANTITIES"]
+__all__ = ["WorstCase", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "term_bounds", "QUANTITIES",
+           "CORRELATION_NOTE"]
+
+#: What outputs say of the worst case of a correlated budget: it is unchanged, the box.
+CORRELATION_NOTE = ("The worst case is the maximum over the box of every input's range: a rank correlation "
+                    "(the budget's [correlation] table) leaves each input its full range and every corner of the "
+                    "box possible, so it does not change the worst case.")
 
 #: Quantities maximised: the position-error norm, ``|dphi|``, ``|dx|`` and ``|dy|``.
 QUANTITIES = ("position", "phi", "x", "y")

@@ -22,6 +22,7 @@ import os
 import re
 import warnings
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +36,7 @@ from ...model.effects import TEMP_LIMITS_C
 from ...model.linear import linear_model
 
 __all__ = ["Campaign", "read_campaign", "REQUIRED_COLUMNS", "CMD_COLUMNS", "MEAS_COLUMNS", "DIR_COLUMNS",
-           "MAX_ERROR", "MIN_POSES", "require_testable", "count_rows", "check_error_scale"]
+           "MAX_ERROR", "MIN_POSES", "require_testable", "count_rows", "CAMPAIGN_PRESETS", "check_error_scale"]
 
 #: Commanded and measured pose columns, ``[x mm, y mm, phi deg]``.
 CMD_COLUMNS, MEAS_COLUMNS = ("x_cmd", "y_cmd", "phi_cmd"), ("x_meas", "y_meas", "phi_meas")
@@ -45,6 +46,8 @@ REQUIRED_COLUMNS = ("pose_id", *CMD_COLUMNS, *MEAS_COLUMNS)
 DIR_COLUMNS = ("dir_1", "dir_2", "dir_3")
 #: Largest ``|measured - commanded|`` accepted (mm, mm, deg): beyond it a row is a unit or sign mistake.
 MAX_ERROR = (5.0, 5.0, 5.0)
+#: Bundled campaigns, by name (``--data example``; how each was made: the script beside it).
+CAMPAIGN_PRESETS = {"example": "data/campaigns/example.csv"}
 _SAME_CMD_TOL = 1e-6  # mm or deg: repeats of a pose must command the same pose
 #: Fewest distinct poses a campaign must visit for the discrepancy workflow to test anything: one pose
 #: is held out to cross-validate the others, and the instrument's registration (a pose-independent
@@ -375,9 +378,13 @@ def _shown(path: Path) -> str:
 
 
 def _campaign_file(data: "str | os.PathLike") -> Path:
+    """The file ``data`` names: a path, or a bundled campaign's name (:data:`CAMPAIGN_PRESETS`) if no such file exists."""
     path = Path(data)
+    if not path.is_file() and str(data) in CAMPAIGN_PRESETS:
+        path = Path(str(resources.files("prp3mc").joinpath(CAMPAIGN_PRESETS[str(data)])))
     if not path.is_file():
-        raise InputFileError(f"campaign file {_shown(path)} does not exist")
+        raise InputFileError(f"campaign file {_shown(path)} does not exist"
+                             + (f" (bundled: {', '.join(CAMPAIGN_PRESETS)})" if path.suffix != ".csv" else ""))
     return path
 
 

@@ -28,7 +28,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import optimize
 
-from ..._distributions import chi2_ppf
 from ...kinematics.chain import inverse_kinematics
 from ...kinematics.geometry import Geometry
 from ...kinematics.sensitivity import sensitivity
@@ -391,7 +390,8 @@ class Engine:
     # -- intervals
     def _profile_interval(self, loglik, x_hat: float, lo: float, hi: float, level: float) -> tuple[float, float]:
         """Ends of {x: 2 (max - loglik(x)) <= chi2_1(level)} within [lo, hi], by root finding."""
-        q = chi2_ppf(level, 1)
+        from scipy.stats import chi2  # imported when used: prp3mc --help imports this module
+        q = chi2.ppf(level, 1)
         top = loglik(x_hat)
 
         def g(x):

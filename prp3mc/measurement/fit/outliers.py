@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..._distributions import chi2_isf
 from .likelihood import Engine
 from .nuisance import NUISANCE_NAMES
 
@@ -36,7 +35,8 @@ _MAX_ROUNDS = 6
 def threshold(n_measurements: int, rate: float) -> float:
     """Squared distance above which one of ``n_measurements`` rows is a gross error (Šidák at ``rate``)."""
     level = -np.expm1(np.log1p(-rate) / n_measurements)
-    return float(chi2_isf(level, 3))
+    from scipy.stats import chi2  # imported when used: prp3mc --help imports this module
+    return float(chi2.isf(level, 3))
 
 
 def distances(engine: Engine, keep: np.ndarray, values: dict, factors: dict, r: float) -> np.ndarray:

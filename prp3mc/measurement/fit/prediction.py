@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 
 from ..._result import freeze, pose_columns, short_repr
-from ...errors import BudgetError
+from ...errors import BudgetError, ParameterError
 from ...kinematics.geometry import Geometry
 from ...model.budget import Budget
 from ...model.linear import linear_model
@@ -114,10 +114,10 @@ def noise_cov(sigma_mm: float, sigma_deg: float) -> np.ndarray:
     """
     for name, v in (("instrument_sigma_mm", sigma_mm), ("instrument_sigma_deg", sigma_deg)):
         if not (np.isfinite(v) and v >= 0):
-            raise BudgetError(f"{name} must be finite and >= 0, got {v}")
+            raise ParameterError(f"{name} must be finite and >= 0, got {v}")
         if v > MAX_INSTRUMENT_SIGMA:
-            raise BudgetError(f"{name} = {v:g} is beyond any instrument (at most {MAX_INSTRUMENT_SIGMA:g}): "
-                              "give the instrument's noise sd in mm and deg")
+            raise ParameterError(f"{name} = {v:g} is beyond any instrument (at most {MAX_INSTRUMENT_SIGMA:g}): "
+                                 "give the instrument's noise sd in mm and deg")
     return np.diag([sigma_mm**2, sigma_mm**2, sigma_deg**2])
 
 
@@ -151,7 +151,7 @@ def predict(geometry: Geometry, budget: Budget, campaign: Campaign, *, effects: 
     effects = dict(effects or {})
     model_budget = spread_budget(budget, effects)
     if not 0.0 <= repeatable_fraction <= 1.0:
-        raise BudgetError(f"repeatable_fraction must lie in [0, 1], got {repeatable_fraction}")
+        raise ParameterError(f"repeatable_fraction must lie in [0, 1], got {repeatable_fraction}")
     mean, sigma = linear_model(geometry, model_budget.without_effects(), campaign.poses, check=False).moments()
     noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
     systematic = {k: v for k, v in effects.items() if effect(k).systematic}

@@ -32,17 +32,13 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from ..._distributions import chi2_isf, chi2_ppf, chi2_sf
 from .signatures import effect
 from .likelihood import Engine, Fit
-from .results import DiscrepancyResult, NamedEffect
+from .results import NamedEffect
 from .subsets import Gram
 
-#: ``DiscrepancyResult`` is defined in :mod:`~prp3mc.measurement.fit.results` and re-exported here, where the
-#: report and earlier code import it from.
-__all__ = ["DiscrepancyResult", "select", "name_effects", "names_in"]
+__all__ = ["select", "name_effects", "names_in"]
 
-_Q_ALIAS = float(chi2_ppf(0.99, 1))
 #: Most candidates refitted with r and the spreads re-profiled at each step.
 _JOINT = 3
 _STEP_COLUMNS = ["candidate", "lr", "estimate", "lr_joint", "step", "threshold", "accepted"]
@@ -110,13 +106,14 @@ def select(engine: Engine, base: Fit, alpha: float, max_effects: int) -> tuple[F
     fit = base
     accepted: dict[str, dict] = {}
     step_rows = []
-    drop_level = float(chi2_isf(alpha, 1))
+    from scipy.stats import chi2  # imported when used: prp3mc --help imports this module
+    drop_level = float(chi2.isf(alpha, 1))
     for step in range(1, max_effects + 1):
         scan = _scan(engine, fit)
         if scan.empty:
             break
         K = len(scan)
-        threshold = float(chi2_isf(alpha / K, 1))
+        threshold = float(chi2.isf(alpha / K, 1))
         scan = scan.sort_values("lr", ascending=False, ignore_index=True)
         # the LR with r and spreads re-profiled is at least the scan's: refit the strongest, and the next
         # ones only when it fails (a repeatable fraction fitted high may hide an effect's pose pattern)
@@ -154,10 +151,12 @@ def select(engine: Engine, base: Fit, alpha: float, max_effects: int) -> tuple[F
 
 def name_effects(engine: Engine, fit: Fit, accepted: dict) -> tuple[NamedEffect, ...]:
     """The effects in ``fit``'s model with values, 95 % intervals and aliases given the final model."""
+    from scipy.stats import chi2
+    q_alias = float(chi2.ppf(0.99, 1))
     named = []
     gram = Gram(engine, fit)
     S = tuple(fit.sys)
-    alternatives = gram.alternatives(S, _Q_ALIAS) if S else []
+    alternatives = gram.alternatives(S, q_alias) if S else []
     top = gram.gain(S)
     n_obs = 3 * engine.M
     for name in names_in(engine, fit):
@@ -171,12 +170,12 @@ def name_effects(engine: Engine, fit: Fit, accepted: dict) -> tuple[NamedEffect,
                     continue
                 factors = {k: v for k, v in fit.factors.items() if k != name}
                 trial = engine.refit(fit.sys, {**factors, other.name: 1.0}, fit.r)
-                if trial.loglik >= fit.loglik - _Q_ALIAS / 2:
+                if trial.loglik >= fit.loglik - q_alias / 2:
                     aliases.append(other.name)
         else:
             j = engine.sys_index(name)
             rest = [s for s in S if s != j]
-            swaps = [c for c in gram.eligible if c not in S and gram.gain(rest + [c]) >= top - _Q_ALIAS]
+            swaps = [c for c in gram.eligible if c not in S and gram.gain(rest + [c]) >= top - q_alias]
             alias_sets = [alt for alt in alternatives if j not in alt]
             aliases = [engine.systematic[c].name for c in swaps]
             for alt in alias_sets:
@@ -188,7 +187,7 @@ def name_effects(engine: Engine, fit: Fit, accepted: dict) -> tuple[NamedEffect,
             trial = _with(engine, _without(engine, fit, name), alias, r=fit.r)
             a_value, a_ci = engine.estimate(trial, alias)
             alias_fits[alias] = {"value": a_value, "unit": effect(alias).unit, "ci95": list(a_ci)}
-        p = float(chi2_sf(lr, 1))
+        p = float(chi2.sf(lr, 1))
         ev.update(lr=float(lr), p_bonferroni=min(1.0, ev["n_candidates"] * p),
                   delta_bic=float(lr - np.log(n_obs)), identified=not aliases, alias_fits=alias_fits,
                   alternative_sets=[[engine.systematic[c].name for c in alt] for alt in alias_sets])

@@ -20,15 +20,14 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from scipy import optimize
 
-from ..._distributions import chi2_isf, chi2_sf
-from ..._fork import in_background
 from ..._rng import child_seed, resolve_rng
 from ..._threads import single_threaded_blas
-from ...errors import BudgetError
+from ...errors import ParameterError
 from ...kinematics.geometry import Geometry
 from ...progress import Progress
 from ...model.budget import Budget
@@ -43,7 +42,7 @@ from .prediction import noise_cov, predict
 from .results import DiscrepancyResult
 from .selection import name_effects, names_in, select
 from .updated import updated_model
-from .accuracy import load_propagation, predicted_accuracy
+from .accuracy import predicted_accuracy
 from ..campaign.iso9283 import iso9283_figures
 
 __all__ = ["discrepancy", "detectable_effect", "STAGES"]
@@ -104,13 +103,13 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     seed, rng = resolve_rng(rng)
     for name, value in (("alpha", alpha), ("alpha_unexplained", alpha_unexplained), ("outlier_rate", outlier_rate)):
         if not 0 < value < 1:
-            raise BudgetError(f"{name} must lie in (0, 1), got {value}")
+            raise ParameterError(f"{name} must lie in (0, 1), got {value}")
     budget.check_geometry(geometry)
     campaign = require_testable(read_campaign(campaign, geometry))
     check_error_scale(campaign, geometry, budget, instrument_sigma_mm)
-    # the predicted accuracy needs the named effects only: on another core where one is idle, which loads
-    # numba (the Monte Carlo's and the worst case's kernels) while the effects are named
-    with in_background(predicted_accuracy, prepare=load_propagation) as accuracy:
+    # the predicted accuracy needs the named effects only: on a thread of its own (its kernels release the
+    # GIL) while the rest is diagnosed
+    with ThreadPoolExecutor(max_workers=1) as pool:
         noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
         full = Engine(geometry, budget, campaign, noise, registration=registration)
         bar = progress if isinstance(progress, Progress) else Progress(len(STAGES), "discrepancy", progress)
@@ -143,7 +142,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
             d2 = gross.distances(full, keep, engine.values(fit), fit.factors, fit.r)
         named = name_effects(engine, fit, accepted)
         model = updated_model(geometry, budget, named, campaign)
-        accuracy.submit(geometry, budget, model, campaign, seed)
+        accuracy = pool.submit(predicted_accuracy, geometry, budget, model, campaign, seed)
         done()
         null_before = null_variances(engine, base, n_bootstrap, rng)
         before = diagnose(engine, base, null=null_before)
@@ -218,7 +217,8 @@ def _nuisance(engine: Engine, fit: Fit, alpha: float) -> tuple[tuple, dict]:
     no_drift = engine.refit(fit.sys, fit.factors, start_r=fit.r,
                             nuis=tuple(j for j in fit.nuis if NUISANCE_NAMES[j] not in DRIFT))
     lr = max(2.0 * (fit.loglik - no_drift.loglik), 0.0)
-    p = float(chi2_sf(lr, 3))
+    from scipy.stats import chi2  # imported when used: prp3mc --help imports this module
+    p = float(chi2.sf(lr, 3))
     drift_test = {"lr": lr, "df": 3, "p": p, "significant": bool(p < alpha), "time": engine.time_source,
                   "values": {n: entries[n]["value"] for n in DRIFT}}
     listed = [n for n in REGISTRATION if n in entries] + (list(DRIFT) if drift_test["significant"] else [])
@@ -263,18 +263,18 @@ def detectable_effect(geometry: Geometry, budget: Budget, campaign: Campaign, na
     """
     eff = effect(name)
     if not eff.systematic:
-        raise BudgetError(f"{name}: detectable_effect handles systematic effects; simulate spreads instead")
+        raise ParameterError(f"{name}: detectable_effect handles systematic effects; simulate spreads instead")
     engine = Engine(geometry, budget, read_campaign(campaign, geometry),
                     noise_cov(instrument_sigma_mm, instrument_sigma_deg), registration=registration)
     if name not in [e.name for e in engine.systematic] or name in engine.confounded:
         return float("inf")
     K = len(engine.systematic) - len(engine.confounded) + len(engine.spreads)
-    threshold = chi2_isf(alpha / K, 1)
+    from scipy.stats import chi2, ncx2  # imported when used: prp3mc --help imports this module
+    threshold = chi2.isf(alpha / K, 1)
     fit = engine.fit((), {}, 0.0)
     g = engine.whitened_candidates(fit)[:, engine.sys_index(name)]
     Q, _ = np.linalg.qr(engine.whitened(fit, (), engine.nuisance)[1])
     g = g - Q @ (Q.T @ g)
     info = float(g @ g)                                            # Fisher information per unit^2
-    from scipy.stats import ncx2  # planning only: the analysis itself does without scipy.stats
     lam = optimize.brentq(lambda nc: ncx2.sf(threshold, 1, nc) - power, 1e-6, 1e4)
     return float(np.sqrt(lam / info))
