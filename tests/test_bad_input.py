@@ -504,7 +504,7 @@ _values = st.sampled_from(_ODD)
 
 
 @st.composite
-def _argv(draw):
+def _fuzz_argv(draw):
     command = draw(st.sampled_from(sorted(_WORDS)))
     argv = [command]
     for (word,) in draw(st.lists(st.sampled_from(_WORDS[command]), max_size=6)):
@@ -534,7 +534,7 @@ _CLI_FUZZ = settings(max_examples=int(os.environ.get("PRP3MC_FUZZ_EXAMPLES", 40)
 
 @pytest.mark.slow
 @_CLI_FUZZ
-@given(_argv(), st.sampled_from(["c_good", "g_bom", "s_ok", "b_bom"]),
+@given(_fuzz_argv(), st.sampled_from(["c_good", "g_bom", "s_ok", "b_bom"]),
        st.lists(st.tuples(st.integers(0, 10**6), st.integers(0, 255)), max_size=4))
 def test_cli_fuzz(corpus_files, tmp_path_factory, capsys, argv, base, flips):
     """Any command line over odd words and mutated files ends in exit 0, 1 or 2 and never a traceback or a hang
@@ -568,7 +568,7 @@ def test_cli_fuzz(corpus_files, tmp_path_factory, capsys, argv, base, flips):
 
 @pytest.mark.slow
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(_argv())
+@given(_fuzz_argv())
 def test_cli_fuzz_in_a_real_process(corpus_files, tmp_path_factory, argv):
     """The same in real processes, with a timeout: a hang or a traceback on the way out fails."""
     tmp = tmp_path_factory.mktemp("fuzzp")
