@@ -141,6 +141,34 @@ def _lock(path: Path) -> int:
     return fd
 
 
+def _output_path(path: str | os.PathLike) -> Path:
+    """The absolute output folder ``path`` names: a symbolic link to a folder stands for that folder.
+
+    Raises
+    ------
+    OutputError
+        The name is empty or the root folder, or a symbolic link leads nowhere.
+    """
+    if not str(path).strip():
+        raise OutputError("the output folder is empty: name a folder with --out")
+    absolute = Path(os.path.abspath(path))
+    if not absolute.name:
+        raise OutputError(f"--out {os.fsdecode(path)!r} is the root folder: name a new folder under it")
+    if absolute.is_symlink():
+        if not absolute.exists():
+            raise OutputError(f"--out {absolute} is a dangling symbolic link (to {os.readlink(absolute)}): "
+                              "remove it or choose another --out")
+        return _output_path(absolute.resolve())   # written where the link leads, which keeps leading there
+    return absolute
+
+
+def _umask() -> int:
+    """The process's umask (read by setting it and setting it back)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 @contextmanager
 def claim_output(path: str | os.PathLike, force: bool = False,
                  inputs: Iterable[str | os.PathLike] = ()) -> Iterator[Path]:
@@ -160,9 +188,7 @@ def claim_output(path: str | os.PathLike, force: bool = False,
     OutputError
         The parent folder cannot be created or written.
     """
-    if not str(path).strip():
-        raise OutputError("the output folder is empty: name a folder with --out")
-    path = Path(os.path.abspath(path))
+    path = _output_path(path)
     if path in _HELD:
         check_output(path, force or _HELD[path])
         yield path
@@ -185,8 +211,22 @@ def claim_output(path: str | os.PathLike, force: bool = False,
         os.close(fd)
 
 
+#: Set once a run starts moving its finished folder into place: from then on the run is complete, and a
+#: signal handler (the command line's) lets it finish rather than interrupt it (exit 0, the folder whole).
+COMMITTED = {"value": False}
+
+
 def _install(tmp: Path, path: Path, force: bool) -> None:
     """Move the finished folder ``tmp`` to ``path``; replace an existing one only with ``force``."""
+    COMMITTED["value"] = True
+    try:
+        _move_into_place(tmp, path, force)
+    except BaseException:
+        COMMITTED["value"] = False
+        raise
+
+
+def _move_into_place(tmp: Path, path: Path, force: bool) -> None:
     if force and path.exists():
         if _rename(tmp, path, _RENAME_EXCHANGE):
             shutil.rmtree(tmp, ignore_errors=True)  # tmp now holds the old folder
@@ -219,6 +259,7 @@ def output_folder(path: str | os.PathLike, force: bool = False) -> Iterator[Path
     with claim_output(path, force) as path:
         tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.tmp-{os.getpid()}-", dir=path.parent))
         try:
+            os.chmod(tmp, 0o777 & ~_umask())   # mkdtemp makes it 0700: the folder is the user's, as mkdir makes it
             yield tmp
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)

@@ -24,10 +24,9 @@ import numpy as np
 
 from .._rng import check_seed
 from .._version import __version__
-from ..errors import Prp3mcError, Prp3mcWarning
-from ..errors import OutputExistsError
-from ..limits import Estimate, check, format_seconds
-from ..output import claim_output, dumps_json
+from ..errors import OutputExistsError, Prp3mcError, Prp3mcWarning, ResourceError
+from ..limits import Estimate, check, format_bytes, format_seconds
+from ..output import COMMITTED, claim_output, dumps_json
 from ..provenance import spec_record, versions
 
 __all__ = ["main"]
@@ -139,7 +138,11 @@ def add_output(p: argparse.ArgumentParser, help: str = "output folder (must not 
 
 
 def within_limits(args, estimate: Estimate) -> Estimate:
-    """Refuse a request that will not fit in this machine's memory (see :mod:`prp3mc.limits`)."""
+    """Refuse a request that will not fit in this machine's memory, or in ``--max-gb`` (:mod:`prp3mc.limits`)."""
+    max_gb = getattr(args, "max_gb", None)
+    if max_gb is not None and not estimate.bytes <= max_gb * (1 << 30):
+        raise ResourceError(f"{estimate.what} needs ~{format_bytes(estimate.bytes)} of memory, more than "
+                            f"--max-gb {max_gb:g}: {estimate.hint}")
     return check(estimate)
 
 
@@ -264,7 +267,8 @@ def matrix_table(M: np.ndarray, rows=("dx", "dy", "dphi"), cols=LEGS) -> str:
 
 
 def _one_line(text: str) -> str:
-    return " ".join(str(text).split())
+    """``text`` on one line, printable on any stream (a file name that is not UTF-8 shows as escapes)."""
+    return " ".join(str(text).encode("utf-8", "backslashreplace").decode("utf-8").split())
 
 
 class _Parser(argparse.ArgumentParser):
@@ -286,7 +290,7 @@ def _command_named(argv: list[str]) -> str | None:
     """
     words = iter(argv)
     for word in words:
-        if word == "--max-hours":
+        if word in ("--max-hours", "--max-gb"):
             next(words, None)
         elif not word.startswith("-"):
             names = _command_modules()
@@ -374,6 +378,8 @@ def build_parser(command: str | None = None, *, listing: bool = False) -> argpar
     parser.add_argument("--version", action="version", version=f"prp3mc {__version__}")
     parser.add_argument("--max-hours", type=positive_float, default=None, metavar="H",
                         help="stop the run after H hours of wall time, writing nothing (default: no limit)")
+    parser.add_argument("--max-gb", type=positive_float, default=None, metavar="GB",
+                        help="refuse requests estimated to need more memory, GiB (default: what the machine has)")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     for name, (help_text, cls) in sorted(entries.items()):
         if command in (None, name):
@@ -389,7 +395,11 @@ def main(argv: list[str] | None = None) -> int:
 
     Without ``argv`` (the process's own command line) a SIGTERM ends the run as Ctrl-C does.
     """
-    return _run(argv) if argv is not None else _run(sys.argv[1:], own_process=True)
+    if argv is not None:
+        return _run(argv)
+    status = _run(sys.argv[1:], own_process=True)
+    _quiet_exit()
+    return status
 
 
 def _input_files(args: argparse.Namespace) -> list[str]:
@@ -403,7 +413,41 @@ class _Terminated(KeyboardInterrupt):
 
 
 def _terminated(signum, frame):
-    raise _Terminated()
+    """SIGTERM and SIGINT of a command's own process: interrupt the run, unless its output is being installed.
+
+    Once the finished folder is moving into place (:data:`prp3mc.output.COMMITTED`)
+    the run is complete: the signal is let pass, and the run ends with exit 0
+    and its folder whole, never with a folder installed and exit 130/143.
+    """
+    if COMMITTED["value"]:
+        return
+    _SIGNALLED["signum"] = signum
+    raise _Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+
+#: The signal that interrupted the current run, if one did: an error raised on the interrupt's way out
+#: (a figure half drawn, a file half written) is reported as the interruption, not as an error of its own.
+_SIGNALLED = {"signum": None}
+
+
+def _stopped(name: str, signum) -> int:
+    """The one line and the exit status of a run stopped by ``signum`` (130 for SIGINT, 143 for SIGTERM)."""
+    terminated = signum == signal.SIGTERM
+    print(f"{name}: {'terminated' if terminated else 'interrupted'}", file=sys.stderr)
+    return 143 if terminated else 130
+
+
+def _quiet_exit() -> None:
+    """Ignore SIGINT and SIGTERM from here to the process's end (interpreter finalisation).
+
+    A signal handled while the interpreter tears down (threads, weak sets,
+    a figure's draw) ended in tracebacks or a fatal error; the command has
+    decided its exit status by now. ``signal.signal`` runs the handler of a
+    signal already pending before it replaces it, so none is lost half-way.
+    """
+    COMMITTED["value"] = True
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, signal.SIG_IGN)
 
 
 class _TimeUp(KeyboardInterrupt):
@@ -437,8 +481,11 @@ def _run(argv: list[str], own_process: bool = False) -> int:
         return int(exc.code or 0)
     if own_process:  # a SIGTERM (timeout, a batch system) ends the run as Ctrl-C does: no leftovers
         signal.signal(signal.SIGTERM, _terminated)
+        signal.signal(signal.SIGINT, _terminated)
+        sys.stdout.reconfigure(errors="surrogateescape")  # a file name that is not UTF-8 prints as its own bytes
     name = f"prp3mc {args.command}"
     WARNINGS.clear()
+    COMMITTED["value"], _SIGNALLED["signum"] = False, None
     show = warnings.showwarning
 
     def one_line_warning(message, category, filename, lineno, file=None, line=None):
@@ -457,24 +504,24 @@ def _run(argv: list[str], own_process: bool = False) -> int:
             if args.max_hours is not None:  # entered last, left first: the unwinding is not cut short
                 stack.enter_context(_stopping_after(3600 * args.max_hours))
             args.run(args)
-    except Prp3mcError as exc:
-        print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
-        return 1
-    except MemoryError:
-        print(f"{name}: error: out of memory: use fewer samples or poses", file=sys.stderr)
-        return 1
     except _TimeUp:
         print(f"{name}: error: stopped at the --max-hours limit ({format_seconds(3600 * args.max_hours)} of wall "
               "time): nothing was written", file=sys.stderr)
         return 1
     except KeyboardInterrupt as exc:
-        print(f"{name}: {'terminated' if isinstance(exc, _Terminated) else 'interrupted'}", file=sys.stderr)
-        return 143 if isinstance(exc, _Terminated) else 130
-    except BrokenPipeError:
-        return 0
-    except OSError as exc:  # the file system or the machine, not the request: still one line
-        print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
-        return 1
+        return _stopped(name, signal.SIGTERM if isinstance(exc, _Terminated) else signal.SIGINT)
+    except Exception as exc:
+        if _SIGNALLED["signum"] is not None:   # raised by what the signal interrupted
+            return _stopped(name, _SIGNALLED["signum"])
+        if isinstance(exc, BrokenPipeError):
+            return 0
+        if isinstance(exc, MemoryError):
+            print(f"{name}: error: out of memory: use fewer samples or poses", file=sys.stderr)
+            return 1
+        if isinstance(exc, (Prp3mcError, OSError)):  # OSError: the file system or the machine, still one line
+            print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
+            return 1
+        raise
     return 0
 
 

@@ -7,6 +7,7 @@ from ..model.budget import Budget
 from ..kinematics.geometry import Geometry
 from ..limits import montecarlo_estimate
 from ..montecarlo.propagation import monte_carlo
+from ..kinematics.chain import check_poses
 from ..units import probability_text
 from ..model.validity import check_linearity
 from . import (EFFECTS_NOTE, provenance, add_budget, add_geometry, add_json, add_pose_or_region, add_progress,
@@ -36,6 +37,8 @@ class MonteCarloCommand:
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         poses, where = grid_poses(args)
+        if args.region is None:   # a refused pose before any warning about the analysis
+            check_poses(geometry, poses)
         within_limits(args, montecarlo_estimate(args.samples, poses.shape[0], len(budget.factors) + 1))
         check_linearity(geometry, budget, poses)
         if args.region is not None:

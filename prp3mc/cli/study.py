@@ -4,7 +4,7 @@ import sys
 import time
 
 from ..errors import Prp3mcError
-from ..limits import study_estimate
+from ..limits import allocate_estimate, study_estimate
 from ..output import figure_formats, table_formats
 from ..units import MM2UM
 from ..reports.study_report import write_study
@@ -48,9 +48,10 @@ class StudyCommand:
             study = study.reduced()
         formats = figure_formats(args.formats) + table_formats(args.formats)[1:]   # refused before the run
         within_limits(args, study_estimate(study))
-        if not study.sweep:  # a sweep's base configuration need not be feasible: its combinations are checked
-            for c in study.configurations:
-                check_linearity(c.geometry, study.budget, c.region.grid((3, 3)))
+        if study.allocation is not None:   # the memory of each configuration's allocation (one after another)
+            nx, ny = study.allocation.grid or study.worstcase_grid
+            within_limits(args, allocate_estimate(nx * ny, len(study.budget.factors), study.allocation.samples
+                                                  if study.allocation.spec_percentile is not None else 0))
         result = run_study(study, rng=args.seed, progress=args.progress, scheduler=args.scheduler)
         if not result.configurations:
             first = result.skipped[0]

@@ -5,6 +5,7 @@ import pandas as pd
 from .._version import __version__
 from ..model.budget import Budget
 from ..kinematics.geometry import Geometry
+from ..kinematics.chain import check_poses
 from ..model.validity import check_linearity
 from ..worstcase.envelope import CORRELATION_NOTE, worst_case
 from . import (provenance, add_budget, add_geometry, add_json, add_pose_or_region, command, emit_json, emit_table,
@@ -26,6 +27,8 @@ class WorstCaseCommand:
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         poses, where = grid_poses(args)
+        if args.region is None:   # a refused pose before any warning about the analysis
+            check_poses(geometry, poses)
         check_linearity(geometry, budget, poses)
         if args.region is not None:
             wc = worst_case(geometry, budget, poses, k_sigma=args.k_sigma)

@@ -262,7 +262,11 @@ def _reasons(geometry: Geometry, fr: Frame, limits: Limits) -> dict[str, np.ndar
     nd = fr.b.ndim - 1
     lo, hi = legs_first(geometry.stroke_mm[:, 0], nd), legs_first(geometry.stroke_mm[:, 1], nd)
     tol = limits.stroke_tol_mm
-    masks = {
+    masks = {   # singular first: there b, d and A are round-off or infinite, and the other reasons nonsense
+        "parallel": ~(np.abs(fr.transmission) > _SINGULAR),
+        "singular": np.broadcast_to((~(fr.condition < 1.0 / _SINGULAR) | _guides_parallel(fr.tr))
+                                    & (np.abs(fr.b) < _FAR).all(axis=0) & (np.abs(fr.d) < _FAR).all(axis=0),
+                                    fr.b.shape),   # a pose far out (1e300 mm) leaves the stroke: said so
         "below": fr.b < lo - tol,
         "above": fr.b > hi + tol,
         "d": ~(fr.d > 0),
@@ -270,6 +274,28 @@ def _reasons(geometry: Geometry, fr: Frame, limits: Limits) -> dict[str, np.ndar
         "condition": np.broadcast_to(~(fr.condition <= limits.max_condition), fr.b.shape),
     }
     return {k: np.moveaxis(v, 0, -1) for k, v in masks.items()}
+
+
+#: |sin| of the angle between a guide and its slider, or 1 / cond(A), below which a pose is singular (not near one).
+_SINGULAR = 1e-9
+#: Joint values (mm) beyond any machine: a pose that needs them is out of stroke, whatever A's round-off says.
+_FAR = 1e12
+
+
+def _guides_parallel(tr: Trig) -> np.ndarray:
+    """Mask (...) of poses where the three guides l_i are parallel (A's position columns have rank 1)."""
+    sines = [np.abs(tr.cl[i] * tr.sl[j] - tr.sl[i] * tr.cl[j]) for i, j in ((0, 1), (0, 2), (1, 2))]
+    return np.maximum.reduce(sines) < _SINGULAR
+
+
+def _dependent_legs(A: np.ndarray) -> str:
+    """Which legs of a singular A (3, 3) constrain the platform alike, for the refusal."""
+    if np.linalg.matrix_rank(A[:, :2], tol=_SINGULAR) < 2:   # unit vectors (-sin l_i, cos l_i) in the rows
+        return "the guides of legs 1, 2 and 3 are parallel: the platform can slide along them"
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        if np.linalg.norm(np.cross(A[i], A[j])) <= _SINGULAR * np.linalg.norm(A[i]) * np.linalg.norm(A[j]):
+            return f"legs {i + 1} and {j + 1} constrain the platform alike (identical or mirrored legs)"
+    return "the three legs' constraints are linearly dependent"
 
 
 def feasible(geometry: Geometry, poses, limits: Limits = DEFAULT_LIMITS) -> np.ndarray:
@@ -302,15 +328,19 @@ def refusal(geometry: Geometry, pose: np.ndarray, index: tuple, reason: str, leg
             limits: Limits = DEFAULT_LIMITS) -> str:
     """The one-line message refusing ``pose`` (3,) found at ``index`` of its batch.
 
-    ``reason`` is one of ``below, above, d, transmission, condition`` (the
+    ``reason`` is one of ``parallel, singular, below, above, d, transmission, condition`` (the
     order in which they are tested), ``leg`` the 0-based leg breaking it.
     """
     with np.errstate(all="ignore"):
         fr = frame(geometry, np.asarray(pose, dtype=float))
+        why = _dependent_legs(fr.A) if reason == "singular" else ""
     x, y, phi = pose
     at = f"pose ({x:g} mm, {y:g} mm, {phi:g} deg) {_where(index)}"
     lo, hi = geometry.stroke_mm[leg]
     msg = {
+        "parallel": (f"is singular: leg {leg + 1}'s guide is parallel to its slider (l_{leg + 1} along "
+                     f"j_{leg + 1}), so b_{leg + 1} is undetermined: change theta_{leg + 1}, gamma_{leg + 1} or phi"),
+        "singular": f"is singular: A is not invertible ({why}): check the geometry",
         "below": f"leaves leg {leg + 1}'s stroke: b_{leg + 1} = {fr.b[leg]:.6g} mm < {lo:g} mm",
         "above": f"leaves leg {leg + 1}'s stroke: b_{leg + 1} = {fr.b[leg]:.6g} mm > {hi:g} mm",
         "d": f"has d_{leg + 1} = {fr.d[leg]:.6g} mm <= 0 on leg {leg + 1}",
@@ -373,7 +403,11 @@ def solve_closure(geometry: Geometry, b: np.ndarray, pose0_rad: np.ndarray,
         res = tr.cl * wy - tr.sl * wx
         dphi = -(tr.cl * wx + tr.sl * wy) - c * tr.dot("l", "k") - e * tr.dot("l", "m")
         jac = np.moveaxis(np.stack([-tr.sl, tr.cl, dphi], axis=1), (0, 1), (-2, -1))   # (..., 3, 3)
-        return np.linalg.solve(jac, -np.moveaxis(res, 0, -1)[..., None])[..., 0]
+        try:
+            return np.linalg.solve(jac, -np.moveaxis(res, 0, -1)[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            raise ConvergenceError("closure equations are singular at a pose (a guide parallel to its slider "
+                                   "or dependent legs)") from None
 
     for _ in range(max_iter):
         step = newton_step()
