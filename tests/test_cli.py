@@ -88,12 +88,12 @@ def test_json_outputs_describe_themselves(argv, tmp_path, capsys):
         assert doc["inputs"]["budget"] == {"name": "paper", "preset": "paper"}
     if "--seed" in argv:
         assert doc["inputs"]["seed"] == 4
-    assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib"}
+    assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib", "numba", "matplotlib"}
 
 
 def test_init_templates_run_as_written(tmp_path, capsys):
     """`prp3mc init` writes templates that every command reads as they are, and refuses to overwrite."""
-    for kind in ("geometry", "budget", "study", "classes"):
+    for kind in ("geometry", "budget", "study", "classes", "region"):
         assert main(["init", kind, str(tmp_path / f"{kind}.toml")]) == 0
     assert main(["init", "budget", str(tmp_path / "budget.toml")]) == 1
     assert "exists" in capsys.readouterr().err
@@ -108,6 +108,9 @@ def test_init_templates_run_as_written(tmp_path, capsys):
                  str(tmp_path / "classes.toml"), "--spec-position-um", "150", "--grid", "11", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["feasible"] and set(doc["choice"]) == {f"{q}_{i}" for q in ("rho", "theta", "b") for i in (1, 2, 3)}
+    assert main(["allocate", "--geometry", "u-shape", "--region", str(tmp_path / "region.toml"), "--classes",
+                 "example", "--spec-position-um", "150", "--grid", "11", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["inputs"]["region"]["sha256"]
 
 
 def test_discrepancy_json_describes_itself(tmp_path, capsys):
@@ -127,7 +130,7 @@ def test_discrepancy_json_describes_itself(tmp_path, capsys):
     for doc in (printed, written):
         assert doc["inputs"]["data"]["sha256"] == hashlib.sha256(data.read_bytes()).hexdigest()
         assert doc["inputs"]["seed"] == 5 and doc["inputs"]["budget"] == {"name": "paper", "preset": "paper"}
-        assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib"}
+        assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib", "numba", "matplotlib"}
     report = (tmp_path / "out" / "report.html").read_text()
     assert "<h2>Run</h2>" in report and written["inputs"]["data"]["sha256"] in report
 

@@ -44,9 +44,12 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import math
 
 import numpy as np
 
+from ..errors import ResourceError
+from ..limits import MEMORY_MARGIN, available_memory, format_bytes
 from ..units import RAD2DEG
 from ..kinematics.geometry import Geometry
 from .classes import ClassMenu
@@ -59,6 +62,29 @@ __all__ = ["Problem", "Search", "least_cost", "QUANTITIES"]
 #: Constrained quantities: worst-case position (mm), worst-case ``|dphi|`` (deg), screened position quantile (mm).
 QUANTITIES = ("position", "phi", "screen")
 _CHUNK_ELEMENTS = 1 << 21   # K x N elements per evaluated block
+
+
+#: Bytes a queued node holds (its class indices, key and tuple): the queue is refused past the memory.
+_NODE_BYTES = 120
+
+
+def _over_limits(search: "Search", queued: int) -> None:
+    """Refuse (ResourceError) a search whose queue outgrows the memory.
+
+    The number of choices of a menu (6^27 for nine families of six classes
+    on three legs) says nothing of what branch and bound examines, which
+    cannot be told before it runs; time is bounded by ``prp3mc --max-hours``
+    (a wall-clock stop), memory here.
+    """
+    if not queued or queued % 4096:
+        return
+    memory = queued * (_NODE_BYTES + 8 * len(search.pb.inputs))
+    if memory > MEMORY_MARGIN * available_memory():
+        choices = math.prod(int(n) for n in search.pb.n_classes)
+        raise ResourceError(f"tolerance allocation over {len(search.pb.inputs)} inputs ({choices:.3g} choices of "
+                            f"classes) needs more than this machine's memory ({format_bytes(memory)} queued): the "
+                            f"search examined {search.nodes} candidates without proving the least cost; give fewer "
+                            "classes or families, or a looser spec")
 
 
 class Problem:
@@ -353,6 +379,7 @@ class Search:
         counter, heap = itertools.count(), []
 
         def push(A, depth):
+            _over_limits(self, len(heap))
             r_bound, r_cheap = self._ratios(A, depth)
             costs = self.cost_lb(A)
             for k in np.flatnonzero(r_bound <= 1.0):
@@ -378,6 +405,7 @@ class Search:
         counter, heap = itertools.count(), []
 
         def push(A, depth):
+            _over_limits(self, len(heap))
             r_bound, _ = self._ratios(A, depth)
             costs = self.cost_lb(A)
             for k in range(A.shape[0]):

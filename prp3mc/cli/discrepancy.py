@@ -8,7 +8,7 @@ from ..measurement.fit.workflow import STAGES, discrepancy
 from ..progress import Progress
 from ..reports.discrepancy_report import report_document, write_report
 from ..model.budget import Budget
-from ..units import MM2UM
+from ..units import MM2UM, quantity_text
 from . import (WARNINGS, add_budget, add_geometry, add_json, add_output, add_progress, add_seed, command, emit_json,
                nonnegative_float, probability, provenance, within_limits)
 
@@ -19,7 +19,8 @@ class DiscrepancyCommand:
     def add_arguments(p):
         add_geometry(p)
         add_budget(p)
-        p.add_argument("--data", required=True, metavar="CSV", help="measurement campaign CSV (docs, File formats)")
+        p.add_argument("--data", required=True, metavar="CSV",
+                       help="measurement campaign CSV (docs, File formats), or the bundled one: example")
         add_output(p, help="report folder (discrepancy.json, report.html)")
         p.add_argument("--instrument-sigma-mm", type=nonnegative_float, default=0.0, metavar="S",
                        help="instrument noise sd of x and y, mm (default 0)")
@@ -84,7 +85,7 @@ def headline(result) -> list[str]:
     for e in result.named_effects:
         alias = f" (not separable from {', '.join(e.aliases)})" if e.aliases else ""
         phase = f", phase {e.phase_deg:.1f} deg" if e.phase_deg is not None else ""
-        lines.append(f"named {e.name} = {e.value:.4g} {e.unit}  95% CI [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]"
+        lines.append(f"named {e.name} = {quantity_text(e.value, e.unit)}  95% CI [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]"
                      f"{phase}{alias}")
     if not result.named_effects:
         lines.append("named nothing: the model misses nothing this campaign can see")

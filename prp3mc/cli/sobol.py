@@ -8,6 +8,7 @@ from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
 from ..sobol.ranking import ranking
 from ..sobol.indices import DEPENDENT_NOTE, sobol_indices
+from ..kinematics.chain import check_poses
 from ..model.validity import check_linearity
 from ..units import DISPLAY, OUTPUTS
 from ..worstcase.envelope import worst_case
@@ -95,6 +96,7 @@ class SobolCommand:
         perms = args.samples // 2 if args.shapley_permutations is None else args.shapley_permutations
         within_limits(args, sobol_estimate(args.samples, 1, d, d + len(budget.groups) + len(groups),
                                            len(OUTPUTS), shapley_permutations=perms))
+        check_poses(geometry, args.pose)   # a refused pose before any warning about the analysis
         check_linearity(geometry, budget, args.pose)
         r = sobol_indices(geometry, budget, args.pose, args.samples, rng=args.seed, groups=groups,
                           replicates=args.replicates, conf_level=args.conf_level, method=args.method,

@@ -252,6 +252,26 @@ class Region:
             known = ", ".join(REGION_PRESETS)
             raise UnknownPresetError(f"no test region for {name!r} (known: {known})") from None
 
+    @classmethod
+    def from_toml(cls, path: str | os.PathLike) -> "Region":
+        """Read a region TOML file: ``x_mm = [lo, hi]``, ``y_mm = [lo, hi]``, ``phi_deg`` (``prp3mc init region``)."""
+        doc = load_toml(path)
+        doc.pop("name", None)
+        unknown = sorted(set(doc) - {"x_mm", "y_mm", "phi_deg"})
+        if unknown or not {"x_mm", "y_mm"} <= set(doc):
+            raise GeometryError(f"{path}: a region file holds x_mm = [lo, hi], y_mm = [lo, hi] and phi_deg "
+                                f"(optional name); " + (f"unknown key(s) {', '.join(unknown)}" if unknown
+                                                        else "x_mm or y_mm is missing"))
+        try:
+            return cls(**doc)
+        except (TypeError, ValueError) as exc:
+            raise GeometryError(f"{path}: {exc}") from None
+
+    @classmethod
+    def load(cls, spec: "str | os.PathLike | Region") -> "Region":
+        """A preset name (a reference geometry's test region), a region TOML path or a Region, as ``--region`` takes."""
+        return load_spec(cls, spec, REGION_PRESETS)
+
     def grid(self, n: int | tuple[int, int]) -> np.ndarray:
         """Poses on an ``ny x nx`` grid, shape (ny, nx, 3): x mm, y mm, phi deg."""
         nx, ny = (n, n) if np.isscalar(n) else n

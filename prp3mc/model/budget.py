@@ -151,6 +151,16 @@ class Budget:
                 raise BudgetError(f"group {gname!r}: unknown input(s) {', '.join(unknown) or '(empty group)'}")
             if gname in factors:
                 raise BudgetError(f"group {gname!r} has the name of an input")
+            twice = sorted({m for m in members if members.count(m) > 1})
+            if twice:
+                raise BudgetError(f"group {gname!r} lists {', '.join(twice)} twice")
+            if gname in groups and set(groups[gname]) != set(members):
+                raise BudgetError(f"group {gname!r} clashes with the clearance group of that name "
+                                  f"({', '.join(groups[gname])}): name it otherwise")
+            same = next((g for g, m in groups.items() if g != gname and set(m) == set(members)), None)
+            if same is not None and not same.startswith("clearance_"):
+                raise BudgetError(f"groups {same!r} and {gname!r} hold the same inputs ({', '.join(members)}): "
+                                  "keep one")
             groups[gname] = members
         object.__setattr__(self, "copula", parse_correlation(dict(self.correlation), factors, groups))
         object.__setattr__(self, "inputs", FrozenDict(inputs))

@@ -1,13 +1,16 @@
-"""Drawing and saving a report's figures, on worker processes where the system forks.
+"""Drawing and saving a report's figures, here or on worker processes.
 
-Matplotlib draws on one core and a report's figures are independent:
-:func:`rendering` hands them to a :class:`concurrent.futures.ProcessPoolExecutor`
-with the ``fork`` start method, whose workers inherit the results in memory
-(only each figure's index and its PNG bytes cross between processes), and the
-caller goes on (writing tables). Where the system cannot fork, another thread
-runs (a fork copies only the calling thread: a notebook kernel, a Dask
-worker), or one worker is asked for, the figures are drawn here, one after
-the other. The files and bytes are the same either way.
+By default :func:`rendering` draws the figures in this process, one after
+the other, as the caller consumes them. Asked for ``workers``, it hands them
+to a :class:`concurrent.futures.ProcessPoolExecutor` with the ``fork`` start
+method, whose workers inherit the results in memory (only each figure's index
+and its PNG bytes cross between processes) while the caller goes on (writing
+tables); where the system cannot fork or another thread runs (a fork copies
+only the calling thread: a notebook kernel, a Dask worker), they are drawn
+here. The files and bytes are the same either way. Workers are not the
+default: on the shared 2-core machine (load 12) the discrepancy command took
+20-35 s with two drawing workers and 19.5-26.6 s without (three turns of
+each, issue 23); on idle cores they pay, but less than 2x.
 """
 
 from __future__ import annotations
@@ -22,7 +25,6 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
-from .._threads import cores
 from ..output import save_figure
 
 __all__ = ["rendering"]
@@ -58,7 +60,7 @@ def _can_fork() -> bool:
 
 @contextlib.contextmanager
 def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=("png",),
-              workers: int | None = None, dpi: int = 150) -> Iterator[Iterator[bytes]]:
+              workers: int = 1, dpi: int = 150) -> Iterator[Iterator[bytes]]:
     """Draw every figure and save it as ``folder/name.<format>``; yields an iterator of their PNG bytes, in order.
 
     Parameters
@@ -68,10 +70,10 @@ def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=
     folder : path
     formats : sequence of str
         As :func:`prp3mc.output.save_figure`.
-    workers : int, optional
-        Worker processes (default: the cores, at most one per figure, where
-        the system can fork and no other thread runs); 1 draws in this
-        process, lazily, as the iterator is consumed.
+    workers : int
+        Worker processes (at most one per figure), where the system can fork
+        and no other thread runs; 1 (default) draws in this process, lazily,
+        as the iterator is consumed.
     dpi : int
         Resolution of every format (:func:`prp3mc.output.save_figure`).
 
@@ -80,7 +82,7 @@ def rendering(figures: Sequence[FigureTask], folder: str | os.PathLike, formats=
     (leaving it by an error cancels those not started).
     """
     figures, folder, formats = list(figures), Path(folder), tuple(formats)
-    workers = min(len(figures), cores()) if workers is None else max(1, int(workers))
+    workers = min(len(figures), int(workers))
     if workers <= 1 or not _can_fork():
         yield (save_figure(draw(), folder, name, formats, dpi) for name, draw in figures)
         return

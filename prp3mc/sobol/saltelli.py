@@ -80,6 +80,10 @@ def design_factors(budget: Budget, groups: dict | None) -> Factors:
             raise BudgetError(f"group {gname!r}: expected a list of inputs, got the string {members!r}")
         extra[str(gname)] = tuple(members)
     user = {k: v for k, v in budget.groups.items() if not k.startswith("clearance_")}
+    clash = next((k for k in extra if k in user and set(extra[k]) != set(user[k])), None)
+    if clash is not None:
+        raise BudgetError(f"group {clash!r} is defined twice: the budget has {', '.join(user[clash])}, the request "
+                          f"{', '.join(extra[clash])}: name one otherwise")
     merged = Budget(budget.inputs, groups={**user, **extra}, effects=budget.effects).groups  # validates them
     inputs = budget.factors
     d = len(inputs)

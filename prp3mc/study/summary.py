@@ -160,7 +160,7 @@ def _file_specs(source: str) -> tuple[Path, list[str], list[str]]:
     """The study file's folder and the budget and geometry specs it names (empty if it cannot be read)."""
     path = Path(source)
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        doc = tomllib.loads(path.read_text(encoding="utf-8-sig"))
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
         return path.parent, [], []
     configs = doc.get("configuration", [])

@@ -156,6 +156,25 @@ def _repeat_errors(budget: Budget, X: np.ndarray, pose_of_visit: np.ndarray, n_p
     return out
 
 
+def _template(plan, geometry: Geometry) -> Campaign:
+    """A campaign template (measured columns empty) validated as a campaign whose measurements equal the commands."""
+    if isinstance(plan, Campaign):
+        return plan
+    frame = pd.DataFrame(plan).rename(columns=lambda c: str(c).strip()).dropna(axis=1, how="all")  # empty columns
+    for cmd, meas in zip(CMD_COLUMNS, MEAS_COLUMNS):
+        if cmd in frame.columns:
+            frame[meas] = frame[cmd]
+    return Campaign.from_frame(frame, geometry, "campaign plan")
+
+
+def _plan_times(template: Campaign) -> np.ndarray:
+    """The template's ``time_s``: finite and never decreasing."""
+    t = pd.to_numeric(template.extra["time_s"], errors="coerce").to_numpy(dtype=float)
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) < 0):
+        raise CampaignError("campaign plan: time_s must be finite numbers that never decrease (row order is time)")
+    return t
+
+
 def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int = 8, *,
                       effects: dict | None = None, approach: str = "both",
                       temp_drift_C: tuple[float, float] | None = (20.0, 28.0),
@@ -165,7 +184,8 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
                       outliers: tuple[float, float] | None = None,
                       repeatable_fraction: float = 0.0,
                       slider_error_fn=None, pose_error_fn=None, visit_order: str = "random",
-                      rng: "None | int | np.random.Generator" = None) -> Campaign:
+                      rng: "None | int | np.random.Generator" = None,
+                      plan: "pd.DataFrame | Campaign | None" = None) -> Campaign:
     """Simulate a measurement campaign with the exact nonlinear model.
 
     The campaign visits every pose once per round, in a fresh random order
@@ -185,10 +205,11 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         Random errors; spread effects in ``effects`` change its laws. The
         systematic effects of its ``[effects]`` table are part of the
         machine too (with the campaign's directions and temperatures).
-    poses : array_like, shape (P, 3)
-        Commanded poses ``[x_mm, y_mm, phi_deg]`` (any batch shape is flattened).
+    poses : array_like, shape (P, 3), or None
+        Commanded poses ``[x_mm, y_mm, phi_deg]`` (any batch shape is
+        flattened); None with ``plan``.
     n_repeats : int
-        Measurements per pose (1: a one-visit campaign, as a laser tracker's sweep).
+        Measurements per pose (1: a one-visit campaign, as a laser tracker's sweep; ignored with ``plan``).
     effects : dict of str to float, optional
         Hidden effects of the library (:data:`~prp3mc.measurement.fit.signatures.EFFECT_NAMES`, in their units); any number
         at once, their pose errors add up through the exact chain (a hidden effect the budget's
@@ -240,6 +261,13 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         Randomness (Scientific Python SPEC 7; streams in the module notes);
         the integer seed used is recorded in ``metadata["seed"]``, also when
         a Generator is given.
+    plan : DataFrame or Campaign, optional
+        A campaign template (SPEC §11: the campaign columns, measured ones
+        empty, as ``prp3mc plan`` writes): its rows are the measurements, in
+        their order, with their ``pose_id`` and commanded poses, the
+        template's ``dir_1..dir_3`` (instead of ``approach``) and ``time_s``
+        (instead of :func:`visit_times`) when it has them. No visiting order
+        is drawn.
 
     Returns
     -------
@@ -254,9 +282,10 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         A setting out of range.
     """
     seed_used, rng = resolve_rng(rng)
-    poses = as_poses(poses).reshape(-1, 3)
+    template = None if plan is None else _template(plan, geometry)
+    poses = as_poses(poses if template is None else template.poses).reshape(-1, 3)
     check_poses(geometry, poses)
-    n_repeats = int(n_repeats)
+    n_repeats = int(n_repeats) if template is None else int(template.repeats.max())
     if n_repeats < 1:
         raise CampaignError(f"n_repeats must be at least 1, got {n_repeats}")
     if approach not in ("both", "positive", "negative", "sequence"):
@@ -281,13 +310,19 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     if "thermal" in machine and temp_drift_C is None:
         raise CampaignError("a thermal effect (hidden or in the budget) needs a temperature drift (temp_drift_C)")
     P = poses.shape[0]
-    order = np.concatenate([rng.permutation(P) if visit_order == "random" else np.arange(P)
-                            for _ in range(n_repeats)])                      # visiting order
+    if template is None:
+        order = np.concatenate([rng.permutation(P) if visit_order == "random" else np.arange(P)
+                                for _ in range(n_repeats)])                  # visiting order
+        pose_ids = np.array([f"P{k + 1:03d}" for k in order])
+    else:
+        order, pose_ids = template.pose_index, template.pose_id
     M = order.size
     cmd = poses[order]
     b_pose, _ = inverse_kinematics(geometry, poses, check=False)
     b = b_pose[order]
-    if approach == "both":
+    if template is not None and all(template.has_dir):
+        direction = template.direction
+    elif approach == "both":
         direction = rng.choice([-1.0, 1.0], size=(M, 3))
     elif approach == "sequence":
         step = np.diff(b, axis=0, prepend=b[:1] - 1.0)
@@ -295,7 +330,7 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         direction = pd.DataFrame(direction).ffill().fillna(1.0).to_numpy()
     else:
         direction = np.full((M, 3), 1.0 if approach == "positive" else -1.0)
-    time_s = visit_times(b)
+    time_s = visit_times(b) if template is None or "time_s" not in template.extra else _plan_times(template)
     temp = None if temp_drift_C is None else np.linspace(temp_drift_C[0], temp_drift_C[1], M)
     sim_budget = spread_budget(budget.without_effects(), effects)
     X = sim_budget.sample(M, rng)
@@ -325,7 +360,7 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         measured[rows, 0] += outliers[1] * np.cos(angle)
         measured[rows, 1] += outliers[1] * np.sin(angle)
         outlier_rows = rows.tolist()
-    frame = pd.DataFrame({"pose_id": [f"P{k + 1:03d}" for k in order]})
+    frame = pd.DataFrame({"pose_id": pose_ids})
     for k, col in enumerate(CMD_COLUMNS):
         frame[col] = cmd[:, k]
     for k, col in enumerate(MEAS_COLUMNS):
@@ -346,5 +381,6 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
                 "rng": "root stream: order, directions, budget, noise; child_seed(seed, 1): per-pose draws; "
                        "child_seed(seed, 2): outliers",
                 "budget": budget.name, "geometry": geometry.name, "version": __version__,
-                "out_of_library": slider_error_fn is not None or pose_error_fn is not None}
+                "out_of_library": slider_error_fn is not None or pose_error_fn is not None,
+                "plan": None if template is None else template.source}
     return Campaign.from_frame(frame, None, "simulated campaign", metadata)

@@ -146,9 +146,15 @@ def _scaled_chi2_logsf(t, mean, var, upper=True):
     return _chi2_logsf(t / c, nu) if upper else chi2.logcdf(t / c, nu)
 
 
+#: log of the smallest normal double: a p-value that underflows (a statistic of exactly zero, as perfect
+#: measurements give the lower tail) is reported at this floor, so that every score stays finite.
+_LOG_P_FLOOR = float(np.log(np.finfo(float).tiny))
+
+
 def _two_sided(t, mean, var):
-    """log of the two-sided p-value of a scaled chi-square statistic."""
-    return np.minimum(0.0, _LN2 + np.minimum(_scaled_chi2_logsf(t, mean, var), _scaled_chi2_logsf(t, mean, var, False)))
+    """log of the two-sided p-value of a scaled chi-square statistic (floored at :data:`_LOG_P_FLOOR`)."""
+    lower = np.maximum(_scaled_chi2_logsf(t, mean, var, False), _LOG_P_FLOOR)
+    return np.minimum(0.0, _LN2 + np.minimum(_scaled_chi2_logsf(t, mean, var), lower))
 
 
 def _holm_log_min(log_p: np.ndarray) -> float:

@@ -99,17 +99,25 @@ class Prediction:
         })
 
 
+#: Largest instrument noise sd accepted, mm or deg (a kilometre: any larger is a unit or typing mistake).
+MAX_INSTRUMENT_SIGMA = 1e6
+
+
 def noise_cov(sigma_mm: float, sigma_deg: float) -> np.ndarray:
     """Instrument noise covariance ``diag(s_mm^2, s_mm^2, s_deg^2)``, shape (3, 3).
 
     Raises
     ------
     BudgetError
-        A standard deviation is negative or not finite.
+        A standard deviation is negative, not finite, or beyond any instrument
+        (above :data:`MAX_INSTRUMENT_SIGMA`: its square would overflow the fit).
     """
     for name, v in (("instrument_sigma_mm", sigma_mm), ("instrument_sigma_deg", sigma_deg)):
         if not (np.isfinite(v) and v >= 0):
             raise ParameterError(f"{name} must be finite and >= 0, got {v}")
+        if v > MAX_INSTRUMENT_SIGMA:
+            raise ParameterError(f"{name} = {v:g} is beyond any instrument (at most {MAX_INSTRUMENT_SIGMA:g}): "
+                                 "give the instrument's noise sd in mm and deg")
     return np.diag([sigma_mm**2, sigma_mm**2, sigma_deg**2])
 
 

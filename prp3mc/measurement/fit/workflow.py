@@ -42,7 +42,7 @@ from ...kinematics.geometry import Geometry
 from ...progress import Progress
 from ...model.budget import Budget
 from . import outliers as gross
-from ..campaign.data import Campaign, read_campaign, require_testable
+from ..campaign.data import Campaign, check_error_scale, read_campaign, require_testable
 from .diagnostics import diagnose, gap, gap_value, null_variances
 from .signatures import effect
 from ...model.effects import amplitude_phase
@@ -117,6 +117,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
             raise ParameterError(f"{name} must lie in (0, 1), got {value}")
     budget.check_geometry(geometry)
     campaign = require_testable(read_campaign(campaign, geometry))
+    check_error_scale(campaign, geometry, budget, instrument_sigma_mm)
     # the predicted accuracy needs the named effects only: on a thread of its own (its kernels release the
     # GIL) while the rest is diagnosed
     with ThreadPoolExecutor(max_workers=1) as pool:
