@@ -97,7 +97,6 @@ FILES = {
     "csv_header_only": _HEADER,
     "csv_duplicate_header": _HEADER.replace("\n", ",x_meas\n") + "".join(f"{k % 4},0,100,0,0,100,0,5\n" for k in range(8)),
     "csv_one_row": _HEADER + "1,0,100,0,0.001,100,0\n",
-    "csv_no_repeats": _HEADER + "".join(f"{k},{10 * k},100,0,{10 * k},100,0\n" for k in range(3)),
     "csv_two_poses": _HEADER + "".join(f"{k % 2},{10 * (k % 2)},100,0,{10 * (k % 2)},100,0\n" for k in range(6)),
     "csv_small": _HEADER + "".join(f"{k % 4},{10 * (k % 2)},{100 + 10 * (k % 4 // 2)},0,{10 * (k % 2) + 0.001 * k},"
                                    f"{100 + 10 * (k % 4 // 2)},0\n" for k in range(8)),
@@ -272,8 +271,6 @@ CASES = [
           message="column 'x_meas' appears twice in the header (columns 5 and 8)"),
     _case("discrepancy", *G, *B, "--data", "{csv_one_row}", "--out", "{root}/d17",
           message="too small to test anything: 1 measurement(s) of 1 pose(s)"),
-    _case("discrepancy", *G, *B, "--data", "{csv_no_repeats}", "--out", "{root}/d18",
-          message="0 of them repeated; the discrepancy workflow needs at least 3 distinct poses"),
     _case("discrepancy", *G, *B, "--data", "{csv_two_poses}", "--out", "{root}/d19", message="too small"),
     _case("discrepancy", *G, "--budget", "{budget_backlash}", "--data", "{csv_no_dir}", "--out", "{root}/d20",
           message="effect backlash_1 (fitted on c1.csv) needs column dir_1, which the campaign lacks"),

@@ -251,8 +251,8 @@ def emit_json(obj: dict) -> None:
 #: How Monte Carlo and Sobol take a budget's [effects] (docs, File formats), said under their tables.
 EFFECTS_NOTE = ("Effects: backlash_i and thermal are factors (the approach direction is unknown: delta b_i = "
                 "±h_i/2 with probability 1/2 each; one temperature, uniform over temp_range_C); offsets "
-                "(offset_q_i) and lead scales (scale_i) are known shifts: no variance share, a systematic part "
-                "of the worst case.")
+                "(offset_q_i), lead scales (scale_i) and cyclic screw errors (cyclic_i) are known shifts: no "
+                "variance share, a systematic part of the worst case.")
 
 LEGS = ("leg 1", "leg 2", "leg 3")
 

@@ -73,20 +73,28 @@ def headline(result) -> list[str]:
         lines.append(f"{len(result.outliers)} gross error(s) set aside (data rows {rows}; false-alarm rate "
                      f"{result.outlier_rule['family_wise_rate']:g} over all rows)")
     for n in result.nuisance:
+        alias = " (union over the aliases of the named effects)" if "by_alias" in n else ""
         lines.append(f"nuisance {n['name']} = {n['value']:.4g} {n['unit']}  95% CI [{n['ci95'][0]:.4g}, "
-                     f"{n['ci95'][1]:.4g}]")
+                     f"{n['ci95'][1]:.4g}]{alias}")
     rep = result.repeatability
-    lines.append(f"repeatable fraction {rep['repeatable_fraction']:.2f}  95% CI [{rep['ci95'][0]:.2f}, "
-                 f"{rep['ci95'][1]:.2f}]")
+    if rep["repeatable_fraction"] is None:
+        lines.append(f"repeatable fraction not testable: {rep['not_testable']}")
+    else:
+        lines.append(f"repeatable fraction {rep['repeatable_fraction']:.2f}  95% CI [{rep['ci95'][0]:.2f}, "
+                     f"{rep['ci95'][1]:.2f}]")
     for e in result.named_effects:
         alias = f" (not separable from {', '.join(e.aliases)})" if e.aliases else ""
-        lines.append(f"named {e.name} = {quantity_text(e.value, e.unit)}  95% CI [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]{alias}")
+        phase = f", phase {e.phase_deg:.1f} deg" if e.phase_deg is not None else ""
+        lines.append(f"named {e.name} = {quantity_text(e.value, e.unit)}  95% CI [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]"
+                     f"{phase}{alias}")
     if not result.named_effects:
         lines.append("named nothing: the model misses nothing this campaign can see")
     if result.confounded_with_registration:
         lines.append("not testable, confounded with registration: " + ", ".join(result.confounded_with_registration))
     verdict = ("closed" if g["closed"] else
                f"not closed: UNEXPLAINED disagreement remains ({g['deciding_channel'].replace('_', ' ')})")
+    if g.get("not_tested"):
+        verdict += "; the dispersion channels were not tested (one visit per pose: nothing to compare repeats with)"
     lines.append(f"gap {g['before']:.3g} -> {g['after']:.3g} (null level <= 1, closed at <= {g['closed_at']:.2g}): "
                  f"{verdict}")
     h = g["held_out"]

@@ -76,5 +76,6 @@ class WorstCaseCommand:
             lines.append(CORRELATION_NOTE)
         if budget.effects:
             lines.append("Effects: backlash_i over ±h_i/2 and thermal over temp_range_C (their drivers are "
-                         "unknown at a pose); offsets (offset_q_i) and lead scales (scale_i) are known shifts.")
+                         "unknown at a pose); offsets (offset_q_i), lead scales (scale_i) and cyclic screw "
+                         "errors (cyclic_i) are known shifts.")
         print("\n".join(lines))

@@ -25,7 +25,8 @@ from ..errors import BudgetError, IncompleteBudgetWarning, ParameterError, Unkno
 from .catalogue import Catalogue
 from .copula import GaussianCopula, parse_correlation
 from .laws import Law, law_from_dict
-from .effects import T_REF_C, FittedOn, SystematicEffect, effect_factors, effects_from_dict
+from .effects import (T_REF_C, FittedOn, SystematicEffect, check_leads, effect_factors, effects_from_dict,
+                      slider_error)
 from ..kinematics.geometry import Geometry
 from ..kinematics.sensitivity import LENGTH_FAMILIES
 
@@ -78,9 +79,10 @@ class Budget:
     name : str
     effects : dict of str to SystematicEffect
         Fitted systematic effects (the ``[effects]`` table: backlash, lead
-        scale, thermal expansion, offsets), keyed by their library name.
-        Backlash and thermal add random *factors* (:attr:`factors`) drawn
-        with the inputs; offsets and scales are known shifts.
+        scale, thermal expansion, cyclic screw errors, offsets), keyed by
+        their library name. Backlash and thermal add random *factors*
+        (:attr:`factors`) drawn with the inputs; offsets, scales and cyclic
+        errors are known shifts.
     fitted_on : FittedOn, optional
         The geometry the effects were fitted on; a budget that has one
         refuses other geometries (:meth:`check_geometry`).
@@ -190,8 +192,11 @@ class Budget:
     def check_geometry(self, geometry: Geometry) -> None:
         """Refuse a geometry other than the one this budget's effects were fitted on (one line).
 
-        Budgets without effects or without ``fitted_on`` apply to any geometry.
+        Budgets without effects or without ``fitted_on`` apply to any
+        geometry, except that a cyclic screw error needs its leg's
+        ``lead_mm`` in the geometry.
         """
+        check_leads(self.effects, geometry, f"budget {self.name!r}: effect ")
         if self.fitted_on is None or not self.effects:
             return
         diff = self.fitted_on.difference(geometry)
@@ -254,14 +259,15 @@ class Budget:
 
     def effects_frame(self):
         """One row per effect: effect, kind, value, unit, ci95_low, ci95_high, temp_lo_C, temp_hi_C,
-        campaign, campaign_sha256, source, and how the analyses take it (``enters``)."""
+        campaign, campaign_sha256, source, phase_deg (cyclic), and how the analyses take it (``enters``)."""
         import pandas as pd
         enters = {"offset": "known shift", "scale": "known shift", "backlash": "±h/2, approach unknown",
-                  "thermal": "temperature over temp_range_C"}
+                  "thermal": "temperature over temp_range_C", "cyclic": "known shift"}
         rows = [{"effect": k, "kind": e.effect.kind, "value": e.value, "unit": e.unit,
                  "ci95_low": (e.ci95 or (np.nan,) * 2)[0], "ci95_high": (e.ci95 or (np.nan,) * 2)[1],
                  "temp_lo_C": (e.temp_range_C or (np.nan,) * 2)[0], "temp_hi_C": (e.temp_range_C or (np.nan,) * 2)[1],
                  "campaign": e.campaign or "", "campaign_sha256": e.campaign_sha256 or "", "source": e.source or "",
+                 "phase_deg": np.nan if e.phase_deg is None else e.phase_deg,
                  "enters": enters[e.effect.kind]} for k, e in self.effects.items()]
         return pd.DataFrame(rows)
 
@@ -351,7 +357,8 @@ class Budget:
         bits.advance(start * D)
         return self.ppf(np.random.Generator(bits).random((min(n - start, SAMPLE_BLOCK), D)))
 
-    def errors(self, X: np.ndarray, b: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    def errors(self, X: np.ndarray, b: np.ndarray | None = None,
+               lead_mm: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Factor samples ``X`` (n, D) as per-family errors, mm / deg.
 
         The form :func:`~prp3mc.kinematics.exact.exact_pose_error` takes; a
@@ -359,8 +366,9 @@ class Budget:
         Without effects each family's errors are (n, 3). The effects add
         their errors: offsets to their family (``b_i`` to ``b``), backlash
         and, given the nominal slider positions ``b`` (..., 3) (mm) of the
-        poses, lead scale and thermal expansion to ``b``, which is then
-        (..., n, 3).
+        poses, lead scale, thermal expansion and (with the screws' leads
+        ``lead_mm`` (3,), mm: :attr:`Geometry.lead_mm`) cyclic screw errors
+        to ``b``, which is then (..., n, 3).
         """
         X = np.asarray(X, dtype=float)
         errors: dict[str, np.ndarray] = {}
@@ -378,17 +386,22 @@ class Budget:
                 errors.setdefault(e.family, np.zeros((X.shape[0], 3)))[:, e.leg] += eff.value
             elif e.kind == "backlash":
                 slider[:, e.leg] += X[:, factors.index(name)]
-        if kinds & {"scale", "thermal"}:
+        if kinds & {"scale", "thermal", "cyclic"}:
             if b is None:
-                raise ParameterError("lead scale and thermal effects need the nominal slider positions b")
+                raise ParameterError("lead scale, thermal and cyclic effects need the nominal slider positions b")
+            b = np.asarray(b, dtype=float)
             strain = np.zeros((X.shape[0], 3))
+            cyclic = np.zeros(b.shape)
             for name, eff in self.effects.items():
                 if eff.effect.kind == "scale":
                     strain[:, eff.effect.leg] += eff.value
                 elif eff.effect.kind == "thermal":
                     strain += eff.value * (X[:, factors.index(name), None] - T_REF_C)
-            slider = slider + strain * np.asarray(b, dtype=float)[..., None, :]
-        if kinds & {"backlash", "scale", "thermal"}:
+                elif eff.effect.kind == "cyclic":
+                    cyclic += slider_error({name: eff.model_value}, b.reshape(-1, 3),
+                                           lead_mm=lead_mm).reshape(b.shape)
+            slider = slider + strain * b[..., None, :] + cyclic[..., None, :]
+        if kinds & {"backlash", "scale", "thermal", "cyclic"}:
             errors["b"] = errors.get("b", 0.0) + slider
         return errors
 

@@ -9,7 +9,8 @@ whole batch of poses x samples is one matrix product.
 
 A budget's systematic effects (its ``[effects]`` table) add terms: an offset
 q_i is a known shift ``J_q[:, i] * value``, a lead scale the shift
-``J_b[:, i] kappa_i b_i`` with b_i from the nominal inverse kinematics; a
+``J_b[:, i] kappa_i b_i`` with b_i from the nominal inverse kinematics, a
+cyclic screw error the shift ``J_b[:, i] A_i sin(2 pi b_i / p_i + phi_i)``; a
 backlash is the factor delta b_i = ±h_i/2 through ``J_b[:, i]``; thermal
 expansion the factor T through ``alpha_T (T - 20) J_b b``, one term of all
 three legs. The shifts share one constant feature (1).
@@ -53,8 +54,9 @@ class LinearModel:
         One term per input except the zeta_i (``rho_i`` stands for the
         clearance term rho_i cos(zeta_i - omega_i)), then one per effect of
         the budget in library order: offsets ``offset_q_i`` (the effect
-        ``q_i``; the input q_i is another term) and ``scale_i`` (known
-        shifts, the term's value is the effect's value), ``backlash_i`` (the
+        ``q_i``; the input q_i is another term), ``scale_i`` and
+        ``cyclic_i`` (known shifts, the term's value is the effect's value:
+        a cyclic error's amplitude A_i), ``backlash_i`` (the
         factor delta b_i, mm) and ``thermal`` (T - 20, K).
     legs : tuple of int
         The (0-based) leg of every term; :data:`ALL_LEGS` for a term of all legs.
@@ -307,6 +309,11 @@ def linear_model(geometry: Geometry, budget: Budget, poses, *, check: bool = Tru
             plan.append(("shift", eff.value))
         elif e.kind == "scale":
             weights.append(_one_leg(entries("b") * b, e.leg))
+            plan.append(("shift", eff.value))
+        elif e.kind == "cyclic":                                # A_i sin(2 pi b_i / p_i + phi_i): per unit of A_i
+            wave = np.zeros_like(b)
+            wave[e.leg] = np.sin(2.0 * np.pi * b[e.leg] / geometry.lead_mm[e.leg] + np.deg2rad(eff.phase_deg))
+            weights.append(_one_leg(entries("b") * wave, e.leg))
             plan.append(("shift", eff.value))
         elif e.kind == "backlash":
             weights.append(_one_leg(entries("b"), e.leg))

@@ -71,7 +71,7 @@ def linearity_departure(geometry: Geometry, budget: Budget, poses, *, n_poses: i
         return 0.0
     idx = np.unique(np.linspace(0, flat.shape[0] - 1, min(n_poses, flat.shape[0])).round().astype(int))
     b, _ = inverse_kinematics(geometry, flat[idx], check=False)
-    errors = budget.errors(_probe_inputs(budget, n_samples), b=b)
+    errors = budget.errors(_probe_inputs(budget, n_samples), b=b, lead_mm=geometry.lead_mm)
     probes = np.broadcast_to(flat[idx, None, :], (len(idx), n_samples, 3))
     linear = linear_pose_error(geometry, probes, errors, check=False)
     try:

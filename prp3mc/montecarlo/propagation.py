@@ -374,7 +374,8 @@ def _linearization(model: LinearModel, budget: Budget, seed: int, n_poses: int, 
     flat = model.poses.reshape(-1, 3)
     idx = np.unique(np.linspace(0, flat.shape[0] - 1, min(n_poses, flat.shape[0])).round().astype(int))
     X = budget.sample(n_samples, seed)
-    errors = budget.errors(X, b=inverse_kinematics(model.geometry, flat[idx], check=False)[0])
+    errors = budget.errors(X, b=inverse_kinematics(model.geometry, flat[idx], check=False)[0],
+                           lead_mm=model.geometry.lead_mm)
     poses = np.broadcast_to(flat[idx, None, :], (len(idx), X.shape[0], 3))
     exact = exact_pose_error(model.geometry, poses, errors, check=False)
     sub = linear_model(model.geometry, budget, flat[idx], check=False)

@@ -29,8 +29,8 @@ def _term_map(result: SobolResult, wc: WorstCase) -> tuple[np.ndarray, list]:
 
     A clearance term rho_i cos(zeta_i - omega_i) belongs to a name holding both
     rho_i and zeta_i (clearance_i); rho_i and zeta_i alone, and groups that
-    split a clearance, get a row of NaN. A known shift (an offset or lead
-    scale effect) varies with no factor: it gets a row of its own.
+    split a clearance, get a row of NaN. A known shift (an offset, lead
+    scale or cyclic screw error effect) varies with no factor: it gets a row of its own.
     """
     factors = wc.inputs
     needs, shifts = [], []
@@ -82,7 +82,7 @@ def ranking(sobol_result: SobolResult, worst_case_result: WorstCase, output: str
         rho_i cos(zeta_i - omega_i) carries rho_i and zeta_i together, so its
         contribution is reported on ``clearance_i`` and rho_i, zeta_i (and
         any group holding only one of them) show NaN. The budget's known
-        shifts (offset effects as ``offset_q_i``, ``scale_i``) follow with
+        shifts (offset effects as ``offset_q_i``, ``scale_i``, ``cyclic_i``) follow with
         kind ``shift``: a systematic contribution to the worst case, no
         variance share (S1, ST NaN), last in the order.
 

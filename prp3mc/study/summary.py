@@ -92,7 +92,8 @@ __all__ = ["build_summary", "study_inputs"]
 def _undefined(name: str, kind: str, constant: set, correlated: bool) -> str:
     """Why a Sobol index is undefined (it is NaN in the result, null in summary.json)."""
     if kind == "shift":
-        return "undefined: a known shift (an offset or lead scale of the budget's effects) has no variance to share"
+        return ("undefined: a known shift (an offset, lead scale or cyclic screw error of the budget's effects) has "
+                "no variance to share")
     if name in constant:
         return "undefined: a constant input (zero-width law) has no variance to share"
     if correlated:

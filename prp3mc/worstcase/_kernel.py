@@ -17,7 +17,8 @@ their generators as one bit each, the refusal word) plus one scratch array per t
 
 A budget's effects are terms too: known shifts are terms of zero width, a
 backlash a term of its leg, a lead scale and thermal expansion are multiplied
-by the nominal slider position b_i; thermal expansion acts on all legs at
+by the nominal slider position b_i, a cyclic screw error by
+sin(2 pi b_i / p_i + phi_i); thermal expansion acts on all legs at
 once, so it adds a shared generator to the zonotope (16 corners).
 """
 
@@ -96,7 +97,7 @@ def kernel_tables(geometry: Geometry, budget: Budget, k_sigma: float | None) -> 
     Kept for the last few (geometry, budget, k_sigma), so that a small batch does not pay for them again.
     """
     bounds = budget.bounds(k_sigma)
-    out = (bounds, leg_constants(geometry), term_table(budget, bounds))
+    out = (bounds, leg_constants(geometry), term_table(budget, bounds, geometry.lead_mm))
     for a in out:
         a.flags.writeable = False
     return out
@@ -106,16 +107,18 @@ def kernel_tables(geometry: Geometry, budget: Budget, k_sigma: float | None) -> 
 TERM_COLUMNS = ("family", "leg", "unit", "mode", "lo", "hi", "zeta_lo", "zeta_hi")
 
 
-def term_table(budget: Budget, bounds: np.ndarray) -> np.ndarray:
+def term_table(budget: Budget, bounds: np.ndarray, lead_mm: np.ndarray | None = None) -> np.ndarray:
     """The budget's terms for the kernel, one row each (T, 8), columns :data:`TERM_COLUMNS`.
 
     ``family``: index in FAMILIES; ``leg``: 0-2, or -1 for a term of every leg;
     ``unit``: 1 for lengths, rad per deg for angles, alpha_T for thermal;
     ``mode``: 1 when the term's u_i is also multiplied by the nominal slider
-    position b_i, else 0; ``lo``, ``hi``: the term's interval, or a clearance's
+    position b_i, 2 when by ``sin(zeta_lo b_i + zeta_hi)`` (a cyclic screw
+    error: ``zeta_lo`` = 2 pi / p_i, rad per mm, ``zeta_hi`` = phi_i, rad),
+    else 0; ``lo``, ``hi``: the term's interval, or a clearance's
     rho interval with its contact angles ``zeta_lo``, ``zeta_hi`` (rad;
     zeta_hi = inf for a full circle, both 0 for other terms). ``bounds`` (D, 2)
-    are the factors' intervals.
+    are the factors' intervals; ``lead_mm`` (3,) the screws' leads (cyclic errors need them).
     """
     names, factors = budget.names, budget.factors
     rows = []
@@ -136,12 +139,14 @@ def term_table(budget: Budget, bounds: np.ndarray) -> np.ndarray:
             unit = 1.0 if e.family in LENGTH_FAMILIES else DEG2RAD
         else:
             unit = eff.value if e.kind == "thermal" else 1.0
-        if e.kind in ("offset", "scale"):
+        if e.kind in ("offset", "scale", "cyclic"):
             lo = hi = eff.value
         else:
             lo, hi = bounds[factors.index(name)] - (T_REF_C if e.kind == "thermal" else 0.0)
+        mode = {"scale": 1, "thermal": 1, "cyclic": 2}.get(e.kind, 0)
+        wave = (2.0 * math.pi / lead_mm[e.leg], math.radians(eff.phase_deg)) if e.kind == "cyclic" else (0.0, 0.0)
         rows.append((FAMILIES.index(e.family if e.kind == "offset" else "b"), -1 if e.kind == "thermal" else e.leg,
-                     unit, 1 if e.kind in ("scale", "thermal") else 0, lo, hi, 0.0, 0.0))
+                     unit, mode, lo, hi, *wave))
     return np.array(rows, dtype=float).reshape(-1, len(TERM_COLUMNS))
 
 
@@ -258,6 +263,16 @@ def _nonfinite(cs, j):
     ``cs`` (cos is NaN for an infinite phi; v - v is NaN for those only, and it vectorises)."""
     x, y, c = cs[_row(_X) + j], cs[_row(_Y) + j], cs[_row(_COS_PHI) + j]
     return np.int64(not (x - x) + (y - y) + (c - c) == 0.0) * NONFINITE
+
+
+@njit(inline="always")
+def _slider_factor(mode, b, wavenumber, phase):
+    """What a term's u_i is multiplied by (:func:`term_table`'s ``mode``): 1, b_i, or sin(wavenumber b_i + phase)."""
+    if mode == 1.0:
+        return b
+    if mode == 2.0:
+        return math.sin(wavenumber * b + phase)
+    return 1.0
 
 
 #: Poses per block: the block's scratch rows (about 70 x BLOCK float64) stay in cache and every
@@ -392,7 +407,7 @@ def _block(start, stop, poses, legc, terms, check, values, codes, bad, cs, A, le
     uh[:] = 0.0
     g = 0
     for k in range(terms.shape[0]):
-        fam, i, un, by_b = int(terms[k, 0]), int(terms[k, 1]), terms[k, 2], terms[k, 3] != 0
+        fam, i, un, mode = int(terms[k, 0]), int(terms[k, 1]), terms[k, 2], terms[k, 3]
         lo, hi, zlo, zhi = terms[k, 4], terms[k, 5], terms[k, 6], terms[k, 7]
         if i < 0:  # a term of every leg: a further generator, w_l = h_l unit (b_l) on leg l
             mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
@@ -401,7 +416,7 @@ def _block(start, stop, poses, legc, terms, check, values, codes, bad, cs, A, le
                 bl = legs[_leg_row(l, _B):_leg_row(l, _B) + m]
                 mid_l, gen = um[l, :m], ext[g, l, :m]
                 for j in range(m):
-                    w = hf[j] * un * (bl[j] if by_b else 1.0)
+                    w = hf[j] * un * _slider_factor(mode, bl[j], zlo, zhi)
                     mid_l[j] += w * mid
                     gen[j] = w * half
             g += 1
@@ -415,7 +430,7 @@ def _block(start, stop, poses, legc, terms, check, values, codes, bad, cs, A, le
                 cmin, _, cmax, _ = cos_range(zlo - omega, zhi - omega)
                 c_lo = (hi if cmin <= 0 else lo) * cmin  # the term rho cos(zeta - omega)'s interval
                 c_hi = (hi if cmax >= 0 else lo) * cmax
-                scale = hf[j] * un * (bi[j] if by_b else 1.0)
+                scale = hf[j] * un
                 mid_i[j] += scale * (0.5 * (c_lo + c_hi))
                 half_i[j] += abs(scale) * (0.5 * (c_hi - c_lo))
             continue
@@ -423,7 +438,7 @@ def _block(start, stop, poses, legc, terms, check, values, codes, bad, cs, A, le
             lo, hi = -hi, hi
         mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
         for j in range(m):
-            scale = hf[j] * un * (bi[j] if by_b else 1.0)
+            scale = hf[j] * un * _slider_factor(mode, bi[j], zlo, zhi)
             mid_i[j] += scale * mid
             half_i[j] += abs(scale) * half
     zonotope_maxima(Ai.reshape((3, 3, B)), um, uh, ext, values, codes, start, m, zs)

@@ -6,6 +6,13 @@ phi_meas``, a ``pose_id`` shared by the repeats of one commanded pose, and
 optionally the approach direction ``dir_1, dir_2, dir_3`` (+-1) of each
 actuator and the temperature ``temp_C``. Other columns are kept and ignored.
 
+Repeats are optional. A campaign that visits every pose once (a laser
+tracker's sweep) is enough for the systematic channels of the discrepancy
+workflow; repeats buy its dispersion channels (spreads, the repeatable
+fraction, the repeat scatter), which compare the visits of a pose. The
+workflow needs at least :data:`MIN_POSES` distinct poses
+(:func:`require_testable`).
+
 Reading refuses, with the row and the column in the message, anything it
 would otherwise have to guess: missing columns, empty or non-numeric cells,
 repeats of one ``pose_id`` with different commands, directions other than
@@ -471,19 +478,18 @@ def check_error_scale(campaign: Campaign, geometry: Geometry, budget, instrument
 def require_testable(campaign: Campaign) -> Campaign:
     """Refuse a campaign too small for the discrepancy workflow to test anything.
 
-    It needs at least :data:`MIN_POSES` distinct poses and at least one pose
-    measured twice (the dispersion channel compares repeats).
+    It needs at least :data:`MIN_POSES` distinct poses. A campaign that
+    measures no pose twice is accepted: its systematic channels are tested,
+    its dispersion channels (which compare repeats) are not.
 
     Raises
     ------
     CampaignError
         One line saying what the campaign has and what it would need.
     """
-    repeated = int(np.sum(campaign.repeats >= 2))
-    if campaign.n_poses < MIN_POSES or repeated == 0:
+    if campaign.n_poses < MIN_POSES:
         raise CampaignError(
             f"{campaign.source}: too small to test anything: {campaign.n_measurements} measurement(s) of "
-            f"{campaign.n_poses} pose(s), {repeated} of them repeated; the discrepancy workflow needs at least "
-            f"{MIN_POSES} distinct poses (one is held out, the registration takes 3 degrees of freedom) and at least "
-            "one pose measured twice (the dispersion test compares repeats)")
+            f"{campaign.n_poses} pose(s); the discrepancy workflow needs at least {MIN_POSES} distinct poses (one is "
+            "held out, the registration takes 3 degrees of freedom)")
     return campaign

@@ -9,7 +9,7 @@ hidden effects of the library (:mod:`prp3mc.measurement.fit.signatures`), severa
 once if wanted.
 
 Randomness (one seed, recorded in ``metadata["seed"]``): the root generator
-draws, in this order, the visiting order, the approach directions (``both``),
+draws, in this order, the visiting order (``visit_order="random"``), the approach directions (``both``),
 the budget errors of every visit and the instrument noise; the per-pose
 errors (``repeatable_fraction``) come from the stream
 ``child_seed(seed, 1)`` and the outliers from ``child_seed(seed, 2)``. So a
@@ -29,6 +29,7 @@ from ...kinematics.chain import as_poses, check_poses, inverse_kinematics
 from ...kinematics.exact import exact_pose_error
 from ...kinematics.geometry import Geometry
 from ...model.budget import Budget, parse_input
+from ...model.effects import check_leads, effect_value
 from ...units import DEG2RAD
 from .data import CMD_COLUMNS, DIR_COLUMNS, MAX_ERROR, MEAS_COLUMNS, Campaign
 from ..fit.signatures import effect, offset_errors, slider_error, spread_budget
@@ -182,13 +183,13 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
                       drift: tuple[float, float, float] | None = None,
                       outliers: tuple[float, float] | None = None,
                       repeatable_fraction: float = 0.0,
-                      slider_error_fn=None, pose_error_fn=None,
+                      slider_error_fn=None, pose_error_fn=None, visit_order: str = "random",
                       rng: "None | int | np.random.Generator" = None,
                       plan: "pd.DataFrame | Campaign | None" = None) -> Campaign:
     """Simulate a measurement campaign with the exact nonlinear model.
 
     The campaign visits every pose once per round, in a fresh random order
-    each round, for ``n_repeats`` rounds; the temperature drifts linearly in
+    each round (or in the order given: ``visit_order``), for ``n_repeats`` rounds; the temperature drifts linearly in
     time over the campaign. Every measurement has a time (``time_s``, from
     the moves between poses: :func:`visit_times`). By default every
     measurement draws fresh budget errors (a clearance settles at a new
@@ -208,11 +209,12 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         Commanded poses ``[x_mm, y_mm, phi_deg]`` (any batch shape is
         flattened); None with ``plan``.
     n_repeats : int
-        Measurements per pose (ignored with ``plan``).
+        Measurements per pose (1: a one-visit campaign, as a laser tracker's sweep; ignored with ``plan``).
     effects : dict of str to float, optional
         Hidden effects of the library (:data:`~prp3mc.measurement.fit.signatures.EFFECT_NAMES`, in their units); any number
         at once, their pose errors add up through the exact chain (a hidden effect the budget's
-        ``[effects]`` also holds adds to its value).
+        ``[effects]`` also holds adds to its value). A cyclic screw error ``cyclic_i`` is its phasor,
+        its amplitude (phase 0) or ``(amplitude_mm, phase_deg)``, and needs ``lead_mm`` of leg i in the geometry.
     approach : {"both", "positive", "negative", "sequence"}
         Approach direction of each actuator: random +-1 per actuator and
         measurement; always +1; always -1; or the sign of the actuator's
@@ -251,6 +253,10 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         ``f(commanded (M, 3), b (M, 3), direction (M, 3), temp_C (M,) or None)``
         returning an extra slider error delta b (M, 3) mm, or an extra pose
         error (M, 3) ``[mm, mm, deg]`` added to the exact one.
+    visit_order : {"random", "given"}
+        Each round visits the poses in a fresh random order, or in the order
+        of ``poses`` (a sweep: a raster or serpentine path, as a laser tracker
+        measures a workspace).
     rng : None, int or numpy.random.Generator
         Randomness (Scientific Python SPEC 7; streams in the module notes);
         the integer seed used is recorded in ``metadata["seed"]``, also when
@@ -289,20 +295,24 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     r = float(repeatable_fraction)
     if not 0.0 <= r <= 1.0:
         raise CampaignError(f"repeatable_fraction must lie in [0, 1], got {repeatable_fraction!r}")
-    effects = dict(effects or {})
+    if visit_order not in ("random", "given"):
+        raise CampaignError(f"visit_order must be random or given, got {visit_order!r}")
+    effects = {name: effect_value(name, value) for name, value in dict(effects or {}).items()}
     parsed = [effect(name) for name in effects]          # raises on unknown names
     for e, v in zip(parsed, effects.values()):
         if e.kind == "backlash" and v < 0:
             raise CampaignError(f"{e.name}: backlash h must be >= 0, got {v}")
     budget.check_geometry(geometry)
-    machine = {name: eff.value for name, eff in budget.effects.items()}      # the budget's effects, then the hidden
+    check_leads(effects, geometry, "hidden effect ")
+    machine = {name: eff.model_value for name, eff in budget.effects.items()}   # the budget's effects, then the hidden
     for name, value in effects.items():
         machine[name] = machine.get(name, 0.0) + value
     if "thermal" in machine and temp_drift_C is None:
         raise CampaignError("a thermal effect (hidden or in the budget) needs a temperature drift (temp_drift_C)")
     P = poses.shape[0]
     if template is None:
-        order = np.concatenate([rng.permutation(P) for _ in range(n_repeats)])   # visiting order
+        order = np.concatenate([rng.permutation(P) if visit_order == "random" else np.arange(P)
+                                for _ in range(n_repeats)])                  # visiting order
         pose_ids = np.array([f"P{k + 1:03d}" for k in order])
     else:
         order, pose_ids = template.pose_index, template.pose_id
@@ -329,7 +339,7 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     errors = sim_budget.errors(X)
     for family, value in offset_errors(machine).items():
         errors[family] = errors.get(family, 0.0) + value
-    db = slider_error(machine, b, direction, temp)
+    db = slider_error(machine, b, direction, temp, geometry.lead_mm)
     if slider_error_fn is not None:
         db = db + np.asarray(slider_error_fn(cmd, b, direction, temp), dtype=float)
     errors["b"] = errors.get("b", 0.0) + db
@@ -360,7 +370,8 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     if temp is not None:
         frame["temp_C"] = temp
     frame["time_s"] = time_s
-    metadata = {"seed": seed_used, "effects": effects, "machine_effects": machine, "n_repeats": n_repeats, "approach": approach,
+    metadata = {"seed": seed_used, "effects": effects, "machine_effects": machine, "n_repeats": n_repeats,
+                "visit_order": visit_order, "approach": approach,
                 "temp_drift_C": None if temp_drift_C is None else list(temp_drift_C),
                 "instrument_sigma_mm": instrument_sigma_mm, "instrument_sigma_deg": instrument_sigma_deg,
                 "registration": None if registration is None else list(registration),

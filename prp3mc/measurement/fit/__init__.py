@@ -8,6 +8,7 @@
 - :mod:`~prp3mc.measurement.fit.outliers` — gross errors at a stated family-wise false-alarm rate.
 - :mod:`~prp3mc.measurement.fit.subsets` — best subsets and alias sets of systematic effects.
 - :mod:`~prp3mc.measurement.fit.selection` — naming effects with exchange moves, aliases.
+- :mod:`~prp3mc.measurement.fit.cyclic` — a cyclic screw error's amplitude interval (covers near 0).
 - :mod:`~prp3mc.measurement.fit.diagnostics` — the tests, the one verdict and the gap.
 - :mod:`~prp3mc.measurement.fit.holdout` — the gap on poses left out of the fit.
 - :mod:`~prp3mc.measurement.fit.updated` — the updated model and what a controller can compensate.

@@ -294,7 +294,7 @@ def diagnose(engine: Engine, fit: Fit, n_boot: int = 0, rng=None, *, null: tuple
     dof = 3.0 * engine.M - n_par
     model_cols = engine.whitened(fit, fit.sys, fit.nuis)[1]
     testable = [j for j, e in enumerate(engine.systematic) if j not in fit.sys and e.name not in engine.confounded]
-    lib_stat, lib_df = _span_energy(fit.z, engine.whitened_candidates(fit)[:, testable], model_cols)
+    lib_stat, lib_df = _span_energy(fit.z, engine.whitened_candidates(fit)[:, engine.cols_of(testable)], model_cols)
     probes = engine.whiten(_probe_basis(engine), fit.Lw, fit.Lb)
     lof_stat, lof_df = _span_energy(fit.z, probes, model_cols)
     summary = {

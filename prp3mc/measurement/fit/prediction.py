@@ -32,7 +32,7 @@ from ...model.budget import Budget
 from ...model.linear import linear_model
 from ...units import OUTPUT_UNITS, POSE_OUTPUTS
 from ..campaign.data import Campaign
-from .signatures import budget_effect_errors, effect, signatures, spread_budget
+from .signatures import budget_effect_errors, components, effect, signatures, spread_budget
 
 __all__ = ["Prediction", "predict", "noise_cov"]
 
@@ -131,8 +131,9 @@ def predict(geometry: Geometry, budget: Budget, campaign: Campaign, *, effects: 
     geometry, budget
     campaign : Campaign
     effects : dict of str to float, optional
-        Library effects added to the model (systematic values and spreads);
-        a systematic effect the budget's ``[effects]`` already holds adds to its value.
+        Library effects added to the model (systematic values, a cyclic
+        error's phasor, and spreads); a systematic effect the budget's
+        ``[effects]`` already holds adds to its value.
     instrument_sigma_mm, instrument_sigma_deg : float
     repeatable_fraction : float
         Share ``r`` in [0, 1] of the budget's covariance that repeats at every visit of a pose.
@@ -159,7 +160,7 @@ def predict(geometry: Geometry, budget: Budget, campaign: Campaign, *, effects: 
     if systematic:
         G = signatures(geometry, campaign.poses, campaign.pose_index, list(systematic),
                        campaign.direction, campaign.temp_C)
-        m = m + G @ np.array(list(systematic.values()))
+        m = m + G @ components(list(systematic), list(systematic.values()))
     return Prediction(mean=m, cov=sigma + noise, scatter_cov=(1.0 - repeatable_fraction) * sigma + noise,
                       pose_index=campaign.pose_index, poses=campaign.poses, budget=model_budget, effects=effects,
                       repeatable_fraction=float(repeatable_fraction))
