@@ -274,7 +274,7 @@ def _smoothed(law: Law, mu: float, s: float) -> float:
 
 
 def pair_covariance(law_i: Law, law_j: Law, r: float) -> float:
-    """Covariance of two factors joined by a Gaussian copula of latent correlation ``r`` (|r| < 1).
+    """Covariance of two factors joined by a Gaussian copula of latent correlation ``r`` (``|r| < 1``).
 
     ``E[g_i(Z_i) g_j(Z_j)]`` with ``g = F^-1 o Phi`` is written as the
     expectation over Z_i of g_i(Z_i) times E[g_j(r Z_i + s W)], s = sqrt(1 - r^2):

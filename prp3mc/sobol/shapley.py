@@ -2,7 +2,7 @@
 
 The Shapley effect of factor i on an output Y (Owen 2014; Song, Nelson and
 Staum 2016) is its Shapley value in the game whose cost of a set J of factors
-is c(J) = E[Var(Y | X_-J)], the variance left when all but J are known::
+is c(J) = E[Var(Y | ``X_-J``)], the variance left when all but J are known::
 
     Sh_i = 1/d sum over J not holding i of C(d - 1, |J|)^-1 [c(J + i) - c(J)] / Var(Y).
 
@@ -18,7 +18,7 @@ with N_O = 1 outer and N_I = 3 inner draws, the allocation they show to
 minimise the variance for a given number of model runs), with common random
 numbers along each order. For each of m random orders of the d factors: one
 outer draw x and three fresh draws w_h; for j = 1 .. d, with J the first j
-factors of the order, three inner draws keep x's values of X_-J and draw X_J
+factors of the order, three inner draws keep x's values of ``X_-J`` and draw X_J
 given them from w_h. The sample variance of the three outputs is an unbiased
 estimate of c(J) (each j on its own is Song's draw; sharing x and w between
 the j of one order only correlates them), and c(empty) = 0; at j = d all
@@ -36,8 +36,8 @@ before the first is averaged, where random orders spread the same runs over
 more outer draws.
 
 Conditional draws are exact: a budget's factors are independent or joined by
-a Gaussian copula (:mod:`~prp3mc.model.copula`), so X_J given X_-J is
-the image of the latent normals Z_J given Z_-J, drawn by Matheron's rule
+a Gaussian copula (:mod:`~prp3mc.model.copula`), so X_J given ``X_-J`` is
+the image of the latent normals Z_J given ``Z_-J``, drawn by Matheron's rule
 (w + K (z - w) with w a fresh draw of Z and K the kriging gain).
 
 Intervals: the orders are drawn in B batches from independent streams. The
@@ -186,7 +186,7 @@ def _order_draws(budget: Budget, players: np.ndarray, m: int, rng: np.random.Gen
     perms : ndarray (m, d) int
         Orders, as indices into ``players``.
     X : ndarray (m * d * N_INNER, D)
-        Row (order p, position j, inner h): X_-J of the order's outer draw and X_J drawn given it
+        Row (order p, position j, inner h): ``X_-J`` of the order's outer draw and X_J drawn given it
         from the order's h-th fresh draw, J the factors of the first j positions of order p.
         Every position of an order shares its outer and fresh draws (common random numbers):
         consecutive sets differ in one factor, so their costs' difference is estimated closely.
