@@ -103,8 +103,9 @@ class Problem:
     percentile : float, optional
         q (in %) of the statistical screen.
     fixed : Budget, optional
-        A budget whose ``[effects]`` stay fixed in every candidate (its
-        inputs play no part: the classes choose them).
+        A budget whose ``[effects]`` stay fixed in every candidate and whose
+        ``[correlation]`` every candidate takes (its inputs' laws play no
+        part: the classes choose them).
 
     Attributes
     ----------
@@ -127,7 +128,7 @@ class Problem:
                  k_sigma: float | None = None, percentile: float | None = None, fixed: Budget | None = None):
         self.menu, self.poses = menu, np.asarray(poses, dtype=float).reshape(-1, 3)
         self.inputs = menu.inputs
-        self.fixed_budget = fixed if fixed is not None and fixed.effects else None
+        self.fixed_budget = fixed if fixed is not None and (fixed.effects or fixed.correlated) else None
         first = {name: menu.classes_of(name)[0].name for name in self.inputs}
         model = linear_model(geometry, self.budget(first), self.poses)
         N, J = self.poses.shape[0], len(self.inputs)
