@@ -285,21 +285,19 @@ def allocate(geometry, classes, region, *, spec_position_um: float | None = None
         seed, _ = resolve_rng(rng)
         check = PercentileCheck(geometry, problem, limits["screen"], spec_percentile, n_samples, seed)
         idx, nodes, proven = percentile_least_cost(problem, {"phi": limits["phi"]}, check)
-        if idx is not None:
-            statistical = _confirm(geometry, problem, check, idx, proven)
     feasible = idx is not None
     if idx is None:
         nearest = Search(problem, limits)
         idx = nearest.closest()
         nodes += nearest.nodes
+    if spec_percentile is not None:
+        statistical = _confirm(geometry, problem, check, idx, feasible and proven)
     choice = _choice(problem, idx)
     wc = worst_case(geometry, problem.budget(choice), poses, k_sigma=k_sigma)
     values = {"position": wc.position_mm, "phi": wc.phi_deg}
     ratios = {q: float(values[q].max()) / limits[q] for q in ("position", "phi") if limits.get(q)}
     if statistical is not None:
         ratios["percentile"] = statistical["ci_high_mm"] / limits["screen"]
-    elif "screen" in limits:
-        ratios["percentile"] = float(problem.envelopes(idx)["screen"].max()) / limits["screen"]
     binding = max(ratios, key=ratios.get)
     if binding == "percentile" and statistical is not None:
         binding_poses = statistical.pop("pose")[None]
@@ -325,22 +323,25 @@ def _fixed(budget) -> Budget | None:
 
 
 def _confirm(geometry, problem, check: PercentileCheck, idx, proven: bool) -> dict:
-    """The statistical record of a choice that meets the percentile spec, with its Monte Carlo confirmation.
+    """The statistical record of the choice (or of the closest one, when none meets the spec), with its
+    Monte Carlo confirmation.
 
-    Exact method: Monte Carlo confirms when no pose's 95 % interval of the
-    percentile lies wholly above S (it does not refute the exact decision;
-    the choice is tight, so the interval's upper end may pass S by chance).
-    Monte Carlo method: a second, independent run whose upper end is within S
-    at every pose.
+    ``confirmed``: an independent Monte Carlo run agrees with the decision.
+    Exact method, a choice that meets the spec: no pose's 95 % interval of the
+    percentile lies wholly above S (the run does not refute it; the choice is
+    tight, so the interval's upper end may pass S by chance). Monte Carlo
+    method: the upper end is within S at every pose. A choice that fails: some
+    pose's upper end passes S.
     """
     decided = check.record(idx)
     mc = monte_carlo(geometry, problem.budget(_choice(problem, idx)), problem.poses, check.n_samples,
                      rng=child_seed(check.seed, 1), percentiles=(check.q,))
     low, high = mc.position_pct_ci[:, 0, 0], mc.position_pct_ci[:, 0, 1]
     worst = int(np.argmax(high))
-    confirmed = bool(np.all(low <= check.S)) if check.method == "exact" else bool(high[worst] <= check.S)
-    return {"percentile": check.q, "method": check.method,
-            "exceedance": decided["value"] if check.method == "exact" else None,
+    exact = decided["method"] == "exact"
+    agrees = bool(np.all(low <= check.S)) if exact else bool(high[worst] <= check.S)
+    confirmed = agrees if decided["met"] else bool(high[worst] > check.S)
+    return {"percentile": check.q, "method": decided["method"], "exceedance": decided["value"] if exact else None,
             "screen_mm": float(problem.envelopes(idx)["screen"].max()),
             "percentile_mm": float(mc.position_pct[worst, 0]), "ci_high_mm": float(high[worst]),
             "pose": problem.poses[worst], "n_samples": check.n_samples, "seed": check.seed,

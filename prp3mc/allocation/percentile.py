@@ -10,7 +10,8 @@ is ``P(|(dx, dy)| > S) <= 1 - q/100``. :class:`PercentileCheck` decides it:
   bound: met when ``exceedance + bound <= 1 - q/100`` at every pose
   (the bound is asked for at a thousandth of ``1 - q/100``);
 - ``monte_carlo`` (a budget with a ``[correlation]`` table, which the exact
-  engine does not take): Monte Carlo with the budget's Gaussian copula, met
+  engine does not take, or a choice whose legs have too few continuous laws
+  for the engine's series): Monte Carlo with the budget's Gaussian copula, met
   when the upper end of the percentile's 95 % interval is at most S at every
   pose (the check is then statistical, at that level).
 
@@ -114,8 +115,8 @@ class PercentileCheck:
             try:
                 r = exact_yield(self.geometry, budget, self.pb.poses[poses], spec_position_um=self.S * MM2UM,
                                 quantiles=False, target=min(1e-2, 1e-3 * self.alpha))
-            except BudgetError as exc:         # no density (too few continuous laws): the series cannot serve
-                raise BudgetError(f"percentile spec: {exc}") from None
+            except BudgetError:                # too few continuous laws for the series: Monte Carlo decides
+                return self._monte_carlo(key)
             high = np.asarray(r.exceed_position + r.bound_position).reshape(-1)
             k = int(np.argmax(high))
             record = {"met": bool(high[k] <= self.alpha), "value": float(high[k]), "pose": int(poses[k]),
