@@ -144,3 +144,19 @@ def test_a_correlation_naming_an_input_the_classes_lack_is_refused_in_one_line()
                    correlation={"a_1,a_2": 0.5})
     with pytest.raises(AllocationError, match="cannot take budget 'frame'"):
         allocate("u-shape", "example", "u-shape", spec_position_um=40.0, spec_percentile=Q, grid=3, budget=fixed)
+
+
+@pytest.mark.slow   # the engine takes ~1 min to find that its series would need more than 2^23 terms
+def test_a_choice_the_exact_engine_cannot_serve_is_decided_by_monte_carlo():
+    """A leg whose only laws are a narrow uniform and a discrete slip: the series cannot converge in budget."""
+    menu = ClassMenu.from_dict({
+        "theta": {"classes": [{"name": "fine", "law": "uniform", "lo": -0.005, "hi": 0.005, "cost": 7.0}]},
+        "b": {"classes": [{"name": "slip", "law": "discrete", "values": [-0.012, 0.0, 0.012],
+                           "weights": [0.004, 0.992, 0.004], "cost": 1.1}]}}, source="slip")
+    geometry, poses = Geometry.from_preset("u-shape"), region_poses("u-shape", 2)
+    problem = Problem(geometry, menu, poses, percentile=Q)
+    rec = PercentileCheck(geometry, problem, 0.020, Q, 20_000, 1).record(np.zeros(6, dtype=int))
+    mc = monte_carlo(geometry, problem.budget({n: menu.classes_of(n)[0].name for n in menu.inputs}), poses,
+                     20_000, rng=1, percentiles=(Q,))
+    assert rec["method"] == "monte_carlo" and 0 < rec["value"] <= float(mc.position_pct_ci[:, 0, 1].max()) * 1.2
+    assert rec["met"] == (rec["value"] <= 0.020)

@@ -20,9 +20,9 @@ screen of :mod:`~prp3mc.allocation.search` is no bound of the exact quantile
 (it errs both ways: too high for sums of a few uniform terms, too low where a
 law is cut at k·sd), so it only proposes: the least-cost choice within
 ``f * S`` on the screen, with the factor f bisected on the check's answers
-(phase 1). Where the menu is small enough, every cheaper choice that valid
-bounds leave is then checked in cost order (phase 2): the first one met is
-the least-cost choice, *proven* (``proven``); the valid bounds are the
+(phase 1). With the exact method, where the menu is small enough, every
+cheaper choice that valid bounds leave is then checked in cost order (phase
+2): the first one met is the least-cost choice, *proven* (``proven``); the valid bounds are the
 worst-case specs and, with bounded laws, the second moment: with W the worst
 case and ``E = E|(dx, dy)|^2``, ``P(|(dx, dy)| > S) >= (E - S^2) / (W^2 - S^2)``.
 """
@@ -31,11 +31,12 @@ from __future__ import annotations
 
 import itertools
 import math
+import warnings
 
 import numpy as np
 
 from .._rng import child_seed
-from ..errors import BudgetError
+from ..errors import BudgetError, Prp3mcWarning
 from ..montecarlo.propagation import monte_carlo
 from ..stackup import exact_yield
 from ..units import MM2UM
@@ -113,8 +114,10 @@ class PercentileCheck:
         first = np.intersect1d(self._active, at)
         for poses in ((first,) if first.size else ()) + (at,):   # the poses that failed before, then all
             try:
-                r = exact_yield(self.geometry, budget, self.pb.poses[poses], spec_position_um=self.S * MM2UM,
-                                quantiles=False, target=min(1e-2, 1e-3 * self.alpha))
+                with warnings.catch_warnings():   # a bound above the target is in the decision: no warning
+                    warnings.simplefilter("ignore", Prp3mcWarning)
+                    r = exact_yield(self.geometry, budget, self.pb.poses[poses], spec_position_um=self.S * MM2UM,
+                                    quantiles=False, target=min(1e-2, 1e-3 * self.alpha))
             except BudgetError:                # too few continuous laws for the series: Monte Carlo decides
                 return self._monte_carlo(key)
             high = np.asarray(r.exceed_position + r.bound_position).reshape(-1)
