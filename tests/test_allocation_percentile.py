@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from prp3mc import Budget, Geometry, allocate, exact_yield
+from prp3mc._rng import child_seed
 from prp3mc.allocation.classes import ClassMenu
 from prp3mc.allocation.optimum import region_poses
 from prp3mc.allocation.percentile import PercentileCheck
@@ -157,6 +158,6 @@ def test_a_choice_the_exact_engine_cannot_serve_is_decided_by_monte_carlo():
     problem = Problem(geometry, menu, poses, percentile=Q)
     rec = PercentileCheck(geometry, problem, 0.020, Q, 20_000, 1).record(np.zeros(6, dtype=int))
     mc = monte_carlo(geometry, problem.budget({n: menu.classes_of(n)[0].name for n in menu.inputs}), poses,
-                     20_000, rng=1, percentiles=(Q,))
-    assert rec["method"] == "monte_carlo" and 0 < rec["value"] <= float(mc.position_pct_ci[:, 0, 1].max()) * 1.2
+                     20_000, rng=child_seed(1, 1001), percentiles=(Q,))    # the check's first stream
+    assert rec["method"] == "monte_carlo" and rec["value"] == float(mc.position_pct_ci[:, 0, 1].max())
     assert rec["met"] == (rec["value"] <= 0.020)
