@@ -29,7 +29,6 @@ case and ``E = E|(dx, dy)|^2``, ``P(|(dx, dy)| > S) >= (E - S^2) / (W^2 - S^2)``
 
 from __future__ import annotations
 
-import itertools
 import math
 import warnings
 
@@ -52,7 +51,7 @@ METHODS = {"exact": "exact distribution of the linear model (prp3mc.stackup): ex
                           "at every pose"}
 #: Screen factors tried by phase 1 (the least-cost choice within f * S on the normal screen, f bisected).
 _PHASE1_CHECKS = 10
-#: Phase 2 runs when the menu has at most this many choices times poses, and checks at most _CERTIFY choices.
+#: Phase 2 runs when the menu has at most this many choices times inputs, and checks at most _CERTIFY choices.
 _ENUMERATE_ELEMENTS = 1 << 24
 _CERTIFY = 400
 _CHUNK_ELEMENTS = 1 << 18
@@ -199,7 +198,7 @@ def percentile_least_cost(problem: Problem, limits: dict, check: PercentileCheck
     proven = False
     if check.method == "exact":
         cheaper = _cheaper(problem, limits, check, None if best is None else _cost(problem, best))
-        if cheaper is not None and len(cheaper) <= _CERTIFY:
+        if cheaper is not None:
             for idx in cheaper:
                 if check(idx):
                     best = idx
@@ -210,32 +209,34 @@ def percentile_least_cost(problem: Problem, limits: dict, check: PercentileCheck
 
 def _cheaper(problem: Problem, limits: dict, check: PercentileCheck, cost: float | None):
     """The choices cheaper than ``cost`` that the worst-case limits and the second-moment bound leave,
-    (m, J) in cost order, or None when the menu is too large to list."""
+    (m, J) in cost order, or None when the menu is too large to list or more than ``_CERTIFY`` are left."""
     N, J = problem.poses.shape[0], len(problem.inputs)
-    n_choices = math.prod(int(n) for n in problem.n_classes)
-    if n_choices * N > _ENUMERATE_ELEMENTS:
-        return None
-    every = np.array(list(itertools.product(*(range(int(n)) for n in problem.n_classes))), dtype=int).reshape(-1, J)
-    costs = problem.cost[np.arange(J), every].sum(axis=1)
-    keep = costs < cost * (1 - 1e-12) if cost is not None else np.ones(len(every), dtype=bool)
-    every, costs = every[keep], costs[keep]
-    ok = np.ones(len(every), dtype=bool)
-    step = max(1, _CHUNK_ELEMENTS // N)
+    shape = tuple(int(n) for n in problem.n_classes)
     j = np.arange(J)
+    if math.prod(shape) * J > _ENUMERATE_ELEMENTS:
+        return None
+    every = np.stack(np.unravel_index(np.arange(math.prod(shape)), shape), axis=1)
+    costs = problem.cost[j, every].sum(axis=1)
+    if cost is not None:
+        every, costs = every[costs < cost * (1 - 1e-12)], costs[costs < cost * (1 - 1e-12)]
+    every = every[np.argsort(costs, kind="stable")]
     px, py = problem.P[..., 0], problem.P[..., 1]
-    fixed = problem.fixed
-    for s in range(0, len(every), step):
+    fixed, left = problem.fixed, []
+    step = max(1, _CHUNK_ELEMENTS // N)
+    for s in range(0, len(every), step):           # cheapest first: stop once more are left than can be checked
         idx = every[s:s + step]
         env = problem.envelopes(idx)
+        ok = np.ones(len(idx), dtype=bool)
         if limits.get("phi") is not None:
-            ok[s:s + step] &= env["phi"].max(axis=1) <= limits["phi"]
+            ok &= env["phi"].max(axis=1) <= limits["phi"]
         if check.bounded:
             mu = (problem.mean[j, idx] @ problem.P.reshape(J, -1)).reshape(len(idx), N, 3) + fixed["mean"]
-            var = problem.var[j, idx]
-            second = (mu[..., 0] ** 2 + mu[..., 1] ** 2 + var @ (px * px + py * py)
+            second = (mu[..., 0] ** 2 + mu[..., 1] ** 2 + problem.var[j, idx] @ (px * px + py * py)
                       + fixed["cov"][:, 0, 0] + fixed["cov"][:, 1, 1])
             W2, S2 = env["position"] ** 2, check.S ** 2
             low = np.where(W2 > S2, (second - S2) / np.where(W2 > S2, W2 - S2, 1.0), 0.0)
-            ok[s:s + step] &= low.max(axis=1) <= check.alpha
-    every, costs = every[ok], costs[ok]
-    return every[np.argsort(costs, kind="stable")]
+            ok &= low.max(axis=1) <= check.alpha
+        left.append(idx[ok])
+        if sum(len(x) for x in left) > _CERTIFY:
+            return None
+    return np.concatenate(left) if left else np.zeros((0, J), dtype=int)
