@@ -491,6 +491,8 @@ def _run(argv: list[str], own_process: bool = False) -> int:
     def one_line_warning(message, category, filename, lineno, file=None, line=None):
         if not issubclass(category, Prp3mcWarning):
             return show(message, category, filename, lineno, file, line)
+        if _one_line(message) in WARNINGS:      # once: a budget's warning comes again from every configuration
+            return None
         WARNINGS.append(_one_line(message))
         print(f"{name}: warning: {_one_line(message)}", file=sys.stderr)
 
