@@ -103,3 +103,39 @@ def test_correlated_study_report(tmp_path, capsys):
     assert "rank correlations\n<code>bearings</code> = 0.8" in html          # the Run section
     table = (out / "tables" / "correlation.csv").read_text().splitlines()
     assert table[0] == "input_a,input_b,spearman,latent,realised,realised_se" and len(table) == 13
+
+
+def test_discrepancy_warning_measures_what_the_fit_leaves_out(seed):
+    """The warning's figures (largest relative change of the sd of the position error and of phi at the poses) are
+    those of Monte Carlo draws of the correlated and of the independent budget, within their sampling error."""
+    import re
+
+    from prp3mc.cli.discrepancy import correlation_warning
+    from prp3mc.kinematics.geometry import Geometry
+    from prp3mc.model.linear import linear_model
+    geometry, budget = Geometry.from_preset("u-shape"), EXAMPLE.budget
+    poses = np.array([[-30.0, 70.0, 0.0], [0.0, 100.0, 2.0], [30.0, 130.0, -2.0]])
+    message = correlation_warning(geometry, budget, poses)
+    position, phi = map(float, re.findall(r"by up to (\d+) %", message))
+    n = 40_000
+    sds = []
+    for b in (budget, Budget(budget.inputs)):
+        err = linear_model(geometry, b, poses).evaluate(b.sample(n, seed))          # (P, n, 3)
+        sds.append((np.sqrt(err[..., 0].var(1) + err[..., 1].var(1)), err[..., 2].std(1)))
+    for k, shown in enumerate((position, phi)):
+        change = 100 * np.max(np.abs(sds[0][k] / sds[1][k] - 1))
+        assert abs(change - shown) <= 0.5 + 100 * 6 * np.sqrt(2 / n) * (1 + change / 100), (k, change, shown)
+    assert "takes them as independent" in message and "one-batch" in message
+
+
+@pytest.mark.slow
+def test_discrepancy_of_a_correlated_budget_warns_once(tmp_path, capsys):
+    from prp3mc.study.reader import STUDIES_DIR
+    out = tmp_path / "d"
+    assert main(["discrepancy", "--geometry", "u-shape", "--budget", str(STUDIES_DIR / "budgets" / "one_batch.toml"),
+                 "--data", "example", "--instrument-sigma-mm", "0.002", "--instrument-sigma-deg", "0.0005",
+                 "--seed", "1", "--no-progress", "--out", str(out)]) == 0
+    assert capsys.readouterr().err.count("the discrepancy fit takes them as independent") == 1
+    doc = json.loads((out / "discrepancy.json").read_text())
+    assert sum("takes them as independent" in w for w in doc["warnings"]) == 1
+    assert "[correlation]" in (out / "model" / "budget.toml").read_text()
