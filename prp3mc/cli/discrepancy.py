@@ -6,14 +6,8 @@ import numpy as np
 
 from ..kinematics.geometry import Geometry
 from ..limits import discrepancy_estimate
-from ..measurement.fit.accuracy import MODELS
-from ..measurement.campaign.data import count_rows, read_campaign
-from ..measurement.fit.workflow import STAGES, discrepancy
 from ..progress import Progress
-from ..reports.discrepancy_report import report_document, write_report
 from ..errors import Prp3mcWarning
-from ..model.budget import Budget
-from ..model.linear import linear_model
 from ..units import MM2UM, quantity_text
 from . import (WARNINGS, add_budget, add_geometry, add_json, add_output, add_progress, add_seed, command, emit_json,
                nonnegative_float, probability, provenance, within_limits)
@@ -46,6 +40,10 @@ class DiscrepancyCommand:
 
     @staticmethod
     def run(args) -> None:
+        from ..model.budget import Budget
+        from ..reports.discrepancy_report import report_document, write_report
+        from ..measurement.fit.workflow import STAGES, discrepancy
+        from ..measurement.campaign.data import count_rows, read_campaign
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         d = len(budget)
         within_limits(args, discrepancy_estimate(count_rows(args.data), n_inputs=d))  # before reading the file
@@ -80,6 +78,8 @@ def correlation_warning(geometry, budget, poses) -> str:
     position error (the root of the x, y variances' sum) and of φ differ
     from the independent one's at some pose (the largest relative difference).
     """
+    from ..model.linear import linear_model
+    from ..model.budget import Budget
     budget = budget.without_effects()
     cov = [linear_model(geometry, b, poses, check=False).moments()[1] for b in (budget, Budget(budget.inputs))]
     sd = [(np.sqrt(c[..., 0, 0] + c[..., 1, 1]), np.sqrt(c[..., 2, 2])) for c in cov]
@@ -94,6 +94,7 @@ def correlation_warning(geometry, budget, poses) -> str:
 
 def headline(result) -> list[str]:
     """The lines printed after an analysis: what was named, the nuisances, the gap and the one verdict."""
+    from ..measurement.fit.accuracy import MODELS
     g = result.gap
     lines = [f"{result.campaign.n_measurements} measurements of {result.campaign.n_poses} poses; "
              f"seed {result.seed}; {result.wall_time_s:.1f} s"]
