@@ -552,7 +552,7 @@ def _dependence(result: StudyResult, summary: dict, tables: dict) -> dict | None
                                                   "realised_se": "se"})
     return {"analyses": [{"name": names[k], **v} for k, v in correlation["analyses"].items()],
             "pairs": _html_table(pairs, 3), "n": correlation["realised_from"]["samples"],
-            "seed": correlation["realised_from"]["seed"], "table": correlation["table"]}
+            "seed": summary["inputs"]["montecarlo_seed"], "table": correlation["table"]}
 
 
 def _merit_name(analysis: str, output: str, statistic: str) -> str:

@@ -41,7 +41,7 @@ Layout (µm and arcsec)::
         "copula": "Gaussian",
         "pairs": [{"inputs": ["rho_1", "rho_2"], "spearman": 0.8, "latent": 0.813,
                    "realised": {"value": 0.799, "se": 0.002}}, ...],   # every correlated pair, groups expanded
-        "realised_from": {"samples": 32768, "seed": ...},       # the Monte Carlo draws of the budget
+        "realised_from": {"samples": 32768},    # the Monte Carlo draws of the budget (inputs.montecarlo_seed)
         "analyses": {"montecarlo": {"respects": true, "how": "..."}, "shapley": {...},
                      "sobol": {"respects": false, "how": "not defined: ..."},
                      "worst_case": {"respects": false, "how": "a box: ..."}, ...}}}
@@ -256,7 +256,8 @@ def correlation_summary(result: StudyResult) -> dict | None:
 
     The realised rank correlations are those of the Monte Carlo draws
     (``budget.sample(montecarlo_samples, montecarlo_seed)``; without a
-    Monte Carlo, :data:`REALISED_SAMPLES` draws of that seed).
+    Monte Carlo, :data:`REALISED_SAMPLES` draws of that seed). The seed is
+    in ``inputs`` (``montecarlo_seed``), so that two runs' summaries compare.
     """
     from scipy import stats
     budget, study = result.study.budget, result.study
@@ -276,7 +277,7 @@ def correlation_summary(result: StudyResult) -> dict | None:
                               "latent": float(cop.latent[a, b]),
                               "realised": {"value": r, "se": (1.0 - r * r) * z_se}})
     return {"table": dict(budget.correlation), "copula": "Gaussian", "pairs": pairs,
-            "realised_from": {"samples": int(n), "seed": result.montecarlo_seed},
+            "realised_from": {"samples": int(n)},
             "analyses": _analyses_under_correlation(study)}
 
 
