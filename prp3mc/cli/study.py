@@ -37,7 +37,6 @@ class StudyCommand:
 
     @staticmethod
     def run(args) -> None:
-        from ..model.validity import check_linearity
         from ..study.reader import Study
         from ..study.runner import run_study
         from ..reports.study_report import write_study

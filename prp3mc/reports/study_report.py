@@ -355,11 +355,16 @@ def _summary_frame(result: StudyResult) -> pd.DataFrame:
     return pd.concat([frame, pd.DataFrame(rows, columns=frame.columns)], ignore_index=True) if rows else frame
 
 
-def _correlation_frame(correlation: dict) -> pd.DataFrame:
-    """One row per correlated pair of ``summary.json``'s ``correlation``: asked, latent, realised and its se."""
-    return pd.DataFrame([{"input_a": p["inputs"][0], "input_b": p["inputs"][1], "spearman": p["spearman"],
-                          "latent": p["latent"], "realised": p["realised"]["value"], "realised_se": p["realised"]["se"]}
-                         for p in correlation["pairs"]])
+def _correlation_frame(correlation: dict, order: list[str]) -> pd.DataFrame:
+    """One row per correlated pair of ``summary.json``'s ``correlation`` (asked, latent, realised and its se), in
+    the heat-map's ``order`` (:func:`correlation_order`)."""
+    rank = {n: k for k, n in enumerate(order)}
+    rows = []
+    for p in sorted(correlation["pairs"], key=lambda p: sorted(rank[n] for n in p["inputs"])):
+        a, b = sorted(p["inputs"], key=rank.get)
+        rows.append({"input_a": a, "input_b": b, "spearman": p["spearman"], "latent": p["latent"],
+                     "realised": p["realised"]["value"], "realised_se": p["realised"]["se"]})
+    return pd.DataFrame(rows)
 
 
 def _tables(result: StudyResult, summary: dict | None = None) -> dict[str, pd.DataFrame]:
@@ -370,7 +375,7 @@ def _tables(result: StudyResult, summary: dict | None = None) -> dict[str, pd.Da
     if result.study.budget.effects:
         tables["effects"] = result.study.budget.effects_frame()
     if summary is not None and "correlation" in summary:
-        tables["correlation"] = _correlation_frame(summary["correlation"])
+        tables["correlation"] = _correlation_frame(summary["correlation"], correlation_order(result.study.budget))
     if result.study.sweep:
         tables["design_space"] = design_frame(result, _MC_PERCENTILE)
     for c in result.configurations:
@@ -469,7 +474,7 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
         effects_table=_html_table(tables["effects"].drop(columns=["campaign_sha256"])) if "effects" in tables else None,
         summary=summary, mc_percentile=f"p{_MC_PERCENTILE:g}", tables=sorted(tables),
         inputs=summary["inputs"], versions=summary["versions"], allocations=_allocations(result, tables),
-        glance=_glance(result, summary), dependence=_dependence(result, summary, tables),
+        glance=_glance(result, summary), dependence=_dependence(summary, tables),
         formats=tuple(formats), extras=[ext for ext in formats if ext != "png"],
         written=_written(figures, tables, formats, table_types))
 
@@ -536,20 +541,16 @@ def _glance(result: StudyResult, summary: dict) -> list[dict]:
     return rows
 
 
-def _dependence(result: StudyResult, summary: dict, tables: dict) -> dict | None:
-    """The section on a correlated budget (None for an independent one): which analyses respected its correlation,
-    the pairs asked and realised, and whether the ranking is by Shapley effects."""
+def _dependence(summary: dict, tables: dict) -> dict | None:
+    """The section on a correlated budget (None for an independent one): its table, which analyses respected it,
+    and the pairs asked and realised (the draws' size and seed)."""
     correlation = summary.get("correlation")
     if correlation is None:
         return None
     names = {"worst_case": "exact worst case", "montecarlo": "Monte Carlo", "shapley": "Shapley effects",
              "sobol": "Sobol indices (S1, ST)", "allocation": "tolerance allocation"}
-    rank = {n: k for k, n in enumerate(correlation_order(result.study.budget))}
-    pairs = tables["correlation"].assign(_a=lambda d: d["input_a"].map(rank), _b=lambda d: d["input_b"].map(rank))
-    pairs = pairs.assign(_lo=pairs[["_a", "_b"]].min(axis=1), _hi=pairs[["_a", "_b"]].max(axis=1))
-    pairs = pairs.sort_values(["_lo", "_hi"]).drop(columns=["_a", "_b", "_lo", "_hi"]).rename(columns={"input_a": "input", "input_b": "with", "spearman": "asked",
-                                                  "latent": "latent normal r", "realised": "realised",
-                                                  "realised_se": "se"})
+    pairs = tables["correlation"].rename(columns={"input_a": "input", "input_b": "with", "spearman": "asked",
+                                                  "latent": "latent normal r", "realised_se": "se"})
     return {"analyses": [{"name": names[k], **v} for k, v in correlation["analyses"].items()],
             "pairs": _html_table(pairs, 3), "n": correlation["realised_from"]["samples"],
             "seed": summary["inputs"]["montecarlo_seed"], "table": correlation["table"]}
