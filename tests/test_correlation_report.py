@@ -99,7 +99,7 @@ def test_correlated_study_report(tmp_path, capsys):
     assert 'alt="correlation"' in html and (out / "figures" / "correlation.png").is_file()
     assert "Spearman (rank) correlation" in html and "Gaussian copula realises it" in html
     assert html.index("Dependent inputs</h2>") < html.index('alt="correlation"') < html.index("Budget</h2>")
-    assert "a box: The worst case is the maximum over the box" in html
+    assert "unchanged, a box. The worst case is the maximum over the box" in html
     assert "rank correlations\n<code>bearings</code> = 0.8" in html          # the Run section
     table = (out / "tables" / "correlation.csv").read_text().splitlines()
     assert table[0] == "input_a,input_b,spearman,latent,realised,realised_se" and len(table) == 13

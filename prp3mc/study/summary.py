@@ -236,7 +236,7 @@ REALISED_SAMPLES = 1 << 15
 
 def _analyses_under_correlation(study) -> dict:
     """Which analyses of ``study`` respected its budget's correlation, and how (``respects``, ``how``)."""
-    out = {"worst_case": {"respects": False, "how": "a box: " + CORRELATION_NOTE}}
+    out = {"worst_case": {"respects": False, "how": "unchanged, a box. " + CORRELATION_NOTE}}
     if "montecarlo" in study.outputs:
         out["montecarlo"] = {"respects": True, "how": "each draw of the correlated inputs passes through the "
                              "Gaussian copula; every percentile, mean and probability is of the dependent inputs"}
