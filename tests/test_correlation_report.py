@@ -96,6 +96,7 @@ def test_correlated_study_report(tmp_path, capsys):
     assert "Sensitivity: Shapley effects</h2>" in html and "Sobol sensitivity</h2>" not in html
     assert "so Sobol indices are not defined" in html and "dominant by Shapley effect" in html
     assert "(Sh 0." in html                                                  # the dominant input's Shapley effect
+    assert "Shapley effects (the budget correlates inputs): 512 random orders of the inputs on a 3 × 3 grid" in html
     assert 'alt="correlation"' in html and (out / "figures" / "correlation.png").is_file()
     assert "Spearman (rank) correlation" in html and "Gaussian copula realises it" in html
     assert html.index("Dependent inputs</h2>") < html.index('alt="correlation"') < html.index("Budget</h2>")
