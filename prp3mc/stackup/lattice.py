@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Channel", "channel", "LEVELS", "MIXED_LEG"]
+__all__ = ["Channel", "channel", "leg_powers", "LEVELS", "MIXED_LEG"]
 
 #: Probabilities of the reported quantiles: p99.73 and p99.9937 (3 and 4 sd of a normal law, two-sided:
 #: Cpk 1 and 1.33) and p99.9999 (1 ppm).
@@ -54,7 +54,7 @@ class Channel:
     alias: np.ndarray       # (N,) mass of the normal laws beyond their cut that acts on the channel
 
 
-def _leg_powers(table, c, legs, share: float) -> np.ndarray:
+def leg_powers(table, c, legs, share: float) -> np.ndarray:
     """Asymptotic decay power of each leg's envelope product with the transform's share, (N, 3)."""
     present = table.random[None, :] & (np.abs(c).max(axis=1) > 0)               # (N, T)
     out = np.zeros((c.shape[0], 3))
@@ -111,7 +111,7 @@ def channel(which: str, columns: np.ndarray, Ainv: np.ndarray, legs, table, z1, 
         grp[nonzero] = 0
     elif d == 2:
         m = np.moveaxis(Ainv[:, :2, :], 1, 2)                          # (N, leg, 2): each leg's direction
-        valid = _leg_powers(table, c, legs, 0.75) > 1.0 + 1e-9
+        valid = leg_powers(table, c, legs, 0.75) > 1.0 + 1e-9
         pairs = ((0, 1), (0, 2), (1, 2))
         score = np.zeros((N, 3))
         for k, (a, b) in enumerate(pairs):
@@ -131,7 +131,7 @@ def channel(which: str, columns: np.ndarray, Ainv: np.ndarray, legs, table, z1, 
             on = nonzero & (legs[None, :] == pair[:, j, None])
             grp[on] = j
     else:
-        valid = _leg_powers(table, c, legs, 1.0 / 3.0) > 1.0 + 1e-9
+        valid = leg_powers(table, c, legs, 1.0 / 3.0) > 1.0 + 1e-9
         ok = valid.all(axis=1)
         V[:] = np.swapaxes(Ainv, 1, 2)                                 # rows: the legs' directions
         grp[nonzero] = -1

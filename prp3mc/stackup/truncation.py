@@ -60,7 +60,7 @@ _SQRT2 = math.sqrt(2.0)
 _N_CAP = 1 << 20            # longest 1-D envelope array of a basis leg
 _BINS = 1400                # log2 bins of the envelope, from 2^-1300 up
 _WALK_CAP = 1 << 22         # farthest point of a row walk
-_MAX_POINTS = (1 << 23, 1 << 23, 1 << 21)   # most points walked at one pose, per dimension (beyond: status 3)
+_MAX_POINTS = (1 << 23, 1 << 23, 1 << 18)   # most points walked at one pose, per dimension (beyond: status 3)
 
 
 # ------------------------------------------------------------------ bounds of the transform of D
@@ -455,7 +455,7 @@ def _rows_3d(E2, E3, SE, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2, e_part):
                     if tail <= 0.5 * budget:
                         tails += tail
                         break
-                if U > _WALK_CAP:
+                if U > _WALK_CAP or count > _MAX_POINTS[2]:
                     return rows[:count], row_sum[:count], np.inf, np.inf, 3
                 U += 1
     return rows[:count], row_sum[:count], outer, 2.0 * tails, status
@@ -475,7 +475,8 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
         Points walked (before dropping).
     status : int
         0; 1 when the bound could not be brought within 0.9 eps; 2 when there is none (a basis leg's
-        envelope sums to infinity); 3 when the points needed exceed 2^23 (2^21 for d = 3).
+        envelope sums to infinity); 3 when the points needed exceed 2^23 (2^18 for d = 3, whose caller
+        then falls back on a bracket).
     """
     empty = np.zeros((0, 3), np.int64)
     g_origin = (_tau(d, z1, z2, 0.0) / lam) ** (1.0 / d)
