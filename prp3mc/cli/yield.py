@@ -1,6 +1,7 @@
 """``prp3mc yield``: the exact yield of the linear model against a position (and orientation) spec (SPEC §9)."""
 
 import sys
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -55,8 +56,12 @@ class YieldCommand:
         if budget.correlated:
             _correlated(args, geometry, budget, poses, where)
             return
-        over = exact_yield(geometry, budget, poses, quantiles=args.region is None, target=args.target, **specs)
+        with warnings.catch_warnings(record=True) as caught:    # a spec in the wrong unit: one line, not two
+            warnings.simplefilter("always")
+            over = exact_yield(geometry, budget, poses, quantiles=args.region is None, target=args.target, **specs)
         _check_scale(args, over)
+        for w in caught:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         inputs = dict(**specs, target=args.target, **where)
         if args.region is not None:
             region = over.region_summary()
@@ -97,7 +102,8 @@ def _pose_frame(r) -> pd.DataFrame:
         frame["exceed_phi_ppm"] = PPM * r.exceed_phi.reshape(-1)
         frame["exceed_any_ppm"] = PPM * r.exceed_any.reshape(-1)
     frame["error_bound_ppm"] = PPM * r.error_bound.reshape(-1)
-    frame["ppk_position"] = r.ppk("position").reshape(-1)
+    ppk_pos = r.ppk("position").reshape(-1)
+    frame["ppk_position"] = pd.Series(ppk_pos, dtype=object).where(np.isfinite(ppk_pos), None)   # P = 0: none
     frame["worst_case_position_um"] = MM2UM * r.worst_position_mm.reshape(-1)
     frame["rss_position_um"] = MM2UM * r.rss_position_mm.reshape(-1)
     return frame
@@ -105,7 +111,7 @@ def _pose_frame(r) -> pd.DataFrame:
 
 def _correlated(args, geometry, budget, poses, where) -> None:
     """A budget with [correlation]: the streamed Monte Carlo, its Wilson interval as the error (said in method)."""
-    from ..montecarlo import monte_carlo
+    from ..montecarlo.propagation import monte_carlo
 
     S = args.spec_position_um / MM2UM
     mc = monte_carlo(geometry, budget, poses, args.samples, rng=args.seed, tolerance_mm=S,
