@@ -45,7 +45,8 @@ def uniform_budget() -> Budget:
 
 def ot_budget() -> Budget:
     """Uniform, normal and triangular laws: what OpenTURNS' linear combination represents."""
-    return Budget({"theta_1": Uniform(-0.04, 0.04), "theta_2": Normal(0.0, 0.012), "theta_3": Triangular(-0.03, 0.01, 0.04),
+    return Budget({"theta_1": Uniform(-0.04, 0.04), "theta_2": Normal(0.0, 0.012),
+                   "theta_3": Triangular(-0.03, 0.01, 0.04),
                    "b_1": Normal(0.002, 0.006), "b_2": Uniform(0.0, 0.025), "b_3": Triangular(0.0, 0.02, 0.025),
                    "c_1": Uniform(-0.01, 0.01)}, name="ot")
 
@@ -284,6 +285,17 @@ def test_mixed_budget_agrees_with_monte_carlo(preset, seed):
     check_against_monte_carlo(geometry, budget, poses, 200_000, seed)
 
 
+def test_the_joint_series_agrees_with_monte_carlo(seed):
+    """A normal law in every leg: P(either) comes from the 3-D series (not the bracket), within its bound."""
+    geometry = Geometry.from_preset("u-shape")
+    budget = Budget({f"theta_{i}": Normal(0.0, 0.012) for i in (1, 2, 3)}
+                    | {f"b_{i}": Uniform(0.0, 0.025) for i in (1, 2, 3)} | {"rho_2": Uniform(0.0, 0.016),
+                                                                           "zeta_2": Uniform(0.0, 360.0)}, name="n")
+    poses = poses_of("u-shape", 3, np.random.default_rng(seed))
+    r, _ = check_against_monte_carlo(geometry, budget, poses, 200_000, seed)
+    assert not np.any(r.bracketed_any) and np.all(r.bound_any <= r.target)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("preset", ["u-shape", "delta-shape"])
 @pytest.mark.parametrize("which", ["paper", "mixed"])
@@ -318,3 +330,21 @@ def test_result_frame_and_record_carry_the_spec_figures():
     assert summary["argmax_pose"] == [float(v) for v in r.poses[int(np.argmax(r.exceed_position))]]
     # worst case >= every quantile (the paper's budget is bounded), and the exceedance of the worst case is 0
     assert np.all(r.quantile_position_mm[:, -1] <= r.worst_position_mm + r.quantile_position_err_mm[:, -1])
+
+
+def test_quantiles_agree_with_monte_carlo(seed):
+    """P(position > q) and P(|dphi| > q) at the exact quantiles q are 1 - level, within N_SE standard errors."""
+    geometry, budget = Geometry.from_preset("u-shape"), Budget.load("paper")
+    poses = poses_of("u-shape", 2, np.random.default_rng(seed))
+    r = exact_yield(geometry, budget, poses, spec_position_um=100.0)
+    n = 200_000
+    rng = np.random.default_rng(seed)
+    for k in range(poses.shape[0]):
+        model = linear_model(geometry, budget, poses[k:k + 1])
+        for q, level in enumerate(r.levels[:2]):
+            p = 1.0 - level / 100.0
+            qp, qf = r.quantile_position_mm[k, q], r.quantile_phi_deg[k, q] * DEG2RAD
+            assert r.quantile_position_err_mm[k, q] < 1e-5 * qp and r.quantile_phi_err_deg[k, q] * DEG2RAD < 1e-5 * qf
+            mc = sample_exceedance(model, n, rng, qp, qf)
+            se = math.sqrt(p * (1.0 - p) / n)
+            assert abs(mc[0, 0] - p) <= N_SE * se and abs(mc[1, 0] - p) <= N_SE * se, (k, level, mc[:2, 0], p)

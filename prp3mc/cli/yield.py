@@ -174,14 +174,16 @@ def _text(args, geometry, budget, pose, r, record, region) -> list[str]:
         k = float(np.ravel(r.ppk(output))[0])
         lines.append(f"  {label:24s}{100 * p:11.4g} %{PPM * p:14.4f}{k:8.2f}" if np.isfinite(k) else
                      f"  {label:24s}{100 * p:11.4g} %{PPM * p:14.4f}{'> 6':>8s}")
-    lines += ["", f"{'':18s}{'worst case':>12s}{'RSS':>10s}" + "".join(f"{'p' + format(v, 'g'):>11s}" for v in r.levels)]
+    lines += ["", f"{'':18s}{'worst case':>12s}{'RSS':>10s}"
+              + "".join(f"{'p' + format(v, 'g'):>11s}" for v in r.levels)]
     for label, worst, rss, q, scale in (("position (µm)", r.worst_position_mm, r.rss_position_mm,
                                          r.quantile_position_mm, MM2UM),
                                         ("|dphi| (arcsec)", r.worst_phi_deg, r.rss_phi_deg, r.quantile_phi_deg,
                                          DEG2ARCSEC)):
         w = float(np.ravel(worst)[0])
         lines.append(f"  {label:16s}{scale * w:12.3f}" if np.isfinite(w) else f"  {label:16s}{'unbounded':>12s}")
-        lines[-1] += f"{scale * float(np.ravel(rss)[0]):10.3f}" + "".join(f"{scale * float(v):11.3f}" for v in np.ravel(q))
+        lines[-1] += (f"{scale * float(np.ravel(rss)[0]):10.3f}"
+                      + "".join(f"{scale * float(v):11.3f}" for v in np.ravel(q)))
     qerr_pos = max(record["quantile_error_bounds_position_um"].values())
     qerr_phi = max(record["quantile_error_bounds_phi_arcsec"].values())
     lines += [f"Quantiles exact within {qerr_pos:.2g} µm and {qerr_phi:.2g} arcsec. RSS: |centre| + root sum of "

@@ -226,7 +226,8 @@ class _Runner:
         p, b, n, status = out[:4]
         p[sure], b[sure], n[sure], status[sure] = 1.0, 0.0, 0, 0
         for code, why in ((2, "fewer legs with a continuous law, whose terms decay, than it has dimensions: it "
-                              "has no density"), (3, "the series needs more than 2^23 terms (too few continuous laws)")):
+                              "has no density"),
+                          (3, "the series needs more than 2^23 terms (too few continuous laws)")):
             if np.any(status == code) and not fallback:
                 raise BudgetError(f"exact yield: {what} of budget {self.budget!r} at {int(np.sum(status == code))} "
                                   f"pose(s): {why}; use Monte Carlo")
