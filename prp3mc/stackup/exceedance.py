@@ -51,8 +51,8 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
                 quantiles: bool = True, target: float = DEFAULT_TARGET, workers: int | None = None) -> YieldResult:
     """The exact distribution of the linear model's pose error against a spec, at a batch of poses.
 
-    For each pose: P(|(dx, dy)| > S), P(|dphi| > Z), P(either), and the
-    quantiles p99.73, p99.9937, p99.9999 of the position error and of |dphi|,
+    For each pose: P(``|(dx, dy)|`` > S), P(``|dphi|`` > Z), P(either), and the
+    quantiles p99.73, p99.9937, p99.9999 of the position error and of ``|dphi|``,
     each with a guaranteed bound of its error; no sampling. The budget's
     inputs are independent; its ``[effects]`` enter as in the other
     analyses (known shifts, backlash ±h/2 with probability 1/2 each, one
@@ -68,9 +68,15 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     Y's support away from D (so the periodised density equals the density
     on D); it is summed over the lattice points a rigorous bound says matter,
     and the bound on everything left out (decreasing envelopes of every
-    term's |phi_t|, analytic power-law tails) is the reported error, with
+    term's ``|phi_t|``, analytic power-law tails) is the reported error, with
     floating point and the mass of normal laws past their cut. Quantiles solve
     P(z) = p on the same series; their bracket P(z) = p -/+ bound bounds their error.
+
+    P(either) needs the 3-D series, which converges in time only when every
+    leg's characteristic function decays fast (a normal law in each leg, say);
+    otherwise it is the midpoint of ``[max(P_pos, P_phi), P_pos + P_phi]``
+    with the half-width (plus both bounds) as its bound, flagged in
+    ``bracketed_any``: the bound holds, but exceeds the target (a warning says so).
 
     Parameters
     ----------
@@ -81,15 +87,23 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     poses : array_like, shape (..., 3)
         ``[x_mm, y_mm, phi_deg]``; poses out of stroke or near a singularity are refused.
     spec_position_um : float
-        S, µm: the position error |(dx, dy)| must stay within it.
+        S, µm: the position error ``|(dx, dy)|`` must stay within it.
     spec_phi_arcsec : float, optional
-        Z, arcsec: |dphi| must stay within it.
+        Z, arcsec: ``|dphi|`` must stay within it.
     quantiles : bool
         Compute the quantiles too (the most time-consuming part on grids).
     target : float
         Bound of the absolute error of every probability (default 1e-9, i.e. 1e-3 ppm); in (0, 1e-2].
     workers : int, optional
         Threads (default: the CPU count).
+
+    Raises
+    ------
+    SpecError
+        A spec or target out of range.
+    BudgetError
+        A budget with ``[correlation]`` (the series needs independent inputs: use Monte Carlo), or whose
+        position has no 2-D density (one leg random).
 
     Returns
     -------
@@ -235,7 +249,7 @@ class _Runner:
 
 
 def _either(run, C, Ainv, legs, table, share, S, Z, e_pos, b_pos, e_phi, b_phi):
-    """P(position > S or |dphi| > Z) and its bound, per pose: the 3-D series of the cylinder where it is
+    """P(position > S or ``|dphi|`` > Z) and its bound, per pose: the 3-D series of the cylinder where it is
     certified, else the Fréchet bracket ``[max(P_pos, P_phi), P_pos + P_phi]`` (its midpoint, the half-width
     plus both channels' bounds as the bound), whichever bound is smaller. The joint series converges slowly
     when a leg has few continuous laws (its characteristic function decays slowly along that leg's axis):
@@ -276,7 +290,7 @@ def _moments(C: np.ndarray, table) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _worst(pos, phi, C, table) -> tuple[np.ndarray, np.ndarray]:
-    """The exact worst case of the position (mm) and |dphi| (rad); NaN where a normal law acts."""
+    """The exact worst case of the position (mm) and ``|dphi|`` (rad); NaN where a normal law acts."""
     normal_xy = (np.abs(C[:, :2, :]).max(axis=1) > 0) & table.normal[None, :]
     normal_phi = (np.abs(C[:, 2, :]) > 0) & table.normal[None, :]
     worst_pos = np.where(normal_xy.any(axis=1), np.nan, pos.zmax)
@@ -291,7 +305,7 @@ def _worst(pos, phi, C, table) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _rss(C: np.ndarray, table) -> tuple[np.ndarray, np.ndarray]:
-    """RSS stack of the position (mm) and |dphi| (rad): |centre| + sqrt(sum_t (|c_t| h_t)²), h_t the
+    """RSS stack of the position (mm) and ``|dphi|`` (rad): ``|centre|`` + sqrt(sum_t (``|c_t|`` h_t)²), h_t the
     half-width of term t's interval (3 sd for a normal law)."""
     sd = np.sqrt(table.var)
     half = np.where(table.normal, 3.0 * sd, 0.5 * (table.hi - table.lo))

@@ -1,7 +1,7 @@
 """The alias-free lattice of each channel of the pose error, at a batch of poses (numpy).
 
 A channel is dphi (d = 1), the position (dx, dy) (d = 2) or both (d = 3),
-with the region D: |dphi| <= z, the disc |(dx, dy)| <= z, or their cylinder.
+with the region D: ``|dphi|`` <= z, the disc ``|(dx, dy)|`` <= z, or their cylinder.
 Its lattice (:mod:`.series`) is rectangular in ``nu_j = m_j . w`` over a
 basis of d directions m_j: the single direction 1 for dphi; two legs'
 directions (the position rows of A^-1's columns) for the position, the pair
@@ -65,7 +65,7 @@ def leg_powers(table, c, legs, share: float) -> np.ndarray:
 
 
 def _segments_max(s, dirs, lo, hi) -> np.ndarray:
-    """Largest |s + sum_g dirs_g x_g| over x_g in [lo_g, hi_g]: at a corner. s (N, k), dirs (N, G, k), lo/hi (N, G)."""
+    """Largest ``|s + sum_g dirs_g x_g|`` over x_g in [lo_g, hi_g]: at a corner. s (N, k), dirs (N, G, k), lo/hi (N, G)."""
     G = dirs.shape[1]
     best = np.zeros(s.shape[0])
     for corner in itertools.product((0, 1), repeat=G):
@@ -171,7 +171,7 @@ def channel(which: str, columns: np.ndarray, Ainv: np.ndarray, legs, table, z1, 
 
 
 def _zmax(d: int, c: np.ndarray, s: np.ndarray, legs: np.ndarray, table, random: np.ndarray) -> np.ndarray:
-    """Largest |Y| over the support (normal laws cut): the terms of a leg are parallel, so their sum is
+    """Largest ``|Y|`` over the support (normal laws cut): the terms of a leg are parallel, so their sum is
     one segment; with the terms of all legs (thermal) the maximum is at one of a few corners."""
     if d == 3:
         return np.full(c.shape[0], np.nan)
