@@ -104,3 +104,11 @@ def test_a_correlated_budget_falls_back_on_monte_carlo_and_says_so(capsys, tmp_p
     assert rec["error_bound_ppm"] > 0 and rec["exceed_phi_ppm"] is None
     with pytest.raises(Exception, match="correlates"):
         exact_yield("u-shape", Budget.from_dict(doc), [10.0, 120.0, 0.0], spec_position_um=150.0)
+
+
+def test_the_command_default_target_is_the_engine_s():
+    import importlib
+
+    from prp3mc.stackup import DEFAULT_TARGET
+
+    assert importlib.import_module("prp3mc.cli.yield").DEFAULT_TARGET == DEFAULT_TARGET

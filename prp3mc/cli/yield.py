@@ -4,20 +4,17 @@ import sys
 import warnings
 
 import numpy as np
-import pandas as pd
 
 from .._version import __version__
 from ..errors import SpecError
-from ..kinematics.chain import check_poses
 from ..kinematics.geometry import Geometry
-from ..model.budget import Budget
-from ..model.validity import check_linearity
-from ..stackup import DEFAULT_TARGET, exact_yield
-from ..stackup.result import PPM, ppk
 from ..units import DEG2ARCSEC, MM2UM
 from . import (add_budget, add_geometry, add_json, add_pose_or_region, add_seed, command, emit_json, emit_table,
                grid_poses, positive_float, positive_int, probability, provenance)
 
+#: prp3mc.stackup.DEFAULT_TARGET, written out so that --help imports no numba (tests/test_yield_cli.py checks).
+DEFAULT_TARGET = 1e-9
+PPM = 1e6
 #: A spec this many times below the error's RSS scale is refused (a value in mm typed as µm, or the like).
 _SCALE = 1e-3
 _LEVELS = ("p99.73", "p99.9937", "p99.9999")
@@ -47,6 +44,11 @@ class YieldCommand:
 
     @staticmethod
     def run(args) -> None:
+        from ..kinematics.chain import check_poses
+        from ..model.budget import Budget
+        from ..model.validity import check_linearity
+        from ..stackup import exact_yield
+
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         poses, where = grid_poses(args)
         if args.region is None:
@@ -93,8 +95,10 @@ def _check_scale(args, r) -> None:
                             f"pose is out of spec; a value in another unit (mm, deg)?")
 
 
-def _pose_frame(r) -> pd.DataFrame:
+def _pose_frame(r) -> "pd.DataFrame":
     """One row per pose: the exceedances (ppm) and their bound, the position's Ppk, worst case and RSS."""
+    import pandas as pd
+
     poses = r.poses.reshape(-1, 3)
     frame = pd.DataFrame({"x_mm": poses[:, 0], "y_mm": poses[:, 1], "phi_deg": poses[:, 2],
                           "exceed_position_ppm": PPM * r.exceed_position.reshape(-1)})
@@ -111,7 +115,10 @@ def _pose_frame(r) -> pd.DataFrame:
 
 def _correlated(args, geometry, budget, poses, where) -> None:
     """A budget with [correlation]: the streamed Monte Carlo, its Wilson interval as the error (said in method)."""
+    import pandas as pd
+
     from ..montecarlo.propagation import monte_carlo
+    from ..stackup.result import ppk
 
     S = args.spec_position_um / MM2UM
     mc = monte_carlo(geometry, budget, poses, args.samples, rng=args.seed, tolerance_mm=S,
