@@ -43,6 +43,7 @@ from ..worstcase.envelope import WorstCase, worst_case
 from ..units import RAD2DEG
 from .allocation import ALLOCATION_STREAM, run_allocation
 from .reader import Study, StudyConfiguration
+from .spec import exceedance_curve, run_yield
 from .results import ConfigurationResult, PoseSamples, SkippedConfiguration, StudyResult
 from .sweep import Variant, expand
 
@@ -141,7 +142,8 @@ def run_configuration(plan: Plan, variant: Variant) -> Outcome:
 
 def _timings(study: Study) -> dict[str, float]:
     """Zero time for every analysis the study runs."""
-    return dict.fromkeys(("worstcase",) + study.outputs + (("allocation",) if study.allocation else ()), 0.0)
+    return dict.fromkeys(("worstcase",) + study.outputs + (("yield",) if study.spec else ())
+                         + (("allocation",) if study.allocation else ()), 0.0)
 
 
 def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple[ConfigurationResult, dict]:
@@ -182,6 +184,15 @@ def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple
         kw["sobol"] = s
         kw["ranking"] = {o: ranking(s, wc_s, output=o) for o in study.sobol_outputs}
         timings["sobol"] += time.perf_counter() - t
+    if study.spec is not None:
+        nx, ny = study.mc_grid
+        stage(f"exact yield against the spec on {nx} x {ny} poses")
+        t = time.perf_counter()
+        y = kw["yield_"] = run_yield(config, b, study.spec, study.mc_grid)
+        draws = b.sample(study.mc_samples, mc_seed) if "montecarlo" in study.outputs else None
+        kw["curves"] = tuple(exceedance_curve(config, b, y, o, draws)
+                             for o in ("position",) + (("phi",) if study.spec.phi_arcsec is not None else ()))
+        timings["yield"] += time.perf_counter() - t
     allocation = study.allocation
     if allocation is not None and allocation.applies_to(variant.base.name):  # a swept one: by its base's name
         stage("tolerance allocation" + (" and its Pareto front" if allocation.front else ""))
