@@ -43,7 +43,6 @@ grid = 9
 samples = 4096
 grid = 3
 percentiles = [50, 99]
-tolerance_mm = 0.08
 
 [sobol]
 samples = 256
@@ -147,7 +146,7 @@ def test_cli_writes_report_folder(tmp_path, capsys):
     u = summary["configurations"]["u-shape"]
     assert set(u["worst_case_position_um"]) == {"min", "max", "mean"}
     assert set(u["montecarlo"]["position_um"]["p99"]["max"]) == {"value", "se"}
-    assert u["montecarlo"]["exceed"]["tolerance_mm"] == 0.08
+    assert "exceed" not in u["montecarlo"] and "yield" not in u     # no spec (test_study_spec.py has one)
     assert set(u["sobol"]["position"]["clearance_1"]) == {"kind", "S1", "ST", "Sh", "worst_case_share"}
     meta = summary["metadata"]
     assert meta["seed"] == 3 and meta["montecarlo_samples"] == 4096 and meta["wall_time_s"] > 0

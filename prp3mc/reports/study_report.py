@@ -326,7 +326,7 @@ def _exceedance_figures(results) -> list[tuple[str, str, Callable]]:
 
 
 #: Size and margins (inches) of an exceedance curve.
-_EXCEEDANCE = ((6.4, 3.8), Margins(0.75, 0.2, 0.55, 0.35))
+_EXCEEDANCE = ((8.8, 3.8), Margins(0.75, 3.0, 0.55, 0.35))       # the legend right of the panel
 #: Size and margins (inches) of a Pareto chart of contributors.
 _PARETO = ((6.4, 3.4), Margins(0.75, 0.2, 0.75, 0.35))
 #: Size and margins (inches) of an allocation's map (its legend below it) and of its Pareto front.

@@ -35,7 +35,7 @@ def exceedance_plot(curve, *, ax=None, title: str = ""):
     """
     if ax is None:
         import matplotlib.pyplot as plt
-        ax = plt.figure(figsize=(6.4, 3.6)).subplots()
+        ax = plt.figure(figsize=(8.8, 3.8)).subplots(gridspec_kw={"right": 0.66})
     name, unit, scale = _NAMES[curve.output]
     s = scale * np.asarray(curve.s)
     exact = np.where(curve.exact > 0, curve.exact, np.nan)       # a log axis has no zero
@@ -58,7 +58,7 @@ def exceedance_plot(curve, *, ax=None, title: str = ""):
     ax.set_xlim(s.min(), s.max() * 1.02)
     ax.set(xlabel=f"{name} s ({unit})", ylabel=f"P({name} > s)")
     ax.grid(True, which="major", alpha=0.3)
-    ax.legend(fontsize=7, frameon=False, loc="lower left")
+    ax.legend(fontsize=7, frameon=False, loc="upper left", bbox_to_anchor=(1.02, 1.0))   # right of the curve
     x, y, phi = curve.pose
     ax.set_title(f"{title + ': ' if title else ''}{name} at x = {x:.4g}, y = {y:.4g} mm, φ = {phi:.4g}°",
                  fontsize=10, y=1.0)
