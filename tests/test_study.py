@@ -43,6 +43,7 @@ grid = 9
 samples = 4096
 grid = 3
 percentiles = [50, 99]
+# no tolerance_mm: a spec adds the exact yield (tests/test_study_spec.py)
 
 [sobol]
 samples = 256
@@ -76,7 +77,7 @@ def test_bundled_studies():
     for c in s.configurations:
         assert c.geometry == Geometry.from_preset(c.name)
         assert c.region == Region.from_preset(c.name) and c.region.phi_deg == 0.0
-    assert s.outputs == ("montecarlo", "sobol") and s.worstcase_grid == (201, 201)
+    assert s.outputs == ("montecarlo", "sobol", "yield") and s.worstcase_grid == (201, 201)
     assert Study.load(STUDIES_DIR / "quick.toml") == Study.load("quick")
 
 

@@ -31,7 +31,7 @@ BASE = """\
 name = "spec"
 seed = 5
 budget = "paper"
-outputs = ["montecarlo"]
+outputs = ["montecarlo", "yield"]
 
 [worstcase]
 grid = 5
@@ -57,6 +57,8 @@ def test_spec_table_read():
     assert (s.spec.position_um, s.spec.phi_arcsec, s.spec.source) == (100.0, 60.0, "[spec]")
     assert s.tolerance_mm == pytest.approx(0.1)            # the Monte Carlo run counts against the same spec
     assert Study.from_text(_text()).spec is None
+    assert Study.from_text(_text("[spec]\nposition_um = 100\n").replace('outputs = ["montecarlo", "yield"]', "")).outputs \
+        == ("montecarlo", "sobol", "yield")                  # the exact yield runs by default with a spec
 
 
 def test_tolerance_is_the_same_position_spec():

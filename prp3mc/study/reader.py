@@ -12,7 +12,8 @@ optional; paths are relative to the study file)::
     description = "..."               # a paragraph for the report
     seed = 20240611                   # default: fresh, recorded in the outputs
     budget = "paper"                  # budget preset or TOML file
-    outputs = ["montecarlo", "sobol"] # analyses besides the exact worst case, which always runs
+    outputs = ["montecarlo", "sobol", "yield"]  # analyses besides the exact worst case, which always runs
+                                      # (yield: the exact yield, with a [spec])
 
     [worstcase]                       # exact worst case of the linear model
     grid = 201                        # n (n x n poses) or [nx, ny]
@@ -58,7 +59,7 @@ optional; paths are relative to the study file)::
     "leg.3.a_mm" = [200, 220, 240]    # product of geometry parameters (keys as in a geometry
     "leg.*.e_mm" = [10, 20, 30]       # file, legs 1-3 or * for all; see prp3mc.study.sweep)
 
-With a spec, every configuration gets its exact yield (P(position > S),
+With a spec (and ``yield`` among the outputs, as by default), every configuration gets its exact yield (P(position > S),
 P(|δφ| > Z), P(either), Ppk, the exact quantiles; :mod:`prp3mc.study.spec`) at
 every pose of its Monte Carlo grid. One spec, not two: ``[montecarlo]
 tolerance_mm`` is the same position spec in mm; without ``[spec]`` it is
@@ -117,7 +118,7 @@ def _studies_dir() -> Path:
 #: Folder of the bundled studies.
 STUDIES_DIR = _studies_dir()
 #: Analyses a study can ask for besides the exact worst case (which always runs).
-ANALYSES = ("montecarlo", "sobol")
+ANALYSES = ("montecarlo", "sobol", "yield")
 _DEFAULT = {"worstcase_grid": (101, 101), "mc_samples": 1 << 16, "mc_grid": (11, 11), "sobol_samples": 1 << 12,
             "sobol_grid": (5, 5), "sobol_outputs": ("position", "phi")}
 _REDUCED = {"worstcase_grid": 21, "mc_samples": 1 << 14, "mc_grid": 5, "sobol_samples": 1 << 10, "sobol_grid": 3}
@@ -263,7 +264,7 @@ class Study:
             out.update(montecarlo_samples=self.mc_samples, montecarlo_grid=list(self.mc_grid))
         if "sobol" in self.outputs:
             out.update(sobol_samples=self.sobol_samples, sobol_grid=list(self.sobol_grid))
-        if self.spec is not None:
+        if self.spec is not None and "yield" in self.outputs:
             out.update(yield_grid=list(self.mc_grid))
         if self.allocation is not None:
             out.update(self.allocation.sizes(self.worstcase_grid))
