@@ -198,3 +198,17 @@ def test_first_screen_answers_against_the_spec(written):
     assert contributions["share"].is_monotonic_decreasing
     assert "<th>value (µm)</th>" in html and "<th>value (arcsec)</th>" in html and "<th>value</th>" not in html
     assert missing_files(html, out) == [] and figures_without_files(html, out, "png") == []
+
+
+def test_correlated_budget_runs_without_exact_yield(tmp_path):
+    """The exact series needs independent inputs: a correlated budget's study says so and runs on (fast: no yield)."""
+    (tmp_path / "corr.toml").write_text('name = "corr"\n[inputs]\n'
+                                        + "".join(f'b_{i} = {{ law = "uniform", lo = 0, hi = 0.025 }}\n'
+                                                  for i in (1, 2, 3))
+                                        + '[correlation]\n"b_1,b_2" = 0.5\n')
+    text = _text("[spec]\nposition_um = 30\n").replace('budget = "paper"', 'budget = "corr.toml"')
+    study = Study.from_text(text, source=str(tmp_path / "s.toml"), base=tmp_path)
+    with pytest.warns(Warning, match="no exact yield for u-shape: the budget correlates inputs"):
+        result = run_study(study, progress=False)
+    c = result["u-shape"]
+    assert c.yield_ is None and c.curves == () and c.montecarlo.tolerance_mm == pytest.approx(0.03)

@@ -26,6 +26,7 @@ import contextlib
 import os
 import sys
 import time
+import warnings
 from dataclasses import dataclass, replace
 from typing import Any, Iterable, Iterator
 
@@ -33,7 +34,7 @@ import numpy as np
 
 from .._rng import child_seed, resolve_rng
 from .._threads import single_threaded_blas
-from ..errors import GeometryError, InfeasiblePoseError
+from ..errors import GeometryError, InfeasiblePoseError, Prp3mcWarning
 from ..model.budget import Budget
 from ..model.linear import linear_model
 from ..montecarlo.propagation import monte_carlo
@@ -184,7 +185,11 @@ def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple
         kw["sobol"] = s
         kw["ranking"] = {o: ranking(s, wc_s, output=o) for o in study.sobol_outputs}
         timings["sobol"] += time.perf_counter() - t
-    if study.spec is not None and "yield" in study.outputs:
+    if study.spec is not None and "yield" in study.outputs and b.correlated:
+        warnings.warn(Prp3mcWarning(f"study {study.name}: no exact yield for {config.name}: the budget correlates "
+                                    "inputs ([correlation]) and the exact series needs independent ones; the Monte "
+                                    "Carlo run counts P(position > spec) instead"), stacklevel=2)
+    elif study.spec is not None and "yield" in study.outputs:
         nx, ny = study.mc_grid
         stage(f"exact yield against the spec on {nx} x {ny} poses")
         t = time.perf_counter()
