@@ -180,6 +180,10 @@ def prepare(root: Path) -> dict:
         "c_blank_lines": _csv(good).replace("\n", "\n\n"),
         # studies
         "s_ok": 'name = "s"\nseed = 1\n[worstcase]\ngrid = 3\n[[configuration]]\ngeometry = "u-shape"\n',
+        # every section of a study's report (worst case, Monte Carlo, Sobol) at sizes of seconds: the signal loop's
+        "s_signal": ('name = "sig"\nseed = 1\noutputs = ["montecarlo", "sobol"]\n[worstcase]\ngrid = 5\n'
+                     '[montecarlo]\nsamples = 4096\ngrid = 3\n[sobol]\nsamples = 256\ngrid = 2\n'
+                     '[[configuration]]\ngeometry = "u-shape"\nregion = "u-shape"\n'),
         "s_parallel": 'name = "s"\nseed = 1\n[worstcase]\ngrid = 3\n[[configuration]]\ngeometry = "{g_parallel}"\n'
                       'region = "u-shape"\n',
         "s_multiply": ('name = "s"\nseed = 1\n[worstcase]\ngrid = 601\n[montecarlo]\nsamples = 1048576\ngrid = 41\n'
@@ -594,11 +598,14 @@ def run(only: str | None = None, timeout: float = 300.0, root: Path | None = Non
     return counts
 
 
-def signal_loop(root: Path, n: int, seed: int = 0, paths: dict | None = None) -> dict:
+def signal_loop(root: Path, n: int, seed: int = 0, paths: dict | None = None, log=lambda line: None) -> dict:
     """Send SIGTERM or SIGINT at a random time near the end of a study and of a discrepancy, ``n`` runs.
 
-    Each run is timed once undisturbed; the signal comes at 60-110 % of that
-    time. A run ends well when it completed (exit 0, its folder whole, no
+    Each command is timed undisturbed (after a first run that fills the
+    compiled-code caches), and the time is kept up to date as the machine's
+    load changes (a run that ends before its signal is timed, one interrupted
+    later than the estimate ran at least that long); the signal comes at
+    60-110 % of it. A run ends well when it completed (exit 0, its folder whole, no
     traceback) or did not and changed nothing (exit 130 or 143, no folder,
     no traceback, no leftovers). Returns ``{"total", "bad", "outcomes", "problems"}``.
     """
@@ -607,7 +614,7 @@ def signal_loop(root: Path, n: int, seed: int = 0, paths: dict | None = None) ->
     import signal
     paths = paths or prepare(root / "files")
     rng = random.Random(seed)
-    commands = {"study": ["study", paths["s_ok"], "--out", "OUT"],
+    commands = {"study": ["study", paths["s_signal"], "--out", "OUT"],
                 "discrepancy": [*D, "--data", paths["c_good"], "--out", "OUT", "--seed", "1"]}
     marks = {"study": "summary.json", "discrepancy": "discrepancy.json"}
 
@@ -617,17 +624,19 @@ def signal_loop(root: Path, n: int, seed: int = 0, paths: dict | None = None) ->
 
     took = {}
     for kind, argv in commands.items():
-        out = root / f"calibrate_{kind}"
-        shutil.rmtree(out, ignore_errors=True)
-        t0 = time.time()
-        start(argv, out).communicate()
-        took[kind] = time.time() - t0
-    result = {"total": 0, "bad": 0, "outcomes": {}, "problems": [], "calibration_s": took}
+        for _ in range(2):   # the first run fills the compiled-code caches; the second is the one timed
+            out = root / f"calibrate_{kind}"
+            shutil.rmtree(out, ignore_errors=True)
+            t0 = time.time()
+            start(argv, out).communicate()
+            took[kind] = time.time() - t0
+    result = {"total": 0, "bad": 0, "outcomes": {}, "problems": [], "calibration_s": dict(took)}
     for t in range(n):
         kind = ("study", "discrepancy")[t % 2]
         sig = signal.SIGTERM if rng.random() < 0.6 else signal.SIGINT
         out = root / f"sig{t}"
         shutil.rmtree(out, ignore_errors=True)
+        t0 = time.time()
         run = start(commands[kind], out)
         when = took[kind] * rng.uniform(0.6, 1.1)
         try:
@@ -642,11 +651,18 @@ def signal_loop(root: Path, n: int, seed: int = 0, paths: dict | None = None) ->
         ok = clean and not left and ((run.returncode == 0 and whole)
                                      or (run.returncode in (130, 143) and not os.path.lexists(out)))
         key = f"{kind} {sig.name} exit {run.returncode}{' folder whole' if whole else ''}"
+        if run.returncode == 0 and whole and time.time() - t0 < when:   # it ended before the signal came
+            key = f"{kind} ended before the signal"
+            took[kind] = 0.5 * (took[kind] + time.time() - t0)        # the machine is faster now: aim earlier
+        elif run.returncode in (130, 143):
+            took[kind] = max(took[kind], when)    # it would have run at least this long
         result["outcomes"][key] = result["outcomes"].get(key, 0) + 1
         result["total"] += 1
         if not ok:
             result["bad"] += 1
             result["problems"].append(f"{key} at {when:.1f} s: leftovers {left}; {err.strip()[-300:]}")
+        log(f"{'ok ' if ok else 'BAD'} {t:3d} {key} (signal at {when:.1f} s, ran {time.time() - t0:.1f} s)"
+            + ("" if ok else f"\n      {err.strip()[-300:]}"))
     return result
 
 
@@ -668,7 +684,7 @@ if __name__ == "__main__":
     if a.signals:
         root = a.root or Path(os.environ.get("TMPDIR", "/tmp")) / f"prp3mc_signals_{os.getpid()}"
         root.mkdir(parents=True, exist_ok=True)
-        result = signal_loop(root, a.signals)
+        result = signal_loop(root, a.signals, log=lambda line: print(line, flush=True))
     else:
         result = run(a.only, timeout=a.timeout, root=a.root, jobs=a.jobs, ids=rerun)
     print(json.dumps(result))

@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from . import (add_budget, add_geometry, add_json, add_seed, command, emit_json, nonnegative_float, positive_int,
-               provenance)
+               provenance, within_limits)
 from ..errors import CampaignError, InputFileError
+from ..limits import simulate_estimate
 from ..output import OutputExistsError
 from ..provenance import file_record
 
@@ -142,7 +143,9 @@ class SimulateCommand:
         }
         if args.plan is not None:
             plan, poses, where = _read_plan(args.plan), None, {"plan": file_record(args.plan)}
+            within_limits(args, simulate_estimate(len(plan)))
         else:
+            within_limits(args, simulate_estimate(args.poses * args.visits))
             region_spec = args.region or (args.geometry if args.geometry in GEOMETRY_PRESETS else None)
             if region_spec is None:
                 raise CampaignError("--poses needs --region (a preset or a region file) for a geometry file")
