@@ -26,6 +26,7 @@ from .errors import ResourceError
 
 __all__ = ["Estimate", "available_memory", "check", "montecarlo_estimate", "sobol_estimate",
            "worstcase_estimate", "allocate_estimate", "study_estimate", "discrepancy_estimate", "simulate_estimate",
+           "sensitivity_estimate",
            "format_bytes",
            "format_seconds", "MEMORY_MARGIN"]
 
@@ -57,6 +58,9 @@ _DISC_BYTES_FIXED = 64 << 20
 # Simulated campaign: per measurement its drawn inputs, the exact chain's pose, the table's row and its
 # CSV text (180000 rows held 1.3 KiB each at the peak).
 _SIM_BYTES_PER_MEASUREMENT = 2048
+# Sensitivity over a grid: every matrix entry of every pose as a row of the long table and its CSV text
+# (3600 poses held 27 KiB each).
+_SENS_BYTES_PER_POSE = 32 << 10
 
 
 @dataclass(frozen=True, slots=True)
@@ -195,6 +199,12 @@ def study_estimate(study) -> Estimate:
                                           d + len(study.budget.groups) + len(study.sobol_groups),
                                           len(study.sobol_outputs), shapley_permutations=study.sobol_samples // 2))
     return Estimate(f"study {study.name!r} ({total.what})", total.bytes)
+
+
+def sensitivity_estimate(n_poses: int) -> Estimate:
+    """Memory of ``prp3mc sensitivity --region`` at ``n_poses`` poses (A, B and every J_q as a long table)."""
+    return Estimate(f"sensitivity matrices at {n_poses} poses", float(n_poses) * _SENS_BYTES_PER_POSE,
+                    "use a smaller --grid")
 
 
 def simulate_estimate(n_measurements: int) -> Estimate:

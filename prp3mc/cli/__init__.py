@@ -78,13 +78,16 @@ def add_pose_or_region(p: argparse.ArgumentParser) -> None:
 DEFAULT_GRID = 21
 
 
-def grid_poses(args) -> tuple[np.ndarray, dict]:
+def grid_poses(args, estimate=None) -> tuple[np.ndarray, dict]:
     """The poses (N, 3) of ``--region R --grid N`` and their record for ``inputs``.
+
+    ``estimate`` (number of poses -> :class:`~prp3mc.limits.Estimate`), the
+    command's memory at that many poses, is checked before the grid is made.
 
     Raises
     ------
     Prp3mcError
-        ``--grid`` or ``--out`` without ``--region``, or a region that cannot be read.
+        ``--grid`` or ``--out`` without ``--region``, a region that cannot be read, or a grid that will not fit.
     """
     from ..kinematics.geometry import Region
 
@@ -94,6 +97,8 @@ def grid_poses(args) -> tuple[np.ndarray, dict]:
         return np.asarray(args.pose, dtype=float)[None, :], {}
     region = Region.load(args.region)
     n = DEFAULT_GRID if args.grid is None else args.grid
+    if estimate is not None:
+        within_limits(args, estimate(n * n))
     record = {"region": spec_record(args.region, region) | {"x_mm": list(region.x_mm), "y_mm": list(region.y_mm),
                                                           "phi_deg": region.phi_deg}, "grid": n}
     return region.grid(n).reshape(-1, 3), record

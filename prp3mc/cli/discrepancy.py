@@ -3,7 +3,7 @@
 from ..kinematics.geometry import Geometry
 from ..limits import discrepancy_estimate
 from ..measurement.fit.accuracy import MODELS
-from ..measurement.campaign.data import count_rows, read_campaign
+from ..measurement.campaign.data import check_instrument_noise, count_rows, read_campaign
 from ..measurement.fit.workflow import STAGES, discrepancy
 from ..progress import Progress
 from ..reports.discrepancy_report import report_document, write_report
@@ -44,6 +44,7 @@ class DiscrepancyCommand:
         d = len(budget)
         within_limits(args, discrepancy_estimate(count_rows(args.data), n_inputs=d))  # before reading the file
         campaign = read_campaign(args.data, geometry)
+        check_instrument_noise(campaign, args.instrument_sigma_mm, args.instrument_sigma_deg)
         within_limits(args, discrepancy_estimate(campaign.n_measurements, campaign.n_poses,
                                                  int(campaign.repeats.max()), n_inputs=d))
         with Progress(len(STAGES) + 1, "discrepancy", args.progress) as bar:

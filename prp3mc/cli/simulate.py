@@ -126,6 +126,8 @@ class SimulateCommand:
         from ..measurement.campaign.simulate import simulate_campaign
         from ..model.budget import Budget
 
+        if not args.out_file.strip():
+            raise CampaignError("--out is empty: name the campaign file to write (or '-' for stdout)")
         out = None if args.out_file == "-" else Path(args.out_file)
         if out is None and args.json:
             raise CampaignError("--json prints to stdout: write the campaign to a file (--out CAMPAIGN.csv)")

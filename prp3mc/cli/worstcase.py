@@ -3,6 +3,7 @@
 import pandas as pd
 
 from .._version import __version__
+from ..limits import worstcase_estimate
 from ..model.budget import Budget
 from ..kinematics.geometry import Geometry
 from ..kinematics.chain import check_poses
@@ -26,7 +27,7 @@ class WorstCaseCommand:
     @staticmethod
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
-        poses, where = grid_poses(args)
+        poses, where = grid_poses(args, lambda n: worstcase_estimate(n, len(budget)))
         if args.region is None:   # a refused pose before any warning about the analysis
             check_poses(geometry, poses)
         check_linearity(geometry, budget, poses)

@@ -43,7 +43,8 @@ from ...model.effects import TEMP_LIMITS_C
 from ...model.linear import linear_model
 
 __all__ = ["Campaign", "read_campaign", "REQUIRED_COLUMNS", "CMD_COLUMNS", "MEAS_COLUMNS", "DIR_COLUMNS",
-           "MAX_ERROR", "MIN_POSES", "require_testable", "count_rows", "CAMPAIGN_PRESETS", "check_error_scale"]
+           "MAX_ERROR", "MIN_POSES", "require_testable", "count_rows", "CAMPAIGN_PRESETS", "check_error_scale",
+           "check_instrument_noise"]
 
 #: Commanded and measured pose columns, ``[x mm, y mm, phi deg]``.
 CMD_COLUMNS, MEAS_COLUMNS = ("x_cmd", "y_cmd", "phi_cmd"), ("x_meas", "y_meas", "phi_meas")
@@ -302,6 +303,49 @@ def _check_units(cmd: np.ndarray, meas: np.ndarray, source: str) -> None:
                 what = "deg" if k == 2 else "mm"
                 raise CampaignError(f"{source}: column {MEAS_COLUMNS[k]} looks like {unit}: measured poses must be "
                                     f"in mm and deg, like the command (convert {MEAS_COLUMNS[k]} to {what})")
+
+
+#: Level of the test that refuses an instrument noise the campaign's scatter rules out.
+INSTRUMENT_NOISE_LEVEL = 1e-6
+
+
+def check_instrument_noise(campaign: "Campaign", sigma_mm: float, sigma_deg: float) -> None:
+    """Refuse an instrument noise that the campaign's own scatter rules out (a µm or arcsec figure given in mm or deg).
+
+    The instrument's noise adds to every other scatter of the measured errors
+    (measured - commanded): their variance about their mean is at least
+    sigma². With nu degrees of freedom, ``nu s² / sigma²`` is then at least
+    chi²(nu) distributed, and a value below its :data:`INSTRUMENT_NOISE_LEVEL`
+    quantile rules the stated sigma out (x and y pooled, phi on its own).
+
+    Parameters
+    ----------
+    campaign : Campaign
+    sigma_mm, sigma_deg : float
+        Stated instrument noise sd of x and y (mm) and of phi (deg); 0 is not checked.
+
+    Raises
+    ------
+    CampaignError
+        One line: the stated sd, the campaign's scatter, the largest sd it allows, the likely unit.
+    """
+    from scipy.stats import chi2
+
+    errors = campaign.measured - campaign.commanded
+    for columns, sigma, option, unit, small, factor in (((0, 1), sigma_mm, "--instrument-sigma-mm", "mm", "µm", 1e3),
+                                                         ((2,), sigma_deg, "--instrument-sigma-deg", "deg", "arcsec",
+                                                          3600.0)):
+        e = errors[:, columns]
+        nu = e.size - len(columns)
+        if not sigma > 0 or nu < 2:
+            continue
+        s2 = float(np.sum((e - e.mean(axis=0)) ** 2)) / nu
+        least = float(chi2.ppf(INSTRUMENT_NOISE_LEVEL, nu))
+        if nu * s2 < least * sigma ** 2:
+            raise CampaignError(f"{option} {sigma:g}: the campaign's measured errors scatter by {s2 ** 0.5:.3g} {unit} "
+                                f"(sd over {e.shape[0]} rows) and instrument noise only adds to that, so its sd is at "
+                                f"most {(nu * s2 / least) ** 0.5:.3g} {unit}: give it in {unit} (if {sigma:g} is in "
+                                f"{small}: {sigma / factor:g} {unit})")
 
 
 def _unit_hint(geometry: Geometry, poses: np.ndarray) -> str:
