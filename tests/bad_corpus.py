@@ -45,6 +45,7 @@ class Case:
     setup: Callable | None = None     # (root) -> None: what the folder holds before the run
     left: str = ""                    # why this case still ends badly (counted so, an expected failure in tests)
     process: bool = False             # run in a real process in the tests too (its stdout takes any file name)
+    warning: str = ""                 # an accepted run must warn with this fragment (a legal but unlikely input)
     id: str = field(default="")
 
     def __post_init__(self):
@@ -196,6 +197,37 @@ def prepare(root: Path) -> dict:
         "s_sweep_delta_model": None,
         "s_ctrl_name": 'name = "s\\u0001x"\nseed = 1\n[worstcase]\ngrid = 3\n[[configuration]]\ngeometry = "u-shape"\n',
     }
+    # regions, budgets in the wrong unit, a campaign template (the second corpus)
+    region = 'x_mm = [-40.0, 40.0]\ny_mm = [60.0, 140.0]\n'
+    files.update({
+        "r_reversed": 'x_mm = [40.0, -40.0]\ny_mm = [60.0, 140.0]\n',
+        "r_zero": 'x_mm = [0.0, 0.0]\ny_mm = [100.0, 100.0]\n',
+        "r_far": 'x_mm = [-400.0, 400.0]\ny_mm = [600.0, 1400.0]\n',
+        "r_nan": 'x_mm = [nan, 1.0]\ny_mm = [60.0, 140.0]\n',
+        "r_missing_y": 'x_mm = [-40.0, 40.0]\n',
+        "r_unknown": region + 'z_mm = [0, 1]\n',
+        "r_string": 'x_mm = "wide"\ny_mm = [60.0, 140.0]\n',
+        "r_phi_string": region + 'phi_deg = "level"\n',
+        "r_phi_bool": region + 'phi_deg = true\n',
+        "r_bom": "\ufeff" + region,
+        "r_empty": "",
+        "r_three": 'x_mm = [-40.0, 0.0, 40.0]\ny_mm = [60.0, 140.0]\n',
+        "r_table": 'x_mm = { lo = -40, hi = 40 }\ny_mm = [60.0, 140.0]\n',
+        "r_int": 'x_mm = [-40, 40]\ny_mm = [60, 140]\n',
+        "r_inf": 'x_mm = [-inf, 40.0]\ny_mm = [60.0, 140.0]\n',
+        "b_mm_for_um": _budget_text(inputs="".join(f'b_{i} = {{ law = "uniform", lo = -2.5, hi = 2.5 }}\n'
+                                                   for i in (1, 2, 3))),
+        "b_arcsec_for_deg": _budget_text(inputs="".join(f'theta_{i} = {{ law = "uniform", lo = -144, hi = 144 }}\n'
+                                                        for i in (1, 2, 3))),
+        "b_sd_mm_for_um": _budget_text(inputs="".join(f'b_{i} = {{ law = "normal", mu = 0, sd = 5 }}\n'
+                                                      for i in (1, 2, 3))),
+        "c_plan": _csv(good.drop(columns=["x_meas", "y_meas", "phi_meas"])),
+        "c_plan_far": _csv(good.drop(columns=["x_meas", "y_meas", "phi_meas"]).assign(y_cmd=400.0)),
+        "s_formats": 'name = "f"\nseed = 1\noutputs = ["montecarlo"]\n[worstcase]\ngrid = 3\n[montecarlo]\n'
+                     'samples = 1024\ngrid = 2\n[[configuration]]\ngeometry = "u-shape"\nregion = "u-shape"\n',
+        "s_region_file": None,   # filled below (needs the region file's path)
+        "s_region_reversed": None,
+    })
     # nine families of six classes each: 6^9 = 10 million choices
     families = ("rho", "theta", "b", "a", "alpha", "beta", "c", "gamma", "psi")
     big = 'name = "big"\n'
@@ -214,7 +246,7 @@ def prepare(root: Path) -> dict:
         {"backlash_1": SystematicEffect("backlash_1", 0.02, campaign="c1.csv")},
         fitted_on=Geometry.from_preset("delta-shape")).to_dict())
     paths: dict[str, str | bytes] = {}
-    ext = {"g": "toml", "b": "toml", "s": "toml", "c": "csv", "classes": "toml"}
+    ext = {"g": "toml", "b": "toml", "s": "toml", "c": "csv", "classes": "toml", "r": "toml"}
     for name in files:
         paths[name] = str(root / f"{name}.{ext.get(name.split('_')[0], 'toml')}")
     files["s_allocation_big"] = ('name = "s"\nseed = 1\n[allocation]\nclasses = "' + paths["classes_big"]
@@ -223,6 +255,10 @@ def prepare(root: Path) -> dict:
                                     'grid = 3\n[[configuration]]\ngeometry = "u-shape"\n[sweep]\n'
                                     '"leg.3.a_mm" = [170, 180]\n')
     files["s_parallel"] = files["s_parallel"].replace("{g_parallel}", paths["g_parallel"])
+    files["s_region_file"] = ('name = "s"\nseed = 1\n[worstcase]\ngrid = 3\n[[configuration]]\ngeometry = "u-shape"\n'
+                              f'region = {json.dumps(paths["r_reversed"])}\n')   # a study takes presets or tables
+    files["s_region_reversed"] = ('name = "s"\nseed = 1\n[worstcase]\ngrid = 3\n[[configuration]]\n'
+                                  'geometry = "u-shape"\nregion = { x_mm = [40, -40], y_mm = [60, 140] }\n')
     for name, content in files.items():
         data = content if isinstance(content, bytes) else content.encode("utf-8")
         Path(paths[name]).write_bytes(data)
@@ -475,7 +511,131 @@ def cases() -> list[Case]:
     for kind in ("geometry", "budget"):
         add(Case(L, ["init", kind, f"{{tmp}}/mode_{kind}.toml"], expect="accept",
                  check=lambda root, kind=kind: _file_mode_ok(root / f"mode_{kind}.toml")))
+    out += second_cases()
     return out
+
+
+#: Where the second corpus's cases start (``python -m tests.bad_corpus --second`` runs them alone).
+SECOND = "second: "
+
+
+def second_cases() -> list[Case]:
+    """The second corpus (regions, simulate, init, --formats, --max-gb, values in the wrong unit, grid sizes)."""
+    out: list[Case] = []
+
+    def add(case: Case) -> None:
+        case.id = SECOND + case.id
+        out.append(case)
+
+    T, H, M, S, L = "tracebacks", "hangs", "messages", "silently accepted", "leftovers & permissions"
+    sim = ["simulate", *G, *B, "--seed", "1"]
+    # ------------------------------------------------------------------ region files, in every command taking one
+    for name, msg in (("r_reversed", "lo < hi"), ("r_zero", "lo < hi"), ("r_nan", "finite"), ("r_inf", "finite"),
+                      ("r_missing_y", "y_mm is missing"), ("r_unknown", "z_mm"), ("r_string", "x_mm"),
+                      ("r_phi_string", "phi_deg"), ("r_phi_bool", "phi_deg"), ("r_empty", "missing"),
+                      ("r_three", "[lo, hi]"), ("r_table", "x_mm"), ("r_far", "stroke")):
+        add(Case(M, ["sensitivity", *G, "--region", f"{{{name}}}", "--grid", "3"], message=msg))
+    for command in (["worstcase", *G, *B], ["montecarlo", *G, *B, "--samples", "256", "--seed", "1"]):
+        add(Case(M, [*command, "--region", "{r_phi_string}", "--grid", "3"], message="phi_deg"))
+    add(Case(M, ["allocate", *G, "--region", "{r_string}", "--classes", "example", "--spec-position-um", "150",
+                 "--grid", "3"], message="x_mm"))
+    add(Case(M, [*sim, "--poses", "9", "--region", "{r_table}", "--out", "{tmp}/c.csv"], message="x_mm"))
+    add(Case(M, ["study", "{s_region_file}", "--out", "{tmp}/st_region"], message="unknown region preset"))
+    add(Case(M, ["study", "{s_region_reversed}", "--out", "{tmp}/st_region2"], message="lo < hi"))
+    add(Case(M, ["sensitivity", *G, "--region", "{r_bom}", "--grid", "2", "--json"], expect="accept"))
+    add(Case(M, ["sensitivity", *G, "--region", "{r_int}", "--grid", "2", "--json"], expect="accept"))
+    # ------------------------------------------------------------------ grids and campaigns past the machine
+    add(Case(H, ["sensitivity", *G, "--region", "u-shape", "--grid", "3000"], message="use a smaller --grid"))
+    add(Case(H, ["sensitivity", *G, "--region", "u-shape", "--grid", "100000"], message="memory"))
+    add(Case(H, ["worstcase", *G, *B, "--region", "u-shape", "--grid", "100000"], message="memory"))
+    add(Case(H, ["montecarlo", *G, *B, "--region", "u-shape", "--grid", "100000", "--samples", "256"],
+             message="memory"))
+    add(Case(H, ["--max-gb", "0.001", "sensitivity", *G, "--region", "u-shape", "--grid", "30"], message="--max-gb"))
+    add(Case(H, ["--max-gb", "0.001", "worstcase", *G, *B, "--region", "u-shape", "--grid", "300"],
+             message="--max-gb"))
+    add(Case(H, [*sim, "--poses", "1000000000", "--out", "{tmp}/c.csv"], message="use fewer poses or visits"))
+    add(Case(H, [*sim, "--poses", "9", "--visits", "100000000", "--out", "{tmp}/c.csv"], message="memory"))
+    add(Case(H, ["--max-gb", "0.01", *sim, "--poses", "900", "--out", "{tmp}/c.csv"], message="--max-gb"))
+    add(Case(H, ["--max-hours", "1e-9", *sim, "--poses", "9", "--out", "{tmp}/c.csv"], message="--max-hours"))
+    add(Case(H, ["--max-hours", "1e-12", "init", "budget", "{tmp}/t.toml"], message="--max-hours"))
+    add(Case(H, ["--max-gb", "-1", "init", "budget", "{tmp}/t.toml"], status=(2,), message="> 0"))
+    add(Case(H, ["--max-gb", "inf", *sim, "--poses", "9", "--out", "{tmp}/c.csv"], status=(2,), message="finite"))
+    # ------------------------------------------------------------------ simulate
+    add(Case(M, [*sim, "--poses", "0", "--out", "{tmp}/c.csv"], status=(2,), message="positive integer"))
+    add(Case(M, [*sim, "--poses", "9", "--visits", "0", "--out", "{tmp}/c.csv"], status=(2,),
+             message="positive integer"))
+    add(Case(M, [*sim, "--poses", "9", "--effects", "wobble_1=1", "--out", "{tmp}/c.csv"], message="wobble_1"))
+    add(Case(M, [*sim, "--poses", "9", "--effects", "scale_2", "--out", "{tmp}/c.csv"], status=(2,),
+             message="NAME=VALUE"))
+    add(Case(M, [*sim, "--poses", "9", "--effects", "cyclic_1=0.01", "--out", "{tmp}/c.csv"], message="lead_mm"))
+    add(Case(M, [*sim, "--poses", "9", "--registration", "1,2", "--out", "{tmp}/c.csv"], message="--registration"))
+    add(Case(M, [*sim, "--poses", "9", "--drift", "nan,0,0", "--out", "{tmp}/c.csv"], message="--drift"))
+    add(Case(M, [*sim, "--poses", "9", "--outliers", "1.5", "--out", "{tmp}/c.csv"], message="outliers"))
+    add(Case(M, [*sim, "--poses", "9", "--repeatable-fraction", "2", "--out", "{tmp}/c.csv"],
+             message="repeatable_fraction"))
+    add(Case(M, [*sim, "--poses", "9", "--temperature", "20", "--out", "{tmp}/c.csv"], message="--temperature"))
+    add(Case(M, [*sim, "--poses", "9", "--approach", "sideways", "--out", "{tmp}/c.csv"], status=(2,),
+             message="sideways"))
+    add(Case(M, [*sim, "--poses", "9", "--out", ""], message="--out is empty"))
+    add(Case(M, [*sim, "--poses", "9", "--out", "{c_good}"], message="exists"))
+    add(Case(M, [*sim, "--poses", "9", "--out", "-", "--json"], message="--json"))
+    add(Case(M, [*sim, "--plan", "{tmp}/nowhere.csv", "--out", "{tmp}/c.csv"], message="does not exist"))
+    add(Case(M, [*sim, "--plan", "{c_plan_far}", "--out", "{tmp}/c.csv"], message="stroke"))
+    add(Case(M, [*sim, "--plan", "{c_plan}", "--out", "{tmp}/c_plan.csv"], expect="accept",
+             check=lambda root: None if (root / "c_plan.csv").is_file() else "c_plan.csv was not written"))
+    add(Case(M, [*sim, "--poses", "9", "--region", "{r_far}", "--out", "{tmp}/c.csv"], message="stroke"))
+    add(Case(M, ["simulate", *G, *B, "--poses", "4", "--out", "{tmp}/deep/er/c.csv", "--seed", "1"],
+             expect="accept", check=lambda root: None if (root / "deep/er/c.csv").is_file() else "not written"))
+    # values in the wrong unit: refused where they cannot be, warned where they are legal but unlikely
+    add(Case(S, [*sim, "--poses", "9", "--temperature", "293,301", "--out", "{tmp}/c.csv"], message="kelvin"))
+    add(Case(S, [*sim, "--poses", "9", "--instrument-sigma-mm", "2", "--out", "{tmp}/c.csv"], message="units"))
+    add(Case(S, [*sim, "--poses", "9", "--instrument-sigma-deg", "5", "--out", "{tmp}/c.csv"], message="units"))
+    add(Case(S, [*sim, "--poses", "9", "--effects", "backlash_1=20", "--out", "{tmp}/c.csv"], message="units"))
+    add(Case(S, [*sim, "--poses", "9", "--effects", "scale_2=500", "--out", "{tmp}/c.csv"], message="units"))
+    add(Case(S, [*sim, "--poses", "9", "--registration", "0,0,1e6", "--out", "{tmp}/c.csv"], message="units"))
+    add(Case(S, [*D, "--data", "{c_good}", "--out", "{tmp}/d_sig_um", "--instrument-sigma-mm", "2"], message="µm"))
+    add(Case(S, [*D, "--data", "{c_good}", "--out", "{tmp}/d_sig_as", "--instrument-sigma-deg", "1.8"],
+             message="arcsec"))
+    add(Case(S, [*D, "--data", "{c_perfect}", "--out", "{tmp}/d_sig_perf", "--instrument-sigma-mm", "0.002"],
+             message="scatter"))
+    add(Case(S, ["worstcase", *G, "--budget", "{b_mm_for_um}", *P], expect="accept", warning="too large"))
+    add(Case(S, ["worstcase", *G, "--budget", "{b_arcsec_for_deg}", *P], expect="accept", warning="too large"))
+    add(Case(S, ["worstcase", *G, "--budget", "{b_sd_mm_for_um}", *P, "--k-sigma", "3"], expect="accept",
+             warning="too large"))
+    add(Case(S, ["montecarlo", *G, "--budget", "{b_mm_for_um}", *P, "--samples", "1024", "--seed", "1"],
+             expect="accept", warning="too large"))
+    add(Case(S, ["sobol", *G, "--budget", "{b_arcsec_for_deg}", *P, "--samples", "256", "--seed", "1"],
+             expect="accept", warning="too large"))
+    # ------------------------------------------------------------------ init
+    add(Case(M, ["init", "budget", ""], message="empty"))
+    add(Case(M, ["init", "budget", " "], message="empty"))
+    add(Case(M, ["init", "wobble", "{tmp}/t.toml"], status=(2,), message="wobble"))
+    add(Case(M, ["init", "region", "{c_good}"], message="exists"))
+    add(Case(M, ["init", "region", "{tmp}"], message="exists"))
+    add(Case(T, ["init", "budget", "-"], expect="accept",
+             check=lambda root: None if not (root / "-").exists() else "wrote a file named '-'"))
+    add(Case(T, ["init", "region", "{tmp}/new/deeper/r.toml"], expect="accept",
+             check=lambda root: _init_reads_region(root / "new/deeper/r.toml")))
+    add(Case(L, ["init", "region", "{tmp}/mode_region.toml"], expect="accept",
+             check=lambda root: _file_mode_ok(root / "mode_region.toml")))
+    # ------------------------------------------------------------------ study --formats
+    add(Case(M, ["study", "{s_formats}", "--out", "{tmp}/f1", "--formats", "pdf"], message="formats"))
+    add(Case(M, ["study", "{s_formats}", "--out", "{tmp}/f2", "--formats", ""], message="formats"))
+    add(Case(M, ["study", "{s_formats}", "--out", "{tmp}/f3", "--formats", ","], message="formats"))
+    add(Case(M, ["study", "{s_formats}", "--out", "{tmp}/f4", "--formats", "xlsx"], expect="accept", slow=True,
+             check=lambda root: None if list((root / "f4").rglob("*.xlsx")) else "no workbook written"))
+    add(Case(M, ["study", "{s_formats}", "--out", "{tmp}/f5", "--formats", "PNG, svg"], expect="accept", slow=True,
+             check=lambda root: None if list((root / "f5").rglob("*.svg")) else "no svg written"))
+    return out
+
+
+def _init_reads_region(path: Path) -> str | None:
+    from prp3mc.kinematics.geometry import Region
+    try:
+        Region.from_toml(path)
+    except Exception as exc:  # noqa: BLE001
+        return f"{path.name} does not read back: {exc}"
+    return None
 
 
 def _earlier_output(folder: Path) -> None:
@@ -550,6 +710,8 @@ def judge(case: Case, code: int | None, out: str, err: str, root: Path, existed:
         return None
     if code != 0:
         return f"exit {code}: {err.strip()[:200]}"
+    if case.warning and case.warning not in err:
+        return f"no warning with {case.warning!r}: {err.strip()[:200]}"
     return case.check(root) if case.check else None
 
 

@@ -118,6 +118,7 @@ def emit_table(args, frame, doc: dict) -> None:
         path = Path(args.out_file)
         if path.exists() and not args.force:
             raise OutputExistsError(f"{path} exists: choose another name or pass --force to replace it")
+        path.parent.mkdir(parents=True, exist_ok=True)
         write_csv(frame, path)
         print(f"wrote {path} ({len(frame)} rows)", file=sys.stderr)
     else:

@@ -163,6 +163,7 @@ class SimulateCommand:
         else:
             from ..output import write_text
 
+            out.parent.mkdir(parents=True, exist_ok=True)
             write_text(out, frame.to_csv(index=False, float_format="%.12g", lineterminator="\n"))
         meta = campaign.metadata
         if args.json:
