@@ -234,6 +234,11 @@ class Campaign:
                                 f"[{temp.min():g}, {temp.max():g}], {temp.min() - 273.15:.4g} to "
                                 f"{temp.max() - 273.15:.4g} degrees C if in kelvin: temp_C must be in degrees C "
                                 "(subtract 273.15)")
+        if temp is not None and _FAHRENHEIT[0] <= temp.min() and temp.max() <= _FAHRENHEIT[1]:
+            warnings.warn(f"{source}: every temp_C lies in [{temp.min():g}, {temp.max():g}] degrees C, hotter than "
+                          f"any room machines are measured in: if they are degrees F ({(temp.min() - 32) / 1.8:.4g} "
+                          f"to {(temp.max() - 32) / 1.8:.4g} degrees C), convert them (C = (F - 32) / 1.8)",
+                          Prp3mcWarning, stacklevel=2)
         if "time_s" in frame.columns:
             frame = frame.assign(time_s=_seconds(frame["time_s"], where))
         hot_or_cold = np.zeros(0) if temp is None else (temp < TEMP_LIMITS_C[0]) | (temp > TEMP_LIMITS_C[1])
@@ -279,6 +284,9 @@ class Campaign:
 #: Temperatures that are plausible machine-room temperatures in kelvin (-50 to 100 degrees C) and
 #: implausible in degrees C (above 220): such a temp_C column is refused as kelvin.
 _KELVIN = (223.15, 373.15)
+#: Temperatures of machine rooms in degrees F (10 to 40 degrees C) that are 50 degrees C and more as degrees C:
+#: legal (an oven test), so such a temp_C column is run with a warning naming Fahrenheit, not refused.
+_FAHRENHEIT = (50.0, 104.0)
 #: Factors of the usual unit mistakes, (measured / commanded, what it means).
 _UNIT_FACTORS = ((1 / 25.4, "inches (measured / commanded = 1/25.4)"), (25.4, "mm against a command in inches"),
                  (1000.0, "µm (measured / commanded = 1000)"), (1e-3, "metres (measured / commanded = 1/1000)"))
