@@ -620,9 +620,11 @@ def test_the_time_limit_as_the_folder_lands(tmp_path, monkeypatch):
     import signal as _signal
     import time
 
-    from prp3mc import output
+    from prp3mc import cli, output
     from prp3mc.cli import _stopping_after, _TimeUp
     move = output._move_into_place
+    monkeypatch.setitem(cli._SIGNALLED, "decided", False)   # as at the start of a run (an earlier one ended)
+    monkeypatch.setitem(output.COMMITTED, "value", False)
 
     def ring_while_moving(tmp, path, force):
         _signal.setitimer(_signal.ITIMER_REAL, 0.01)
@@ -633,7 +635,7 @@ def test_the_time_limit_as_the_folder_lands(tmp_path, monkeypatch):
     with _stopping_after(3600):
         with output.output_folder(tmp_path / "landed") as folder:
             (folder / "summary.json").write_text("{}")
-    output.COMMITTED["value"] = False
+    output.COMMITTED["value"] = False            # the next run's start
     assert (tmp_path / "landed" / "summary.json").is_file()
     monkeypatch.setattr(output, "_move_into_place", move)
     with pytest.raises(_TimeUp), _stopping_after(0.01):
