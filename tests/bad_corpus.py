@@ -613,7 +613,7 @@ def second_cases() -> list[Case]:
     add(Case(M, ["init", "wobble", "{tmp}/t.toml"], status=(2,), message="wobble"))
     add(Case(M, ["init", "region", "{c_good}"], message="exists"))
     add(Case(M, ["init", "region", "{tmp}"], message="exists"))
-    add(Case(T, ["init", "budget", "-"], expect="accept",
+    add(Case(S, ["init", "budget", "-"], expect="accept",
              check=lambda root: None if not (root / "-").exists() else "wrote a file named '-'"))
     add(Case(T, ["init", "region", "{tmp}/new/deeper/r.toml"], expect="accept",
              check=lambda root: _init_reads_region(root / "new/deeper/r.toml")))
