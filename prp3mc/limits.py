@@ -25,7 +25,9 @@ from ._threads import cores
 from .errors import ResourceError
 
 __all__ = ["Estimate", "available_memory", "check", "montecarlo_estimate", "sobol_estimate",
-           "worstcase_estimate", "allocate_estimate", "study_estimate", "discrepancy_estimate", "format_bytes",
+           "worstcase_estimate", "allocate_estimate", "study_estimate", "discrepancy_estimate", "simulate_estimate",
+           "sensitivity_estimate",
+           "format_bytes",
            "format_seconds", "MEMORY_MARGIN"]
 
 #: Share of the available memory a request may use.
@@ -53,6 +55,12 @@ _DISC_BYTES_PER_REPLICATE_ROW = lambda d: 8 * (2 * d + 8)  # noqa: E731
 _DISC_BYTES_SPATIAL = 6 * 8                 # per (3P)^2
 _DISC_BYTES_ISO_VISIT = 100                 # per simulated campaign and visit of the most visited pose
 _DISC_BYTES_FIXED = 64 << 20
+# Simulated campaign: per measurement its drawn inputs, the exact chain's pose, the table's row and its
+# CSV text (180000 rows held 1.3 KiB each at the peak).
+_SIM_BYTES_PER_MEASUREMENT = 2048
+# Sensitivity over a grid: every matrix entry of every pose as a row of the long table and its CSV text
+# (3600 poses held 27 KiB each).
+_SENS_BYTES_PER_POSE = 32 << 10
 
 
 @dataclass(frozen=True, slots=True)
@@ -191,6 +199,18 @@ def study_estimate(study) -> Estimate:
                                           d + len(study.budget.groups) + len(study.sobol_groups),
                                           len(study.sobol_outputs), shapley_permutations=study.sobol_samples // 2))
     return Estimate(f"study {study.name!r} ({total.what})", total.bytes)
+
+
+def sensitivity_estimate(n_poses: int) -> Estimate:
+    """Memory of ``prp3mc sensitivity --region`` at ``n_poses`` poses (A, B and every J_q as a long table)."""
+    return Estimate(f"sensitivity matrices at {n_poses} poses", float(n_poses) * _SENS_BYTES_PER_POSE,
+                    "use a smaller --grid")
+
+
+def simulate_estimate(n_measurements: int) -> Estimate:
+    """Memory of :func:`prp3mc.measurement.campaign.simulate.simulate_campaign` and its CSV (``n_measurements`` rows)."""
+    return Estimate(f"a simulated campaign of {n_measurements} measurements",
+                    float(n_measurements) * _SIM_BYTES_PER_MEASUREMENT, "use fewer poses or visits")
 
 
 def discrepancy_estimate(n_measurements: int, n_poses: int | None = None, max_visits: int | None = None,

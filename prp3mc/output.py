@@ -271,8 +271,12 @@ def write_text(path: str | os.PathLike, text: str) -> None:
     """Write text through a temporary file and an atomic rename."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    except BaseException:   # a full disk, Ctrl-C: no temporary file left behind
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def write_csv(frame, path: str | os.PathLike) -> None:

@@ -21,6 +21,7 @@ import os
 import pkgutil
 import signal
 import sys
+import threading
 import warnings
 from pathlib import Path
 
@@ -81,13 +82,16 @@ def add_pose_or_region(p: argparse.ArgumentParser) -> None:
 DEFAULT_GRID = 21
 
 
-def grid_poses(args) -> tuple[np.ndarray, dict]:
+def grid_poses(args, estimate=None) -> tuple[np.ndarray, dict]:
     """The poses (N, 3) of ``--region R --grid N`` and their record for ``inputs``.
+
+    ``estimate`` (number of poses -> :class:`~prp3mc.limits.Estimate`), the
+    command's memory at that many poses, is checked before the grid is made.
 
     Raises
     ------
     Prp3mcError
-        ``--grid`` or ``--out`` without ``--region``, or a region that cannot be read.
+        ``--grid`` or ``--out`` without ``--region``, a region that cannot be read, or a grid that will not fit.
     """
     from ..kinematics.geometry import Region
 
@@ -97,6 +101,8 @@ def grid_poses(args) -> tuple[np.ndarray, dict]:
         return np.asarray(args.pose, dtype=float)[None, :], {}
     region = Region.load(args.region)
     n = DEFAULT_GRID if args.grid is None else args.grid
+    if estimate is not None:
+        within_limits(args, estimate(n * n))
     record = {"region": spec_record(args.region, region) | {"x_mm": list(region.x_mm), "y_mm": list(region.y_mm),
                                                           "phi_deg": region.phi_deg}, "grid": n}
     return region.grid(n).reshape(-1, 3), record
@@ -116,6 +122,7 @@ def emit_table(args, frame, doc: dict) -> None:
         path = Path(args.out_file)
         if path.exists() and not args.force:
             raise OutputExistsError(f"{path} exists: choose another name or pass --force to replace it")
+        path.parent.mkdir(parents=True, exist_ok=True)
         write_csv(frame, path)
         print(f"wrote {path} ({len(frame)} rows)", file=sys.stderr)
     else:
@@ -401,7 +408,10 @@ def main(argv: list[str] | None = None) -> int:
     """
     if argv is not None:
         return _run(argv)
-    status = _run(sys.argv[1:], own_process=True)
+    try:
+        status = _run(sys.argv[1:], own_process=True)
+    except KeyboardInterrupt as exc:  # the signal came as the run's end was being decided: it wrote nothing
+        status = _stopped(f"prp3mc {_command_named(sys.argv[1:]) or ''}".strip(), _signum(exc))
     _quiet_exit()
     return status
 
@@ -422,8 +432,10 @@ def _terminated(signum, frame):
     Once the finished folder is moving into place (:data:`prp3mc.output.COMMITTED`)
     the run is complete: the signal is let pass, and the run ends with exit 0
     and its folder whole, never with a folder installed and exit 130/143.
+    Once the run's end is decided (an error reported, an interruption being
+    reported) a signal is let pass too: it would only cut the one line short.
     """
-    if COMMITTED["value"]:
+    if COMMITTED["value"] or _SIGNALLED["decided"]:
         return
     _SIGNALLED["signum"] = signum
     raise _Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
@@ -431,7 +443,12 @@ def _terminated(signum, frame):
 
 #: The signal that interrupted the current run, if one did: an error raised on the interrupt's way out
 #: (a figure half drawn, a file half written) is reported as the interruption, not as an error of its own.
-_SIGNALLED = {"signum": None}
+_SIGNALLED = {"signum": None, "decided": False}
+
+
+def _signum(exc: KeyboardInterrupt) -> int:
+    """The signal an interrupt of the run stands for (SIGTERM for :class:`_Terminated`, else SIGINT)."""
+    return signal.SIGTERM if isinstance(exc, _Terminated) else signal.SIGINT
 
 
 def _stopped(name: str, signum) -> int:
@@ -459,7 +476,37 @@ class _TimeUp(KeyboardInterrupt):
 
 
 def _time_up(signum, frame):
+    """The ``--max-hours`` alarm: interrupt the run, unless its output is being installed (see :func:`_terminated`)."""
+    if COMMITTED["value"] or _SIGNALLED["decided"]:
+        return
     raise _TimeUp()
+
+
+def _interrupt_again(hook):
+    """``sys.unraisablehook`` that raises a swallowed interrupt of the run again, where the run is.
+
+    A signal handler's exception raised inside a weak reference's callback,
+    a ``__del__`` or the garbage collector cannot propagate: Python prints
+    "Exception ignored in ..." and carries on, and the run would complete
+    as if never interrupted, with that traceback on stderr. The signal is
+    sent again instead, from a helper thread a moment later (raised here its
+    handler would run inside this hook and be swallowed again), and its handler interrupts
+    the run at the run's next step. Any other unraisable exception goes to ``hook``.
+    """
+    def handle(unraisable):
+        exc = unraisable.exc_value
+        signum = signal.SIGALRM if isinstance(exc, _TimeUp) else _SIGNALLED["signum"]
+        if isinstance(exc, KeyboardInterrupt) and signum is not None and \
+                signal.getsignal(signum) in (_terminated, _time_up, signal.SIG_IGN):
+            try:
+                again = threading.Timer(0.02, os.kill, (os.getpid(), signum))   # once this hook has returned
+                again.daemon = True
+                again.start()
+            except RuntimeError:   # the interpreter is shutting down: the run has ended anyway
+                pass
+            return
+        hook(unraisable)
+    return handle
 
 
 @contextlib.contextmanager
@@ -486,10 +533,11 @@ def _run(argv: list[str], own_process: bool = False) -> int:
     if own_process:  # a SIGTERM (timeout, a batch system) ends the run as Ctrl-C does: no leftovers
         signal.signal(signal.SIGTERM, _terminated)
         signal.signal(signal.SIGINT, _terminated)
+        sys.unraisablehook = _interrupt_again(sys.__unraisablehook__)
         sys.stdout.reconfigure(errors="surrogateescape")  # a file name that is not UTF-8 prints as its own bytes
     name = f"prp3mc {args.command}"
     WARNINGS.clear()
-    COMMITTED["value"], _SIGNALLED["signum"] = False, None
+    COMMITTED["value"], _SIGNALLED["signum"], _SIGNALLED["decided"] = False, None, False
     show = warnings.showwarning
 
     def one_line_warning(message, category, filename, lineno, file=None, line=None):
@@ -510,25 +558,34 @@ def _run(argv: list[str], own_process: bool = False) -> int:
             if args.max_hours is not None:  # entered last, left first: the unwinding is not cut short
                 stack.enter_context(_stopping_after(3600 * args.max_hours))
             args.run(args)
-    except _TimeUp:
+    except BaseException as exc:
+        _SIGNALLED["decided"] = True  # from here a signal is let pass (see _terminated)
+        return _ended_by(exc, name, args)
+    _SIGNALLED["decided"] = True
+    return 0
+
+
+def _ended_by(exc: BaseException, name: str, args: argparse.Namespace) -> int:
+    """The one line on stderr and the exit status of a run that ended in ``exc``; re-raised if unforeseen."""
+    if isinstance(exc, _TimeUp):
         print(f"{name}: error: stopped at the --max-hours limit ({format_seconds(3600 * args.max_hours)} of wall "
               "time): nothing was written", file=sys.stderr)
         return 1
-    except KeyboardInterrupt as exc:
-        return _stopped(name, signal.SIGTERM if isinstance(exc, _Terminated) else signal.SIGINT)
-    except Exception as exc:
-        if _SIGNALLED["signum"] is not None:   # raised by what the signal interrupted
-            return _stopped(name, _SIGNALLED["signum"])
-        if isinstance(exc, BrokenPipeError):
-            return 0
-        if isinstance(exc, MemoryError):
-            print(f"{name}: error: out of memory: use fewer samples or poses", file=sys.stderr)
-            return 1
-        if isinstance(exc, (Prp3mcError, OSError)):  # OSError: the file system or the machine, still one line
-            print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
-            return 1
-        raise
-    return 0
+    if isinstance(exc, KeyboardInterrupt):
+        return _stopped(name, _signum(exc))
+    if not isinstance(exc, Exception):  # SystemExit and the like: as Python ends on them
+        raise exc
+    if _SIGNALLED["signum"] is not None:   # raised by what the signal interrupted
+        return _stopped(name, _SIGNALLED["signum"])
+    if isinstance(exc, BrokenPipeError):
+        return 0
+    if isinstance(exc, MemoryError):
+        print(f"{name}: error: out of memory: use fewer samples or poses", file=sys.stderr)
+        return 1
+    if isinstance(exc, (Prp3mcError, OSError)):  # OSError: the file system or the machine, still one line
+        print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
+        return 1
+    raise exc
 
 
 if __name__ == "__main__":

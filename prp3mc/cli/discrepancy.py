@@ -43,11 +43,12 @@ class DiscrepancyCommand:
         from ..model.budget import Budget
         from ..reports.discrepancy_report import report_document, write_report
         from ..measurement.fit.workflow import STAGES, discrepancy
-        from ..measurement.campaign.data import count_rows, read_campaign
+        from ..measurement.campaign.data import check_instrument_noise, count_rows, read_campaign
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         d = len(budget)
         within_limits(args, discrepancy_estimate(count_rows(args.data), n_inputs=d))  # before reading the file
         campaign = read_campaign(args.data, geometry)
+        check_instrument_noise(campaign, args.instrument_sigma_mm, args.instrument_sigma_deg)
         if budget.correlated:
             warnings.warn(Prp3mcWarning(correlation_warning(geometry, budget, campaign.poses)), stacklevel=1)
         within_limits(args, discrepancy_estimate(campaign.n_measurements, campaign.n_poses,

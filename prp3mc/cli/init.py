@@ -1,9 +1,10 @@
 """``prp3mc init KIND FILE``: write a commented template that runs as it is (docs, *File formats*)."""
 
+import sys
 from importlib import resources
 from pathlib import Path
 
-from ..errors import OutputExistsError
+from ..errors import OutputError, OutputExistsError
 from ..output import write_text
 from . import command
 
@@ -20,12 +21,17 @@ class InitCommand:
     @staticmethod
     def add_arguments(p):
         p.add_argument("kind", choices=KINDS, help="what to write")
-        p.add_argument("file", type=Path, help="the file to write (a .toml name)")
+        p.add_argument("file", help="the file to write (a .toml name; '-': stdout)")
         p.add_argument("--force", action="store_true", help="replace an existing file")
 
     @staticmethod
     def run(args) -> None:
-        path = args.file
+        if args.file == "-":
+            sys.stdout.write(template(args.kind))
+            return
+        if not args.file.strip():
+            raise OutputError("the file name is empty: name the .toml file to write")
+        path = Path(args.file)
         if path.exists() and not args.force:
             raise OutputExistsError(f"{path} exists: choose another name or pass --force to replace it")
         if path.exists() and not path.is_file():

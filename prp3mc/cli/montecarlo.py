@@ -37,7 +37,7 @@ class MonteCarloCommand:
         from ..kinematics.geometry import Geometry
         from ..model.budget import Budget
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
-        poses, where = grid_poses(args)
+        poses, where = grid_poses(args, lambda n: montecarlo_estimate(args.samples, n, len(budget.factors) + 1))
         if args.region is None:   # a refused pose before any warning about the analysis
             check_poses(geometry, poses)
         within_limits(args, montecarlo_estimate(args.samples, poses.shape[0], len(budget.factors) + 1))

@@ -6,6 +6,7 @@ import numpy as np
 
 from .._version import __version__
 from ..kinematics.geometry import Geometry
+from ..limits import sensitivity_estimate
 from . import (LEGS, provenance, matrix_table, add_geometry, add_json, add_pose_or_region, command, emit_json, emit_table,
                grid_poses)
 
@@ -22,7 +23,7 @@ class SensitivityCommand:
     def run(args) -> None:
         from ..kinematics.sensitivity import FAMILIES, sensitivity
         geometry = Geometry.load(args.geometry)
-        poses, where = grid_poses(args)
+        poses, where = grid_poses(args, sensitivity_estimate)
         if args.region is not None:
             emit_table(args, _long_table(sensitivity(geometry, poses), poses), provenance(args, geometry, **where))
             return

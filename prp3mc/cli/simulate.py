@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from . import (add_budget, add_geometry, add_json, add_seed, command, emit_json, nonnegative_float, positive_int,
-               provenance)
+               provenance, within_limits)
 from ..errors import CampaignError, InputFileError
+from ..limits import simulate_estimate
 from ..output import OutputExistsError
 from ..provenance import file_record
 
@@ -125,6 +126,8 @@ class SimulateCommand:
         from ..measurement.campaign.simulate import simulate_campaign
         from ..model.budget import Budget
 
+        if not args.out_file.strip():
+            raise CampaignError("--out is empty: name the campaign file to write (or '-' for stdout)")
         out = None if args.out_file == "-" else Path(args.out_file)
         if out is None and args.json:
             raise CampaignError("--json prints to stdout: write the campaign to a file (--out CAMPAIGN.csv)")
@@ -142,7 +145,9 @@ class SimulateCommand:
         }
         if args.plan is not None:
             plan, poses, where = _read_plan(args.plan), None, {"plan": file_record(args.plan)}
+            within_limits(args, simulate_estimate(len(plan)))
         else:
+            within_limits(args, simulate_estimate(args.poses * args.visits))
             region_spec = args.region or (args.geometry if args.geometry in GEOMETRY_PRESETS else None)
             if region_spec is None:
                 raise CampaignError("--poses needs --region (a preset or a region file) for a geometry file")
@@ -158,6 +163,7 @@ class SimulateCommand:
         else:
             from ..output import write_text
 
+            out.parent.mkdir(parents=True, exist_ok=True)
             write_text(out, frame.to_csv(index=False, float_format="%.12g", lineterminator="\n"))
         meta = campaign.metadata
         if args.json:

@@ -2,6 +2,7 @@
 
 
 from .._version import __version__
+from ..limits import worstcase_estimate
 from ..kinematics.geometry import Geometry
 from . import (provenance, add_budget, add_geometry, add_json, add_pose_or_region, command, emit_json, emit_table,
                grid_poses, positive_float)
@@ -26,7 +27,7 @@ class WorstCaseCommand:
         from ..model.budget import Budget
         import pandas as pd
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
-        poses, where = grid_poses(args)
+        poses, where = grid_poses(args, lambda n: worstcase_estimate(n, len(budget)))
         if args.region is None:   # a refused pose before any warning about the analysis
             check_poses(geometry, poses)
         check_linearity(geometry, budget, poses)

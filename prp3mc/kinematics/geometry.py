@@ -239,8 +239,9 @@ class Region:
         for key in ("x_mm", "y_mm"):
             lo, hi = _pair(key, getattr(self, key))
             object.__setattr__(self, key, (lo, hi))
-        if not np.isfinite(self.phi_deg):
-            raise GeometryError("phi_deg must be finite")
+        if isinstance(self.phi_deg, bool) or not isinstance(self.phi_deg, (int, float, np.floating, np.integer)) \
+                or not np.isfinite(self.phi_deg):
+            raise GeometryError(f"phi_deg: expected a finite number of degrees, got {self.phi_deg!r}")
         object.__setattr__(self, "phi_deg", float(self.phi_deg))
 
     @classmethod
@@ -297,7 +298,10 @@ def _leads(values: Any) -> tuple:
 
 
 def _pair(key: str, values: Any) -> tuple[float, float]:
-    arr = np.asarray(values, dtype=float)
+    try:
+        arr = np.asarray(values, dtype=float)
+    except (TypeError, ValueError):   # text, a table, a ragged list
+        arr = np.full(0, np.nan)
     if arr.shape != (2,) or not np.all(np.isfinite(arr)) or not arr[0] < arr[1]:
         raise GeometryError(f"{key}: expected finite [lo, hi] with lo < hi, got {values!r}")
     return float(arr[0]), float(arr[1])

@@ -43,7 +43,8 @@ from ...model.effects import TEMP_LIMITS_C
 from ...model.linear import linear_model
 
 __all__ = ["Campaign", "read_campaign", "REQUIRED_COLUMNS", "CMD_COLUMNS", "MEAS_COLUMNS", "DIR_COLUMNS",
-           "MAX_ERROR", "MIN_POSES", "require_testable", "count_rows", "CAMPAIGN_PRESETS", "check_error_scale"]
+           "MAX_ERROR", "MIN_POSES", "require_testable", "count_rows", "CAMPAIGN_PRESETS", "check_error_scale",
+           "check_instrument_noise"]
 
 #: Commanded and measured pose columns, ``[x mm, y mm, phi deg]``.
 CMD_COLUMNS, MEAS_COLUMNS = ("x_cmd", "y_cmd", "phi_cmd"), ("x_meas", "y_meas", "phi_meas")
@@ -233,6 +234,11 @@ class Campaign:
                                 f"[{temp.min():g}, {temp.max():g}], {temp.min() - 273.15:.4g} to "
                                 f"{temp.max() - 273.15:.4g} degrees C if in kelvin: temp_C must be in degrees C "
                                 "(subtract 273.15)")
+        if temp is not None and _FAHRENHEIT[0] <= temp.min() and temp.max() <= _FAHRENHEIT[1]:
+            warnings.warn(f"{source}: every temp_C lies in [{temp.min():g}, {temp.max():g}] degrees C, hotter than "
+                          f"any room machines are measured in: if they are degrees F ({(temp.min() - 32) / 1.8:.4g} "
+                          f"to {(temp.max() - 32) / 1.8:.4g} degrees C), convert them (C = (F - 32) / 1.8)",
+                          Prp3mcWarning, stacklevel=2)
         if "time_s" in frame.columns:
             frame = frame.assign(time_s=_seconds(frame["time_s"], where))
         hot_or_cold = np.zeros(0) if temp is None else (temp < TEMP_LIMITS_C[0]) | (temp > TEMP_LIMITS_C[1])
@@ -278,6 +284,9 @@ class Campaign:
 #: Temperatures that are plausible machine-room temperatures in kelvin (-50 to 100 degrees C) and
 #: implausible in degrees C (above 220): such a temp_C column is refused as kelvin.
 _KELVIN = (223.15, 373.15)
+#: Temperatures of machine rooms in degrees F (10 to 40 degrees C) that are 50 degrees C and more as degrees C:
+#: legal (an oven test), so such a temp_C column is run with a warning naming Fahrenheit, not refused.
+_FAHRENHEIT = (50.0, 104.0)
 #: Factors of the usual unit mistakes, (measured / commanded, what it means).
 _UNIT_FACTORS = ((1 / 25.4, "inches (measured / commanded = 1/25.4)"), (25.4, "mm against a command in inches"),
                  (1000.0, "µm (measured / commanded = 1000)"), (1e-3, "metres (measured / commanded = 1/1000)"))
@@ -302,6 +311,49 @@ def _check_units(cmd: np.ndarray, meas: np.ndarray, source: str) -> None:
                 what = "deg" if k == 2 else "mm"
                 raise CampaignError(f"{source}: column {MEAS_COLUMNS[k]} looks like {unit}: measured poses must be "
                                     f"in mm and deg, like the command (convert {MEAS_COLUMNS[k]} to {what})")
+
+
+#: Level of the test that refuses an instrument noise the campaign's scatter rules out.
+INSTRUMENT_NOISE_LEVEL = 1e-6
+
+
+def check_instrument_noise(campaign: "Campaign", sigma_mm: float, sigma_deg: float) -> None:
+    """Refuse an instrument noise that the campaign's own scatter rules out (a µm or arcsec figure given in mm or deg).
+
+    The instrument's noise adds to every other scatter of the measured errors
+    (measured - commanded): their variance about their mean is at least
+    sigma². With nu degrees of freedom, ``nu s² / sigma²`` is then at least
+    chi²(nu) distributed, and a value below its :data:`INSTRUMENT_NOISE_LEVEL`
+    quantile rules the stated sigma out (x and y pooled, phi on its own).
+
+    Parameters
+    ----------
+    campaign : Campaign
+    sigma_mm, sigma_deg : float
+        Stated instrument noise sd of x and y (mm) and of phi (deg); 0 is not checked.
+
+    Raises
+    ------
+    CampaignError
+        One line: the stated sd, the campaign's scatter, the largest sd it allows, the likely unit.
+    """
+    from scipy.stats import chi2
+
+    errors = campaign.measured - campaign.commanded
+    for columns, sigma, option, unit, small, factor in (((0, 1), sigma_mm, "--instrument-sigma-mm", "mm", "µm", 1e3),
+                                                         ((2,), sigma_deg, "--instrument-sigma-deg", "deg", "arcsec",
+                                                          3600.0)):
+        e = errors[:, columns]
+        nu = e.size - len(columns)
+        if not sigma > 0 or nu < 2:
+            continue
+        s2 = float(np.sum((e - e.mean(axis=0)) ** 2)) / nu
+        least = float(chi2.ppf(INSTRUMENT_NOISE_LEVEL, nu))
+        if nu * s2 < least * sigma ** 2:
+            raise CampaignError(f"{option} {sigma:g}: the campaign's measured errors scatter by {s2 ** 0.5:.3g} {unit} "
+                                f"(sd over {e.shape[0]} rows) and instrument noise only adds to that, so its sd is at "
+                                f"most {(nu * s2 / least) ** 0.5:.3g} {unit}: give it in {unit} (if {sigma:g} is in "
+                                f"{small}: {sigma / factor:g} {unit})")
 
 
 def _unit_hint(geometry: Geometry, poses: np.ndarray) -> str:
