@@ -11,6 +11,8 @@
 - :mod:`~prp3mc.measurement.subsets` — best subsets and alias sets of systematic effects.
 - :mod:`~prp3mc.measurement.diagnostics` — the tests, the one verdict and the gap.
 - :mod:`~prp3mc.measurement.selection` — naming effects with exchange moves, aliases.
+- :mod:`~prp3mc.measurement.relinearise` — the exact chain linearised about an estimate (Gauss-Newton).
+- :mod:`~prp3mc.measurement.identify` — gross errors and names, relinearised until stable; the linearity guard.
 - :mod:`~prp3mc.measurement.holdout` — the gap on poses left out of the fit (cross-validation by pose).
 - :mod:`~prp3mc.measurement.updated` — the updated model: identified geometry, budgets with ``[effects]``,
   what a controller can compensate.

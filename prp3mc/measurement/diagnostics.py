@@ -162,7 +162,7 @@ def null_variances(engine: Engine, fit: Fit, n_boot: int, rng) -> tuple[np.ndarr
     every visit: ``mu + sqrt(r) (e_pose - mu) + sqrt(1 - r) (e_visit - mu)``.
     """
     bud = spread_budget(engine.budget.without_effects(), {n: f * engine.spread_ref[n] for n, f in fit.factors.items()})
-    model = linear_model(engine.geometry, bud, engine.campaign.poses, check=False)
+    model = linear_model(engine.model_geometry, bud, engine.model_poses, check=False)
     mean = engine.moments(fit.factors, fit.r)[0]
     coef = model.coef[engine.idx]
     F = model.features(bud.sample(n_boot * engine.M, rng)).reshape(n_boot, engine.M, -1)
