@@ -44,6 +44,7 @@ _API = {
     "Campaign": "measurement.campaign", "read_campaign": "measurement.campaign",
     "DiscrepancyResult": "measurement.results", "simulate_campaign": "measurement.simulate",
     "detectable_effect": "measurement.workflow", "discrepancy": "measurement.workflow",
+    "CampaignPlan": "measurement.plan", "plan_campaign": "measurement.plan",
 }
 #: The wings, importable as attributes too (``prp3mc.measurement`` after ``import prp3mc``).
 _WINGS = ("kinematics", "uncertainty", "measurement", "study", "reports", "cli", "errors", "testing")
@@ -62,6 +63,7 @@ __all__ = [
     "Study", "StudyResult", "run_study", "build_summary",
     # measurements
     "Campaign", "read_campaign", "simulate_campaign", "discrepancy", "DiscrepancyResult", "detectable_effect",
+    "plan_campaign", "CampaignPlan",
 ]
 
 

@@ -13,6 +13,8 @@
 - :mod:`~prp3mc.measurement.selection` — naming effects with exchange moves, aliases.
 - :mod:`~prp3mc.measurement.relinearise` — the exact chain linearised about an estimate (Gauss-Newton).
 - :mod:`~prp3mc.measurement.identify` — gross errors and names, relinearised until stable; the linearity guard.
+- :mod:`~prp3mc.measurement.confounds` — what a campaign cannot tell apart (``confounded``), the ambiguous verdict.
+- :mod:`~prp3mc.measurement.plan` — planning a campaign: D-optimal poses, interleaved order, approach directions.
 - :mod:`~prp3mc.measurement.holdout` — the gap on poses left out of the fit (cross-validation by pose).
 - :mod:`~prp3mc.measurement.updated` — the updated model: identified geometry, budgets with ``[effects]``,
   what a controller can compensate.

@@ -103,7 +103,16 @@ class DiscrepancyResult:
     named_effects : tuple of NamedEffect
         Empty when the model misses nothing the campaign can see.
     unexplained : bool
-        Disagreement remains that no candidate explains; exactly ``not gap["closed"]``.
+        Disagreement remains that no candidate explains: ``not gap["closed"]``, or the linearity guard tripped.
+    verdict : mapping
+        ``state`` (one of :data:`~prp3mc.measurement.diagnostics.VERDICTS`:
+        ``beyond the linear model``, ``unexplained``, ``ambiguous``,
+        ``explained``, ``nothing missing``) and a one-line ``text``.
+    confounded : tuple of mapping
+        What the campaign cannot tell apart (:mod:`~prp3mc.measurement.confounds`):
+        ``{effects, with, why, advice, source}``, ``source`` ``design`` (from
+        the signatures, with ``vif`` or ``r``) or ``data`` (an effect that
+        explains the drift the data show as well).
     gap : mapping
         ``metric, before, after, null_level, closed_at, closed,
         deciding_channel`` and every channel's evidence (see
@@ -177,6 +186,8 @@ class DiscrepancyResult:
 
     named_effects: tuple
     unexplained: bool
+    verdict: dict
+    confounded: tuple
     gap: dict
     before: Diagnosis
     after: Diagnosis
@@ -299,6 +310,8 @@ class DiscrepancyResult:
             "inputs": self.inputs(), "versions": versions(), **warnings,
             "named_effects": [e.to_dict() for e in self.named_effects],
             "unexplained": bool(self.unexplained),
+            "verdict": _thawed(self.verdict),
+            "confounded": _thawed(self.confounded),
             "gap": _thawed(self.gap),
             "nuisance": _thawed(self.nuisance),
             "outliers": _thawed(self.outliers),

@@ -155,6 +155,17 @@ def _repeat_errors(budget: Budget, X: np.ndarray, pose_of_visit: np.ndarray, n_p
     return out
 
 
+def _schedule(order, n_poses: int) -> np.ndarray:
+    """A given visiting order as indices into the poses, every pose visited."""
+    order = np.asarray(order)
+    if order.ndim != 1 or order.size == 0 or not np.issubdtype(order.dtype, np.integer) \
+            or order.min() < 0 or order.max() >= n_poses:
+        raise CampaignError(f"order must be a 1-d array of pose indices in [0, {n_poses})")
+    if np.unique(order).size != n_poses:
+        raise CampaignError("order must visit every pose")
+    return order
+
+
 def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int = 8, *,
                       effects: dict | None = None, approach: str = "both",
                       temp_drift_C: tuple[float, float] | None = (20.0, 28.0),
@@ -163,7 +174,7 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
                       drift: tuple[float, float, float] | None = None,
                       outliers: tuple[float, float] | None = None,
                       repeatable_fraction: float = 0.0,
-                      slider_error_fn=None, pose_error_fn=None,
+                      slider_error_fn=None, pose_error_fn=None, order=None, time_s=None,
                       rng: "None | int | np.random.Generator" = None) -> Campaign:
     """Simulate a measurement campaign with the exact nonlinear model.
 
@@ -192,10 +203,11 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         Hidden effects of the library (:data:`~prp3mc.measurement.effects.EFFECT_NAMES`, in their units); any number
         at once, their pose errors add up through the exact chain (a hidden effect the budget's
         ``[effects]`` also holds adds to its value).
-    approach : {"both", "positive", "negative", "sequence"}
+    approach : {"both", "positive", "negative", "sequence"} or array_like, shape (M, 3)
         Approach direction of each actuator: random +-1 per actuator and
-        measurement; always +1; always -1; or the sign of the actuator's
-        move from the previous pose visited.
+        measurement; always +1; always -1; the sign of the actuator's
+        move from the previous pose visited; or given, +-1 per measurement
+        (a planned campaign, :func:`~prp3mc.measurement.plan.plan_campaign`).
     temp_drift_C : (start, end) or None
         Temperature at the first and last measurement, degrees C; None for
         a campaign without a ``temp_C`` column (thermal effects then need it).
@@ -230,6 +242,12 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         ``f(commanded (M, 3), b (M, 3), direction (M, 3), temp_C (M,) or None)``
         returning an extra slider error delta b (M, 3) mm, or an extra pose
         error (M, 3) ``[mm, mm, deg]`` added to the exact one.
+    order : array_like of int, shape (M,), optional
+        The visiting order, indices into ``poses`` (a planned campaign;
+        ``n_repeats`` is then unused); by default ``n_repeats`` rounds, each
+        in a fresh random order.
+    time_s : array_like, shape (M,), optional
+        Time of each measurement, s, increasing (default :func:`visit_times`).
     rng : None, int or numpy.random.Generator
         Randomness (Scientific Python SPEC 7; streams in the module notes);
         the integer seed used is recorded in ``metadata["seed"]``, also when
@@ -253,7 +271,8 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     n_repeats = int(n_repeats)
     if n_repeats < 1:
         raise CampaignError(f"n_repeats must be at least 1, got {n_repeats}")
-    if approach not in ("both", "positive", "negative", "sequence"):
+    given = not isinstance(approach, str)
+    if not given and approach not in ("both", "positive", "negative", "sequence"):
         raise CampaignError(f"approach must be both, positive, negative or sequence, got {approach!r}")
     registration, drift = _triple(registration, "registration"), _triple(drift, "drift")
     outliers = _outlier_setting(outliers)
@@ -272,12 +291,17 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     if "thermal" in machine and temp_drift_C is None:
         raise CampaignError("a thermal effect (hidden or in the budget) needs a temperature drift (temp_drift_C)")
     P = poses.shape[0]
-    order = np.concatenate([rng.permutation(P) for _ in range(n_repeats)])   # visiting order
+    order = (np.concatenate([rng.permutation(P) for _ in range(n_repeats)]) if order is None    # visiting order
+             else _schedule(order, P))
     M = order.size
     cmd = poses[order]
     b_pose, _ = inverse_kinematics(geometry, poses, check=False)
     b = b_pose[order]
-    if approach == "both":
+    if given:
+        direction = np.asarray(approach, dtype=float)
+        if direction.shape != (M, 3) or not np.all(np.abs(direction) == 1.0):
+            raise CampaignError(f"approach given as directions must be +-1 of shape ({M}, 3)")
+    elif approach == "both":
         direction = rng.choice([-1.0, 1.0], size=(M, 3))
     elif approach == "sequence":
         step = np.diff(b, axis=0, prepend=b[:1] - 1.0)
@@ -285,7 +309,12 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         direction = pd.DataFrame(direction).ffill().fillna(1.0).to_numpy()
     else:
         direction = np.full((M, 3), 1.0 if approach == "positive" else -1.0)
-    time_s = visit_times(b)
+    if time_s is None:
+        time_s = visit_times(b)
+    else:
+        time_s = np.asarray(time_s, dtype=float)
+        if time_s.shape != (M,) or not np.all(np.isfinite(time_s)) or np.any(np.diff(time_s) < 0):
+            raise CampaignError(f"time_s must be {M} finite, non-decreasing times (s)")
     temp = None if temp_drift_C is None else np.linspace(temp_drift_C[0], temp_drift_C[1], M)
     sim_budget = spread_budget(budget.without_effects(), effects)
     X = sim_budget.sample(M, rng)
@@ -325,7 +354,8 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     if temp is not None:
         frame["temp_C"] = temp
     frame["time_s"] = time_s
-    metadata = {"seed": seed_used, "effects": effects, "machine_effects": machine, "n_repeats": n_repeats, "approach": approach,
+    metadata = {"seed": seed_used, "effects": effects, "machine_effects": machine, "n_repeats": n_repeats,
+                "approach": "given" if given else approach,
                 "temp_drift_C": None if temp_drift_C is None else list(temp_drift_C),
                 "instrument_sigma_mm": instrument_sigma_mm, "instrument_sigma_deg": instrument_sigma_deg,
                 "registration": None if registration is None else list(registration),

@@ -33,7 +33,8 @@ from ..kinematics.geometry import Geometry
 from ..progress import Progress
 from ..uncertainty.budget import Budget
 from .campaign import Campaign, read_campaign, require_testable
-from .diagnostics import diagnose, gap, gap_value, null_variances
+from .confounds import ambiguities, design_confounds
+from .diagnostics import diagnose, gap, gap_value, null_variances, verdict
 from .effects import effect
 from .holdout import held_out_gap
 from .likelihood import Engine, Fit
@@ -126,11 +127,13 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
         model = updated_model(geometry, budget, effects, campaign)
         accuracy.submit(geometry, budget, model, campaign, seed)
         done()
-        before, after, gap_doc = _verdict(named, n_bootstrap, alpha_unexplained, rng, seed)
+        before, after, gap_doc = _diagnoses(named, n_bootstrap, alpha_unexplained, rng, seed)
         done()
         with_outliers = _with_outliers(named, alpha, max_effects, n_bootstrap, gap_doc["closed_at"], rng)
         done()
         nuisance, drift_test = _nuisance(engine, fit, alpha)
+        shown, reasons = ambiguities(engine, fit, effects, drift_test)
+        confounded = tuple(design_confounds(engine) + shown)
         r_lo, r_hi = engine.r_interval(fit)
         effects_after = _effect_values(engine, fit)
         systematic = {n: v for n, v in effects_after.items() if effect(n).systematic}
@@ -142,6 +145,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
             bar.close()
         return DiscrepancyResult(
             named_effects=effects, unexplained=not gap_doc["closed"] or linearity["guard"] != "ok", gap=gap_doc,
+            verdict=verdict(gap_doc, effects, linearity, reasons, confounded), confounded=confounded,
             before=before, after=after, steps=named.steps, prediction_after=prediction,
             budget_after=prediction.budget, systematic=systematic, nuisance=nuisance, drift_test=drift_test,
             registration=registration, outliers=_outlier_rows(named, campaign), outlier_rule=_outlier_rule(named, outlier_rate),
@@ -155,7 +159,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
             instrument_sigma_deg=instrument_sigma_deg, wall_time_s=time.perf_counter() - t0)
 
 
-def _verdict(named: Named, n_bootstrap: int, alpha_unexplained: float, rng, seed: int) -> tuple:
+def _diagnoses(named: Named, n_bootstrap: int, alpha_unexplained: float, rng, seed: int) -> tuple:
     """The diagnoses before and after the named effects, and the gap document with its held-out part."""
     engine, base, fit = named.engine, named.base, named.fit
     null_before = null_variances(engine, base, n_bootstrap, rng)

@@ -1,0 +1,155 @@
+"""A planned campaign against the 7 x 7 grid of the same size (issue 24, point 6), on the exact chain.
+
+For each geometry, ``plan_campaign`` plans 49 poses x 8 visits for a few
+candidate effects (``PLANNED``). For each effect:
+
+- its **smallest detectable value** (named with probability 0.9 at the
+  workflow's level, registration fitted) on the plan and on the grid of
+  ``bench_discrepancy.py`` (49 poses, phi cycling -4, 0, 4 deg, 8 visits in
+  random rounds, random approach directions);
+- the **detection rate** over seeds: campaigns simulated with the exact
+  chain on each layout (a registration error of 20 µm / 20 µm / 0.005
+  deg, temperature 20 -> 28 degC), the effect hidden at the plan's
+  detectable value, analysed by ``discrepancy``: the share in which it is
+  named (or is an alias of the named effect).
+
+Both layouts carry the ``dir_i`` columns of the legs with a backlash among
+the planned effects only, as the plan's template does.
+
+**Thermal against drift** (``--thermal``): on the delta-shape, a plan for
+thermal expansion (temperature rising steadily with time: the plan cannot
+set it) against the grid: thermal's variance inflation from the nuisances
+on each layout, and over seeds of a warming machine (the library's thermal
+at ``THERMAL`` 1/K) the share in which it is named, the verdict says the
+cause is ambiguous, or it is swallowed (neither).
+
+Usage: ``python benchmarks/bench_plan.py [--seeds N] [--geometries ...] [--thermal] [--json]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+import numpy as np
+from bench_discrepancy import REGISTRATION, SIGMA, campaign_poses, wilson
+
+import prp3mc
+from prp3mc import Budget, Geometry
+from prp3mc.measurement.confounds import design_confounds
+from prp3mc.measurement.likelihood import Engine
+from prp3mc.measurement.plan import plan_campaign
+from prp3mc.measurement.prediction import noise_cov
+from prp3mc.measurement.simulate import simulate_campaign
+from prp3mc.measurement.workflow import detectable_effect, discrepancy
+
+#: The effects planned for on each geometry (each is then hidden alone).
+PLANNED = {"u-shape": ("scale_2", "backlash_1", "beta_1", "thermal"),
+           "delta-shape": ("scale_1", "backlash_3", "gamma_2", "thermal")}
+#: Thermal expansion of the warming machine of the thermal case, 1/K.
+THERMAL = 2e-5
+_PLAN_SEED = 24
+
+
+def layouts(preset: str, effects) -> dict:
+    """The plan and the grid: name -> simulate_campaign keyword arguments, and the plan itself."""
+    g, b = Geometry.from_preset(preset), Budget.from_preset("paper")
+    plan = plan_campaign(g, b, effects, 49, 8, rng=_PLAN_SEED, **SIGMA)
+    return plan, {"plan": {"poses": plan.poses, "order": plan.order, "approach": plan.direction,
+                           "time_s": plan.time_s},
+                  "grid": {"poses": campaign_poses(preset), "n_repeats": 8}}
+
+
+def campaign(preset: str, layout: dict, dir_legs, seed: int, effects: dict):
+    """One simulated campaign of ``layout`` as a frame with the ``dir_i`` columns of ``dir_legs`` only."""
+    g, b = Geometry.from_preset(preset), Budget.from_preset("paper")
+    kwargs = dict(layout)
+    poses = kwargs.pop("poses")
+    n = kwargs.pop("n_repeats", 8)
+    c = simulate_campaign(g, b, poses, n, effects=effects, registration=REGISTRATION, rng=seed, **SIGMA, **kwargs)
+    return c.to_frame().drop(columns=[f"dir_{i + 1}" for i in range(3) if i not in dir_legs])
+
+
+def rate(values: list[bool]) -> dict:
+    k = int(sum(values))
+    return {"k": k, "n": len(values), "rate": k / len(values), "ci95": list(wilson(k, len(values)))}
+
+
+def detection(preset: str, seeds: range) -> list[dict]:
+    plan, lays = layouts(preset, PLANNED[preset])
+    g, b = Geometry.from_preset(preset), Budget.from_preset("paper")
+    out = []
+    for name in PLANNED[preset]:
+        value = plan.detectable[name]
+        row = {"geometry": preset, "effect": name, "value": value, "detectable": {}, "detected": {}}
+        for label, layout in lays.items():
+            frames = [campaign(preset, layout, plan.dir_legs, s, {name: value}) for s in seeds]
+            row["detectable"][label] = detectable_effect(g, b, prp3mc.read_campaign(frames[0], g), name,
+                                                         **SIGMA)
+            found = [discrepancy(g, b, f, rng=s, **SIGMA).effect_fit(name) is not None for s, f in zip(seeds, frames)]
+            row["detected"][label] = rate(found)
+        out.append(row)
+        print(table([row]).splitlines()[-1], file=sys.stderr, flush=True)
+    return out
+
+
+def thermal(seeds: range) -> dict:
+    preset = "delta-shape"
+    g, b = Geometry.from_preset(preset), Budget.from_preset("paper")
+    plan, lays = layouts(preset, ("thermal",))
+    out = {"geometry": preset, "thermal": THERMAL}
+    for label, layout in lays.items():
+        frames = [campaign(preset, layout, plan.dir_legs, s, {"thermal": THERMAL}) for s in seeds]
+        engine = Engine(g, b, prp3mc.read_campaign(frames[0], g), noise_cov(SIGMA["instrument_sigma_mm"],
+                                                                             SIGMA["instrument_sigma_deg"]))
+        vif = [c["vif"]["thermal"] for c in design_confounds(engine, ("thermal",)) if "vif" in c]
+        named, ambiguous = [], []
+        for s, f in zip(seeds, frames):
+            r = discrepancy(g, b, f, rng=s, **SIGMA)
+            named.append(r.effect_fit("thermal") is not None)
+            ambiguous.append(r.verdict["state"] == "ambiguous")
+        out[label] = {"vif_listed": vif, "named": rate(named), "ambiguous": rate(ambiguous),
+                      "swallowed": rate([not n and not a for n, a in zip(named, ambiguous)])}
+        print(label, out[label], file=sys.stderr, flush=True)
+    return out
+
+
+def _cell(r: dict) -> str:
+    return f"{r['k']}/{r['n']}"
+
+
+def table(rows: list[dict]) -> str:
+    head = ["geometry", "effect", "hidden value (the plan's detectable)", "detectable: plan; grid",
+            "detected: plan; grid"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        d, k = r["detectable"], r["detected"]
+        lines.append(f"| {r['geometry']} | {r['effect']} | {r['value']:.3g} | {d['plan']:.3g}; {d['grid']:.3g} | "
+                     f"{_cell(k['plan'])}; {_cell(k['grid'])} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--seeds", type=int, default=25, help="campaigns per effect and layout (default 25)")
+    p.add_argument("--first-seed", type=int, default=0)
+    p.add_argument("--geometries", nargs="+", default=list(PLANNED))
+    p.add_argument("--thermal", action="store_true", help="the thermal-against-drift case instead")
+    p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    args = p.parse_args(argv)
+    seeds = range(args.first_seed, args.first_seed + args.seeds)
+    t0 = time.perf_counter()
+    doc = {"prp3mc": prp3mc.__version__, "seeds": [seeds.start, seeds.stop], "plan_seed": _PLAN_SEED}
+    if args.thermal:
+        doc["thermal"] = thermal(seeds)
+    else:
+        doc["detection"] = [row for preset in args.geometries for row in detection(preset, seeds)]
+    doc["wall_s"] = time.perf_counter() - t0
+    print(json.dumps(doc, indent=2) if args.json or args.thermal else table(doc["detection"]))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
