@@ -34,7 +34,7 @@ import numpy as np
 from scipy.optimize import differential_evolution
 
 from prp3mc import Geometry, Region, allocate, linear_model, worst_case
-from prp3mc.uncertainty.allocation_classes import ClassMenu
+from prp3mc.allocation.classes import ClassMenu
 
 SPEC_UM = 40.0
 

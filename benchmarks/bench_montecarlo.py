@@ -34,8 +34,8 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from prp3mc import Budget, Geometry, Region, linear_model, monte_carlo
-from prp3mc.uncertainty._mckernel import TILE
-from prp3mc.uncertainty._sampler import draw_uniforms, pcg_lanes
+from prp3mc.montecarlo._kernel import TILE
+from prp3mc.montecarlo._sampler import draw_uniforms, pcg_lanes
 
 FLOPS_PER_POSE_SAMPLE = 72
 PERCENTILES = (50.0, 95.0, 99.0, 99.73)
@@ -67,7 +67,7 @@ def _on_all_cores(work, repeat: int = 3) -> float:
 def uniform_rates(d: int, n: int = 1 << 23) -> tuple[float, float]:
     """Samples/s at which d uniforms a sample are drawn, on all cores: by numpy's Generator, and compiled.
 
-    The compiled lanes (:func:`prp3mc.uncertainty._sampler.draw_uniforms`) draw
+    The compiled lanes (:func:`prp3mc.montecarlo._sampler.draw_uniforms`) draw
     the same numbers as numpy: their rate bounds a Monte Carlo on them.
     """
     workers = os.cpu_count() or 1

@@ -10,7 +10,7 @@ problem) is timed on a few poses and scaled to the same grids.
 At one pose (``bench_sobol_pose``) prp3mc's default path (Saltelli design,
 model, first and total indices of four outputs with 100 bootstrap
 resamples) is timed against OpenTURNS' ``SaltelliSensitivityAlgorithm`` on
-the same problem (the budget as :func:`~prp3mc.uncertainty.interop.openturns_distribution`,
+the same problem (the budget as :func:`~prp3mc.model.interop.openturns_distribution`,
 the same linear model, the same N and bootstrap size), when OpenTURNS is
 installed. OpenTURNS estimates the 12 inputs only; prp3mc adds the three
 clearance groups (15 columns of the design instead of 12). Wall and CPU
@@ -29,8 +29,8 @@ import time
 import numpy as np
 
 from prp3mc import Budget, Geometry, Region, linear_model, worst_case
-from prp3mc.uncertainty.ranking import ranking
-from prp3mc.uncertainty.sobol import sobol_indices
+from prp3mc.sobol.ranking import ranking
+from prp3mc.sobol.indices import sobol_indices
 
 PRESETS = ("u-shape", "delta-shape")
 
@@ -96,7 +96,7 @@ def bench_sobol_pose(quick: bool) -> dict:
         import openturns as ot
     except ImportError:
         return result
-    from prp3mc.uncertainty.interop import openturns_distribution
+    from prp3mc.model.interop import openturns_distribution
     model, dist = linear_model(geometry, budget, pose), openturns_distribution(budget)
 
     def four_outputs(X):

@@ -39,7 +39,7 @@ from prp3mc.reports.study_report import write_study
 from prp3mc.study.summary import build_summary
 from prp3mc.study import runner
 from prp3mc.study.reader import Study
-from prp3mc.uncertainty import sobol
+from prp3mc.sobol import indices as sobol
 
 STUDY = "paper_reproduction"
 

@@ -20,8 +20,8 @@ from bench_study import bench_study
 
 import prp3mc
 from prp3mc import Budget, Geometry, Region, sensitivity, worst_case, worst_case_maxima
-from prp3mc.uncertainty._envelope import envelope_kernel, kernel_tables
-from prp3mc.uncertainty.crosscheck import optimizer_worst_case
+from prp3mc.worstcase._kernel import envelope_kernel, kernel_tables
+from prp3mc.worstcase.crosscheck import optimizer_worst_case
 
 
 def best_of(fn, repeat: int) -> float:
@@ -117,7 +117,7 @@ def bench_envelope(quick: bool) -> dict:
     out["worstcase_numpy_load"] = load
     out["envelope_limit_poses_per_s"] = peak_flops(np.float64) / ENVELOPE_FLOPS_PER_POSE
     # a machine's [effects]: thermal adds a shared generator (16 corners), backlash and a lead scale two terms
-    from prp3mc.uncertainty.systematic import SystematicEffect as Effect
+    from prp3mc.model.effects import SystematicEffect as Effect
     machine = budget.with_effects({"backlash_1": Effect("backlash_1", 0.02), "scale_2": Effect("scale_2", 1e-4),
                                    "thermal": Effect("thermal", 1.2e-5, temp_range_C=(15.0, 30.0))})
     grid = region.grid(1001)
@@ -161,7 +161,7 @@ def main(argv=None) -> int:
 
 
 def table(r: dict) -> str:
-    """The README's benchmark table: each figure, the alternative, the ratio and the limit."""
+    """The table of benchmarks/README.md: each figure, the alternative, the ratio and the limit."""
     g = lambda v: f"{v:.3g}"  # noqa: E731
     rows = [
         ("Monte Carlo, 21x21 poses x %d samples (pose-samples/s)" % r["mc_grid_samples"],

@@ -9,11 +9,15 @@ Sobol indices on top.
 
 Units: mm and degrees at every boundary, radians inside.
 
-The names below are the whole everyday API. Everything else lives in the
-wings, by concept: :mod:`prp3mc.kinematics`, :mod:`prp3mc.uncertainty`,
-:mod:`prp3mc.measurement`, :mod:`prp3mc.study`, :mod:`prp3mc.reports`
-(figures and report writers), :mod:`prp3mc.errors` (every exception type)
-and :mod:`prp3mc.testing` (helpers for users' CI).
+The names below are the whole everyday API. Everything else lives in one
+package per concept or method, from the ground up: :mod:`prp3mc.kinematics`
+(geometry, chain, J_q), :mod:`prp3mc.model` (laws, budgets, effects, the
+linear model), the methods side by side (:mod:`prp3mc.montecarlo`,
+:mod:`prp3mc.worstcase`, :mod:`prp3mc.sobol`, :mod:`prp3mc.allocation`),
+:mod:`prp3mc.measurement` (campaigns and the discrepancy fit),
+:mod:`prp3mc.study`, :mod:`prp3mc.reports` (figures and report writers),
+:mod:`prp3mc.cli`, :mod:`prp3mc.errors` (every exception type) and
+:mod:`prp3mc.testing` (helpers for users' CI).
 """
 
 from __future__ import annotations
@@ -31,23 +35,24 @@ _API = {
     "inverse_kinematics": "kinematics.chain", "exact_pose_error": "kinematics.exact",
     "Geometry": "kinematics.geometry", "Region": "kinematics.geometry",
     "Sensitivity": "kinematics.sensitivity", "sensitivity": "kinematics.sensitivity",
-    "Budget": "uncertainty.budget", "Catalogue": "uncertainty.catalogue",
-    **dict.fromkeys(("Disc", "Discrete", "Normal", "Triangular", "TruncNormal", "Uniform"), "uncertainty.laws"),
-    "LinearModel": "uncertainty.model", "linear_model": "uncertainty.model",
-    "MonteCarloResult": "uncertainty.montecarlo", "monte_carlo": "uncertainty.montecarlo",
-    **dict.fromkeys(("WorstCase", "WorstCaseMaxima", "worst_case", "worst_case_maxima"), "uncertainty.worstcase"),
-    "AllocationResult": "uncertainty.allocation", "allocate": "uncertainty.allocation",
-    "SobolResult": "uncertainty.sobol", "sobol_indices": "uncertainty.sobol",
-    "sobol_ranking": "uncertainty.ranking:ranking",
+    "Budget": "model.budget", "Catalogue": "model.catalogue",
+    **dict.fromkeys(("Disc", "Discrete", "Normal", "Triangular", "TruncNormal", "Uniform"), "model.laws"),
+    "LinearModel": "model.linear", "linear_model": "model.linear",
+    "MonteCarloResult": "montecarlo.propagation", "monte_carlo": "montecarlo.propagation",
+    **dict.fromkeys(("WorstCase", "WorstCaseMaxima", "worst_case", "worst_case_maxima"), "worstcase.envelope"),
+    "AllocationResult": "allocation.optimum", "allocate": "allocation.optimum",
+    "SobolResult": "sobol.indices", "sobol_indices": "sobol.indices",
+    "sobol_ranking": "sobol.ranking:ranking",
     "Study": "study.reader", "StudyResult": "study.results", "run_study": "study.runner",
     "build_summary": "study.summary",
-    "Campaign": "measurement.campaign", "read_campaign": "measurement.campaign",
-    "DiscrepancyResult": "measurement.results", "simulate_campaign": "measurement.simulate",
-    "detectable_effect": "measurement.workflow", "discrepancy": "measurement.workflow",
-    "CampaignPlan": "measurement.plan", "plan_campaign": "measurement.plan",
+    "Campaign": "measurement.campaign.data", "read_campaign": "measurement.campaign.data",
+    "DiscrepancyResult": "measurement.fit.results", "simulate_campaign": "measurement.campaign.simulate",
+    "detectable_effect": "measurement.fit.workflow", "discrepancy": "measurement.fit.workflow",
+    "CampaignPlan": "measurement.campaign.plan", "plan_campaign": "measurement.campaign.plan",
 }
 #: The wings, importable as attributes too (``prp3mc.measurement`` after ``import prp3mc``).
-_WINGS = ("kinematics", "uncertainty", "measurement", "study", "reports", "cli", "errors", "testing")
+_WINGS = ("kinematics", "model", "montecarlo", "worstcase", "sobol", "allocation", "measurement", "study",
+          "reports", "cli", "errors", "testing")
 
 __all__ = [
     "__version__", "Prp3mcError",

@@ -30,7 +30,7 @@ MAX_HOURS = 24.0
 #: Share of the available memory a request may use.
 MEMORY_MARGIN = 0.8
 
-# Monte Carlo streams its samples in blocks of 65536 (prp3mc.uncertainty._stream): what still grows
+# Monte Carlo streams its samples in blocks of 65536 (prp3mc.montecarlo._stream): what still grows
 # with n is the float32 pilot (n / 1024 samples of f features), the per-segment feature sums
 # (S1, S2: f + f^2 float64 per block) and, per pose, one position sum per segment (a block or one
 # of the 64 batches) besides the pose's model and results; the order statistics of a chunk of
@@ -162,7 +162,7 @@ def check(estimate: Estimate, *, max_hours: float | None = None, memory: int | N
 
 
 def montecarlo_estimate(n_samples: int, n_poses: int, n_inputs: int, workers: int | None = None) -> Estimate:
-    """Memory and time of :func:`prp3mc.uncertainty.montecarlo.monte_carlo` (features ~ inputs)."""
+    """Memory and time of :func:`prp3mc.montecarlo.propagation.monte_carlo` (features ~ inputs)."""
     n, d = float(n_samples), n_inputs
     workers = workers or cores()
     return Estimate(f"Monte Carlo of {n_samples} samples at {n_poses} pose(s)",
@@ -173,7 +173,7 @@ def montecarlo_estimate(n_samples: int, n_poses: int, n_inputs: int, workers: in
 
 def sobol_estimate(n_samples: int, n_poses: int, n_inputs: int, n_factors: int, n_outputs: int,
                    num_resamples: int, salib: bool) -> Estimate:
-    """Memory and time of :func:`prp3mc.uncertainty.sobol.sobol_indices` (N base samples, K factors)."""
+    """Memory and time of :func:`prp3mc.sobol.indices.sobol_indices` (N base samples, K factors)."""
     n, runs = float(n_samples), float(n_samples) * (n_factors + 2)
     per_pose = 8 * runs * 3 * (1 + n_outputs)
     memory = runs * 16 * n_inputs + n * num_resamples * _SOBOL_BOOTSTRAP_BYTES + min(n_poses, 4) * per_pose
@@ -185,7 +185,7 @@ def sobol_estimate(n_samples: int, n_poses: int, n_inputs: int, n_factors: int, 
 
 
 def worstcase_estimate(n_poses: int, n_inputs: int) -> Estimate:
-    """Memory and time of :func:`prp3mc.uncertainty.worstcase.worst_case` over ``n_poses`` poses."""
+    """Memory and time of :func:`prp3mc.worstcase.envelope.worst_case` over ``n_poses`` poses."""
     n = float(n_poses)
     return Estimate(f"exact worst case at {n_poses} poses",
                     n * (_WC_BYTES_PER_POSE + _WC_BYTES_PER_POSE_TERM * n_inputs), n * _WC_SECONDS_PER_POSE)
@@ -193,7 +193,7 @@ def worstcase_estimate(n_poses: int, n_inputs: int) -> Estimate:
 
 
 def allocate_estimate(n_poses: int, n_inputs: int, n_samples: int = 0) -> Estimate:
-    """Memory and time of :func:`prp3mc.uncertainty.allocation.allocate` over ``n_poses`` poses.
+    """Memory and time of :func:`prp3mc.allocation.optimum.allocate` over ``n_poses`` poses.
 
     ``n_samples`` > 0 adds the Monte Carlo confirmation of a percentile spec.
     """
@@ -220,7 +220,7 @@ def study_estimate(study) -> Estimate:
 
 def discrepancy_estimate(n_measurements: int, n_poses: int | None = None, max_visits: int | None = None,
                          n_inputs: int = 12, n_bootstrap: int = 400, n_mc: int = 4000) -> Estimate:
-    """Memory and time of :func:`prp3mc.measurement.workflow.discrepancy` and its report.
+    """Memory and time of :func:`prp3mc.measurement.fit.workflow.discrepancy` and its report.
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""Redraw the README's gallery: four figures of the bundled ``quick`` study's report, as small PNGs.
+"""Redraw the gallery of the README and the docs' studies page: four figures of the bundled ``quick`` study's report, as small PNGs.
 
     .venv/bin/python studies/make_gallery.py        # writes studies/gallery/*.png (a few seconds of analyses)
 

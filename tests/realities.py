@@ -1,14 +1,14 @@
 """The campaign layout and instrument of the discrepancy tests.
 
 The realities an instrument adds (registration, drift, gross errors, errors
-that repeat) are :func:`~prp3mc.measurement.simulate.simulate_campaign`'s
+that repeat) are :func:`~prp3mc.measurement.campaign.simulate.simulate_campaign`'s
 keyword arguments.
 """
 
 import numpy as np
 
 from prp3mc import Budget, Region
-from prp3mc.measurement.simulate import simulate_campaign, visit_times
+from prp3mc.measurement.campaign.simulate import simulate_campaign, visit_times
 
 SIGMA = {"instrument_sigma_mm": 0.002, "instrument_sigma_deg": 0.0005}
 BUDGET = Budget.from_preset("paper")

@@ -10,9 +10,9 @@ import pytest
 from prp3mc import Geometry, Region, allocate, linear_model, worst_case
 from prp3mc.cli import main
 from prp3mc.errors import AllocationError, Prp3mcError
-from prp3mc.uncertainty.allocation import allocation_front, region_poses
-from prp3mc.uncertainty.allocation_classes import ClassMenu
-from prp3mc.uncertainty.allocation_search import Problem
+from prp3mc.allocation.optimum import allocation_front, region_poses
+from prp3mc.allocation.classes import ClassMenu
+from prp3mc.allocation.search import Problem
 
 CATALOGUE_MENU = {
     "rho": {"classes": [{"name": "C2", "catalogue": "bearing_radial_clearance.bore_10_18.C2", "cost": 4.0},

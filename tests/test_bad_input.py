@@ -22,9 +22,9 @@ from prp3mc import Budget, Geometry
 from prp3mc._toml import dumps_toml, loads_toml
 from prp3mc.cli import main
 from prp3mc.errors import Prp3mcError, Prp3mcWarning
-from prp3mc.measurement.campaign import read_campaign
+from prp3mc.measurement.campaign.data import read_campaign
 from prp3mc.study.reader import Study
-from prp3mc.uncertainty.systematic import SystematicEffect
+from prp3mc.model.effects import SystematicEffect
 
 G, B, P = ["--geometry", "u-shape"], ["--budget", "paper"], ["--pose", "0", "100", "0"]
 PAPER_LEGS = "".join(f'theta_{i} = {{ law = "uniform", lo = -0.04, hi = 0.04 }}\n' for i in (1, 2, 3))

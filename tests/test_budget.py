@@ -4,7 +4,7 @@ from scipy import stats
 
 from prp3mc import Budget, Catalogue, Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
 from prp3mc.errors import BudgetError, IncompleteBudgetWarning, InputFileError, UnknownPresetError
-from prp3mc.uncertainty.laws import law_from_dict
+from prp3mc.model.laws import law_from_dict
 
 LAWS = [Uniform(-1.0, 3.0), Normal(0.5, 0.2), TruncNormal(0.0, 0.01, 1.33), Triangular(0.0, 0.2, 1.0),
         Disc(0.016), Discrete((0.0, 0.005, 0.01), (0.2, 0.5, 0.3))]

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from prp3mc import Geometry
-from prp3mc.measurement.confounds import VIF_LIMIT, design_confounds
-from prp3mc.measurement.likelihood import Engine
-from prp3mc.measurement.prediction import noise_cov
-from prp3mc.measurement.simulate import simulate_campaign
-from prp3mc.measurement.workflow import discrepancy
+from prp3mc.measurement.fit.confounds import VIF_LIMIT, design_confounds
+from prp3mc.measurement.fit.likelihood import Engine
+from prp3mc.measurement.fit.prediction import noise_cov
+from prp3mc.measurement.campaign.simulate import simulate_campaign
+from prp3mc.measurement.fit.workflow import discrepancy
 
 from .realities import BUDGET, SIGMA, campaign_poses, cycled, rising, thermal_campaign
 

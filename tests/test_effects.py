@@ -11,8 +11,8 @@ from prp3mc.cli import main
 from prp3mc.errors import BudgetError
 from prp3mc.kinematics.chain import inverse_kinematics
 from prp3mc.kinematics.sensitivity import sensitivity
-from prp3mc.uncertainty.systematic import SystematicEffect, offset_errors, slider_error
-from prp3mc.uncertainty.worstcase import worst_case_maxima
+from prp3mc.model.effects import SystematicEffect, offset_errors, slider_error
+from prp3mc.worstcase.envelope import worst_case_maxima
 from prp3mc.units import DEG2RAD, RAD2DEG
 
 from .conftest import random_poses
@@ -221,7 +221,7 @@ def test_cli_refuses_a_budget_fitted_on_another_geometry(tmp_path, capsys):
 # ------------------------------------------------------------ the exact chain behind the other checks
 def test_linearity_guard_sees_the_effects(geometry, region):
     from prp3mc.errors import LinearityWarning
-    from prp3mc.uncertainty.validity import check_linearity, linearity_departure
+    from prp3mc.model.validity import check_linearity, linearity_departure
     poses = random_poses(region, 3, np.random.default_rng(8), phi_deg=(0.0, 0.0))
     small = small_budget(geometry)
     assert linearity_departure(geometry, small, poses) < 0.01
@@ -235,7 +235,7 @@ def test_an_output_the_budget_does_not_move_is_not_judged_on_round_off(geometry,
     """Equal slider offsets on every leg translate the platform: its linear |dphi| is round-off (1e-19 rad)
     and the exact chain's too (5e-16): their ratio is no departure (it was reported as 1.3e5 %)."""
     from prp3mc import Budget, Uniform
-    from prp3mc.uncertainty.validity import linearity_departure
+    from prp3mc.model.validity import linearity_departure
     offsets = Budget({f"b_{i}": Uniform(0.01, 0.01) for i in (1, 2, 3)})
     poses = random_poses(region, 3, np.random.default_rng(8), phi_deg=(0.0, 0.0))
     assert linearity_departure(geometry, offsets, poses) < 0.01
@@ -250,7 +250,7 @@ def test_monte_carlo_exact_check_includes_the_effects(geometry):
 
 
 def test_optimizer_over_the_factors_does_not_beat_the_envelope(geometry):
-    from prp3mc.uncertainty.crosscheck import optimizer_worst_case
+    from prp3mc.worstcase.crosscheck import optimizer_worst_case
     pose = [5.0, 100.0, 0.0] if geometry.name == "u-shape" else [5.0, 160.0, 0.0]
     budget = small_budget(geometry)
     r = optimizer_worst_case(geometry, budget, pose, rng=3, maxiter=60)
@@ -260,7 +260,7 @@ def test_optimizer_over_the_factors_does_not_beat_the_envelope(geometry):
 
 
 def test_interop_hands_over_the_factors():
-    from prp3mc.uncertainty.interop import openturns_distribution, salib_model, salib_problem
+    from prp3mc.model.interop import openturns_distribution, salib_model, salib_problem
     g = Geometry.from_preset("u-shape")
     budget = small_budget(g)
     problem = salib_problem(budget)

@@ -11,9 +11,9 @@ import pytest
 from prp3mc import Budget, Geometry, allocate, linear_model, worst_case
 from prp3mc.cli import main
 from prp3mc.errors import BudgetError
-from prp3mc.uncertainty.allocation import allocation_front, region_poses
-from prp3mc.uncertainty.allocation_search import Problem
-from prp3mc.uncertainty.systematic import SystematicEffect
+from prp3mc.allocation.optimum import allocation_front, region_poses
+from prp3mc.allocation.search import Problem
+from prp3mc.model.effects import SystematicEffect
 
 from .test_allocation import assert_pareto_front, random_menu
 

@@ -8,10 +8,10 @@ import pytest
 
 from prp3mc import Budget, Geometry, Uniform, linear_model, worst_case
 from prp3mc.errors import BudgetError
-from prp3mc.uncertainty.ranking import ranking
-from prp3mc.uncertainty.sobol import sobol_indices
-from prp3mc.uncertainty.sobol_closed_form import analytic_indices
-from prp3mc.uncertainty.systematic import SystematicEffect
+from prp3mc.sobol.ranking import ranking
+from prp3mc.sobol.indices import sobol_indices
+from prp3mc.sobol.closed_form import analytic_indices
+from prp3mc.model.effects import SystematicEffect
 
 from .conftest import random_poses
 

@@ -5,8 +5,8 @@ import pytest
 
 from prp3mc import Budget, Normal, Uniform, feasible, worst_case
 from prp3mc.errors import InfeasiblePoseError
-from prp3mc.uncertainty import _envelope
-from prp3mc.uncertainty.worstcase import QUANTITIES, worst_case_maxima
+from prp3mc.worstcase import _kernel as _envelope
+from prp3mc.worstcase.envelope import QUANTITIES, worst_case_maxima
 
 from .conftest import random_poses
 

@@ -7,7 +7,7 @@ from SALib.sample import fast_sampler, latin
 from SALib.sample import morris as morris_sampler
 
 from prp3mc import Budget, Disc, Discrete, Geometry, Region, Triangular, TruncNormal, linear_model, worst_case
-from prp3mc.uncertainty.interop import openturns_distribution, salib_model, salib_problem, to_xarray
+from prp3mc.model.interop import openturns_distribution, salib_model, salib_problem, to_xarray
 
 PAPER = Budget.from_preset("paper")
 POSE = np.array([10.0, 100.0, 0.0])

@@ -9,7 +9,7 @@ import pytest
 from prp3mc import Budget, Geometry, Uniform, linear_model, monte_carlo
 from prp3mc.errors import BudgetError, Prp3mcWarning
 from prp3mc.cli import main
-from prp3mc.uncertainty.montecarlo import ci_samples
+from prp3mc.montecarlo.propagation import ci_samples
 
 from .conftest import random_poses
 
@@ -157,7 +157,7 @@ def test_streamed_order_statistics_are_exact_in_any_memory(geometry, region, bud
 
     The second budget has |dphi| = 0 for every sample (a window of one value).
     """
-    from prp3mc.uncertainty.montecarlo import _order_ranks
+    from prp3mc.montecarlo.propagation import _order_ranks
     poses, n = region.grid(2), 70_000
     small = monte_carlo(geometry, budget, poses, n, rng=seed, max_chunk_bytes=1 << 12, workers=2)
     big = monte_carlo(geometry, budget, poses, n, rng=seed, workers=1)
@@ -171,7 +171,7 @@ def test_streamed_order_statistics_are_exact_in_any_memory(geometry, region, bud
 
 
 def test_sample_blocks_equal_the_sample():
-    from prp3mc.uncertainty.budget import SAMPLE_BLOCK
+    from prp3mc.model.budget import SAMPLE_BLOCK
     n = 2 * SAMPLE_BLOCK + 17
     X = PAPER.sample(n, 5)
     for k in (2, 0, 1):

@@ -7,13 +7,13 @@ from scipy import special
 
 from prp3mc import (Budget, Disc, Discrete, Geometry, Normal, Triangular, TruncNormal, Uniform, linear_model,
                     monte_carlo)
-from prp3mc.uncertainty import _sampler
-from prp3mc.uncertainty._mckernel import feature_key, padded_features, pose_values
-from prp3mc.uncertainty._sampler import LANES, draw_features, pcg_lanes, sampler_tables
-from prp3mc.uncertainty._select import count_below, order_statistics
-from prp3mc.uncertainty.budget import SAMPLE_BLOCK
-from prp3mc.uncertainty.model import FEATURE_COS, FEATURE_SIN
-from prp3mc.uncertainty.systematic import SystematicEffect
+from prp3mc.montecarlo import _sampler
+from prp3mc.montecarlo._kernel import feature_key, padded_features, pose_values
+from prp3mc.montecarlo._sampler import LANES, draw_features, pcg_lanes, sampler_tables
+from prp3mc.montecarlo._select import count_below, order_statistics
+from prp3mc.model.budget import SAMPLE_BLOCK
+from prp3mc.model.linear import FEATURE_COS, FEATURE_SIN
+from prp3mc.model.effects import SystematicEffect
 
 PAPER = Budget.from_preset("paper")
 MIXED = PAPER.replace(rho_1=Disc(0.016), theta_2=Triangular(-0.01, 0.03, 0.04), zeta_2=Uniform(-400.0, 200.0),

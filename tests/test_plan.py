@@ -11,9 +11,9 @@ from prp3mc import Geometry, Region
 from prp3mc.cli import main
 from prp3mc.errors import BudgetError, CampaignError
 from prp3mc.kinematics.chain import feasible
-from prp3mc.measurement import plan as planning
-from prp3mc.measurement.simulate import simulate_campaign
-from prp3mc.measurement.workflow import detectable_effect, discrepancy
+from prp3mc.measurement.campaign import plan as planning
+from prp3mc.measurement.campaign.simulate import simulate_campaign
+from prp3mc.measurement.fit.workflow import detectable_effect, discrepancy
 
 from .realities import BUDGET, SIGMA, campaign_poses
 

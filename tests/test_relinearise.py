@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 
 from prp3mc import Geometry, Region
-from prp3mc.measurement import identify
-from prp3mc.measurement.effects import library, signatures
-from prp3mc.measurement.relinearise import controller_geometry, exact_errors, linearise
-from prp3mc.measurement.simulate import simulate_campaign
-from prp3mc.measurement.workflow import discrepancy
-from prp3mc.uncertainty.systematic import SystematicEffect
+from prp3mc.measurement.fit import identify
+from prp3mc.measurement.fit.signatures import library, signatures
+from prp3mc.measurement.fit.relinearise import controller_geometry, exact_errors, linearise
+from prp3mc.measurement.campaign.simulate import simulate_campaign
+from prp3mc.measurement.fit.workflow import discrepancy
+from prp3mc.model.effects import SystematicEffect
 
 from .realities import BUDGET, SIGMA, campaign_poses
 from .test_discrepancy import covers

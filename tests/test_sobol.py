@@ -10,10 +10,10 @@ from SALib.sample import sobol as sobol_sample
 from prp3mc import Budget, Disc, Geometry, Normal, Region, Triangular, Uniform, linear_model, worst_case
 from prp3mc.errors import BudgetError, InfeasiblePoseError
 from prp3mc.cli import main
-from prp3mc.uncertainty.ranking import ranking
-from prp3mc.uncertainty.saltelli import design_factors as _factors, saltelli_design as _design
-from prp3mc.uncertainty.sobol import sobol_converge, sobol_indices
-from prp3mc.uncertainty.sobol_closed_form import analytic_indices
+from prp3mc.sobol.ranking import ranking
+from prp3mc.sobol.saltelli import design_factors as _factors, saltelli_design as _design
+from prp3mc.sobol.indices import sobol_converge, sobol_indices
+from prp3mc.sobol.closed_form import analytic_indices
 
 from .conftest import random_poses
 

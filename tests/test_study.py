@@ -20,8 +20,8 @@ from prp3mc.errors import IncompleteBudgetWarning, StudyError, UnknownPresetErro
 from prp3mc.reports import plots
 from prp3mc.reports.study_report import comparison, write_study
 from prp3mc.study.summary import build_summary
-from prp3mc.uncertainty.ranking import ranking
-from prp3mc.uncertainty.worstcase import worst_case
+from prp3mc.sobol.ranking import ranking
+from prp3mc.worstcase.envelope import worst_case
 from prp3mc.study.reader import STUDIES_DIR, Study, bundled_studies
 from prp3mc.study.runner import run_study
 from prp3mc.testing import assert_summary_close, load_summary

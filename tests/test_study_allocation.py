@@ -16,7 +16,7 @@ from prp3mc.study.reader import Study
 from prp3mc.study.runner import run_study
 from prp3mc.study.summary import build_summary
 from prp3mc.testing import assert_summary_close, load_summary
-from prp3mc.uncertainty.allocation import allocation_front, front_records
+from prp3mc.allocation.optimum import allocation_front, front_records
 
 from .test_study import GOLDEN, regenerate
 

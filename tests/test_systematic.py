@@ -4,7 +4,7 @@ import pytest
 
 from prp3mc import Budget
 from prp3mc.errors import BudgetError
-from prp3mc.uncertainty.systematic import SystematicEffect, effects_from_dict
+from prp3mc.model.effects import SystematicEffect, effects_from_dict
 
 _INPUTS = '[inputs]\nb_1 = {law = "uniform", lo = 0, hi = 0.01}\nb_2 = {law = "uniform", lo = 0, hi = 0.01}\n' \
           'b_3 = {law = "uniform", lo = 0, hi = 0.01}\n'

@@ -10,7 +10,7 @@ from prp3mc import Budget, Discrete, Normal, Triangular, TruncNormal, Uniform, e
 from prp3mc.errors import BudgetError
 from prp3mc.kinematics.exact import linear_pose_error
 from prp3mc.cli import main
-from prp3mc.uncertainty.crosscheck import optimizer_worst_case
+from prp3mc.worstcase.crosscheck import optimizer_worst_case
 
 from .conftest import random_poses
 

@@ -1,4 +1,4 @@
-"""Command-line interface: ``prp3mc <command> ...`` (README, *Command line*).
+"""Command-line interface: ``prp3mc <command> ...`` (docs, *The command line*).
 
 A thin wrapper over the Python API, one module per command in this package;
 each registers itself with :func:`command`. Bad input ends with a one-line
@@ -176,7 +176,7 @@ def emit_json(obj: dict) -> None:
     sys.stdout.write(dumps_json(obj) + "\n")
 
 
-#: How Monte Carlo and Sobol take a budget's [effects] (README, File formats), said under their tables.
+#: How Monte Carlo and Sobol take a budget's [effects] (docs, File formats), said under their tables.
 EFFECTS_NOTE = ("Effects: backlash_i and thermal are factors (the approach direction is unknown: delta b_i = "
                 "±h_i/2 with probability 1/2 each; one temperature, uniform over temp_range_C); offsets "
                 "(offset_q_i) and lead scales (scale_i) are known shifts: no variance share, a systematic part "

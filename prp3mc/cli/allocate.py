@@ -5,8 +5,8 @@ from __future__ import annotations
 from .._version import __version__
 from ..kinematics.geometry import REGION_PRESETS
 from ..provenance import spec_record
-from ..uncertainty.allocation import allocate, allocation_front, front_records
-from ..uncertainty.budget import Budget
+from ..allocation.optimum import allocate, allocation_front, front_records
+from ..model.budget import Budget
 from ..units import DEG2ARCSEC, MM2UM
 from ..limits import allocate_estimate
 from . import (add_geometry, add_json, add_progress, add_seed, command, emit_json, finite_float, positive_float, positive_int,
@@ -21,7 +21,7 @@ class AllocateCommand:
         p.add_argument("--region", required=True, choices=tuple(REGION_PRESETS), metavar="R",
                        help=f"test region preset ({', '.join(REGION_PRESETS)})")
         p.add_argument("--classes", required=True, metavar="FILE.toml",
-                       help="classes file (README, File formats), or the bundled example: example")
+                       help="classes file (docs, File formats), or the bundled example: example")
         p.add_argument("--budget", default=None, metavar="B",
                        help="a budget whose [effects] (fitted offsets, lead scales, backlash, thermal) stay fixed "
                             "in every bound and check; its inputs play no part (the classes choose them)")

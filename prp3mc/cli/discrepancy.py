@@ -2,13 +2,13 @@
 
 from ..kinematics.geometry import Geometry
 from ..limits import discrepancy_estimate
-from ..measurement.accuracy import MODELS
-from ..measurement.campaign import count_rows, read_campaign
-from ..measurement.workflow import STAGES, discrepancy
+from ..measurement.fit.accuracy import MODELS
+from ..measurement.campaign.data import count_rows, read_campaign
+from ..measurement.fit.workflow import STAGES, discrepancy
 from ..progress import Progress
 from ..reports._render import drawing_ahead
 from ..reports.discrepancy_report import report_document, write_report
-from ..uncertainty.budget import Budget
+from ..model.budget import Budget
 from ..units import MM2UM
 from . import (WARNINGS, add_budget, add_geometry, add_instrument_noise, add_json, add_progress, add_seed, command,
                emit_json, probability, provenance, within_limits)
@@ -20,7 +20,7 @@ class DiscrepancyCommand:
     def add_arguments(p):
         add_geometry(p)
         add_budget(p)
-        p.add_argument("--data", required=True, metavar="CSV", help="measurement campaign CSV (README, File formats)")
+        p.add_argument("--data", required=True, metavar="CSV", help="measurement campaign CSV (docs, File formats)")
         p.add_argument("--out", required=True, metavar="DIR", help="report folder (discrepancy.json, report.html)")
         p.add_argument("--force", action="store_true", help="replace an existing --out folder")
         add_instrument_noise(p)

@@ -1,4 +1,4 @@
-"""``prp3mc init KIND FILE``: write a commented template that runs as it is (README, *File formats*)."""
+"""``prp3mc init KIND FILE``: write a commented template that runs as it is (docs, *File formats*)."""
 
 from importlib import resources
 from pathlib import Path

@@ -1,11 +1,11 @@
 """``prp3mc montecarlo``: Monte Carlo statistics of the pose error at one pose."""
 
 from .._version import __version__
-from ..uncertainty.budget import Budget
+from ..model.budget import Budget
 from ..kinematics.geometry import Geometry
 from ..limits import montecarlo_estimate
-from ..uncertainty.montecarlo import monte_carlo
-from ..uncertainty.validity import check_linearity
+from ..montecarlo.propagation import monte_carlo
+from ..model.validity import check_linearity
 from . import (EFFECTS_NOTE, provenance, add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
                emit_json, nonnegative_float, within_limits)
 

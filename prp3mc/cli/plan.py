@@ -3,9 +3,9 @@
 from pathlib import Path
 
 from ..kinematics.geometry import Geometry, Region
-from ..measurement.plan import plan_campaign
+from ..measurement.campaign.plan import plan_campaign
 from ..output import OutputExistsError
-from ..uncertainty.budget import Budget
+from ..model.budget import Budget
 from . import (add_budget, add_geometry, add_instrument_noise, add_json, add_seed, command, emit_json, finite_float,
                positive_float, positive_int, probability, provenance)
 

@@ -3,14 +3,14 @@
 import math
 
 from .._version import __version__
-from ..uncertainty.budget import Budget
+from ..model.budget import Budget
 from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
-from ..uncertainty.ranking import ranking
-from ..uncertainty.sobol import sobol_indices
-from ..uncertainty.validity import check_linearity
+from ..sobol.ranking import ranking
+from ..sobol.indices import sobol_indices
+from ..model.validity import check_linearity
 from ..units import DISPLAY, OUTPUTS
-from ..uncertainty.worstcase import worst_case
+from ..worstcase.envelope import worst_case
 from ..limits import sobol_estimate
 from . import (EFFECTS_NOTE, provenance, add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
                emit_json, positive_float, positive_int, probability, within_limits)

@@ -11,7 +11,7 @@ from ..reports.study_report import write_study
 from ..study.distributed import parse_scheduler
 from ..study.reader import Study, bundled_studies
 from ..study.runner import run_study
-from ..uncertainty.validity import check_linearity
+from ..model.validity import check_linearity
 from . import WARNINGS, add_progress, add_seed, command, within_limits
 
 #: Configurations named in the closing line; a sweep's best ones beyond that are in the report.

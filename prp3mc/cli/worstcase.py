@@ -1,10 +1,10 @@
 """``prp3mc worstcase``: exact maximum of the linear model over the budget's box."""
 
 from .._version import __version__
-from ..uncertainty.budget import Budget
+from ..model.budget import Budget
 from ..kinematics.geometry import Geometry
-from ..uncertainty.validity import check_linearity
-from ..uncertainty.worstcase import worst_case
+from ..model.validity import check_linearity
+from ..worstcase.envelope import worst_case
 from . import provenance, add_budget, add_geometry, add_json, add_pose, command, emit_json, positive_float
 
 

@@ -1,8 +1,8 @@
 """Figures of a tolerance allocation: the cost-accuracy Pareto front and the binding poses.
 
 :func:`allocation_front_plot` takes the tidy front of
-:func:`prp3mc.uncertainty.allocation.allocation_front`;
-:func:`allocation_map` the :class:`~prp3mc.uncertainty.allocation.AllocationResult`
+:func:`prp3mc.allocation.optimum.allocation_front`;
+:func:`allocation_map` the :class:`~prp3mc.allocation.optimum.AllocationResult`
 of a gridded region. Both take an ``ax=`` (a new figure when None) and
 return the Figure; pyplot is imported lazily and the backend is never
 switched. Shows µm and arcsec.
@@ -101,7 +101,7 @@ def _room_right(ax, x: np.ndarray, labels: list, fontsize: float) -> None:
 def allocation_map(result, shape: tuple, *, ax=None, title: str = ""):
     """Map of the chosen classes' worst case over the region, the binding poses and the spec marked.
 
-    Shows the position error, or |δφ| when the orientation spec binds; the
+    Shows the position error, or ``|δφ|`` when the orientation spec binds; the
     spec's level is drawn as a red contour when it is a worst-case bound.
 
     Parameters

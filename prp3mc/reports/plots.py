@@ -120,7 +120,7 @@ def worst_case_map(wc, quantity: str = "position", *, ax=None, levels=None, titl
 
 def montecarlo_map(mc, percentile: float = 99.73, quantity: str = "position", *, ax=None, levels=None,
                    title: str = ""):
-    """Contour map of a Monte Carlo percentile of the position error (µm) or |δφ| (arcsec)."""
+    """Contour map of a Monte Carlo percentile of the position error (µm) or ``|δφ|`` (arcsec)."""
     label, unit, f = _QUANTITY[quantity]
     q = list(mc.percentiles).index(float(percentile))
     values = (mc.position_pct if quantity == "position" else mc.phi_pct)[..., q]
@@ -241,7 +241,7 @@ def error_histogram(samples, index: int, quantity: str = "position", *, ax=None,
     samples : PoseSamples
     index : int
         Which of its poses.
-    quantity : ``"position"`` (µm) or ``"phi"`` (|δφ|, arcsec)
+    quantity : ``"position"`` (µm) or ``"phi"`` (``|δφ|``, arcsec)
     percentile : float
         Also marked (dotted).
     label : str, optional
@@ -399,7 +399,7 @@ def sobol_ranking(frame, *, ax=None, title: str = ""):
     Parameters
     ----------
     frame : DataFrame
-        :func:`prp3mc.uncertainty.ranking.ranking` (columns name, kind, S1, S1_conf, ST, ST_conf).
+        :func:`prp3mc.sobol.ranking.ranking` (columns name, kind, S1, S1_conf, ST, ST_conf).
 
     Returns
     -------

@@ -7,5 +7,5 @@
 - :mod:`~prp3mc.study.distributed` — those tasks on a Dask cluster (the only module importing Dask).
 - :mod:`~prp3mc.study.summary` — the summary statistics that users pin in CI.
 
-Imports uncertainty, kinematics and the foundations; never measurement or reports.
+Imports the methods, the model, kinematics and the foundations; never measurement or reports.
 """

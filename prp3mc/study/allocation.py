@@ -5,7 +5,7 @@ accuracy spec; for every configuration it applies to, the study runs
 :func:`prp3mc.allocate` over the configuration's geometry and test region
 (gridded like the worst case unless the table gives a grid, at the region's
 orientation, unbounded laws bounded by ``[worstcase] k_sigma``) and, with
-``front = true``, :func:`~prp3mc.uncertainty.allocation.allocation_front`
+``front = true``, :func:`~prp3mc.allocation.optimum.allocation_front`
 on the same poses. The allocation's budget is the classes' laws, as in
 ``prp3mc allocate``, with the study budget's ``[effects]`` held fixed (its
 inputs play no part).
@@ -24,8 +24,8 @@ import pandas as pd
 
 from ..errors import Prp3mcError
 from ..kinematics.chain import check_poses
-from ..uncertainty.allocation import AllocationResult, allocate, allocation_front, front_records
-from ..uncertainty.allocation_classes import ClassMenu
+from ..allocation.optimum import AllocationResult, allocate, allocation_front, front_records
+from ..allocation.classes import ClassMenu
 from ..units import MM2UM, Z95
 
 __all__ = ["AllocationSpec", "ALLOCATION_STREAM", "read_allocation", "run_allocation", "allocation_summary"]
@@ -49,7 +49,7 @@ class AllocationSpec:
         The menu as the file names it (a preset name or a path).
     spec_position_um, spec_phi_arcsec : float or None
         Bounds on the worst-case position error (µm; with ``spec_percentile``
-        on that percentile) and on the worst-case |δφ| (arcsec).
+        on that percentile) and on the worst-case ``|δφ|`` (arcsec).
     spec_percentile : float or None
     samples : int
         Monte Carlo samples confirming a percentile spec.
@@ -77,7 +77,7 @@ class AllocationSpec:
 
     @property
     def front_output(self) -> str:
-        """The output the front is swept in: the position error, or |δφ| with only a phi spec."""
+        """The output the front is swept in: the position error, or ``|δφ|`` with only a phi spec."""
         return "position" if self.spec_position_um is not None else "phi"
 
     def reduced(self) -> "AllocationSpec":

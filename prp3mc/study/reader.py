@@ -85,8 +85,8 @@ from ..errors import Prp3mcError, ResourceError, StudyError, UnknownPresetError
 from ..limits import check, worstcase_estimate
 from ..kinematics.chain import check_poses
 from ..kinematics.geometry import REGION_PRESETS, Geometry, Region
-from ..uncertainty.budget import Budget
-from ..uncertainty.montecarlo import MIN_SAMPLES as MIN_MC_SAMPLES, PERCENTILES
+from ..model.budget import Budget
+from ..montecarlo.propagation import MIN_SAMPLES as MIN_MC_SAMPLES, PERCENTILES
 from ..units import OUTPUTS
 from .allocation import AllocationSpec, read_allocation
 from .sweep import is_number, read_sweep

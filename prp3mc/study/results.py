@@ -16,9 +16,9 @@ import pandas as pd
 from .._result import freeze, short_repr
 from .._version import __version__
 from ..units import OUTPUT_UNITS, Z95
-from ..uncertainty.allocation import AllocationResult
-from ..uncertainty.montecarlo import MonteCarloResult
-from ..uncertainty.worstcase import WorstCase
+from ..allocation.optimum import AllocationResult
+from ..montecarlo.propagation import MonteCarloResult
+from ..worstcase.envelope import WorstCase
 from .reader import Study, StudyConfiguration
 
 __all__ = ["PoseSamples", "ConfigurationResult", "SkippedConfiguration", "StudyResult", "pct_se", "over_grid"]
@@ -56,7 +56,7 @@ class PoseSamples:
     labels : tuple of str
         What each pose is (``centre``, ``worst-case max``...).
     position_mm, phi_deg : ndarray (P, n)
-        Position-error norm (mm) and |dphi| (deg) of each sample.
+        Position-error norm (mm) and ``|dphi|`` (deg) of each sample.
     worst_position_mm, worst_phi_deg : ndarray (P,)
         Exact worst case at each pose.
     seed, n_samples : int
@@ -82,7 +82,7 @@ class PoseSamples:
         """Tidy samples and worst cases, one row per pose, output and value.
 
         Columns: ``pose`` (label), ``x_mm``, ``y_mm``, ``phi_deg``, ``output``
-        (``position`` or ``phi``, the latter |δφ|), ``statistic`` (``sample``
+        (``position`` or ``phi``, the latter ``|δφ|``), ``statistic`` (``sample``
         or ``worst_case``), ``sample`` (index of the draw; <NA> for the worst
         case), ``value``, ``unit`` (mm, deg).
         """
@@ -118,11 +118,11 @@ class ConfigurationResult:
     sobol : SobolResult or None
         On the Sobol grid.
     ranking : mapping of str to DataFrame
-        Per Sobol output, :func:`prp3mc.uncertainty.ranking.ranking` over the Sobol grid.
+        Per Sobol output, :func:`prp3mc.sobol.ranking.ranking` over the Sobol grid.
     allocation : AllocationResult or None
         The least-cost tolerance classes (the study's ``[allocation]``), on the allocation grid.
     allocation_front : DataFrame or None
-        Its cost-accuracy Pareto front (tidy, :func:`~prp3mc.uncertainty.allocation.allocation_front`).
+        Its cost-accuracy Pareto front (tidy, :func:`~prp3mc.allocation.optimum.allocation_front`).
     """
 
     configuration: StudyConfiguration
@@ -154,7 +154,7 @@ class ConfigurationResult:
         """Summary over the analyses' grids: one row per analysis, output, statistic and aggregate.
 
         Columns: ``configuration``, ``analysis`` (``worstcase``, ``montecarlo``),
-        ``output`` (``position``, ``phi``: |δφ|), ``statistic`` (``worst_case``,
+        ``output`` (``position``, ``phi``: ``|δφ|``), ``statistic`` (``worst_case``,
         ``p50`` ...), ``aggregate`` (``min``, ``max``, ``mean`` over the grid),
         ``value``, ``se`` (0 where exact; see :func:`over_grid`), ``unit`` (mm, deg).
         """

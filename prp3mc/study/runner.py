@@ -34,12 +34,12 @@ import numpy as np
 from .._rng import child_seed, resolve_rng
 from .._threads import single_threaded_blas
 from ..errors import GeometryError, InfeasiblePoseError
-from ..uncertainty.budget import Budget
-from ..uncertainty.model import linear_model
-from ..uncertainty.montecarlo import monte_carlo
-from ..uncertainty.ranking import ranking
-from ..uncertainty.sobol import sobol_indices
-from ..uncertainty.worstcase import WorstCase, worst_case
+from ..model.budget import Budget
+from ..model.linear import linear_model
+from ..montecarlo.propagation import monte_carlo
+from ..sobol.ranking import ranking
+from ..sobol.indices import sobol_indices
+from ..worstcase.envelope import WorstCase, worst_case
 from ..units import RAD2DEG
 from .allocation import ALLOCATION_STREAM, run_allocation
 from .reader import Study, StudyConfiguration

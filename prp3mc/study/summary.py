@@ -77,7 +77,7 @@ import numpy as np
 from ..errors import Prp3mcError, Prp3mcWarning
 from ..kinematics.geometry import Geometry
 from ..provenance import file_record, spec_record, versions
-from ..uncertainty.budget import Budget
+from ..model.budget import Budget
 from ..units import DEG2ARCSEC, MM2UM, Z95
 from .allocation import allocation_summary
 from .results import ConfigurationResult, StudyResult, over_grid, pct_se

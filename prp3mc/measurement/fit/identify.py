@@ -1,0 +1,246 @@
+"""The named model: gross errors set aside, effects named, the exact chain relinearised until stable.
+
+One *pass* (:func:`name_pass`) works on the model linearised about one
+point (:mod:`~prp3mc.measurement.fit.relinearise`; the first is the nominal
+geometry): it sets gross errors aside (:mod:`~prp3mc.measurement.outliers`),
+names effects (:mod:`~prp3mc.measurement.selection`) and tests every row
+again under the named model.
+
+:func:`identify` iterates passes (Gauss-Newton on the exact chain): after a
+pass it evaluates the exact chain at the named values; when the pass's
+linear model departs from it there by more than :data:`REMAINDER` (the
+whitened energy of the difference, a log-likelihood ratio: it could move
+no test), it linearises again about those values and runs a new pass from
+scratch (gross errors and names found again), until the named set is the
+one the point was built on and the departure is below :data:`REMAINDER`.
+A large guide or base angle error is so named alone with its value, no
+row set aside for the curvature the nominal model cannot follow, and the
+registration fitted on the converged model.
+
+**The linearity guard.** The result is refused (nothing named, the verdict
+says why and what to do) when the iteration does not settle in
+:data:`MAX_PASSES` passes, when the exact chain cannot be solved at an
+estimate (the named values would take a leg out of its stroke or the
+chain through a singularity), or when the chain is curved across a named
+effect's interval (:data:`CURVATURE`: the Wald interval needs the model
+linear there).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from . import outliers as gross
+from .signatures import effect, library
+from .likelihood import Engine, Fit
+from .relinearise import NonlinearityError, exact_errors, linearise
+from .selection import STEP_COLUMNS, select
+
+__all__ = ["Named", "identify", "name_pass", "MAX_PASSES", "REMAINDER", "CURVATURE"]
+
+#: Most passes of the iteration.
+MAX_PASSES = 6
+#: Largest share of the rows a start model may set aside as gross errors: beyond it the model misses an
+#: effect (gross errors are a few rows), and the effects are named on every row before gross errors are sought.
+GROSS_SHARE = 0.1
+#: Whitened energy (a log-likelihood ratio) of the exact chain's departure from a pass's linear model at
+#: the named values below which the pass stands.
+REMAINDER = 0.1
+#: Whitened energy of the chain's curvature across a named effect's interval (its value +- 2 standard
+#: errors) above which the linearised interval is not trusted.
+CURVATURE = 1.0
+
+
+@dataclass(frozen=True)
+class Named:
+    """One pass: the engine of the kept rows, the null and named fits, and how they were found.
+
+    Attributes
+    ----------
+    engine : Engine
+        On the kept rows, linearised about the pass's point.
+    base, fit : Fit
+        The model without effects and with the named ones.
+    accepted : dict
+        Name -> evidence of the step that named it (:func:`~prp3mc.measurement.selection.select`).
+    steps : DataFrame
+        The selection's steps.
+    keep : ndarray of bool, shape (M,)
+        Rows kept (gross errors set aside).
+    d2 : ndarray, shape (M,)
+        Every row's squared standardised prediction error under ``fit``.
+    limit : float
+        The gross-error threshold of ``d2``.
+    """
+
+    engine: Engine
+    base: Fit
+    fit: Fit
+    accepted: dict
+    steps: pd.DataFrame
+    keep: np.ndarray
+    d2: np.ndarray
+    limit: float
+
+    @property
+    def values(self) -> dict:
+        """The named systematic effects' values, name -> value."""
+        values = self.engine.values(self.fit)
+        return {n: values[n] for n in (self.engine.systematic[j].name for j in self.fit.sys)}
+
+
+def name_pass(full: Engine, alpha: float, max_effects: int, outlier_rate: float, start=()) -> Named:
+    """Gross errors set aside, effects named, every row tested again under the named model (rows set aside
+    only for a missing spread come back), on the model of ``full`` (the whole campaign).
+
+    Gross errors are first looked for under the model with the systematic effects ``start`` (names; the
+    effects the point was linearised about), then names are found from the model without effects.
+    """
+    start_model = {"sys": tuple(full.sys_index(n) for n in start), "factors": {}}
+
+    def start_fit(keep):
+        engine = full.with_rows(keep)
+        return engine, engine.refit(start_model["sys"], start_model["factors"])
+
+    def named_model(keep):
+        engine = full.with_rows(keep)
+        base = engine.refit((), {})
+        return (engine, base, *select(engine, base, alpha, max_effects))
+
+    keep, _ = gross.flag(full, start_fit, outlier_rate)
+    if (~keep).mean() > GROSS_SHARE:
+        # not a few gross errors but a model that misses an effect: name on every row first
+        fit = named_model(np.ones(full.M, bool))[2]
+        start_model.update(sys=fit.sys, factors=fit.factors)
+        keep, _ = gross.flag(full, start_fit, outlier_rate)
+        if (~keep).mean() > GROSS_SHARE:
+            raise NonlinearityError(f"{int((~keep).sum())} of {full.M} rows stand out as gross errors even under "
+                                    "the effects named on every row: the model cannot follow this campaign")
+    engine, base, fit, accepted, steps = named_model(keep)
+    limit = gross.threshold(full.M, outlier_rate)
+    d2 = gross.distances(full, keep, engine.values(fit), fit.factors, fit.r)
+    if ((d2 <= limit) != keep).any() and (d2 <= limit).sum() > 3:
+        keep = d2 <= limit
+        engine, base, fit, accepted, steps = named_model(keep)
+        d2 = gross.distances(full, keep, engine.values(fit), fit.factors, fit.r)
+    return Named(engine, base, fit, accepted, steps, keep, d2, limit)
+
+
+def _energy(named: Named, exact: np.ndarray, values: dict) -> float:
+    """Whitened energy of ``exact`` (M, 3 of the whole campaign) less the pass's linear model at ``values``."""
+    engine = named.engine
+    cols = [engine.sys_index(n) for n in values]
+    linear = engine.known + engine.G[:, :, cols] @ np.array([values[n] for n in values])
+    z = engine.whiten(exact[engine.keep] - linear, named.fit.Lw, named.fit.Lb)
+    return float(z @ z)
+
+
+def _curvature(geometry, budget, campaign, named: Named) -> dict:
+    """Per named systematic effect: the largest whitened energy of the chain's departure from the pass's
+    linear model at its value +- 2 standard errors (the others at theirs)."""
+    values = named.values
+    if not values:
+        return {}
+    engine, fit = named.engine, named.fit
+    sets, labels = [], []
+    for k, name in enumerate(values):
+        se = float(np.sqrt(max(fit.theta_cov[len(fit.nuis) + k, len(fit.nuis) + k], 0.0)))
+        for sign in (-2.0, 2.0):
+            sets.append({**values, name: values[name] + sign * se})
+            labels.append(name)
+    exact = exact_errors(geometry, budget, campaign, sets)
+    out: dict = {}
+    for name, v, e in zip(labels, sets, exact):
+        out[name] = max(out.get(name, 0.0), _energy(named, e, v))
+    return out
+
+
+def identify(geometry, budget, campaign, make_engine, alpha: float, max_effects: int,
+             outlier_rate: float) -> tuple[Named, dict]:
+    """The named model, relinearised on the exact chain until stable (module notes), and its record.
+
+    Parameters
+    ----------
+    geometry, budget, campaign
+        What the analysis runs on (the whole campaign).
+    make_engine : callable
+        ``make_engine(point) -> Engine`` on the whole campaign, linearised about ``point`` (None: nominal).
+    alpha, max_effects, outlier_rate
+        As :func:`~prp3mc.measurement.workflow.discrepancy`.
+
+    Returns
+    -------
+    named : Named
+        The last pass; when the linearity guard trips, its fit is the model without effects.
+    linearity : dict
+        ``passes`` (per pass: the point's values, the named values, gross errors set aside, the
+        departure ``remainder``), ``converged``, ``curvature`` (per named effect), ``guard``
+        (``"ok"`` or ``"tripped"``) and, when tripped, ``why``, ``advice`` and ``last_estimate``.
+    """
+    candidates = [e.name for e in library(budget, campaign.has_dir, campaign.temp_C is not None) if e.systematic]
+    point, passes, why = None, [], None
+    for _ in range(MAX_PASSES):
+        full = make_engine(point)
+        try:
+            named = name_pass(full, alpha, max_effects, outlier_rate, () if point is None else tuple(point.values))
+        except NonlinearityError as exc:
+            if not passes:                     # nothing to fall back on: the model without effects, all rows
+                named = _unnamed(full, outlier_rate)
+            why = str(exc)
+            break
+        values = named.values
+        record = {"point": dict(point.values) if point is not None else {}, "named": dict(values),
+                  "gross_errors": int((~named.keep).sum())}
+        passes.append(record)
+        try:
+            exact = exact_errors(geometry, budget, campaign, [values])[0]
+        except NonlinearityError as exc:
+            why = f"at the named values {_text(values)}: {exc}"
+            break
+        record["remainder"] = _energy(named, exact, values)
+        if record["remainder"] <= REMAINDER and (point is None or set(values) == set(point.values)):
+            break
+        try:
+            point = linearise(geometry, budget, campaign, values, candidates)
+        except NonlinearityError as exc:
+            why = f"linearising at the named values {_text(values)}: {exc}"
+            break
+    else:
+        why = (f"the named set and values did not settle in {MAX_PASSES} passes of relinearisation "
+               f"(last: {_text(passes[-1]['named'])})")
+    doc = {"passes": passes, "converged": why is None, "max_passes": MAX_PASSES, "remainder_tolerance": REMAINDER,
+           "curvature_tolerance": CURVATURE}
+    if why is None:
+        try:
+            doc["curvature"] = _curvature(geometry, budget, campaign, named)
+        except NonlinearityError as exc:
+            why = f"across the named effects' intervals: {exc}"
+        else:
+            curved = {n: c for n, c in doc["curvature"].items() if c > CURVATURE}
+            if curved:
+                why = ("the exact chain is curved across the interval of " + ", ".join(curved)
+                       + f" (whitened departure {max(curved.values()):.3g} > {CURVATURE:g})")
+    doc["guard"] = "ok" if why is None else "tripped"
+    if why is not None:
+        doc.update(why=why, last_estimate=dict(passes[-1]["named"]) if passes else {},
+                   advice="the errors are too large for a model linearised about this geometry: apply the last "
+                          "estimate's offsets to the geometry (a geometry closer to the machine) and analyse again, "
+                          "or measure fewer/closer poses; nothing is named")
+        named = Named(named.engine, named.base, named.base, {}, named.steps, named.keep, named.d2, named.limit)
+    return named, doc
+
+
+def _unnamed(full: Engine, outlier_rate: float) -> Named:
+    """The model without effects on every row (what a pass falls back on when it cannot name)."""
+    base = full.refit((), {})
+    keep = np.ones(full.M, bool)
+    return Named(full, base, base, {}, pd.DataFrame(columns=STEP_COLUMNS), keep,
+                 gross.distances(full, keep, full.values(base), base.factors, base.r),
+                 gross.threshold(full.M, outlier_rate))
+
+
+def _text(values: dict) -> str:
+    return ", ".join(f"{n} = {v:.4g} {effect(n).unit}" for n, v in values.items()) or "nothing"

@@ -1,0 +1,291 @@
+"""The discrepancy workflow: where model and measurement disagree, which effect is missing, the gap.
+
+:func:`discrepancy` fits the instrument's registration and drift as
+nuisances (:mod:`~prp3mc.measurement.fit.nuisance`) and the repeatable fraction
+of the budget's errors in every model (:mod:`~prp3mc.measurement.fit.likelihood`),
+sets gross errors aside (:mod:`~prp3mc.measurement.fit.outliers`), names missing
+effects (:mod:`~prp3mc.measurement.fit.selection`), and diagnoses the
+disagreement before and after and measures the gap
+(:mod:`~prp3mc.measurement.fit.diagnostics`). :func:`detectable_effect` plans a
+campaign: how large an effect its layout can name.
+
+Drift is fitted in every model and *listed* under ``nuisance`` only when a
+likelihood-ratio test (chi2(3) at ``alpha``) shows it. Fitting it always
+(rather than adding it only when significant) keeps the null law of every
+other test free of a pre-test, at a cost of three of the campaign's 3M
+degrees of freedom.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+from scipy import optimize
+
+from ..._distributions import chi2_isf, chi2_sf
+from ..._fork import in_background
+from ..._rng import child_seed, resolve_rng
+from ..._threads import single_threaded_blas
+from ...errors import BudgetError
+from ...kinematics.geometry import Geometry
+from ...progress import Progress
+from ...model.budget import Budget
+from ..campaign.data import Campaign, read_campaign, require_testable
+from .confounds import ambiguities, design_confounds
+from .diagnostics import diagnose, gap, gap_value, null_variances, verdict
+from .signatures import effect
+from .holdout import held_out_gap
+from .likelihood import Engine, Fit
+from .nuisance import DRIFT, NUISANCE_NAMES, NUISANCE_UNITS, REGISTRATION
+from .prediction import noise_cov, predict
+from .results import DiscrepancyResult
+from .identify import Named, identify
+from .selection import name_effects, names_in, select
+from .updated import updated_model
+from .accuracy import load_propagation, predicted_accuracy
+from ..campaign.iso9283 import iso9283_figures
+
+__all__ = ["discrepancy", "detectable_effect", "STAGES"]
+
+#: The stages of :func:`discrepancy`, one progress step each.
+STAGES = ("gross errors and names", "diagnoses", "with the gross errors", "ISO 9283")
+
+
+@single_threaded_blas()  # the analysis's products are small: a second BLAS thread only spun (0.2 CPU-s a run)
+def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigma_mm: float = 0.0,
+                instrument_sigma_deg: float = 0.0, registration: bool = True, alpha: float = 0.01,
+                alpha_unexplained: float = 0.05, outlier_rate: float = 0.01, max_effects: int = 6,
+                n_bootstrap: int = 400, progress: "bool | None | Progress" = None,
+                rng: "None | int | np.random.Generator" = None) -> DiscrepancyResult:
+    """Find where model and campaign disagree, name the missing effects, close the gap.
+
+    Parameters
+    ----------
+    geometry : Geometry
+    budget : Budget
+        The model's random errors and, in its ``[effects]`` table, systematic
+        errors already known (part of every model, null and alternative,
+        driven by the campaign's ``dir_i``, ``temp_C`` and slider positions;
+        one named again is a correction to it). A budget whose effects were
+        fitted on another geometry is refused.
+    campaign : Campaign, DataFrame or path
+        A campaign (docs, *File formats*), measured in the instrument's frame; validated against ``geometry``.
+    instrument_sigma_mm, instrument_sigma_deg : float
+        Standard deviation of the measurement noise per coordinate.
+    registration : bool
+        Fit the instrument's planar registration (False when it is known to be registered).
+    alpha : float
+        Family-wise level of the naming steps (Bonferroni over candidates)
+        and of the drift test.
+    alpha_unexplained : float
+        Family-wise level (Bonferroni over the seven channels of
+        :mod:`~prp3mc.measurement.fit.diagnostics`) of the verdict that
+        disagreement remains unexplained; the gap closes at ``-ln`` of it.
+    outlier_rate : float
+        Family-wise false-alarm rate of the gross-error test over all rows.
+    max_effects : int
+        Most effects named.
+    n_bootstrap : int
+        Parametric-bootstrap replicates for the null variances of the tests.
+    progress : bool, None or Progress
+        Report the stages (:data:`STAGES`) on stderr: True, False, None
+        (when stderr is a terminal), or a :class:`~prp3mc.progress.Progress`
+        to advance by one per stage (left open, for a caller with more stages).
+    rng : None, int or numpy.random.Generator
+        Randomness of the bootstrap (Scientific Python SPEC 7); the integer
+        seed used is recorded in the result.
+
+    Returns
+    -------
+    DiscrepancyResult
+    """
+    t0 = time.perf_counter()
+    seed, rng = resolve_rng(rng)
+    for name, value in (("alpha", alpha), ("alpha_unexplained", alpha_unexplained), ("outlier_rate", outlier_rate)):
+        if not 0 < value < 1:
+            raise BudgetError(f"{name} must lie in (0, 1), got {value}")
+    budget.check_geometry(geometry)
+    campaign = require_testable(read_campaign(campaign, geometry))
+    # the predicted accuracy needs the named effects only: on another core where one is idle, which loads
+    # numba (the Monte Carlo's and the worst case's kernels) while the effects are named
+    with in_background(predicted_accuracy, prepare=load_propagation) as accuracy:
+        noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
+        bar = progress if isinstance(progress, Progress) else Progress(len(STAGES), "discrepancy", progress)
+        stages = iter(STAGES)
+
+        def done():
+            bar.update(label=f"discrepancy: {next(stages)}")
+
+        named, linearity = identify(
+            geometry, budget, campaign,
+            lambda point: Engine(geometry, budget, campaign, noise, registration=registration, point=point),
+            alpha, max_effects, outlier_rate)
+        engine, fit = named.engine, named.fit
+        effects = name_effects(engine, fit, named.accepted)
+        model = updated_model(geometry, budget, effects, campaign)
+        accuracy.submit(geometry, budget, model, campaign, seed)
+        done()
+        before, after, gap_doc = _diagnoses(named, n_bootstrap, alpha_unexplained, rng, seed)
+        done()
+        with_outliers = _with_outliers(named, alpha, max_effects, n_bootstrap, gap_doc["closed_at"], rng)
+        done()
+        nuisance, drift_test = _nuisance(engine, fit, alpha)
+        shown, reasons = ambiguities(engine, fit, effects, drift_test)
+        confounded = tuple(design_confounds(engine) + shown)
+        r_lo, r_hi = engine.r_interval(fit)
+        effects_after = _effect_values(engine, fit)
+        systematic = {n: v for n, v in effects_after.items() if effect(n).systematic}
+        prediction = predict(geometry, budget, campaign, effects=effects_after, instrument_sigma_mm=instrument_sigma_mm,
+                             instrument_sigma_deg=instrument_sigma_deg, repeatable_fraction=fit.r)
+        iso, iso_poses = _iso9283(engine, fit, child_seed(seed, 9283))
+        done()
+        if bar is not progress:
+            bar.close()
+        return DiscrepancyResult(
+            named_effects=effects, unexplained=not gap_doc["closed"] or linearity["guard"] != "ok", gap=gap_doc,
+            verdict=verdict(gap_doc, effects, linearity, reasons, confounded), confounded=confounded,
+            before=before, after=after, steps=named.steps, prediction_after=prediction,
+            budget_after=prediction.budget, systematic=systematic, nuisance=nuisance, drift_test=drift_test,
+            registration=registration, outliers=_outlier_rows(named, campaign), outlier_rule=_outlier_rule(named, outlier_rate),
+            with_outliers=with_outliers, repeatability={"repeatable_fraction": fit.r, "ci95": [r_lo, r_hi]},
+            iso9283=iso, iso9283_poses=iso_poses, invisible=engine.invisible,
+            confounded_with_registration=tuple(n for n, w in engine.confounded.items() if "registration" in w),
+            structural_aliases=tuple(tuple(g) for g in engine.structural_aliases()),
+            not_testable=_not_testable(engine), linearity=linearity, model=model, accuracy=accuracy.result(),
+            campaign=campaign, geometry=geometry, budget=budget, seed=seed, n_bootstrap=n_bootstrap, alpha=alpha,
+            alpha_unexplained=alpha_unexplained, instrument_sigma_mm=instrument_sigma_mm,
+            instrument_sigma_deg=instrument_sigma_deg, wall_time_s=time.perf_counter() - t0)
+
+
+def _diagnoses(named: Named, n_bootstrap: int, alpha_unexplained: float, rng, seed: int) -> tuple:
+    """The diagnoses before and after the named effects, and the gap document with its held-out part."""
+    engine, base, fit = named.engine, named.base, named.fit
+    null_before = null_variances(engine, base, n_bootstrap, rng)
+    before = diagnose(engine, base, null=null_before)
+    null_after = null_variances(engine, fit, n_bootstrap, rng)
+    after = diagnose(engine, fit, null=null_after)
+    gap_doc = gap(before, after, alpha_unexplained)
+    gap_doc["held_out"] = held_out_gap(engine, {"before": (base, null_before), "after": (fit, null_after)}, seed)
+    return before, after, gap_doc
+
+
+def _with_outliers(named: Named, alpha: float, max_effects: int, n_bootstrap: int, closed_at: float,
+                   rng) -> dict | None:
+    """What the analysis names, and its gap, with the gross errors kept (None when none was set aside)."""
+    if named.keep.all():
+        return None
+    engine = named.engine.with_rows(np.ones(named.keep.size, bool))
+    base = engine.refit((), {})
+    fit, _, _ = select(engine, base, alpha, max_effects)
+    n_boot = max(n_bootstrap // 4, 50)               # for the comparison only
+    g_before, _ = gap_value(diagnose(engine, base, n_boot, rng))
+    g_after, _ = gap_value(diagnose(engine, fit, n_boot, rng))
+    return {"named_effects": [{"name": n, "value": float(v)} for n, v in _effect_values(engine, fit).items()],
+            "gap_before": g_before, "gap_after": g_after, "unexplained": bool(g_after > closed_at),
+            "repeatable_fraction": fit.r}
+
+
+def _outlier_rows(named: Named, campaign: Campaign) -> tuple:
+    """The ``outliers`` entries: every row set aside, with its pose and its standardised prediction error."""
+    return tuple({"row": int(m), "pose_id": str(campaign.pose_id[m]), "z": float(np.sqrt(named.d2[m]))}
+                 for m in np.flatnonzero(~named.keep))
+
+
+def _outlier_rule(named: Named, outlier_rate: float) -> dict:
+    """The gross-error rule as ``discrepancy.json`` states it."""
+    m = named.keep.size
+    return {"family_wise_rate": outlier_rate,
+            "per_measurement_level": float(-np.expm1(np.log1p(-outlier_rate) / m)),
+            "z_threshold": float(np.sqrt(named.limit)),
+            "statistic": "squared standardised error of each measurement predicted from the other visits "
+                         "of its pose under the fitted model, chi2(3), Sidak over all rows"}
+
+
+def _not_testable(engine: Engine) -> dict:
+    """Effects the campaign cannot test, with the reason (missing columns, confounded, drift without time)."""
+    out = dict(engine.not_testable)
+    out.update({n: f"confounded with {with_}" for n, with_ in engine.confounded.items()})
+    if engine.time_source != "time_s":
+        out["drift"] = "no time_s column: drift fitted against row order"
+    return out
+
+
+def _effect_values(engine: Engine, fit: Fit) -> dict:
+    """Named effects of ``fit``: systematic values and spread bounds, name -> value in the effect's unit."""
+    values = engine.values(fit)
+    return {n: (fit.factors[n] * engine.spread_ref[n] if n in fit.factors else values[n])
+            for n in names_in(engine, fit)}
+
+
+def _nuisance(engine: Engine, fit: Fit, alpha: float) -> tuple[tuple, dict]:
+    """The ``nuisance`` entries (registration when fitted, drift when its LR test rejects) and the drift test."""
+    entries = {}
+    for j, col in enumerate(fit.nuis):
+        value, ci = engine.wald(fit, j)
+        name = NUISANCE_NAMES[col]
+        entries[name] = {"name": name, "value": value, "unit": NUISANCE_UNITS[name], "ci95": list(ci)}
+    no_drift = engine.refit(fit.sys, fit.factors, start_r=fit.r,
+                            nuis=tuple(j for j in fit.nuis if NUISANCE_NAMES[j] not in DRIFT))
+    lr = max(2.0 * (fit.loglik - no_drift.loglik), 0.0)
+    p = float(chi2_sf(lr, 3))
+    drift_test = {"lr": lr, "df": 3, "p": p, "significant": bool(p < alpha), "time": engine.time_source,
+                  "values": {n: entries[n]["value"] for n in DRIFT}}
+    listed = [n for n in REGISTRATION if n in entries] + (list(DRIFT) if drift_test["significant"] else [])
+    return tuple(entries[n] for n in listed), drift_test
+
+
+def _iso9283(engine: Engine, fit: Fit, seed: int):
+    """ISO 9283 figures of the kept rows in the machine frame (nuisances removed), measured and predicted.
+
+    Predicted by the fitted model: its mean per pose, visit-to-visit
+    covariance ``W`` and repeating covariance ``r Sigma``; the Monte Carlo
+    of :func:`~prp3mc.measurement.campaign.iso9283.iso9283_figures` draws from ``seed``.
+    """
+    values = engine.values(fit)
+    nuis = np.array([values[NUISANCE_NAMES[j]] for j in fit.nuis])
+    corrected = engine.campaign.measured - engine.H[:, :, list(fit.nuis)] @ nuis
+    campaign = dataclasses.replace(engine.campaign, measured=corrected)
+    mean, W, R = engine.moments(fit.factors, fit.r)
+    sys = np.array([values[engine.systematic[j].name] for j in fit.sys])
+    mean = mean + engine.pose_mean(engine.known + engine.G[:, :, list(fit.sys)] @ sys)
+    figures = iso9283_figures(campaign, mean, W, predicted_repeat_cov=R, rng=seed)
+    return {"measured": dict(figures["measured"]), "predicted": dict(figures["predicted"])}, figures["per_pose"]
+
+
+def detectable_effect(geometry: Geometry, budget: Budget, campaign: Campaign, name: str, *,
+                      power: float = 0.9, alpha: float = 0.01, instrument_sigma_mm: float = 0.0,
+                      instrument_sigma_deg: float = 0.0, registration: bool = True) -> float:
+    """Smallest ``|value|`` of a systematic effect that a campaign names with probability ``power``.
+
+    For planning: simulate a campaign without effects (only its layout
+    matters: poses, repeats, directions, temperatures) and ask how large an
+    effect it would detect, with the nuisances (registration unless
+    ``registration`` is False, drift) profiled out and errors drawn afresh
+    at every visit. Uses the non-central chi2(1) law of the LR at the
+    Bonferroni threshold over the library's testable candidates; aliasing
+    is not accounted for.
+
+    Returns
+    -------
+    float
+        In the effect's unit; inf if the campaign cannot see it.
+    """
+    eff = effect(name)
+    if not eff.systematic:
+        raise BudgetError(f"{name}: detectable_effect handles systematic effects; simulate spreads instead")
+    engine = Engine(geometry, budget, read_campaign(campaign, geometry),
+                    noise_cov(instrument_sigma_mm, instrument_sigma_deg), registration=registration)
+    if name not in [e.name for e in engine.systematic] or name in engine.confounded:
+        return float("inf")
+    K = len(engine.systematic) - len(engine.confounded) + len(engine.spreads)
+    threshold = chi2_isf(alpha / K, 1)
+    fit = engine.fit((), {}, 0.0)
+    g = engine.whitened_candidates(fit)[:, engine.sys_index(name)]
+    Q, _ = np.linalg.qr(engine.whitened(fit, (), engine.nuisance)[1])
+    g = g - Q @ (Q.T @ g)
+    info = float(g @ g)                                            # Fisher information per unit^2
+    from scipy.stats import ncx2  # planning only: the analysis itself does without scipy.stats
+    lam = optimize.brentq(lambda nc: ncx2.sf(threshold, 1, nc) - power, 1e-6, 1e4)
+    return float(np.sqrt(lam / info))

@@ -1,0 +1,420 @@
+"""Systematic effects: the library's effect names and the ``[effects]`` table of a budget.
+
+An *effect* is something a model may be missing (docs, *File formats*, and
+the discrepancy workflow). Systematic effects add a deterministic pose error
+that is linear in one parameter; dispersion effects (spreads) change the law of
+one budget input.
+
+=============== ================================================ ===========
+effect          what it changes                                  unit
+=============== ================================================ ===========
+``q_i``         constant offset of parameter q of leg i, q in a, mm or deg
+                alpha, beta, gamma, theta, c, e, psi, b
+                (``b_i``: encoder zero offset)
+``scale_i``     slider error delta b_i = kappa_i b_i             1
+``backlash_i``  delta b_i = dir_i h_i / 2, h_i >= 0              mm
+``thermal``     delta b_i = alpha_T (temp_C - 20) b_i            1/K
+``spread_q_i``  the law of budget input q_i (q in rho, theta,    mm or deg
+                b), scaled about 0 to a new bound
+=============== ================================================ ===========
+
+A budget's ``[effects]`` table holds fitted systematic effects
+(:class:`SystematicEffect`): each with its value, an optional 95 % interval and
+where it came from (the campaign file and its sha256). Spreads are not
+effects of that table: a fitted spread is written as the input's new law.
+Thermal expansion needs the operating temperature range ``temp_range_C`` the
+analyses bound it over.
+
+At an analysis pose (docs, *File formats*), offsets and lead scales are
+known shifts of the pose error; a backlash and the thermal expansion have a
+driver that is not known there (the approach direction, the temperature), so
+they enter as bounded random *factors* (:func:`effect_factors`): backlash_i is
+``delta b_i = s h_i / 2`` with s = -1 or +1 equally likely, thermal is the
+temperature T uniform over ``temp_range_C``, one T for all three legs.
+
+Fitted effects belong to the machine they were measured on: a budget records
+the geometry they were fitted on (:class:`FittedOn`) and refuses another.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import BudgetError
+from ..kinematics.geometry import Geometry
+from ..kinematics.sensitivity import LENGTH_FAMILIES
+from .._result import FrozenDict
+from .laws import Discrete, Law, Uniform
+
+__all__ = ["Effect", "EFFECT_NAMES", "OFFSET_FAMILIES", "SPREAD_FAMILIES", "T_REF_C", "effect",
+           "slider_error", "offset_errors", "SystematicEffect", "effects_from_dict", "EFFECT_LIMITS",
+           "effect_factors", "FittedOn", "FIT_TOLERANCE"]
+
+#: Parameters whose constant offset is a library effect (``b``: encoder zero offset).
+OFFSET_FAMILIES = ("a", "alpha", "beta", "gamma", "theta", "c", "e", "psi", "b")
+#: Budget inputs whose spread is a library effect.
+SPREAD_FAMILIES = ("rho", "theta", "b")
+#: Reference temperature of the thermal effect, degrees C.
+T_REF_C = 20.0
+_LEGS = (1, 2, 3)
+
+#: Every effect name of the library, in library order.
+EFFECT_NAMES = (tuple(f"{q}_{i}" for q in OFFSET_FAMILIES for i in _LEGS)
+                + tuple(f"scale_{i}" for i in _LEGS) + tuple(f"backlash_{i}" for i in _LEGS)
+                + ("thermal",) + tuple(f"spread_{q}_{i}" for q in SPREAD_FAMILIES for i in _LEGS))
+
+_PATTERN = re.compile(r"^(?:(spread)_)?([a-z]+)_([123])$")
+
+
+@dataclass(frozen=True, slots=True)
+class Effect:
+    """One effect of the library.
+
+    Attributes
+    ----------
+    name : str
+        Library name, e.g. ``beta_2``, ``backlash_1``, ``spread_b_3``.
+    kind : str
+        ``offset``, ``scale``, ``backlash``, ``thermal`` or ``spread``.
+    family : str or None
+        Parameter family (``b`` for the slider effects, the input family of a
+        spread; None for ``thermal``).
+    leg : int or None
+        0-based leg (None for ``thermal``).
+    unit : str
+        Unit of the effect's value: ``mm``, ``deg``, ``1`` or ``1/K``.
+    """
+
+    name: str
+    kind: str
+    family: str | None
+    leg: int | None
+    unit: str
+
+    @property
+    def systematic(self) -> bool:
+        """True for effects that add a deterministic pose error (all but spreads)."""
+        return self.kind != "spread"
+
+    @property
+    def needs(self) -> tuple[str, ...]:
+        """Optional campaign columns the effect needs."""
+        if self.kind == "backlash":
+            return (f"dir_{self.leg + 1}",)
+        if self.kind == "thermal":
+            return ("temp_C",)
+        return ()
+
+    @property
+    def budget_input(self) -> str | None:
+        """The budget input a spread changes (None for systematic effects)."""
+        return f"{self.family}_{self.leg + 1}" if self.kind == "spread" else None
+
+
+def effect(name: str) -> Effect:
+    """Parse an effect name of the library; :class:`BudgetError` names the known ones otherwise."""
+    if name == "thermal":
+        return Effect("thermal", "thermal", None, None, "1/K")
+    m = _PATTERN.match(str(name))
+    if m and name in EFFECT_NAMES:
+        spread, family, leg = m.group(1), m.group(2), int(m.group(3)) - 1
+        if spread:
+            unit = "mm" if family in LENGTH_FAMILIES else "deg"
+            return Effect(name, "spread", family, leg, unit)
+        if family in ("scale", "backlash"):
+            return Effect(name, family, "b", leg, "1" if family == "scale" else "mm")
+        return Effect(name, "offset", family, leg, "mm" if family in LENGTH_FAMILIES else "deg")
+    raise BudgetError(f"unknown effect {name!r}: the library has "
+                      "q_i for q in a, alpha, beta, gamma, theta, c, e, psi, b; scale_i; backlash_i; "
+                      "thermal; spread_rho_i, spread_theta_i, spread_b_i (i = 1, 2, 3)")
+
+
+def _as_effects(effects) -> list[Effect]:
+    return [e if isinstance(e, Effect) else effect(e) for e in effects]
+
+
+def slider_error(values: dict, b: np.ndarray, direction: np.ndarray | None = None,
+                 temp_C: np.ndarray | None = None) -> np.ndarray:
+    """Slider position errors delta b of the slider effects in ``values``.
+
+    Parameters
+    ----------
+    values : dict of str to float
+        Effect name to value; effects other than ``b_i``, ``scale_i``,
+        ``backlash_i`` and ``thermal`` are ignored.
+    b : ndarray, shape (M, 3)
+        Commanded slider positions, mm.
+    direction : ndarray, shape (M, 3), optional
+        Approach direction of each actuator, +-1 (needed by backlash).
+    temp_C : ndarray, shape (M,), optional
+        Temperature (needed by thermal).
+
+    Returns
+    -------
+    ndarray, shape (M, 3)
+        delta b, mm.
+    """
+    out = np.zeros(np.shape(b))
+    for eff, value in zip(_as_effects(values), values.values()):
+        if eff.kind == "offset" and eff.family == "b":
+            out[:, eff.leg] += value
+        elif eff.kind == "scale":
+            out[:, eff.leg] += value * b[:, eff.leg]
+        elif eff.kind == "backlash":
+            if direction is None:
+                raise BudgetError(f"{eff.name} needs approach directions dir_{eff.leg + 1}")
+            out[:, eff.leg] += 0.5 * value * direction[:, eff.leg]
+        elif eff.kind == "thermal":
+            if temp_C is None:
+                raise BudgetError("thermal needs temperatures temp_C")
+            out += value * (np.asarray(temp_C)[:, None] - T_REF_C) * b
+    return out
+
+
+def offset_errors(values: dict) -> dict[str, np.ndarray]:
+    """Constant geometric offsets of ``values`` (except ``b_i``) as ``exact_pose_error`` errors (3,) per family."""
+    out: dict[str, np.ndarray] = {}
+    for eff, value in zip(_as_effects(values), values.values()):
+        if eff.kind == "offset" and eff.family != "b":
+            out.setdefault(eff.family, np.zeros(3))[eff.leg] += value
+    return out
+
+
+
+#: Largest magnitude of an effect's value per unit: beyond it the value is a typing slip
+#: (2.5 for 0.0025) or not a small error of this machine.
+EFFECT_LIMITS = {"mm": 1000.0, "deg": 720.0, "1": 0.1, "1/K": 1e-3}
+#: Operating temperatures a thermal effect may be bounded over, degrees C.
+TEMP_LIMITS_C = (-100.0, 300.0)
+_KEYS = ("value", "unit", "ci95", "temp_range_C", "campaign", "campaign_sha256", "source")
+
+
+def _number(value, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise BudgetError(f"{where} must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _pair(value, where: str) -> tuple[float, float] | None:
+    if value is None:
+        return None
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise BudgetError(f"{where} must be a pair [lo, hi], got {value!r}")
+    lo, hi = (_number(v, where) for v in value)
+    if not lo <= hi:
+        raise BudgetError(f"{where} must have lo <= hi, got {list(value)}")
+    return lo, hi
+
+
+@dataclass(frozen=True, slots=True)
+class SystematicEffect:
+    """One fitted systematic effect of a budget's ``[effects]`` table.
+
+    Attributes
+    ----------
+    name : str
+        A systematic library name: ``q_i`` offsets, ``scale_i``, ``backlash_i``, ``thermal``.
+    value : float
+        In the effect's unit (:attr:`unit`): mm, deg, 1 or 1/K; a backlash is
+        its full width h_i >= 0.
+    ci95 : tuple of float or None
+        95 % interval of the value, same unit.
+    temp_range_C : tuple of float or None
+        Operating temperature range, degrees C (thermal only, required there).
+    campaign, campaign_sha256 : str or None
+        The campaign file the value was fitted on, and its sha256.
+    source : str or None
+        Free text (a catalogue or a data sheet) for effects written by hand.
+    """
+
+    name: str
+    value: float
+    ci95: tuple | None = None
+    temp_range_C: tuple | None = None
+    campaign: str | None = None
+    campaign_sha256: str | None = None
+    source: str | None = None
+
+    def __post_init__(self):
+        eff = effect(self.name)
+        where = f"effect {self.name!r}"
+        if not eff.systematic:
+            raise BudgetError(f"{where} is a spread: write it as the input's new law in [inputs], "
+                              "not in [effects]")
+        value = _number(self.value, f"{where}: value")
+        limit = EFFECT_LIMITS[eff.unit]
+        if abs(value) > limit:
+            raise BudgetError(f"{where}: value {value:g} {eff.unit} is beyond any such effect of this "
+                              f"machine (limit ±{limit:g} {eff.unit}); a unit slip?")
+        if eff.kind == "backlash" and value < 0:
+            raise BudgetError(f"{where}: a backlash width h must be >= 0 mm, got {value:g}")
+        ci = _pair(self.ci95, f"{where}: ci95")
+        temps = _pair(self.temp_range_C, f"{where}: temp_range_C")
+        if eff.kind == "thermal":
+            if temps is None:
+                raise BudgetError(f"{where} needs temp_range_C = [lo, hi], the operating temperatures "
+                                  "(degrees C) to bound it over")
+            if not (TEMP_LIMITS_C[0] <= temps[0] and temps[1] <= TEMP_LIMITS_C[1]):
+                raise BudgetError(f"{where}: temp_range_C {list(temps)} is outside "
+                                  f"[{TEMP_LIMITS_C[0]:g}, {TEMP_LIMITS_C[1]:g}] degrees C")
+        elif temps is not None:
+            raise BudgetError(f"{where}: temp_range_C applies to thermal only")
+        for key in ("campaign", "campaign_sha256", "source"):
+            if getattr(self, key) is not None and not isinstance(getattr(self, key), str):
+                raise BudgetError(f"{where}: {key} must be a string, got {getattr(self, key)!r}")
+        object.__setattr__(self, "value", value)
+        object.__setattr__(self, "ci95", ci)
+        object.__setattr__(self, "temp_range_C", temps)
+
+    @property
+    def effect(self) -> Effect:
+        """The library entry (kind, family, leg, unit)."""
+        return effect(self.name)
+
+    @property
+    def unit(self) -> str:
+        return self.effect.unit
+
+    def to_dict(self) -> dict[str, Any]:
+        """The TOML table of the effect (keys left out when unset)."""
+        doc: dict[str, Any] = {"value": self.value, "unit": self.unit}
+        for key in _KEYS[2:]:
+            value = getattr(self, key)
+            if value is not None:
+                doc[key] = list(value) if isinstance(value, tuple) else value
+        return doc
+
+
+def effects_from_dict(doc, source: str) -> FrozenDict:
+    """Parse a budget's ``[effects]`` table: name -> :class:`SystematicEffect`.
+
+    Each entry is a table with ``value`` (required) and optional ``unit``
+    (checked against the effect's unit), ``ci95``, ``temp_range_C`` (thermal),
+    ``campaign``, ``campaign_sha256`` and ``source``.
+    """
+    if not isinstance(doc, dict):
+        raise BudgetError(f"{source}: [effects] must be a table of effects, got {doc!r}")
+    out = {}
+    for name, spec in doc.items():
+        where = f"{source}: effect {name!r}"
+        try:
+            eff = effect(name)
+        except BudgetError as exc:
+            raise BudgetError(f"{source}: {exc}") from None
+        if not isinstance(spec, dict):
+            raise BudgetError(f"{where} must be a table such as {{ value = 0.01 }}, got {spec!r}")
+        unknown = sorted(set(spec) - set(_KEYS))
+        if unknown:
+            raise BudgetError(f"{where}: unknown key(s) {', '.join(unknown)} (expected {', '.join(_KEYS)})")
+        if "value" not in spec:
+            raise BudgetError(f"{where} needs a value")
+        if "unit" in spec and spec["unit"] != eff.unit:
+            raise BudgetError(f"{where}: unit {spec['unit']!r} is not the effect's unit {eff.unit!r}")
+        fields_ = {k: v for k, v in spec.items() if k != "unit"}
+        try:
+            out[name] = SystematicEffect(name, **fields_)
+        except BudgetError as exc:
+            raise BudgetError(f"{source}: {exc}") from None
+    return FrozenDict(out)
+
+
+def effect_factors(effects: dict) -> dict[str, Law]:
+    """The random factors of a budget's effects, in library order: name -> law.
+
+    ``backlash_i``: the slider error delta b_i itself, -h_i/2 or +h_i/2 with
+    probability 1/2 each (mm); ``thermal``: the temperature T, uniform over
+    ``temp_range_C`` (degrees C). Offsets and scales have no random factor.
+    """
+    out: dict[str, Law] = {}
+    for name in EFFECT_NAMES:
+        eff = effects.get(name)
+        if eff is None:
+            continue
+        if eff.effect.kind == "backlash":
+            out[name] = Discrete((-0.5 * eff.value, 0.5 * eff.value), (0.5, 0.5))
+        elif eff.effect.kind == "thermal":
+            out[name] = Uniform(*eff.temp_range_C)
+    return out
+
+
+#: Largest difference of a leg parameter between the geometry a budget's effects were fitted on and
+#: the geometry the budget is used with: more than fitted offsets of that machine could explain.
+FIT_TOLERANCE = {"mm": 1.0, "deg": 1.0}
+_FIT_KEYS = tuple(f"{k}_{'mm' if k in LENGTH_FAMILIES else 'deg'}"
+                  for k in ("a", "alpha", "beta", "gamma", "theta", "c", "e", "psi"))
+
+
+@dataclass(frozen=True, slots=True)
+class FittedOn:
+    """The geometry a budget's effects were fitted on: its name and leg parameters (the fingerprint).
+
+    The TOML table ``[fitted_on]`` holds ``name`` and one list of three
+    values (legs 1-3) per parameter: ``a_mm, alpha_deg, beta_deg, gamma_deg,
+    theta_deg, c_mm, e_mm, psi_deg`` (strokes do not change the model).
+
+    Attributes
+    ----------
+    name : str
+    legs : dict of str to tuple of 3 float
+        Parameter key (as above) to its values for legs 1-3, mm or deg.
+    """
+
+    name: str
+    legs: dict
+
+    def __post_init__(self):
+        if not isinstance(self.name, str):
+            raise BudgetError(f"fitted_on: name must be a string, got {self.name!r}")
+        if set(self.legs) != set(_FIT_KEYS):
+            missing = [k for k in _FIT_KEYS if k not in self.legs]
+            extra = sorted(set(self.legs) - set(_FIT_KEYS))
+            raise BudgetError("fitted_on needs " + ", ".join(_FIT_KEYS)
+                              + (f"; missing {', '.join(missing)}" if missing else "")
+                              + (f"; unknown {', '.join(extra)}" if extra else ""))
+        legs = {}
+        for key in _FIT_KEYS:
+            values = self.legs[key]
+            if not isinstance(values, (list, tuple)) or len(values) != 3:
+                raise BudgetError(f"fitted_on: {key} must list three values (legs 1-3), got {values!r}")
+            legs[key] = tuple(_number(v, f"fitted_on: {key}") for v in values)
+        object.__setattr__(self, "legs", FrozenDict(legs))
+
+    @classmethod
+    def of(cls, geometry: Geometry) -> "FittedOn":
+        """The fingerprint of ``geometry``."""
+        return cls(geometry.name, {key: getattr(geometry, key.rsplit("_", 1)[0]) for key in _FIT_KEYS})
+
+    @classmethod
+    def from_dict(cls, doc, source: str) -> "FittedOn":
+        """Parse a ``[fitted_on]`` table (errors name ``source``)."""
+        if not isinstance(doc, dict):
+            raise BudgetError(f"{source}: [fitted_on] must be a table (name and the legs' parameters), got {doc!r}")
+        try:
+            return cls(doc.get("name", "custom"), {k: v for k, v in doc.items() if k != "name"})
+        except BudgetError as exc:
+            raise BudgetError(f"{source}: {exc}") from None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, **{k: list(v) for k, v in self.legs.items()}}
+
+    def difference(self, geometry: Geometry) -> str | None:
+        """The largest departure of ``geometry`` beyond :data:`FIT_TOLERANCE`, as text, or None."""
+        worst, text = 0.0, None
+        for key in _FIT_KEYS:
+            unit = key.rsplit("_", 1)[1]
+            diff = np.abs(np.subtract(getattr(geometry, key.rsplit("_", 1)[0]), self.legs[key]))
+            if unit == "deg":
+                diff = np.abs((diff + 180.0) % 360.0 - 180.0)
+            leg = int(np.argmax(diff))
+            ratio = diff[leg] / FIT_TOLERANCE[unit]
+            if ratio > 1.0 and ratio > worst:
+                worst = ratio
+                text = (f"{key} of leg {leg + 1} is {getattr(geometry, key.rsplit('_', 1)[0])[leg]:g} in "
+                        f"{geometry.name!r} and {self.legs[key][leg]:g} in {self.name!r} "
+                        f"(more than {FIT_TOLERANCE[unit]:g} {unit} apart)")
+        return text

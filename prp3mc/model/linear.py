@@ -1,0 +1,309 @@
+"""The linear error model of a budget at a batch of poses.
+
+For an input q_i the pose error is ``J_q[:, i] * dq_i``; for a clearance
+(rho_i, zeta_i) it is ``J_rho[:, i] * rho_i cos(zeta_i - omega_i)`` with
+omega_i the direction of E l_i. Writing the cosine as
+``cos(omega) rho cos(zeta) + sin(omega) rho sin(zeta)`` makes the error
+linear in *features* of the samples with pose-dependent coefficients, so a
+whole batch of poses x samples is one matrix product.
+
+A budget's systematic effects (its ``[effects]`` table) add terms: an offset
+q_i is a known shift ``J_q[:, i] * value``, a lead scale the shift
+``J_b[:, i] kappa_i b_i`` with b_i from the nominal inverse kinematics; a
+backlash is the factor delta b_i = ±h_i/2 through ``J_b[:, i]``; thermal
+expansion the factor T through ``alpha_T (T - 20) J_b b``, one term of all
+three legs. The shifts share one constant feature (1).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._result import freeze, short_repr
+from ..units import DEG2RAD, RAD2DEG
+from .budget import Budget, parse_input
+from .laws import angle_moments
+from .effects import EFFECT_NAMES, T_REF_C
+from ..kinematics.geometry import Geometry
+from ..kinematics.chain import as_poses, frame, validated_frame
+from ..kinematics.sensitivity import LENGTH_FAMILIES, h_entries
+
+__all__ = ["LinearModel", "linear_model", "ALL_LEGS", "FEATURE_VALUE", "FEATURE_COS", "FEATURE_SIN", "FEATURE_ONE"]
+
+#: The leg of a term that acts on all three legs at once (thermal expansion).
+ALL_LEGS = -1
+#: Feature codes of :meth:`LinearModel.feature_ops`: factor a's value less a reference; X_a cos(X_b deg);
+#: X_a sin(X_b deg); the constant 1 of the known shifts.
+FEATURE_VALUE, FEATURE_COS, FEATURE_SIN, FEATURE_ONE = range(4)
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class LinearModel:
+    """Linear error model of ``budget`` at ``poses``.
+
+    Attributes
+    ----------
+    geometry : Geometry
+    budget : Budget
+    poses : ndarray, shape (..., 3)
+        ``[x_mm, y_mm, phi_deg]``.
+    terms : tuple of str
+        One term per input except the zeta_i (``rho_i`` stands for the
+        clearance term rho_i cos(zeta_i - omega_i)), then one per effect of
+        the budget in library order: offsets ``offset_q_i`` (the effect
+        ``q_i``; the input q_i is another term) and ``scale_i`` (known
+        shifts, the term's value is the effect's value), ``backlash_i`` (the
+        factor delta b_i, mm) and ``thermal`` (T - 20, K).
+    legs : tuple of int
+        The (0-based) leg of every term; :data:`ALL_LEGS` for a term of all legs.
+    Ainv : ndarray, shape (..., 3, 3)
+        A^-1 at the poses.
+    weights : ndarray, shape (..., 3, T)
+        u per unit (mm, deg, 1 or K) of each term: the pose error is
+        ``A^-1 u`` with ``u = sum over the terms t of weights[:, t] * term_t``
+        (every H_q is diagonal, so a term of one leg has one non-zero entry,
+        h_q,i; thermal has alpha_T h_b,i b_i in every leg).
+    cos_omega, sin_omega : ndarray, shape (..., 3)
+        Worst contact direction omega_i of each leg's clearance (that of E l_i).
+    """
+
+    geometry: Geometry
+    budget: Budget
+    poses: np.ndarray
+    terms: tuple
+    legs: tuple
+    Ainv: np.ndarray
+    weights: np.ndarray
+    cos_omega: np.ndarray
+    sin_omega: np.ndarray
+    _plan: tuple
+
+    def __post_init__(self):
+        freeze(self)
+
+    def __repr__(self) -> str:
+        return short_repr(self, "geometry", "budget", "poses", "terms")
+
+    @property
+    def scale(self) -> np.ndarray:
+        """Weight of every term on its own leg, shape (..., T); 0 for a term of all legs."""
+        legs = np.array(self.legs, dtype=int)
+        own = self.weights[..., np.maximum(legs, 0), np.arange(legs.size)]
+        return np.where(legs >= 0, own, 0.0)
+
+    @property
+    def shared(self) -> tuple[int, ...]:
+        """Indices of the terms of all legs (their u is not along one leg's axis)."""
+        return tuple(t for t, leg in enumerate(self.legs) if leg == ALL_LEGS)
+
+    @property
+    def columns(self) -> np.ndarray:
+        """Pose error (dx mm, dy mm, dphi rad) per unit of each term, shape (..., 3, T)."""
+        cols = self.Ainv[..., :, [max(leg, 0) for leg in self.legs]] * self.scale[..., None, :]
+        for t in self.shared:
+            cols[..., :, t] = np.einsum("...ij,...j->...i", self.Ainv, self.weights[..., :, t])
+        return cols
+
+    @property
+    def omega(self) -> np.ndarray:
+        """Worst contact direction of each leg's clearance, rad, shape (..., 3)."""
+        return np.arctan2(self.sin_omega, self.cos_omega)
+
+    @property
+    def has_shift(self) -> bool:
+        """Whether the budget has known shifts (offsets, scales): the last feature is then the constant 1."""
+        return any(kind == "shift" for kind, *_ in self._plan)
+
+    @property
+    def coef(self) -> np.ndarray:
+        """Coefficients of the sample features (see :meth:`features`), shape (..., 3, F)."""
+        cols = []
+        columns = self.columns
+        shift = 0.0
+        for t, (kind, *args) in enumerate(self._plan):
+            col = columns[..., t]
+            if kind == "value":
+                cols.append(col)
+            elif kind == "shift":
+                shift = shift + col * args[0]
+            else:
+                _, leg = parse_input(self.terms[t])
+                cols += [col * self.cos_omega[..., leg, None], col * self.sin_omega[..., leg, None]]
+        if self.has_shift:
+            cols.append(shift)
+        return np.stack(cols, axis=-1)
+
+    def features(self, X: np.ndarray) -> np.ndarray:
+        """Sample features, shape (n, F), from factor samples X (n, D) in mm / deg (see :attr:`Budget.factors`).
+
+        Non-clearance inputs and backlash factors are their value, thermal
+        is T - 20; a clearance contributes rho cos(zeta) and rho sin(zeta)
+        (zeta in degrees in X); known shifts add the constant 1 last.
+        """
+        X = np.asarray(X, dtype=float)
+        cols = []
+        for kind, *args in self._plan:
+            if kind == "value":
+                k, ref = args
+                cols.append(X[:, k] - ref if ref else X[:, k])
+            elif kind == "clearance":
+                (k, kz), = args
+                rho, zeta = X[:, k], np.deg2rad(X[:, kz])
+                cols.extend([rho * np.cos(zeta), rho * np.sin(zeta)])
+        if self.has_shift:
+            cols.append(np.ones(X.shape[0]))
+        return np.stack(cols, axis=1)
+
+    def feature_ops(self) -> tuple[np.ndarray, np.ndarray]:
+        """How :meth:`features` makes each feature from the factors, for compiled samplers.
+
+        Returns
+        -------
+        ops : ndarray, shape (F, 3), int64
+            Rows ``(op, a, b)``: ``FEATURE_VALUE`` is factor a's value less
+            its reference, ``FEATURE_COS`` / ``FEATURE_SIN`` are X_a cos(X_b) /
+            X_a sin(X_b) with X_b in degrees, ``FEATURE_ONE`` the constant 1
+            (a and b unused where they do not apply).
+        refs : ndarray, shape (F,)
+            The reference subtracted from a value (20 degrees C for thermal, else 0).
+        """
+        rows, refs = [], []
+        for kind, *args in self._plan:
+            if kind == "value":
+                rows.append((FEATURE_VALUE, args[0], args[0]))
+                refs.append(args[1])
+            elif kind == "clearance":
+                (k, kz), = args
+                rows += [(FEATURE_COS, k, kz), (FEATURE_SIN, k, kz)]
+                refs += [0.0, 0.0]
+        if self.has_shift:
+            rows.append((FEATURE_ONE, 0, 0))
+            refs.append(0.0)
+        return np.array(rows, dtype=np.int64).reshape(-1, 3), np.array(refs, dtype=float)
+
+    def evaluate(self, X: np.ndarray, dtype=np.float64) -> np.ndarray:
+        """Pose errors for every pose and sample, shape (..., n, 3): dx mm, dy mm, dphi rad."""
+        F = self.features(X).astype(dtype, copy=False)
+        return np.einsum("...of,nf->...no", self.coef.astype(dtype, copy=False), F, optimize=True)
+
+    def feature_moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Exact mean (F,) and covariance (F, F) of the sample features (see :meth:`features`).
+
+        Non-clearance features are independent factors; a clearance's features
+        (rho cos zeta, rho sin zeta) have moments E[rho^k] times the
+        trigonometric moments of zeta (:func:`~prp3mc.model.laws.angle_moments`);
+        the constant of the shifts has mean 1 and no variance.
+        """
+        laws = list(self.budget.factor_laws.values())
+        fmean, blocks = [], []
+        for kind, *args in self._plan:
+            if kind == "value":
+                k, ref = args
+                fmean.append(laws[k].mean - ref)
+                blocks.append(np.array([[laws[k].var]]))
+            elif kind == "clearance":
+                (k, kz), = args
+                rho, zeta = laws[k], laws[kz]
+                ec, es, ecc, ess, ecs = angle_moments(zeta)
+                r1, r2 = rho.mean, rho.var + rho.mean**2
+                m = np.array([r1 * ec, r1 * es])
+                fmean.extend(m)
+                blocks.append(r2 * np.array([[ecc, ecs], [ecs, ess]]) - np.outer(m, m))
+        if self.has_shift:
+            fmean.append(1.0)
+            blocks.append(np.zeros((1, 1)))
+        nf = len(fmean)
+        fcov = np.zeros((nf, nf))
+        pos = 0
+        for block in blocks:
+            k = block.shape[0]
+            fcov[pos:pos + k, pos:pos + k] = block
+            pos += k
+        return np.array(fmean), fcov
+
+    def moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Exact mean (..., 3) and covariance (..., 3, 3) of the pose error (dx mm, dy mm, dphi deg)."""
+        fmean, fcov = self.feature_moments()
+        deg = np.array([1.0, 1.0, RAD2DEG])
+        mean = np.einsum("...of,f->...o", self.coef, fmean) * deg
+        cov = np.einsum("...of,fg,...qg->...oq", self.coef, fcov, self.coef) * np.outer(deg, deg)
+        return mean, cov
+
+    def term_values(self, X: np.ndarray) -> np.ndarray:
+        """Value of every term per pose and sample, shape (..., n, T), boundary units (K for thermal)."""
+        X = np.asarray(X, dtype=float)
+        out = np.empty(self.poses.shape[:-1] + (X.shape[0], len(self.terms)))
+        for t, (kind, *args) in enumerate(self._plan):
+            if kind == "value":
+                out[..., t] = X[:, args[0]] - args[1]
+            elif kind == "shift":
+                out[..., t] = args[0]
+            else:
+                (k, kz), = args
+                _, leg = parse_input(self.terms[t])
+                zeta = np.deg2rad(X[:, kz])
+                out[..., t] = X[:, k] * (np.cos(zeta) * self.cos_omega[..., leg, None]
+                                         + np.sin(zeta) * self.sin_omega[..., leg, None])
+        return out
+
+
+def _one_leg(h: np.ndarray, leg: int) -> np.ndarray:
+    """Weights (3, ...) of a term of one leg whose h entries (legs first) are ``h``."""
+    w = np.zeros_like(h)
+    w[leg] = h[leg]
+    return w
+
+
+def linear_model(geometry: Geometry, budget: Budget, poses, *, check: bool = True) -> LinearModel:
+    """Build the :class:`LinearModel` of ``budget`` at ``poses`` (..., 3).
+
+    Poses out of stroke, with d_i <= 0 or near a singularity are refused
+    (:class:`~prp3mc.errors.InfeasiblePoseError`) unless ``check=False``;
+    a budget whose effects were fitted on another geometry is refused
+    (:meth:`Budget.check_geometry`).
+    """
+    budget.check_geometry(geometry)
+    poses = as_poses(poses)
+    fr = validated_frame(geometry, poses) if check else frame(geometry, poses)
+    names, factors = budget.names, budget.factors
+    terms, legs, weights, plan = [], [], [], []
+    h = {}
+
+    def entries(family):
+        if family not in h:
+            h[family] = h_entries(geometry, fr, family)
+        return h[family]
+
+    for k, name in enumerate(names):
+        family, leg = parse_input(name)
+        if family == "zeta":
+            continue
+        terms.append(name)
+        legs.append(leg)
+        weights.append(_one_leg(entries(family) * (1.0 if family in LENGTH_FAMILIES else DEG2RAD), leg))
+        plan.append(("clearance", (k, names.index(f"zeta_{leg + 1}"))) if family == "rho" else ("value", k, 0.0))
+    b = fr.b                                                    # nominal slider positions, legs first
+    for name in (n for n in EFFECT_NAMES if n in budget.effects):
+        eff = budget.effects[name]
+        e = eff.effect
+        terms.append(f"offset_{name}" if e.kind == "offset" else name)
+        legs.append(ALL_LEGS if e.kind == "thermal" else e.leg)
+        if e.kind == "offset":
+            weights.append(_one_leg(entries(e.family) * (1.0 if e.family in LENGTH_FAMILIES else DEG2RAD), e.leg))
+            plan.append(("shift", eff.value))
+        elif e.kind == "scale":
+            weights.append(_one_leg(entries("b") * b, e.leg))
+            plan.append(("shift", eff.value))
+        elif e.kind == "backlash":
+            weights.append(_one_leg(entries("b"), e.leg))
+            plan.append(("value", factors.index(name), 0.0))
+        else:                                                   # thermal: one temperature, every leg
+            weights.append(eff.value * entries("b") * b)
+            plan.append(("value", factors.index(name), T_REF_C))
+    return LinearModel(geometry=geometry, budget=budget, poses=poses, terms=tuple(terms), legs=tuple(legs),
+                       Ainv=np.moveaxis(fr.Ainv, (0, 1), (-2, -1)),
+                       weights=np.moveaxis(np.stack(weights, axis=-1), 0, -2),
+                       cos_omega=np.moveaxis(-fr.tr.sl, 0, -1), sin_omega=np.moveaxis(fr.tr.cl, 0, -1),
+                       _plan=tuple(plan))
