@@ -119,8 +119,7 @@ def main(argv=None) -> int:
         for family in args.families:
             for magnitude in args.magnitudes:
                 results.append(run_cell(preset, family, magnitude, seeds))
-                if not args.json:
-                    print(table(results[-1:]).splitlines()[-1], file=sys.stderr, flush=True)
+                print(table(results[-1:]).splitlines()[-1], file=sys.stderr, flush=True)
     doc = {"prp3mc": prp3mc.__version__, "seeds": [seeds.start, seeds.stop], "reader_limit": list(READER_LIMIT),
            "results": results, "wall_s": time.perf_counter() - t0}
     print(json.dumps(doc, indent=2) if args.json else table(results))

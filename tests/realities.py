@@ -29,6 +29,7 @@ def thermal_campaign(geometry, poses, n_repeats: int, alpha_T: float, temperatur
     out-of-library hook with this module's own temperature: ``temperature(s)``
     degrees C at the campaign's time fraction ``s`` (0 at the first
     measurement, 1 at the last, from ``time_s``), which also fills ``temp_C``.
+    ``kwargs`` go to the simulator (a planned ``order``, ``approach`` and ``time_s`` among them).
 
     Returns
     -------
@@ -36,7 +37,7 @@ def thermal_campaign(geometry, poses, n_repeats: int, alpha_T: float, temperatur
         The campaign in the file layout.
     """
     def expansion(cmd, b, direction, temp):
-        t = visit_times(b)
+        t = np.asarray(kwargs["time_s"], dtype=float) if kwargs.get("time_s") is not None else visit_times(b)
         return alpha_T * (temperature((t - t[0]) / (t[-1] - t[0]))[:, None] - 20.0) * b
 
     c = simulate_campaign(geometry, BUDGET, poses, n_repeats, slider_error_fn=expansion, rng=rng, **SIGMA, **kwargs)
