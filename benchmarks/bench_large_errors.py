@@ -91,7 +91,8 @@ def run_cell(preset: str, family: str, magnitude: float, seeds: range) -> dict:
 
 def table(results: list[dict]) -> str:
     head = ["geometry", "effect", "magnitude (deg)", "named alone", "value in CI", "invented outliers",
-            "held-out gap closed", "guard", "beyond the reader (> 5 mm)", "registration error (µm): mean; max", "passes", "s/campaign"]
+            "held-out gap closed", "guard", "beyond the reader (> 5 mm)", "registration error (µm): mean; max",
+            "passes", "s/campaign"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in results:
         cells = [r["geometry"], r["effect"], f"{r['magnitude_deg']:g}"]

@@ -280,10 +280,7 @@ def _schedule(info: _Information, geometry, poses, n_visits, direction, minutes,
     best = None
     for _ in range(N_ORDERS):
         order = np.concatenate([rng.permutation(P) for _ in range(n_visits)])
-        visit = np.zeros(order.size, dtype=int)                      # which visit of its pose each row is
-        for p in range(P):
-            visit[order == p] = np.arange(n_visits)
-        dirs = direction[order, :, visit]
+        dirs = direction[order, :, np.arange(order.size) // P]       # a pose's k-th visit is in round k
         t = (np.linspace(0.0, 60.0 * minutes, order.size) if minutes is not None else
              visit_times(b[order]) - visit_times(b[order])[0])
         s = (t - t[0]) / max(t[-1] - t[0], 1e-12)
