@@ -11,8 +11,11 @@ pass it evaluates the exact chain at the named values; when the pass's
 linear model departs from it there by more than :data:`REMAINDER` (the
 whitened energy of the difference, a log-likelihood ratio: it could move
 no test), it linearises again about those values and runs a new pass from
-scratch (gross errors and names found again), until the named set is the
-one the point was built on and the departure is below :data:`REMAINDER`.
+scratch (gross errors and names found again), until the departure is below
+:data:`REMAINDER` and the named model has not moved from the point's
+(the exact chain at the named values and at the point's, the same within
+:data:`REMAINDER`: an alias named instead of an effect with the same
+signature, ``alpha_1`` for ``beta_1`` when ``a_1 = 0``, has not moved).
 A large guide or base angle error is so named alone with its value, no
 row set aside for the curvature the nominal model cannot follow, and the
 registration fitted on the converged model.
@@ -134,7 +137,12 @@ def _energy(named: Named, exact: np.ndarray, values: dict) -> float:
     engine = named.engine
     cols = [engine.sys_index(n) for n in values]
     linear = engine.known + engine.G[:, :, cols] @ np.array([values[n] for n in values])
-    z = engine.whiten(exact[engine.keep] - linear, named.fit.Lw, named.fit.Lb)
+    return _whitened_energy(named, exact[engine.keep] - linear)
+
+
+def _whitened_energy(named: Named, difference: np.ndarray) -> float:
+    """``|z|^2`` of a difference of pose errors (M_kept, 3) whitened by the pass's fit."""
+    z = named.engine.whiten(difference, named.fit.Lw, named.fit.Lb)
     return float(z @ z)
 
 
@@ -177,7 +185,8 @@ def identify(geometry, budget, campaign, make_engine, alpha: float, max_effects:
         The last pass; when the linearity guard trips, its fit is the model without effects.
     linearity : dict
         ``passes`` (per pass: the point's values, the named values, gross errors set aside, the
-        departure ``remainder``), ``converged``, ``curvature`` (per named effect), ``guard``
+        departure ``remainder`` and, from the second, how far the named model ``moved``),
+        ``converged``, ``curvature`` (per named effect), ``guard``
         (``"ok"`` or ``"tripped"``) and, when tripped, ``why``, ``advice`` and ``last_estimate``.
     """
     candidates = [e.name for e in library(budget, campaign.has_dir, campaign.temp_C is not None) if e.systematic]
@@ -201,7 +210,9 @@ def identify(geometry, budget, campaign, make_engine, alpha: float, max_effects:
             why = f"at the named values {_text(values)}: {exc}"
             break
         record["remainder"] = _energy(named, exact, values)
-        if record["remainder"] <= REMAINDER and (point is None or set(values) == set(point.values)):
+        if point is not None:                # how far the named model moved from the point's (alias swaps: 0)
+            record["moved"] = _whitened_energy(named, (exact - point.exact)[named.keep])
+        if record["remainder"] <= REMAINDER and record.get("moved", 0.0) <= REMAINDER:
             break
         try:
             point = linearise(geometry, budget, campaign, values, candidates)
