@@ -2,8 +2,8 @@
 
 One *pass* (:func:`name_pass`) works on the model linearised about one
 point (:mod:`~prp3mc.measurement.fit.relinearise`; the first is the nominal
-geometry): it sets gross errors aside (:mod:`~prp3mc.measurement.outliers`),
-names effects (:mod:`~prp3mc.measurement.selection`) and tests every row
+geometry): it sets gross errors aside (:mod:`~prp3mc.measurement.fit.outliers`),
+names effects (:mod:`~prp3mc.measurement.fit.selection`) and tests every row
 again under the named model.
 
 :func:`identify` iterates passes (Gauss-Newton on the exact chain): after a
@@ -23,10 +23,11 @@ registration fitted on the converged model.
 **The linearity guard.** The result is refused (nothing named, the verdict
 says why and what to do) when the iteration does not settle in
 :data:`MAX_PASSES` passes, when the exact chain cannot be solved at an
-estimate (the named values would take a leg out of its stroke or the
-chain through a singularity), or when the chain is curved across a named
-effect's interval (:data:`CURVATURE`: the Wald interval needs the model
-linear there).
+estimate (its closure does not converge, or passes a singularity), when
+the effects named on every row still leave more than :data:`GROSS_SHARE`
+of the rows standing out as gross errors, or when the chain is curved
+across a named effect's interval (:data:`CURVATURE`: the Wald interval
+needs the model linear there).
 """
 
 from __future__ import annotations
@@ -237,9 +238,9 @@ def identify(geometry, budget, campaign, make_engine, alpha: float, max_effects:
     doc["guard"] = "ok" if why is None else "tripped"
     if why is not None:
         doc.update(why=why, last_estimate=dict(passes[-1]["named"]) if passes else {},
-                   advice="the errors are too large for a model linearised about this geometry: apply the last "
-                          "estimate's offsets to the geometry (a geometry closer to the machine) and analyse again, "
-                          "or measure fewer/closer poses; nothing is named")
+                   advice="nothing is named: the errors are too large for the model linearised about this "
+                          "geometry; apply the last estimate's geometric offsets to the geometry (a geometry closer "
+                          "to the machine) and analyse again")
         named = Named(named.engine, named.base, named.base, {}, named.steps, named.keep, named.d2, named.limit)
     return named, doc
 
