@@ -84,3 +84,20 @@ def test_warming_and_cycled_rates_over_seeds():
             else:
                 named += fit is not None and fit[1][0] <= ALPHA_T <= fit[1][1]
     assert swallowed <= 3 and named >= 16
+
+
+def test_the_verdict_takes_the_first_state_that_holds():
+    from types import SimpleNamespace
+
+    from prp3mc.measurement.fit.diagnostics import VERDICTS, verdict
+    closed, open_ = {"closed": True, "deciding_channel": "library"}, {"closed": False, "deciding_channel": "spatial"}
+    ok, tripped = {"guard": "ok"}, {"guard": "tripped", "why": "no closure", "advice": "apply the offsets"}
+    e = SimpleNamespace(name="scale_2")
+    drift = [{"effects": ["thermal"], "with": ["drift"]}]
+    assert verdict(open_, [e], tripped, ["x"])["state"] == VERDICTS[0] == "beyond the linear model"
+    assert verdict(open_, [e], ok, ["x"])["state"] == "unexplained"
+    assert verdict(closed, [e], ok, ["x"])["text"] == "the cause is ambiguous: x"
+    assert verdict(closed, [e], ok, [])["text"] == "explained by scale_2"
+    assert verdict(closed, [], ok, [], drift)["text"] == ("the model misses nothing this campaign can see; this "
+                                                          "campaign cannot tell thermal from a drift (see confounded)")
+    assert verdict(closed, [SimpleNamespace(name="thermal")], ok, [], drift)["state"] == "explained"
