@@ -89,19 +89,20 @@ def test_refusals_are_one_line():
 
 def test_cli(tmp_path, capsys):
     out = tmp_path / "plan.csv"
-    args = ["plan", "--geometry", "u-shape", "--budget", "paper", "--effects", "scale_2,thermal", "--poses", "6",
+    args = ["plan", "--geometry", "u-shape", "--budget", "paper", "--effects", "scale_2,thermal,c_1", "--poses", "6",
             "--visits", "3", "--out", str(out), "--minutes", "20", "--seed", "4"]
     assert main(args + ["--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert set(doc) >= {"detectable", "confounded", "inputs", "versions"}
-    assert set(doc["detectable"]) == {"scale_2", "thermal"} and doc["inputs"]["seed"] == 4
+    assert set(doc["detectable"]) == {"scale_2", "thermal", "c_1"} and doc["inputs"]["seed"] == 4
+    assert doc["detectable"]["c_1"] is None and "invisible" in doc["not_detectable"]["c_1"]   # no inf in JSON
     assert doc["inputs"]["geometry"]["name"] == "u-shape" and doc["temperature"]["planned"] is False
     frame = pd.read_csv(out)
     assert frame["time_s"].iloc[-1] == pytest.approx(1200.0) and "dir_1" not in frame.columns
     assert main(args) == 1 and "exists" in capsys.readouterr().err
     assert main(args + ["--force"]) == 0
     text = capsys.readouterr().out
-    assert "thermal assumes the temperature" in text and "scale_2:" in text
+    assert "thermal assumes the temperature" in text and "scale_2:" in text and "c_1: not detectable" in text
     assert main(args[:-2] + ["--effects", "nope_1", "--force"]) == 1
     assert "unknown effect" in capsys.readouterr().err
 

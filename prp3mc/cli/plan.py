@@ -78,7 +78,8 @@ def summary(plan) -> list[str]:
              f"smallest value named with probability {s['power']:g} (family-wise level {s['alpha']:g}), this plan "
              f"vs {plan.reference_layout}:"]
     for name, value in plan.detectable.items():
-        lines.append(f"  {name}: {value:.4g} vs {plan.reference[name]:.4g}")
+        lines.append(f"  {name}: not detectable: {plan.unseen[name]}" if name in plan.unseen else
+                     f"  {name}: {value:.4g} vs {plan.reference[name]:.4g}")
     if "thermal" in plan.effects:
         t = s["temperature_C"]
         lines.append(f"thermal assumes the temperature rising steadily {t[0]:g} -> {t[1]:g} degC: the plan cannot "

@@ -101,7 +101,9 @@ class CampaignPlan:
     temperature_C : ndarray, shape (M,)
         The temperature assumed for thermal expansion (not planned: ``temp_C`` is left to measure).
     detectable : dict
-        Effect -> smallest value named with probability ``power`` (its unit; inf: not visible).
+        Effect -> smallest value named with probability ``power`` (its unit; inf: the campaign cannot see it).
+    unseen : dict
+        Effect -> why the plan cannot see it (invisible, or exactly confounded with a nuisance).
     reference : dict
         The same for a grid of the region with as many poses and visits (``reference_layout``).
     reference_layout : str
@@ -123,6 +125,7 @@ class CampaignPlan:
     time_s: np.ndarray
     temperature_C: np.ndarray
     detectable: dict
+    unseen: dict
     reference: dict
     reference_layout: str
     confounded: tuple
@@ -160,8 +163,9 @@ class CampaignPlan:
                        "effects": list(self.effects), "n_poses": int(self.poses.shape[0]),
                        "n_measurements": self.n_measurements, **self.settings},
             "versions": versions(),
-            "detectable": dict(self.detectable), "confounded": [dict(c) for c in self.confounded],
-            "reference": {"layout": self.reference_layout, "detectable": dict(self.reference)},
+            "detectable": _finite(self.detectable), "not_detectable": dict(self.unseen),
+            "confounded": [dict(c) for c in self.confounded],
+            "reference": {"layout": self.reference_layout, "detectable": _finite(self.reference)},
             "criterion": dict(self.criterion),
             "poses": [{"x_mm": float(x), "y_mm": float(y), "phi_deg": float(p)} for x, y, p in self.poses],
             "temperature": {"planned": False, "assumed_C": [float(self.temperature_C[0]),
@@ -172,6 +176,24 @@ class CampaignPlan:
                                     "and late); cycle the temperature to separate thermal expansion from drift"},
             "power": self.settings["power"], "version": __version__,
         }
+
+
+def _finite(values: dict) -> dict:
+    """Detectable values for JSON: an effect the campaign cannot see is null (its reason is in ``not_detectable``)."""
+    return {n: (float(v) if np.isfinite(v) else None) for n, v in values.items()}
+
+
+def _unseen(engine: Engine, effects) -> dict:
+    """Why the campaign of ``engine`` cannot see each effect of ``effects`` it cannot see."""
+    out = {}
+    for name in effects:
+        if name in engine.invisible:
+            out[name] = "its signature vanishes over the planned poses (invisible)"
+        elif name in engine.confounded:
+            out[name] = f"exactly confounded with the {engine.confounded[name]}"
+        elif name in engine.not_testable:
+            out[name] = engine.not_testable[name]
+    return out
 
 
 def _template(poses, order, direction, dir_legs, time_s) -> pd.DataFrame:
@@ -395,10 +417,12 @@ def plan_campaign(geometry: Geometry, budget: Budget, effects, n_poses: int, n_v
     detect = {n: detectable_effect(geometry, budget, planned, n, power=power, alpha=alpha, **sigma) for n in effects}
     ref = {n: detectable_effect(geometry, budget, ref_campaign, n, power=power, alpha=alpha, **sigma)
            for n in effects}
-    confounded = design_confounds(Engine(geometry, budget, planned, noise, registration=registration), effects)
+    engine = Engine(geometry, budget, planned, noise, registration=registration)
+    confounded = design_confounds(engine, effects)
     return CampaignPlan(
         geometry=geometry, budget=budget, effects=effects, poses=poses, order=order, direction=dirs,
-        dir_legs=dir_legs, time_s=t, temperature_C=temps, detectable=detect, reference=ref,
+        dir_legs=dir_legs, time_s=t, temperature_C=temps, detectable=detect, unseen=_unseen(engine, effects),
+        reference=ref,
         reference_layout=layout, confounded=tuple(confounded),
         criterion={"log_det": value, "reference_log_det": ref_value},
         settings={"instrument_sigma_mm": instrument_sigma_mm, "instrument_sigma_deg": instrument_sigma_deg,
