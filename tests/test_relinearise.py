@@ -10,6 +10,7 @@ from prp3mc.measurement.fit.relinearise import controller_geometry, exact_errors
 from prp3mc.measurement.campaign.simulate import simulate_campaign
 from prp3mc.measurement.fit.workflow import discrepancy
 from prp3mc.model.effects import SystematicEffect
+from prp3mc.reports.discrepancy_report import render_html
 
 from .realities import BUDGET, SIGMA, campaign_poses
 from .test_discrepancy import covers
@@ -92,6 +93,9 @@ def test_the_linearity_guard_refuses_to_name_when_the_iteration_does_not_settle(
     assert lin["guard"] == "tripped" and not lin["converged"] and "did not settle" in lin["why"]
     assert "beta_1" in lin["last_estimate"] and lin["advice"]
     assert not r.named_effects and r.unexplained and not r.outliers
+    assert r.verdict["state"] == "beyond the linear model" and "did not settle" in r.verdict["text"]
+    html = render_html(r, {})
+    assert "Verdict: beyond the linear model." in html and "linearity guard tripped" in html
 
 
 @pytest.mark.slow
