@@ -19,10 +19,11 @@ magnitude, its sign alternating with the seed. Per magnitude and geometry:
 - the registration's largest error (µm, position), and passes and seconds per campaign.
 
 - **beyond the reader**: campaigns with a pose error larger than the
-  campaign reader's plausibility limit (5 mm: a unit mistake, it says),
-  which a base angle error of 3 deg on the U-shape or a guide angle error
-  of 5 deg reaches. The benchmark lifts that limit to measure the fit
-  itself on them; a user's file would be refused.
+  campaign reader's plausibility limit (``MAX_ERROR``: 25 mm and 10 deg,
+  beyond which a row is a unit mistake, it says; it was 5 mm, which a base
+  angle error of 2 deg on the delta-shape's leg 3 passes). The benchmark
+  lifts that limit to measure the fit itself beyond it; a user's file
+  would be refused.
 
 Usage: ``python benchmarks/bench_large_errors.py [--seeds N] [--magnitudes 0.5 1 2 3]
 [--geometries u-shape delta-shape] [--families beta alpha] [--json]``.
@@ -91,7 +92,7 @@ def run_cell(preset: str, family: str, magnitude: float, seeds: range) -> dict:
 
 def table(results: list[dict]) -> str:
     head = ["geometry", "effect", "magnitude (deg)", "named alone", "value in CI", "invented outliers",
-            "held-out gap closed", "guard", "beyond the reader (> 5 mm)", "registration error (µm): mean; max",
+            "held-out gap closed", "guard", f"beyond the reader (> {READER_LIMIT[0]:g} mm)", "registration error (µm): mean; max",
             "passes", "s/campaign"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in results:
@@ -112,7 +113,7 @@ def main(argv=None) -> int:
     p.add_argument("--families", nargs="+", default=["beta", "alpha"], choices=["beta", "alpha", "gamma"])
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     args = p.parse_args(argv)
-    campaign_module.MAX_ERROR = (50.0, 50.0, 50.0)        # the fit is measured beyond the reader's limit too
+    campaign_module.MAX_ERROR = (500.0, 500.0, 180.0)     # the fit is measured beyond the reader's limit too
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     t0 = time.perf_counter()
     results = []
