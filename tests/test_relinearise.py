@@ -113,3 +113,18 @@ def test_large_angle_errors_over_seeds():
         covered += bool(r.named_effects) and r.named_effects[0].ci95[0] <= value <= r.named_effects[0].ci95[1]
         clean += not r.outliers and r.gap["held_out"]["after"] <= r.gap["closed_at"]
     assert alone >= 16 and covered >= 16 and clean >= 16
+
+
+@pytest.mark.slow
+def test_an_alias_set_found_far_from_nominal_gives_way_to_the_effect():
+    """Seed 15 of bench_large_errors.py (beta_1 = -2 deg on the U-shape): the passes settle on alpha_1 with a
+    30 deg psi_1 (beta_1's first-order alias with an encoder zero b_1, which psi_1 equals on this layout);
+    the restart from the alias beta_1 names it alone, which fits as well with one effect fewer."""
+    g = Geometry.from_preset("u-shape")
+    c = simulate_campaign(g, BUDGET, campaign_poses("u-shape", True), 8, effects={"beta_1": -2.0},
+                          registration=REGISTRATION, rng=15, **SIGMA)
+    r = discrepancy(g, BUDGET, c, rng=15, **SIGMA)
+    assert [e.name for e in r.named_effects] == ["beta_1"] and r.verdict["state"] == "explained"
+    assert r.named_effects[0].ci95[0] <= -2.0 <= r.named_effects[0].ci95[1]
+    restarts = r.linearity["restarts"]
+    assert "psi_1" in r.linearity["passes"][0]["named"] and any(x.get("chosen") for x in restarts)

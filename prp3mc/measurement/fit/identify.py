@@ -20,6 +20,12 @@ A large guide or base angle error is so named alone with its value, no
 row set aside for the curvature the nominal model cannot follow, and the
 registration fitted on the converged model.
 
+Far from the nominal geometry Gauss-Newton can settle on a first-order alias
+set instead of the effect (``alpha_1`` with a 30 deg ``psi_1`` for a 2 deg
+``beta_1`` on the U-shape, once in 25 campaigns): when the passes named
+several effects with aliases, the iteration restarts from each alias alone
+and keeps the smallest model that fits as well (``_Passes.simpler``).
+
 **The linearity guard.** The result is refused (nothing named, the verdict
 says why and what to do) when the iteration does not settle in
 :data:`MAX_PASSES` passes, when the exact chain cannot be solved at an
@@ -37,16 +43,19 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from ..._distributions import chi2_isf
 from . import outliers as gross
 from .signatures import effect, library
 from .likelihood import Engine, Fit
 from .relinearise import NonlinearityError, exact_errors, linearise
-from .selection import STEP_COLUMNS, select
+from .selection import STEP_COLUMNS, name_effects, select
 
-__all__ = ["Named", "identify", "name_pass", "MAX_PASSES", "REMAINDER", "CURVATURE"]
+__all__ = ["Named", "identify", "name_pass", "MAX_PASSES", "MAX_RESTARTS", "REMAINDER", "CURVATURE"]
 
 #: Most passes of the iteration.
 MAX_PASSES = 6
+#: Most restarts from aliases (:meth:`_Passes.simpler`).
+MAX_RESTARTS = 3
 #: Largest share of the rows a start model may set aside as gross errors: beyond it the model misses an
 #: effect (gross errors are a few rows), and the effects are named on every row before gross errors are sought.
 GROSS_SHARE = 0.1
@@ -103,7 +112,8 @@ def name_pass(full: Engine, alpha: float, max_effects: int, outlier_rate: float,
     Gross errors are first looked for under the model with the systematic effects ``start`` (names; the
     effects the point was linearised about), then names are found from the model without effects.
     """
-    start_model = {"sys": tuple(full.sys_index(n) for n in start), "factors": {}}
+    visible = {e.name for e in full.systematic}
+    start_model = {"sys": tuple(full.sys_index(n) for n in start if n in visible), "factors": {}}
 
     def start_fit(keep):
         engine = full.with_rows(keep)
@@ -167,6 +177,87 @@ def _curvature(geometry, budget, campaign, named: Named) -> dict:
     return out
 
 
+class _Passes:
+    """Passes from a starting point until the named model settles (module notes): the iteration's state."""
+
+    def __init__(self, geometry, budget, campaign, make_engine, alpha, max_effects, outlier_rate):
+        self.geometry, self.budget, self.campaign, self.make_engine = geometry, budget, campaign, make_engine
+        self.alpha, self.max_effects, self.outlier_rate = alpha, max_effects, outlier_rate
+        self.candidates = [e.name for e in library(budget, campaign.has_dir, campaign.temp_C is not None)
+                           if e.systematic]
+
+    def run(self, values: dict | None = None) -> tuple[Named, list, str | None]:
+        """Passes from the model linearised about ``values`` (None: the nominal geometry): the last pass,
+        the passes' records and why the iteration failed (None when it settled)."""
+        passes, why = [], None
+        try:
+            point = None if values is None else linearise(self.geometry, self.budget, self.campaign, values,
+                                                          self.candidates)
+        except NonlinearityError as exc:
+            return None, passes, f"linearising at {_text(values)}: {exc}"
+        named = None
+        for _ in range(MAX_PASSES):
+            full = self.make_engine(point)
+            try:
+                named = name_pass(full, self.alpha, self.max_effects, self.outlier_rate,
+                                  () if point is None else tuple(point.values))
+            except NonlinearityError as exc:
+                if named is None:                # nothing to fall back on: the model without effects, all rows
+                    named = _unnamed(full, self.outlier_rate)
+                return named, passes, str(exc)
+            values = named.values
+            record = {"point": dict(point.values) if point is not None else {}, "named": dict(values),
+                      "gross_errors": int((~named.keep).sum())}
+            passes.append(record)
+            try:
+                exact = exact_errors(self.geometry, self.budget, self.campaign, [values])[0]
+            except NonlinearityError as exc:
+                return named, passes, f"at the named values {_text(values)}: {exc}"
+            record["remainder"] = _energy(named, exact, values)
+            if point is not None:            # how far the named model moved from the point's (alias swaps: 0)
+                record["moved"] = _whitened_energy(named, (exact - point.exact)[named.keep])
+            if record["remainder"] <= REMAINDER and record.get("moved", 0.0) <= REMAINDER:
+                return named, passes, None
+            try:
+                point = linearise(self.geometry, self.budget, self.campaign, values, self.candidates)
+            except NonlinearityError as exc:
+                return named, passes, f"linearising at the named values {_text(values)}: {exc}"
+        return named, passes, (f"the named set and values did not settle in {MAX_PASSES} passes of "
+                               f"relinearisation (last: {_text(passes[-1]['named'])})")
+
+    def simpler(self, named: Named) -> tuple[Named, list, list]:
+        """Restarts from each alias of the named effects alone, and the smallest model that fits as well.
+
+        Far from the nominal geometry Gauss-Newton can settle on a first-order alias set (``alpha_1`` with
+        a 30 deg ``psi_1``, for a guide angle error ``beta_1`` of 2 deg on the U-shape). Each alias of a
+        named effect (from :func:`~prp3mc.measurement.fit.selection.name_effects`; those with the named
+        effect's own signature left out, :data:`MAX_RESTARTS` at most) is a new start; a model
+        with fewer effects on the same rows replaces the named one unless the named one beats it by the
+        naming threshold for each effect more (a model of the same size, when it fits better).
+        """
+        same = {n: set(g) for g in named.engine.structural_aliases() for n in g}   # one signature: one model
+        starts = {}
+        for e in name_effects(named.engine, named.fit, named.accepted):
+            for alias, fit in e.evidence["alias_fits"].items():
+                if effect(alias).systematic and alias not in named.values and alias not in same.get(e.name, ()):
+                    starts.setdefault(alias, fit["value"])
+        starts = dict(list(starts.items())[:MAX_RESTARTS])       # the first named effect's aliases first
+        threshold = float(chi2_isf(self.alpha / max(len(self.candidates), 1), 1))
+        best, best_passes, tried = named, None, []
+        for alias, value in starts.items():
+            other, passes, why = self.run({alias: value})
+            tried.append({"start": {alias: value}, "named": dict(other.values) if other else {},
+                          "settled": why is None})
+            if why is not None or other is None or not np.array_equal(other.keep, best.keep):
+                continue
+            extra = len(best.values) + len(best.fit.factors) - len(other.values) - len(other.fit.factors)
+            gain = 2.0 * (best.fit.loglik - other.fit.loglik)
+            if (extra > 0 and gain < extra * threshold) or (extra == 0 and gain < -1e-6):
+                best, best_passes = other, passes
+                tried[-1]["chosen"] = True
+        return best, best_passes, tried
+
+
 def identify(geometry, budget, campaign, make_engine, alpha: float, max_effects: int,
              outlier_rate: float) -> tuple[Named, dict]:
     """The named model, relinearised on the exact chain until stable (module notes), and its record.
@@ -178,7 +269,7 @@ def identify(geometry, budget, campaign, make_engine, alpha: float, max_effects:
     make_engine : callable
         ``make_engine(point) -> Engine`` on the whole campaign, linearised about ``point`` (None: nominal).
     alpha, max_effects, outlier_rate
-        As :func:`~prp3mc.measurement.workflow.discrepancy`.
+        As :func:`~prp3mc.measurement.fit.workflow.discrepancy`.
 
     Returns
     -------
@@ -187,44 +278,20 @@ def identify(geometry, budget, campaign, make_engine, alpha: float, max_effects:
     linearity : dict
         ``passes`` (per pass: the point's values, the named values, gross errors set aside, the
         departure ``remainder`` and, from the second, how far the named model ``moved``),
-        ``converged``, ``curvature`` (per named effect), ``guard``
-        (``"ok"`` or ``"tripped"``) and, when tripped, ``why``, ``advice`` and ``last_estimate``.
+        ``restarts`` (from the named effects' aliases, when relinearised: their start, what they
+        named, whether they settled and were ``chosen``), ``converged``, ``curvature`` (per named
+        effect), ``guard`` (``"ok"`` or ``"tripped"``) and, when tripped, ``why``, ``advice`` and
+        ``last_estimate``.
     """
-    candidates = [e.name for e in library(budget, campaign.has_dir, campaign.temp_C is not None) if e.systematic]
-    point, passes, why = None, [], None
-    for _ in range(MAX_PASSES):
-        full = make_engine(point)
-        try:
-            named = name_pass(full, alpha, max_effects, outlier_rate, () if point is None else tuple(point.values))
-        except NonlinearityError as exc:
-            if not passes:                     # nothing to fall back on: the model without effects, all rows
-                named = _unnamed(full, outlier_rate)
-            why = str(exc)
-            break
-        values = named.values
-        record = {"point": dict(point.values) if point is not None else {}, "named": dict(values),
-                  "gross_errors": int((~named.keep).sum())}
-        passes.append(record)
-        try:
-            exact = exact_errors(geometry, budget, campaign, [values])[0]
-        except NonlinearityError as exc:
-            why = f"at the named values {_text(values)}: {exc}"
-            break
-        record["remainder"] = _energy(named, exact, values)
-        if point is not None:                # how far the named model moved from the point's (alias swaps: 0)
-            record["moved"] = _whitened_energy(named, (exact - point.exact)[named.keep])
-        if record["remainder"] <= REMAINDER and record.get("moved", 0.0) <= REMAINDER:
-            break
-        try:
-            point = linearise(geometry, budget, campaign, values, candidates)
-        except NonlinearityError as exc:
-            why = f"linearising at the named values {_text(values)}: {exc}"
-            break
-    else:
-        why = (f"the named set and values did not settle in {MAX_PASSES} passes of relinearisation "
-               f"(last: {_text(passes[-1]['named'])})")
-    doc = {"passes": passes, "converged": why is None, "max_passes": MAX_PASSES, "remainder_tolerance": REMAINDER,
-           "curvature_tolerance": CURVATURE}
+    iteration = _Passes(geometry, budget, campaign, make_engine, alpha, max_effects, outlier_rate)
+    named, passes, why = iteration.run()
+    doc = {"passes": passes, "restarts": []}
+    if why is None and len(passes) > 1 and len(named.values) > 1:
+        named, chosen, doc["restarts"] = iteration.simpler(named)
+        if chosen is not None:
+            doc["passes"] = passes = passes + chosen
+    doc.update(converged=why is None, max_passes=MAX_PASSES, remainder_tolerance=REMAINDER,
+               curvature_tolerance=CURVATURE)
     if why is None:
         try:
             doc["curvature"] = _curvature(geometry, budget, campaign, named)
