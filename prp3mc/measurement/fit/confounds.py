@@ -18,20 +18,23 @@ VIF_LIMIT``; such effects are grouped (connected components).
 From the data
 -------------
 The design says what *could* be confused; the data say whether it was.
-When the drift test rejects (the data show a drift), every testable effect
-is tried *instead of* the drift: an effect that explains the campaign as
-well without a drift (twice the log-likelihood within the chi2(1) 99 %
-quantile of the fitted model's) is a cause the campaign cannot tell from an
-instrument drift, such as thermal expansion while the temperature follows
-time. A named effect with aliases is explained only up to its alias set.
-Either makes the verdict *ambiguous* (:func:`ambiguities`).
+The drift is fitted in every model, so it takes whatever grows with time.
+Every effect that changes between visits of a pose (thermal expansion,
+backlash) and is not named is fitted *instead of* the drift: one that the
+data show plainly then (its likelihood ratio passes the naming threshold)
+and that explains the campaign as well as the drift does (twice the
+log-likelihood within the chi2(1) 99 % quantile) is a cause the campaign
+cannot tell from an instrument drift, such as thermal expansion while the
+temperature follows time (:func:`drift_alternatives`). A named effect with
+aliases is explained only up to its alias set. Either makes the verdict
+*ambiguous* (:func:`ambiguities`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..._distributions import chi2_ppf
+from ..._distributions import chi2_isf, chi2_ppf
 from .signatures import effect
 from .likelihood import Engine, Fit
 from .nuisance import DRIFT, NUISANCE_NAMES, REGISTRATION
@@ -178,28 +181,49 @@ def _effect_groups(engine: Engine, A: np.ndarray, X: np.ndarray) -> list[dict]:
     return out
 
 
-def drift_alternatives(engine: Engine, fit: Fit) -> list[tuple[str, float, float]]:
-    """Testable effects that explain the campaign as well as ``fit``'s drift, without a drift.
+def _time_varying(engine: Engine) -> np.ndarray:
+    """Candidates (indices) whose signature changes between visits of a pose (thermal, backlash): only such
+    an effect can take a drift's place, which grows within each pose's visits."""
+    within = engine.G - engine.pose_mean(engine.G)[engine.idx]
+    return np.flatnonzero(np.sum(within**2, axis=(0, 1)) > 1e-12 * np.sum(engine.G**2, axis=(0, 1)))
+
+
+def drift_alternatives(engine: Engine, fit: Fit, alpha: float) -> list[tuple[str, float, float, float]]:
+    """Effects the data show as plainly as a drift, when no drift is fitted (module notes).
+
+    An effect that changes between visits of a pose (:func:`_time_varying`), not in ``fit``, is fitted
+    *instead of* the drift: it is an alternative when it fits the campaign as well as ``fit`` does with its
+    drift (twice the log-likelihood within the chi2(1) 99 % quantile) and explains something there (its
+    likelihood ratio against the model without it and without a drift passes the naming threshold,
+    chi2(1) at ``alpha`` over the testable candidates).
 
     Returns
     -------
-    list of (name, value, lr)
-        Each effect, its value fitted without a drift, and ``2 (loglik(fit) - loglik(effect, no drift))``
-        (at most the chi2(1) 99 % quantile).
+    list of (name, value, lr_as_drift, lr_shown)
+        Each alternative, its value fitted without a drift, ``2 (loglik(fit) - loglik(effect, no drift))``
+        and its likelihood ratio without a drift.
     """
     no_drift = tuple(j for j in fit.nuis if NUISANCE_NAMES[j] not in DRIFT)
+    K = sum(e.name not in engine.confounded for e in engine.systematic) + len(engine.spreads)
+    threshold = float(chi2_isf(alpha / max(K, 1), 1))
+    without = None
     out = []
-    for j, e in enumerate(engine.systematic):
+    for j in _time_varying(engine):
+        e = engine.systematic[j]
         if j in fit.sys or e.name in engine.confounded:
             continue
-        trial = engine.refit(fit.sys + (j,), fit.factors, start_r=fit.r, nuis=no_drift)
-        lr = 2.0 * (fit.loglik - trial.loglik)
-        if lr <= _Q:
-            out.append((e.name, float(trial.theta[-1]), float(lr)))
+        trial = engine.refit(fit.sys + (int(j),), fit.factors, start_r=fit.r, nuis=no_drift)
+        as_drift = 2.0 * (fit.loglik - trial.loglik)
+        if as_drift > _Q:
+            continue
+        without = without or engine.refit(fit.sys, fit.factors, start_r=fit.r, nuis=no_drift)
+        shown = 2.0 * (trial.loglik - without.loglik)
+        if shown > threshold:
+            out.append((e.name, float(trial.theta[-1]), float(as_drift), float(shown)))
     return out
 
 
-def ambiguities(engine: Engine, fit: Fit, named, drift_test: dict) -> tuple[list[dict], list[str]]:
+def ambiguities(engine: Engine, fit: Fit, named, drift_test: dict, alpha: float) -> tuple[list[dict], list[str]]:
     """The confounds the data show (module notes) and the verdict's reasons to call the cause ambiguous.
 
     Parameters
@@ -209,6 +233,8 @@ def ambiguities(engine: Engine, fit: Fit, named, drift_test: dict) -> tuple[list
     named : sequence of NamedEffect
     drift_test : dict
         The drift's likelihood-ratio test (``significant``, ``values``).
+    alpha : float
+        The workflow's naming level.
 
     Returns
     -------
@@ -221,17 +247,17 @@ def ambiguities(engine: Engine, fit: Fit, named, drift_test: dict) -> tuple[list
     for e in named:
         if e.aliases:
             reasons.append(f"{e.name} is named, but the campaign cannot tell it from {', '.join(e.aliases)}")
-    if drift_test["significant"]:
-        drift = ", ".join(f"{n} = {1e3 * v:.3g} µm" if not n.endswith("phi") else f"{n} = {3600 * v:.3g} arcsec"
-                          for n, v in drift_test["values"].items())
-        for name, value, lr in drift_alternatives(engine, fit):
-            unit = effect(name).unit
-            advice = ADVICE["thermal"] if effect(name).kind == "thermal" else ADVICE["drift"]
-            confounds.append({
-                "effects": [name], "with": ["drift"],
-                "why": f"the data show a drift ({drift}); {name} = {value:.4g} {unit} without a drift explains "
-                       f"them as well (twice the log-likelihood {lr:.3g} below, within {_Q:.3g})",
-                "advice": advice, "value": value, "unit": unit, "lr": lr, "source": "data"})
-            reasons.append(f"the drift the data show may be {name} = {value:.4g} {unit}: the campaign cannot "
-                           f"tell them apart")
+    drift = ", ".join(f"{n} = {1e3 * v:.3g} µm" if not n.endswith("phi") else f"{n} = {3600 * v:.3g} arcsec"
+                      for n, v in drift_test["values"].items())
+    shown = "shown by the data" if drift_test["significant"] else "not significant with the drift fitted"
+    for name, value, as_drift, lr in drift_alternatives(engine, fit, alpha):
+        unit = effect(name).unit
+        confounds.append({
+            "effects": [name], "with": ["drift"],
+            "why": f"{name} = {value:.4g} {unit} explains the data without a drift (likelihood ratio {lr:.3g}) "
+                   f"as well as the drift fitted ({drift}; {shown}) does: twice the log-likelihood "
+                   f"{as_drift:.3g} below, within {_Q:.3g}",
+            "advice": ADVICE["thermal"] if effect(name).kind == "thermal" else ADVICE["drift"],
+            "value": value, "unit": unit, "lr": lr, "lr_as_drift": as_drift, "source": "data"})
+        reasons.append(f"the drift fitted may be {name} = {value:.4g} {unit}: the campaign cannot tell them apart")
     return confounds, reasons

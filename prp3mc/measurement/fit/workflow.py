@@ -132,7 +132,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
         with_outliers = _with_outliers(named, alpha, max_effects, n_bootstrap, gap_doc["closed_at"], rng)
         done()
         nuisance, drift_test = _nuisance(engine, fit, alpha)
-        shown, reasons = ambiguities(engine, fit, effects, drift_test)
+        shown, reasons = ambiguities(engine, fit, effects, drift_test, alpha)
         confounded = tuple(design_confounds(engine) + shown)
         r_lo, r_hi = engine.r_interval(fit)
         effects_after = _effect_values(engine, fit)
