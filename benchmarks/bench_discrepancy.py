@@ -256,33 +256,45 @@ def speed_table(r: dict) -> str:
         f"{r['discrepancy_cli_load_after']:.1f} after (2 cores)"])
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--seeds", type=int, default=40, help="campaigns per case and geometry (default 40)")
-    p.add_argument("--quick", action="store_true", help="8 seeds per case")
+def rates_parser(description: str, cases, seeds: int, quick: int) -> argparse.ArgumentParser:
+    """The options of a rates benchmark: ``--seeds`` (default ``seeds``), ``--quick`` (``quick`` seeds),
+    ``--first-seed``, ``--cases`` (of ``cases``), ``--geometries``, ``--json``."""
+    p = argparse.ArgumentParser(description=description)
+    p.add_argument("--seeds", type=int, default=seeds, help=f"campaigns per case and geometry (default {seeds})")
+    p.add_argument("--quick", action="store_true", help=f"{quick} seeds per case")
     p.add_argument("--first-seed", type=int, default=0)
-    p.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES), metavar="CASE")
+    p.add_argument("--cases", nargs="+", choices=list(cases), default=list(cases), metavar="CASE")
     p.add_argument("--geometries", nargs="+", default=["u-shape", "delta-shape"])
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    return p
+
+
+def main(argv=None) -> int:
+    p = rates_parser(__doc__.splitlines()[0], CASES, 40, 8)
     p.add_argument("--speed", action="store_true", help="time prp3mc discrepancy on 392 rows instead of the rates")
     args = p.parse_args(argv)
     if args.speed:
         doc = bench_discrepancy_cli(args.quick)
         print(json.dumps(doc, indent=2) if args.json else speed_table(doc))
         return 0
-    n = 8 if args.quick else args.seeds
-    seeds = range(args.first_seed, args.first_seed + n)
+    run_cases(run_case, table, args.geometries, args.cases,
+              range(args.first_seed, args.first_seed + (8 if args.quick else args.seeds)), args.json)
+    return 0
+
+
+def run_cases(run_case, table, geometries, cases, seeds: range, as_json: bool) -> None:
+    """Every case on every geometry over ``seeds``: a row per case on stderr as it ends (unless ``as_json``),
+    then the table or one JSON object (seeds, results, wall time) on stdout."""
     t0 = time.perf_counter()
     results = []
-    for preset in args.geometries:
-        for name in args.cases:
+    for preset in geometries:
+        for name in cases:
             results.append(run_case(preset, name, seeds))
-            if not args.json:
+            if not as_json:
                 print(table(results[-1:]).splitlines()[-1], file=sys.stderr, flush=True)
     doc = {"prp3mc": prp3mc.__version__, "seeds": [seeds.start, seeds.stop], "results": results,
            "wall_s": time.perf_counter() - t0}
-    print(json.dumps(doc, indent=2) if args.json else table(results))
-    return 0
+    print(json.dumps(doc, indent=2) if as_json else table(results))
 
 
 if __name__ == "__main__":

@@ -67,8 +67,7 @@ def layouts(preset: str, effects) -> dict:
     """The plan and the grid: name -> simulate_campaign keyword arguments, and the plan itself."""
     g, b = Geometry.from_preset(preset), Budget.from_preset("paper")
     plan = plan_campaign(g, b, effects, 49, 8, rng=_PLAN_SEED, **SIGMA)
-    return plan, {"plan": {"poses": plan.poses, "order": plan.order, "approach": plan.direction,
-                           "time_s": plan.time_s},
+    return plan, {"plan": {"poses": None, "plan": plan.to_frame()},
                   "grid": {"poses": campaign_poses(preset), "n_repeats": 8}}
 
 

@@ -10,7 +10,7 @@ every thread and worker process):
   inside prp3mc's worker threads);
 - the report (``write_study``), the figures drawn on one worker process per
   core while the tables are written, and drawn one after the other in this
-  process, as before (the command picks between them by the idle cores).
+  process, as the command does.
 
 The sample counts and grids are the study's own (``--quick``: its reduced
 version). The same seed gives the same summary.json from the command and from

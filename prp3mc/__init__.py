@@ -42,6 +42,7 @@ _API = {
     **dict.fromkeys(("WorstCase", "WorstCaseMaxima", "worst_case", "worst_case_maxima"), "worstcase.envelope"),
     "AllocationResult": "allocation.optimum", "allocate": "allocation.optimum",
     "SobolResult": "sobol.indices", "sobol_indices": "sobol.indices",
+    "ShapleyResult": "sobol.shapley", "shapley_effects": "sobol.shapley",
     "sobol_ranking": "sobol.ranking:ranking",
     "Study": "study.reader", "StudyResult": "study.results", "run_study": "study.runner",
     "build_summary": "study.summary",
@@ -63,7 +64,7 @@ __all__ = [
     "Budget", "Catalogue", "Uniform", "Normal", "TruncNormal", "Triangular", "Disc", "Discrete",
     "linear_model", "LinearModel", "monte_carlo", "MonteCarloResult", "worst_case", "WorstCase", "worst_case_maxima", "WorstCaseMaxima",
     "allocate", "AllocationResult",
-    "sobol_indices", "SobolResult", "sobol_ranking",
+    "sobol_indices", "SobolResult", "sobol_ranking", "shapley_effects", "ShapleyResult",
     # studies
     "Study", "StudyResult", "run_study", "build_summary",
     # measurements

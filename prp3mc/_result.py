@@ -25,7 +25,8 @@ from types import MappingProxyType
 import numpy as np
 import pandas as pd
 
-__all__ = ["FrozenDict", "freeze", "short_repr", "pose_columns", "interval_frame", "POSE_COLUMNS", "CI_COLUMNS"]
+__all__ = ["FrozenDict", "freeze", "short_repr", "pose_columns", "name_columns", "interval_frame", "POSE_COLUMNS",
+           "CI_COLUMNS"]
 
 POSE_COLUMNS = ("x_mm", "y_mm", "phi_deg")
 CI_COLUMNS = ("ci_low", "ci_high", "level")
@@ -112,6 +113,15 @@ def pose_columns(poses: np.ndarray, repeat: int = 1) -> dict[str, np.ndarray]:
     flat = np.asarray(poses, dtype=float).reshape(-1, 3)
     flat = np.repeat(flat, repeat, axis=0)
     return {c: flat[:, k] for k, c in enumerate(POSE_COLUMNS)}
+
+
+def name_columns(poses: np.ndarray, outputs: tuple, names: tuple, kinds: tuple) -> dict[str, np.ndarray]:
+    """Pose, ``output``, ``name`` and ``kind`` columns, one row per pose, output and name (C order of
+    an (..., O, K) array of indices)."""
+    n = int(np.prod(np.shape(poses)[:-1], dtype=int))
+    O, K = len(outputs), len(names)
+    return {**pose_columns(poses, O * K), "output": np.tile(np.repeat(outputs, K), n),
+            "name": np.tile(names, n * O), "kind": np.tile(kinds, n * O)}
 
 
 def interval_frame(frame: pd.DataFrame, low, high, level: float) -> pd.DataFrame:

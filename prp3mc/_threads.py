@@ -2,11 +2,9 @@
 
 prp3mc spreads its long loops over threads of its own (chunks of poses and
 samples in Monte Carlo, Sobol and the worst case). A matrix product inside
-such a thread would start BLAS's own threads on the same cores: with two
-cores that is four busy threads, and OpenBLAS's threads spin while they wait
-for work, so a product that takes 20 ms on one thread took 0.4 s on this
-2-core machine under load (``benchmarks/bench_study.py`` shows the study's
-time both ways). Inside these sections BLAS runs on one thread.
+such a thread would start BLAS's own threads on the same cores, which spin
+while they wait for work: inside these sections BLAS runs on one thread,
+through threadpoolctl (``benchmarks/bench_study.py`` times the study both ways).
 """
 
 from __future__ import annotations
@@ -21,11 +19,7 @@ __all__ = ["single_threaded_blas", "cores"]
 
 @functools.cache
 def cores() -> int:
-    """The CPU cores this process may run on: the default number of prp3mc's threads.
-
-    Read once (``os.cpu_count()`` reads a file at every call, about 7 µs: most
-    of a small batch's time in the worst-case envelope).
-    """
+    """The CPU cores this process may run on (its affinity, read once): the default number of prp3mc's threads."""
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 

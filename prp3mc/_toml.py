@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -27,10 +28,10 @@ def loads_toml(text: str, source: str = "<string>") -> dict[str, Any]:
 
 
 def read_text_file(path: str | os.PathLike, error: type[Exception] = InputFileError, what: str = "file") -> str:
-    """The UTF-8 text of ``path``; a missing or unreadable file raises ``error`` naming it."""
+    """The UTF-8 text of ``path`` (a byte-order mark skipped); a missing or unreadable file raises ``error`` naming it."""
     path = Path(path)
     try:
-        return path.read_text(encoding="utf-8")
+        return path.read_text(encoding="utf-8-sig")
     except FileNotFoundError:
         raise error(f"{path}: no such {what}") from None
     except (OSError, UnicodeDecodeError) as exc:
@@ -54,8 +55,7 @@ def _scalar(value: Any) -> str:
             return "inf" if value > 0 else "-inf"
         return repr(value)
     if isinstance(value, str):
-        escaped = value.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
-        return f'"{escaped}"'
+        return _string(value)
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(_scalar(v) for v in value) + "]"
     if isinstance(value, dict):
@@ -65,9 +65,23 @@ def _scalar(value: Any) -> str:
     raise TypeError(f"cannot write {type(value).__name__} to TOML")
 
 
+#: Characters a TOML basic string must escape: the backslash, the quote and the control characters.
+_ESCAPE = re.compile(r'[\\"\x00-\x1f\x7f]')
+_SHORT = {"\\": "\\\\", '"': '\\"', "\n": "\\n", "\t": "\\t", "\r": "\\r", "\b": "\\b", "\f": "\\f"}
+
+
+def _string(value: str) -> str:
+    """A TOML basic string holding ``value`` exactly (control characters escaped; non-ASCII as it is).
+
+    A lone surrogate (a file name that is not UTF-8, as Python decodes it)
+    has no TOML form: it is written as its ``\\udcXX`` escape text.
+    """
+    value = value.encode("utf-8", "backslashreplace").decode("utf-8")
+    return '"' + _ESCAPE.sub(lambda m: _SHORT.get(m.group(), f"\\u{ord(m.group()):04x}"), value) + '"'
+
+
 def _key(key: str) -> str:
-    bare = key.replace("_", "").replace("-", "").isalnum()
-    return key if bare else _scalar(key)
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else _string(key)   # bare keys are ASCII only
 
 
 def _is_table_array(value: Any) -> bool:

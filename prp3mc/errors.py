@@ -16,6 +16,13 @@ __all__ = [
     "CampaignError",
     "AllocationError",
     "ResourceError",
+    "ParameterError",
+    "NonlinearityError",
+    "MissingDependencyError",
+    "OutputError",
+    "OutputExistsError",
+    "OutputBusyError",
+    "FigureFormatError",
     "Prp3mcWarning",
     "IncompleteBudgetWarning",
     "LinearityWarning",
@@ -66,7 +73,42 @@ class AllocationError(Prp3mcError, ValueError):
 
 
 class ResourceError(Prp3mcError, ValueError):
-    """A request needs more memory or time than this machine can give it."""
+    """A request needs more memory than this machine has available."""
+
+
+class ParameterError(Prp3mcError, ValueError):
+    """An analysis was asked for something outside its domain: a sample count, a level or percentile, an
+    output, statistic or method it does not know, results that do not belong together."""
+
+
+class NonlinearityError(Prp3mcError, ValueError):
+    """The exact chain cannot be evaluated at an estimate (its closure does not converge, or is singular), or the
+    discrepancy workflow's relinearisation does not settle: what trips its linearity guard."""
+
+
+class MissingDependencyError(Prp3mcError, ImportError):
+    """An optional dependency is not installed; :attr:`install` is the pip line that brings it."""
+
+    def __init__(self, package: str, install: str, needed_for: str = ""):
+        need = f"{needed_for} needs {package}, which is not installed" if needed_for else f"{package} is not installed"
+        super().__init__(f"{need}: {install}", name=package)
+        self.install = install
+
+
+class OutputError(Prp3mcError, OSError):
+    """An output folder cannot be created, claimed or written."""
+
+
+class OutputExistsError(OutputError, FileExistsError):
+    """The output folder exists and ``force`` was not given."""
+
+
+class OutputBusyError(OutputError):
+    """Another live run holds the claim on the output folder."""
+
+
+class FigureFormatError(Prp3mcError, ValueError):
+    """A figure format that reports cannot write."""
 
 
 class Prp3mcWarning(UserWarning):

@@ -1,14 +1,16 @@
-"""What a request costs before it runs: memory and time estimates, and the refusal of what cannot finish.
+"""What a request needs in memory before it runs, and the refusal of what will not fit.
 
 Every command sizes its request here first and calls :func:`check`, which
-refuses, in one line giving the estimate and the limit, a request that needs
-more memory than the machine has available (less a margin) or more time than
-``max_hours`` (default one day; ``prp3mc --max-hours H`` raises it).
+refuses, in one line giving the byte count and the limit, a request that
+needs more than :data:`MEMORY_MARGIN` of the memory this machine has
+available. The byte counts follow the data the analyses hold at their peak
+(rough on purpose, within a factor of about two), not any machine's speed:
+each analysis' memory model lives in one function below, so a change of the
+code's layout is one line here.
 
-The figures are rough on purpose (within a factor of about two): they come
-from the memory layout of today's code and from rates measured on a 2-core
-machine. Each analysis' memory model lives in one
-function below, so a change of the code's layout is one line here.
+Time is not estimated (a throughput measured on one machine is wrong on the
+next): ``prp3mc --max-hours H`` stops a run after H hours of wall time, and
+it unwinds as after Ctrl-C, leaving no half-written folder (:mod:`prp3mc.cli`).
 """
 
 from __future__ import annotations
@@ -23,10 +25,9 @@ from ._threads import cores
 from .errors import ResourceError
 
 __all__ = ["Estimate", "available_memory", "check", "montecarlo_estimate", "sobol_estimate",
-           "worstcase_estimate", "allocate_estimate", "study_estimate", "discrepancy_estimate", "format_bytes", "format_seconds", "MAX_HOURS", "MEMORY_MARGIN"]
+           "worstcase_estimate", "allocate_estimate", "study_estimate", "discrepancy_estimate", "format_bytes",
+           "format_seconds", "MEMORY_MARGIN"]
 
-#: Default time limit of one request, hours.
-MAX_HOURS = 24.0
 #: Share of the available memory a request may use.
 MEMORY_MARGIN = 0.8
 
@@ -39,20 +40,12 @@ _MC_BYTES_PER_SAMPLE = lambda d, f: 4 * f / 1024 + 8 * f * (f + 1) / 65536  # no
 _MC_BYTES_PER_SAMPLE_POSE = 8 / 65536
 _MC_BYTES_PER_POSE = lambda f: 8 * 64 + 1000 + 40 * f  # noqa: E731
 _MC_CHUNK_BYTES = 256 << 20
-_MC_SECONDS_PER_SAMPLE = 1e-7          # sampling, features, moments (measured: 1e9 samples at one pose, 90 s loaded)
-_MC_SECONDS_PER_SAMPLE_POSE = 1e-8      # streamed order statistics per pose (measured: 441 poses x 2^20, 2.4-3.1 s)
-# Sobol: the design and its features for (K + 2) N model runs, SALib's bootstrap index
-# arrays (N x R, about ten of them alive), and per pose in flight the outputs of every run.
-_SOBOL_BOOTSTRAP_BYTES = 80
-_SOBOL_SECONDS_SALIB = 1e-6             # per N x R x K x output (measured: N 4096-65536, 17-615 s)
-_SOBOL_SECONDS_RUN_POSE = 3e-8          # per model run and pose, vectorised estimators
-# Exact worst case: the kept linear model and term bounds per pose (measured: 601^2 poses, 331 MiB, 1 s).
+# Sobol: the design and its features for (K + 2) N model runs, and per pose in flight the outputs of
+# every run; the Shapley effects' draws (3 d runs per order) and their latent normals.
+# Exact worst case: the kept linear model and term bounds per pose (601^2 poses held 331 MiB).
 _WC_BYTES_PER_POSE_TERM = 100
 _WC_BYTES_PER_POSE = 200
-_WC_SECONDS_PER_POSE = 3e-6
-# Tolerance allocation: the worst case of every candidate choice over the grid (measured: 301^2 poses, 56 s).
-_ALLOCATE_SECONDS_PER_POSE = 6e-4
-# Discrepancy workflow (measured on 392-12544 rows, 49-900 poses): the parametric bootstrap of the tests
+# Discrepancy workflow: the parametric bootstrap of the tests
 # holds every replicate's samples, features and whitened errors of every row (8 (2d + 8) bytes per
 # replicate, row); the spatial test a few dense (3P)^2 matrices and their product; ISO 9283's predicted
 # figures n_mc simulated campaigns of the most visited pose; a report reads the rows and draws them.
@@ -60,26 +53,20 @@ _DISC_BYTES_PER_REPLICATE_ROW = lambda d: 8 * (2 * d + 8)  # noqa: E731
 _DISC_BYTES_SPATIAL = 6 * 8                 # per (3P)^2
 _DISC_BYTES_ISO_VISIT = 100                 # per simulated campaign and visit of the most visited pose
 _DISC_BYTES_FIXED = 64 << 20
-_DISC_SECONDS_PER_REPLICATE_ROW = 3e-6      # bootstrap and fits (measured: 3136 rows, 4 s; 12544, 27 s)
-_DISC_SECONDS_SPATIAL = 2e-10               # per (3P)^3 (measured: 900 poses, +4 s)
-_DISC_SECONDS_ISO_VISIT = 1.5e-7            # per simulated campaign and row
-_DISC_SECONDS_FIXED = 2.0                   # the report and the fixed costs
 
 
 @dataclass(frozen=True, slots=True)
 class Estimate:
-    """What a request needs: peak memory in bytes and wall time in seconds."""
+    """What a request needs: peak memory in bytes."""
 
     what: str
     bytes: float
-    seconds: float
     #: How to make the request smaller, for the refusal.
     hint: str = "use fewer samples or poses"
 
     def then(self, other: "Estimate") -> "Estimate":
-        """This request followed by ``other``: the larger memory, the summed time."""
-        return Estimate(f"{self.what}, {other.what}", max(self.bytes, other.bytes), self.seconds + other.seconds,
-                        self.hint)
+        """This request followed by ``other``: the larger memory."""
+        return Estimate(f"{self.what}, {other.what}", max(self.bytes, other.bytes), self.hint)
 
 
 def format_bytes(n: float) -> str:
@@ -131,14 +118,12 @@ def available_memory() -> int:
     return min(candidates)
 
 
-def check(estimate: Estimate, *, max_hours: float | None = None, memory: int | None = None) -> Estimate:
-    """Refuse ``estimate`` if it needs more than the memory available or more than ``max_hours``.
+def check(estimate: Estimate, *, memory: int | None = None) -> Estimate:
+    """Refuse ``estimate`` if it needs more than the memory available.
 
     Parameters
     ----------
     estimate : Estimate
-    max_hours : float, optional
-        Time limit (default :data:`MAX_HOURS`).
     memory : int, optional
         Available bytes (default :func:`available_memory`); the request may
         use :data:`MEMORY_MARGIN` of it.
@@ -148,79 +133,69 @@ def check(estimate: Estimate, *, max_hours: float | None = None, memory: int | N
     ResourceError
         One line with the estimate and the limit.
     """
-    max_hours = MAX_HOURS if max_hours is None else max_hours
     memory = available_memory() if memory is None else memory
     if not estimate.bytes <= MEMORY_MARGIN * memory:
         raise ResourceError(f"{estimate.what} needs ~{format_bytes(estimate.bytes)} of memory, this machine has "
                             f"{format_bytes(memory)} available (limit {format_bytes(MEMORY_MARGIN * memory)}): "
                             f"{estimate.hint}")
-    if not estimate.seconds <= 3600 * max_hours:
-        raise ResourceError(f"{estimate.what} would take ~{format_seconds(estimate.seconds)}, more than the "
-                            f"limit of {format_seconds(3600 * max_hours)}: {estimate.hint}, or "
-                            "raise the limit with prp3mc --max-hours H")
     return estimate
 
 
 def montecarlo_estimate(n_samples: int, n_poses: int, n_inputs: int, workers: int | None = None) -> Estimate:
-    """Memory and time of :func:`prp3mc.montecarlo.propagation.monte_carlo` (features ~ inputs)."""
+    """Memory of :func:`prp3mc.montecarlo.propagation.monte_carlo` (features ~ inputs)."""
     n, d = float(n_samples), n_inputs
     workers = workers or cores()
     return Estimate(f"Monte Carlo of {n_samples} samples at {n_poses} pose(s)",
                     n * _MC_BYTES_PER_SAMPLE(d, d) + n * n_poses * _MC_BYTES_PER_SAMPLE_POSE
-                    + n_poses * _MC_BYTES_PER_POSE(d) + _MC_CHUNK_BYTES + workers * 16 * d * 65536,
-                    n * _MC_SECONDS_PER_SAMPLE + n * n_poses * _MC_SECONDS_PER_SAMPLE_POSE)
+                    + n_poses * _MC_BYTES_PER_POSE(d) + _MC_CHUNK_BYTES + workers * 16 * d * 65536)
 
 
 def sobol_estimate(n_samples: int, n_poses: int, n_inputs: int, n_factors: int, n_outputs: int,
-                   num_resamples: int, salib: bool) -> Estimate:
-    """Memory and time of :func:`prp3mc.sobol.indices.sobol_indices` (N base samples, K factors)."""
+                   shapley_permutations: int = 0) -> Estimate:
+    """Memory of :func:`prp3mc.sobol.indices.sobol_indices` (N base samples, K factors, and the Shapley
+    effects' 3 d runs per random order)."""
     n, runs = float(n_samples), float(n_samples) * (n_factors + 2)
-    per_pose = 8 * runs * 3 * (1 + n_outputs)
-    memory = runs * 16 * n_inputs + n * num_resamples * _SOBOL_BOOTSTRAP_BYTES + min(n_poses, 4) * per_pose
-    if salib:
-        seconds = _SOBOL_SECONDS_SALIB * n * num_resamples * n_factors * n_outputs * n_poses
-    else:
-        seconds = _SOBOL_SECONDS_RUN_POSE * runs * n_poses * n_outputs + _SOBOL_SECONDS_SALIB * n * num_resamples
-    return Estimate(f"Sobol indices of N = {n_samples} at {n_poses} pose(s)", memory, seconds)
+    shapley = 3.0 * n_inputs * shapley_permutations
+    per_pose = 8 * (runs + shapley) * 3 * (1 + n_outputs)
+    memory = (runs + 2 * shapley) * 16 * n_inputs + min(n_poses, 4) * per_pose
+    return Estimate(f"Sobol indices of N = {n_samples} at {n_poses} pose(s)", memory)
 
 
 def worstcase_estimate(n_poses: int, n_inputs: int) -> Estimate:
-    """Memory and time of :func:`prp3mc.worstcase.envelope.worst_case` over ``n_poses`` poses."""
+    """Memory of :func:`prp3mc.worstcase.envelope.worst_case` over ``n_poses`` poses."""
     n = float(n_poses)
     return Estimate(f"exact worst case at {n_poses} poses",
-                    n * (_WC_BYTES_PER_POSE + _WC_BYTES_PER_POSE_TERM * n_inputs), n * _WC_SECONDS_PER_POSE)
-
+                    n * (_WC_BYTES_PER_POSE + _WC_BYTES_PER_POSE_TERM * n_inputs))
 
 
 def allocate_estimate(n_poses: int, n_inputs: int, n_samples: int = 0) -> Estimate:
-    """Memory and time of :func:`prp3mc.allocation.optimum.allocate` over ``n_poses`` poses.
+    """Memory of :func:`prp3mc.allocation.optimum.allocate` over ``n_poses`` poses.
 
     ``n_samples`` > 0 adds the Monte Carlo confirmation of a percentile spec.
     """
     wc = worstcase_estimate(n_poses, n_inputs)
-    total = Estimate(f"tolerance allocation over {n_poses} poses", wc.bytes, n_poses * _ALLOCATE_SECONDS_PER_POSE)
+    total = Estimate(f"tolerance allocation over {n_poses} poses", wc.bytes)
     return total.then(montecarlo_estimate(n_samples, 1, n_inputs)) if n_samples else total
 
 
 def study_estimate(study) -> Estimate:
-    """Memory and time of running a :class:`prp3mc.study.Study` (its analyses, one configuration after another)."""
+    """Memory of running a :class:`prp3mc.study.Study` (its analyses, one configuration after another)."""
     d = len(study.budget.factors)
     n_conf = len(study.configurations) * math.prod(len(entry[-1]) for entry in getattr(study, "sweep", ()))
     total = worstcase_estimate(n_conf * study.worstcase_grid[0] * study.worstcase_grid[1], d)
     if "montecarlo" in study.outputs:
-        mc = montecarlo_estimate(study.mc_samples, study.mc_grid[0] * study.mc_grid[1], d)
-        total = total.then(Estimate(mc.what, mc.bytes, n_conf * mc.seconds))
+        total = total.then(montecarlo_estimate(study.mc_samples, study.mc_grid[0] * study.mc_grid[1], d))
     if "sobol" in study.outputs:
         n_poses = study.sobol_grid[0] * study.sobol_grid[1]
-        so = sobol_estimate(study.sobol_samples, n_poses, d, d + len(study.budget.groups) + len(study.sobol_groups),
-                            len(study.sobol_outputs), 100, salib=n_poses == 1)
-        total = total.then(Estimate(so.what, so.bytes, n_conf * so.seconds))
-    return Estimate(f"study {study.name!r} ({total.what})", total.bytes, total.seconds)
+        total = total.then(sobol_estimate(study.sobol_samples, n_poses, d,
+                                          d + len(study.budget.groups) + len(study.sobol_groups),
+                                          len(study.sobol_outputs), shapley_permutations=study.sobol_samples // 2))
+    return Estimate(f"study {study.name!r} ({total.what})", total.bytes)
 
 
 def discrepancy_estimate(n_measurements: int, n_poses: int | None = None, max_visits: int | None = None,
                          n_inputs: int = 12, n_bootstrap: int = 400, n_mc: int = 4000) -> Estimate:
-    """Memory and time of :func:`prp3mc.measurement.fit.workflow.discrepancy` and its report.
+    """Memory of :func:`prp3mc.measurement.fit.workflow.discrepancy` and its report.
 
     Parameters
     ----------
@@ -240,6 +215,4 @@ def discrepancy_estimate(n_measurements: int, n_poses: int | None = None, max_vi
     return Estimate(f"discrepancy analysis of {n_measurements} measurements{poses}",
                     n_bootstrap * m * _DISC_BYTES_PER_REPLICATE_ROW(n_inputs) + _DISC_BYTES_SPATIAL * (3 * p) ** 2
                     + _DISC_BYTES_ISO_VISIT * n_mc * visits + _DISC_BYTES_FIXED,
-                    n_bootstrap * m * _DISC_SECONDS_PER_REPLICATE_ROW + _DISC_SECONDS_SPATIAL * (3 * p) ** 3
-                    + _DISC_SECONDS_ISO_VISIT * n_mc * m + _DISC_SECONDS_FIXED,
                     "split the campaign into smaller ones (fewer rows or poses)")

@@ -36,23 +36,12 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterable, Iterator
 
-from .errors import Prp3mcError
+from .errors import (FigureFormatError, MissingDependencyError, OutputBusyError, OutputError, OutputExistsError,
+                     Prp3mcError)
 
-__all__ = ["OutputError", "OutputExistsError", "OutputBusyError", "claim_output", "output_folder",
-           "check_output", "dumps_json", "write_json", "write_text", "write_csv", "check_json", "FigureFormatError",
-           "save_figure", "png_data_uri", "figure_formats", "FIGURE_FORMATS"]
-
-
-class OutputError(Prp3mcError, OSError):
-    """An output folder cannot be created, claimed or written."""
-
-
-class OutputExistsError(OutputError, FileExistsError):
-    """The output folder exists and ``force`` was not given."""
-
-
-class OutputBusyError(OutputError):
-    """Another live run holds the claim on the output folder."""
+__all__ = ["claim_output", "output_folder", "check_output", "dumps_json", "write_json", "write_text", "write_csv",
+           "check_json", "save_figure", "png_data_uri", "figure_formats", "FIGURE_FORMATS", "TABLE_FORMATS",
+           "table_formats", "write_workbook"]
 
 
 #: Folders claimed by this process (resolved path -> force), so that nested
@@ -152,6 +141,34 @@ def _lock(path: Path) -> int:
     return fd
 
 
+def _output_path(path: str | os.PathLike) -> Path:
+    """The absolute output folder ``path`` names: a symbolic link to a folder stands for that folder.
+
+    Raises
+    ------
+    OutputError
+        The name is empty or the root folder, or a symbolic link leads nowhere.
+    """
+    if not str(path).strip():
+        raise OutputError("the output folder is empty: name a folder with --out")
+    absolute = Path(os.path.abspath(path))
+    if not absolute.name:
+        raise OutputError(f"--out {os.fsdecode(path)!r} is the root folder: name a new folder under it")
+    if absolute.is_symlink():
+        if not absolute.exists():
+            raise OutputError(f"--out {absolute} is a dangling symbolic link (to {os.readlink(absolute)}): "
+                              "remove it or choose another --out")
+        return _output_path(absolute.resolve())   # written where the link leads, which keeps leading there
+    return absolute
+
+
+def _umask() -> int:
+    """The process's umask (read by setting it and setting it back)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 @contextmanager
 def claim_output(path: str | os.PathLike, force: bool = False,
                  inputs: Iterable[str | os.PathLike] = ()) -> Iterator[Path]:
@@ -171,9 +188,7 @@ def claim_output(path: str | os.PathLike, force: bool = False,
     OutputError
         The parent folder cannot be created or written.
     """
-    if not str(path).strip():
-        raise OutputError("the output folder is empty: name a folder with --out")
-    path = Path(os.path.abspath(path))
+    path = _output_path(path)
     if path in _HELD:
         check_output(path, force or _HELD[path])
         yield path
@@ -196,8 +211,22 @@ def claim_output(path: str | os.PathLike, force: bool = False,
         os.close(fd)
 
 
+#: Set once a run starts moving its finished folder into place: from then on the run is complete, and a
+#: signal handler (the command line's) lets it finish rather than interrupt it (exit 0, the folder whole).
+COMMITTED = {"value": False}
+
+
 def _install(tmp: Path, path: Path, force: bool) -> None:
     """Move the finished folder ``tmp`` to ``path``; replace an existing one only with ``force``."""
+    COMMITTED["value"] = True
+    try:
+        _move_into_place(tmp, path, force)
+    except BaseException:
+        COMMITTED["value"] = False
+        raise
+
+
+def _move_into_place(tmp: Path, path: Path, force: bool) -> None:
     if force and path.exists():
         if _rename(tmp, path, _RENAME_EXCHANGE):
             shutil.rmtree(tmp, ignore_errors=True)  # tmp now holds the old folder
@@ -230,6 +259,7 @@ def output_folder(path: str | os.PathLike, force: bool = False) -> Iterator[Path
     with claim_output(path, force) as path:
         tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.tmp-{os.getpid()}-", dir=path.parent))
         try:
+            os.chmod(tmp, 0o777 & ~_umask())   # mkdtemp makes it 0700: the folder is the user's, as mkdir makes it
             yield tmp
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
@@ -299,22 +329,84 @@ def write_json(path: str | os.PathLike, obj) -> None:
     write_text(path, dumps_json(obj) + "\n")
 
 
-class FigureFormatError(Prp3mcError, ValueError):
-    """A figure format that reports cannot write."""
-
-
 #: Figure formats a report can write.
 FIGURE_FORMATS = ("png", "svg")
+#: Table formats a report can write besides its CSV files (``xlsx`` needs openpyxl: ``pip install 'prp3mc[xlsx]'``).
+TABLE_FORMATS = ("xlsx",)
+
+
+def _formats(spec) -> tuple[str, ...]:
+    """The formats of a comma-separated string such as ``"png,svg,xlsx"`` or a sequence, checked."""
+    text = spec if isinstance(spec, str) else ",".join(spec)
+    formats = tuple(dict.fromkeys(f.strip().lower() for f in text.split(",") if f.strip()))
+    bad = [f for f in formats if f not in FIGURE_FORMATS + TABLE_FORMATS]
+    if bad or not formats:
+        raise FigureFormatError(f"formats must be among {', '.join(FIGURE_FORMATS + TABLE_FORMATS)}, got {text!r}")
+    return formats
 
 
 def figure_formats(spec) -> tuple[str, ...]:
-    """Figure formats from a comma-separated string such as ``"png,svg"`` or a sequence."""
-    text = spec if isinstance(spec, str) else ",".join(spec)
-    formats = tuple(dict.fromkeys(f.strip().lower() for f in text.split(",") if f.strip()))
-    bad = [f for f in formats if f not in FIGURE_FORMATS]
-    if bad or not formats:
-        raise FigureFormatError(f"figure formats must be among {', '.join(FIGURE_FORMATS)}, got {text!r}")
-    return formats
+    """Figure formats of ``spec`` (:func:`_formats`): those it names, ``("png",)`` if it names none."""
+    return tuple(f for f in _formats(spec) if f in FIGURE_FORMATS) or ("png",)
+
+
+def table_formats(spec) -> tuple[str, ...]:
+    """Table formats of ``spec``: ``csv`` always, then ``xlsx`` if named (refused with the pip line without openpyxl)."""
+    extra = tuple(f for f in _formats(spec) if f in TABLE_FORMATS)
+    if "xlsx" in extra:
+        import importlib.util
+        if importlib.util.find_spec("openpyxl") is None:
+            raise MissingDependencyError("openpyxl", "pip install 'prp3mc[xlsx]'", "xlsx tables")
+    return ("csv", *extra)
+
+
+#: Units of column-name suffixes, shown in a workbook's headers.
+_SUFFIX_UNITS = {"_mm": "mm", "_um": "µm", "_deg": "deg", "_arcsec": "arcsec", "_pct": "%", "_s": "s",
+                 "_C": "°C", "_ppm": "ppm"}
+
+
+def _header(name: str) -> str:
+    """A column name with its unit in brackets, read off its suffix (``position_um`` -> ``position [µm]``)."""
+    for suffix, unit in _SUFFIX_UNITS.items():
+        if name.endswith(suffix) and len(name) > len(suffix):
+            return f"{name[:-len(suffix)]} [{unit}]"
+    return name
+
+
+def write_workbook(tables: dict, path: str | os.PathLike) -> None:
+    """Write tables into one Excel workbook, one sheet per table, units in the headers.
+
+    A sheet is named after its table (cut to Excel's 31 characters, made
+    unique); a header shows the unit its column name carries
+    (``x_mm`` -> ``x [mm]``); a table with a ``unit`` column keeps it (its
+    rows differ in unit). Written through a temporary file and a rename.
+
+    Raises
+    ------
+    FigureFormatError
+        openpyxl is not installed (with the pip line).
+    """
+    try:
+        import openpyxl
+    except ImportError:
+        raise FigureFormatError("xlsx tables need openpyxl: pip install 'prp3mc[xlsx]' (or pip install openpyxl)") from None
+    import pandas as pd
+    book = openpyxl.Workbook(write_only=True)
+    used: set[str] = set()
+    for name, frame in tables.items():
+        title, k = name[:31], 1
+        while title in used:
+            k += 1
+            title = f"{name[:31 - len(str(k)) - 1]}~{k}"
+        used.add(title)
+        sheet = book.create_sheet(title)
+        sheet.append([_header(str(c)) for c in frame.columns])
+        for row in frame.itertuples(index=False):      # numpy scalars as Python ones, NaN and NA as empty cells
+            sheet.append([None if pd.isna(v) else v.item() if hasattr(v, "item") else v for v in row])
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    book.save(tmp)
+    os.replace(tmp, path)
 
 
 def save_figure(fig, folder: str | os.PathLike, name: str, formats=("png",), dpi: int = 150) -> bytes:

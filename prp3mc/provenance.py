@@ -18,11 +18,14 @@ from ._version import __version__
 
 __all__ = ["versions", "file_record", "spec_record", "sha256_file"]
 
-_PACKAGES = {"numpy": "numpy", "scipy": "scipy", "pandas": "pandas", "SALib": "SALib"}
+#: Every package whose version can change a number or a picture: the numerical stack, numba (the compiled
+#: kernels' floating-point contractions) and matplotlib (the figures).
+_PACKAGES = {"numpy": "numpy", "scipy": "scipy", "pandas": "pandas", "SALib": "SALib", "numba": "numba",
+             "matplotlib": "matplotlib"}
 
 
 def versions() -> dict[str, str]:
-    """Versions of prp3mc, Python, numpy, scipy, pandas and SALib."""
+    """Versions of prp3mc, Python, numpy, scipy, pandas, SALib, numba and matplotlib."""
     out = {"prp3mc": __version__, "python": platform.python_version()}
     for key, dist in _PACKAGES.items():
         try:

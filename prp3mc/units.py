@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import math
 
-from scipy.special import ndtri
+from scipy.special import ndtri, stdtrit
 
 __all__ = ["RAD2DEG", "DEG2RAD", "MM2UM", "DEG2ARCSEC", "POSE_OUTPUTS", "OUTPUTS", "OUTPUT_UNITS",
-           "DISPLAY", "z_value", "Z95"]
+           "DISPLAY", "z_value", "t_value", "Z95", "probability_text", "quantity_text"]
 
 RAD2DEG = 180.0 / math.pi
 DEG2RAD = math.pi / 180.0
@@ -35,5 +35,51 @@ def z_value(level: float = 0.95) -> float:
     return float(ndtri(0.5 + level / 2))  # scipy.stats.norm.ppf's own kernel, without importing scipy.stats
 
 
+def t_value(level: float, df: int) -> float:
+    """Two-sided Student t quantile with ``df`` degrees of freedom for a confidence ``level`` in (0, 1)."""
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"confidence level must lie in (0, 1), got {level}")
+    return float(stdtrit(df, 0.5 + level / 2))  # scipy.stats.t.ppf's kernel, without importing scipy.stats
+
+
 #: The 95 % two-sided normal quantile, 1.959964...
 Z95 = z_value(0.95)
+
+
+def probability_text(p: float, ci=None, se: float | None = None) -> str:
+    """A probability as a reader of tolerance reports reads it: ppm below 1 %, % above; an interval ``ci``
+    or a standard error ``se`` in the same unit.
+
+    >>> probability_text(0.000815)
+    '815 ppm'
+    >>> probability_text(0.0528, (0.05, 0.055))
+    '5.28 % [5, 5.5]'
+    >>> probability_text(0.0528, se=0.0018)
+    '5.28 ± 0.18 %'
+    """
+    scale, unit = (1e6, "ppm") if p < 0.01 else (100.0, "%")
+
+    def number(v: float) -> str:  # three significant digits, never an exponent
+        return f"{v:.0f}" if abs(v) >= 100 else f"{v:.3g}"
+    if se is not None:
+        spread = scale * se
+        return f"{number(scale * p)} ± {spread:.0f} {unit}" if spread >= 10 else f"{number(scale * p)} ± {spread:.2g} {unit}"
+    text = f"{number(scale * p)} {unit}"
+    if ci is not None:
+        text += f" [{number(scale * ci[0])}, {number(scale * ci[1])}]"
+    return text
+
+
+def quantity_text(value: float, unit: str, fmt: str = ".4g") -> str:
+    """``value unit``, a dimensionless value (unit ``1``) without its unit and, when small, also in ppm.
+
+    >>> quantity_text(0.0004874, "1")
+    '4.874e-04 (487.4 ppm)'
+    >>> quantity_text(0.012, "mm")
+    '0.012 mm'
+    """
+    if unit != "1":
+        return f"{value:{fmt}} {unit}"
+    if value == 0 or abs(value) >= 0.01:
+        return f"{value:{fmt}}"
+    return f"{value:.3e} ({1e6 * value:{fmt}} ppm)"

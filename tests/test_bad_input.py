@@ -97,7 +97,6 @@ FILES = {
     "csv_header_only": _HEADER,
     "csv_duplicate_header": _HEADER.replace("\n", ",x_meas\n") + "".join(f"{k % 4},0,100,0,0,100,0,5\n" for k in range(8)),
     "csv_one_row": _HEADER + "1,0,100,0,0.001,100,0\n",
-    "csv_no_repeats": _HEADER + "".join(f"{k},{10 * k},100,0,{10 * k},100,0\n" for k in range(3)),
     "csv_two_poses": _HEADER + "".join(f"{k % 2},{10 * (k % 2)},100,0,{10 * (k % 2)},100,0\n" for k in range(6)),
     "csv_small": _HEADER + "".join(f"{k % 4},{10 * (k % 2)},{100 + 10 * (k % 4 // 2)},0,{10 * (k % 2) + 0.001 * k},"
                                    f"{100 + 10 * (k % 4 // 2)},0\n" for k in range(8)),
@@ -131,10 +130,11 @@ def _case(*argv, status: int = 1, message: str = ""):
 CASES = [
     # ----------------------------------------------------------- top level
     _case(status=2, message="required: command"),
-    _case("wobble", status=2, message="invalid choice"),
+    _case("wobble", status=2, message="unknown command 'wobble'"),
     _case("--max-hours", "0", "sensitivity", *G, *P, status=2, message="expected a number > 0"),
     _case("--max-hours", "nan", "sensitivity", *G, *P, status=2, message="finite number"),
-    _case("--max-hours", "1e-9", "montecarlo", *G, *B, *P, "--samples", "1000000", message="would take"),
+    _case("--max-hours", "1e-9", "montecarlo", *G, *B, *P, "--samples", "1000000",
+          message="stopped at the --max-hours limit"),
     # ----------------------------------------------------------- sensitivity
     _case("sensitivity", status=2, message="required"),
     _case("sensitivity", *G, "--pose", "nan", "100", "0", status=2, message="finite number, got 'nan'"),
@@ -152,7 +152,7 @@ CASES = [
     _case("sensitivity", "--geometry", "{binary}", *P, message="cannot read"),
     _case("sensitivity", "--geometry", "{existing_dir}", *P, message="existing_dir"),
     _case("sensitivity", "--geometry", "{geometry_nan}", *P, message="geometry_nan.toml"),
-    _case("sensitivity", *G, *P, "--wobble", status=2, message="unrecognized arguments"),
+    _case("sensitivity", *G, *P, "--wobble", status=2, message="unknown option --wobble"),
     # ----------------------------------------------------------- worstcase
     _case("worstcase", *G, *P, status=2, message="--budget"),
     _case("worstcase", *G, "--budget", "nope", *P, message="unknown budget preset 'nope'"),
@@ -207,9 +207,11 @@ CASES = [
     _case("sobol", *G, *B, *P, "--samples", "256", "--group", "a=rho_1", "--group", "a=zeta_1", message="names a group twice"),
     _case("sobol", *G, *B, *P, "--samples", "1000", message="power of two"),
     _case("sobol", *G, *B, *P, "--samples", str(2**40), message="of memory, this machine has"),
-    _case("sobol", *G, *B, *P, "--samples", "256", "--resamples", "0", status=2, message="positive integer"),
-    _case("sobol", *G, *B, *P, "--samples", "256", "--resamples", "1", message="at least 2 resamples"),
-    _case("sobol", *G, *B, *P, "--samples", "1024", "--resamples", str(10**9), message="of memory"),
+    _case("sobol", *G, *B, *P, "--samples", "256", "--replicates", "0", status=2, message="positive integer"),
+    _case("sobol", *G, *B, *P, "--samples", "256", "--replicates", "1", message="replicates must be a power of two"),
+    _case("sobol", *G, *B, *P, "--samples", "256", "--replicates", "256", message="too small for 256 replicates"),
+    _case("sobol", *G, *B, *P, "--samples", "256", "--shapley-permutations", "-1", status=2, message="integer >= 0"),
+    _case("sobol", *G, *B, *P, "--samples", "1024", "--shapley-permutations", str(10**12), message="of memory"),
     _case("sobol", *G, *B, *P, "--conf-level", "1", status=2, message="between 0 and 1"),
     _case("sobol", *G, *B, *P, "--conf-level", "0", status=2, message="between 0 and 1"),
     _case("sobol", *G, *B, *P, "--conf-level", "nan", status=2, message="finite"),
@@ -227,7 +229,8 @@ CASES = [
     _case("study", "{study_bad_toml}", "--out", "{root}/o3", message="malformed TOML"),
     _case("study", "{study_huge_samples}", "--out", "{root}/o4", message="of memory, this machine has"),
     _case("study", "{study_huge_grid}", "--out", "{root}/o5", message="of memory, this machine has"),
-    _case("--max-hours", "0.1", "study", "{study_long}", "--out", "{root}/o6", message="would take"),
+    _case("--max-hours", "1e-9", "study", "{study_long}", "--out", "{root}/o6",
+          message="stopped at the --max-hours limit"),
     _case("study", "{study_unknown_key}", "--out", "{root}/o7", message="unknown key 'wobble'"),
     _case("study", "{study_seed_negative}", "--out", "{root}/o8", message="seed must be a non-negative"),
     _case("study", "{study_budget_hi}", "--out", "{root}/o9", message="beyond any error"),
@@ -268,8 +271,6 @@ CASES = [
           message="column 'x_meas' appears twice in the header (columns 5 and 8)"),
     _case("discrepancy", *G, *B, "--data", "{csv_one_row}", "--out", "{root}/d17",
           message="too small to test anything: 1 measurement(s) of 1 pose(s)"),
-    _case("discrepancy", *G, *B, "--data", "{csv_no_repeats}", "--out", "{root}/d18",
-          message="0 of them repeated; the discrepancy workflow needs at least 3 distinct poses"),
     _case("discrepancy", *G, *B, "--data", "{csv_two_poses}", "--out", "{root}/d19", message="too small"),
     _case("discrepancy", *G, "--budget", "{budget_backlash}", "--data", "{csv_no_dir}", "--out", "{root}/d20",
           message="effect backlash_1 (fitted on c1.csv) needs column dir_1, which the campaign lacks"),
@@ -277,8 +278,8 @@ CASES = [
           message="unknown effect 'wobble_1'"),
     _case("discrepancy", *G, "--budget", "{budget_delta_model}", "--data", "{csv_no_dir}", "--out", "{root}/d22",
           message="holds effects fitted on geometry 'delta-shape', not on geometry 'u-shape'"),
-    _case("--max-hours", "1e-6", "discrepancy", *G, *B, "--data", "{csv_nan}", "--out", "{root}/d23",
-          message="discrepancy analysis of 8 measurements would take"),   # sized before the file is read
+    _case("--max-hours", "1e-9", "discrepancy", *G, *B, "--data", "{csv_nan}", "--out", "{root}/d23",
+          message="stopped at the --max-hours limit"),   # 3.6 µs: stopped before the file is read
     _case("discrepancy", *G, "--budget", "{budget_zero}", "--data", "{csv_small}", "--out", "{root}/d24",
           message="has a zero law"),
     # ----------------------------------------------------------- allocate
@@ -286,8 +287,8 @@ CASES = [
           "100000", message="of memory, this machine has"),
     _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150",
           "--spec-percentile", "95", "--samples", "1000000000000", message="of memory, this machine has"),
-    _case("--max-hours", "0.01", "allocate", *G, "--region", "u-shape", "--classes", "example",
-          "--spec-position-um", "150", "--grid", "301", message="would take"),
+    _case("--max-hours", "1e-9", "allocate", *G, "--region", "u-shape", "--classes", "example",
+          "--spec-position-um", "150", "--grid", "301", message="stopped at the --max-hours limit"),
     _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150", "--seed",
           "-1", status=2, message="non-negative integer"),
     _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150",
@@ -298,8 +299,8 @@ CASES = [
           message="spec_position_um must be a finite number > 0"),
     _case("allocate", *G, "--region", "u-shape", "--classes", "example", "--spec-position-um", "150",
           "--spec-percentile", "150", message="spec_percentile must lie in"),
-    _case("allocate", *G, "--region", "nowhere", "--classes", "example", "--spec-position-um", "150", status=2,
-          message="invalid choice"),
+    _case("allocate", *G, "--region", "nowhere", "--classes", "example", "--spec-position-um", "150",
+          message="no test region for 'nowhere'"),
     _case("allocate", *G, "--region", "u-shape", "--classes", "{root}/none.toml", "--spec-position-um", "150",
           message="none.toml"),
     _case("allocate", *G, "--region", "u-shape", "--classes", "{bad_toml}", "--spec-position-um", "150",
@@ -427,3 +428,158 @@ def test_campaign_bytes_fuzz(tmp_path_factory, data):
     path = tmp_path_factory.mktemp("csv") / "c.csv"
     path.write_bytes(data)
     _only_our_errors(read_campaign, path, Geometry.from_preset("u-shape"))
+
+
+# ------------------------------------------------------------------ the issue 25 corpus (tests/bad_corpus.py)
+from pathlib import Path  # noqa: E402
+
+from . import bad_corpus  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def corpus_files(tmp_path_factory):
+    return bad_corpus.prepare(tmp_path_factory.mktemp("corpus"))
+
+
+def _corpus_param(case):
+    marks = [pytest.mark.slow] if case.slow else []
+    if case.left:
+        marks.append(pytest.mark.xfail(reason=case.left, strict=True))
+    return pytest.param(case, id=f"{case.cls}: {case.id}"[:100], marks=marks)
+
+
+@pytest.mark.parametrize("case", [_corpus_param(c) for c in bad_corpus.cases()])
+def test_corpus_case(case, corpus_files, tmp_path, monkeypatch, capsys):
+    """Each corpus case ends as it must: a one-line refusal naming the fragment (nothing written), or a run
+    whose output passes the case's check (see tests/bad_corpus.py; ``python -m tests.bad_corpus`` runs them
+    in real processes and counts them by class)."""
+    monkeypatch.chdir(tmp_path)
+    if case.process:
+        problem = bad_corpus.run_one(case, bad_corpus.expand(case.argv, corpus_files, str(tmp_path)), tmp_path)
+        assert problem is None, problem
+        return
+    if case.setup:
+        case.setup(tmp_path)
+    argv = [os.fsdecode(a) for a in bad_corpus.expand(case.argv, corpus_files, str(tmp_path))]
+    out_dir = bad_corpus._out_of(argv)
+    existed = out_dir is not None and os.path.lexists(out_dir)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", Prp3mcWarning)   # the one-line warnings are the CLI's, on stderr
+        code = main(argv)
+    out, err = capsys.readouterr()
+    if case.expect == "refuse":  # a warning would be a second line: the refusal must come first and alone
+        err = "\n".join(line for line in err.splitlines() if ": warning: " not in line) + "\n"
+    problem = bad_corpus.judge(case, code, out, err, tmp_path, existed, out_dir)
+    assert problem is None, problem
+
+
+def test_corpus_size():
+    """Issue 25 asks for at least 150 new cases across every command (the signal loops add theirs)."""
+    cases = bad_corpus.cases()
+    assert len(cases) >= 150
+    commands = {a for c in cases for a in c.argv[:3] if isinstance(a, str) and not a.startswith(("-", "{"))}
+    assert {"sensitivity", "worstcase", "montecarlo", "sobol", "study", "discrepancy", "init", "allocate"} <= commands
+    assert {c.cls for c in cases} == set(bad_corpus.CLASSES) - {"signals"}
+
+
+# ------------------------------------------------------------------ fuzzing the command line and file contents
+_WORDS = {
+    "sensitivity": [["--geometry"], ["--pose"]],
+    "worstcase": [["--geometry"], ["--budget"], ["--pose"]],
+    "montecarlo": [["--geometry"], ["--budget"], ["--pose"], ["--samples"], ["--seed"]],
+    "sobol": [["--geometry"], ["--budget"], ["--pose"], ["--samples"], ["--group"]],
+    "discrepancy": [["--geometry"], ["--budget"], ["--data"], ["--out"], ["--instrument-sigma-mm"], ["--seed"]],
+    "study": [["STUDY"], ["--out"], ["--scheduler"]],
+    "allocate": [["--geometry"], ["--region"], ["--classes"], ["--spec-position-um"], ["--grid"]],
+    "init": [["KIND"], ["FILE"]],
+}
+_ODD = ["", " ", "nan", "-inf", "1e309", "-1", "0", "3", "256", "1e-300", "/", ".", "..", "\x01", "é", "\udce9",
+        "a" * 300, "-", "--", "u-shape", "paper", "example", "tcp://h:1", "ucx://h", "local:1", "g=theta_1",
+        "0 100 0", "geometry", "study", "{mutated}", "{c_good}", "{g_bom}", "{s_ok}", "{dangling}", "{tmp}/out",
+        "{tmp}"]
+_values = st.sampled_from(_ODD)
+
+
+@st.composite
+def _fuzz_argv(draw):
+    command = draw(st.sampled_from(sorted(_WORDS)))
+    argv = [command]
+    for (word,) in draw(st.lists(st.sampled_from(_WORDS[command]), max_size=6)):
+        if word.isupper():
+            argv.append(draw(_values))
+        elif word == "--pose":
+            argv += [word, *draw(st.lists(_values, min_size=0, max_size=4))]
+        else:
+            argv += [word, draw(_values)]
+    if draw(st.booleans()):
+        argv.insert(0, draw(st.sampled_from(["--max-hours", "--max-gb"])))
+        argv.insert(1, draw(_values))
+    return argv
+
+
+def _mutated(data: bytes, flips: list) -> bytes:
+    out = bytearray(data)
+    for position, value in flips:
+        if out:
+            out[position % len(out)] = value
+    return bytes(out)
+
+
+_CLI_FUZZ = settings(max_examples=int(os.environ.get("PRP3MC_FUZZ_EXAMPLES", 40)), deadline=None,
+                     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+
+
+@pytest.mark.slow
+@_CLI_FUZZ
+@given(_fuzz_argv(), st.sampled_from(["c_good", "g_bom", "s_ok", "b_bom"]),
+       st.lists(st.tuples(st.integers(0, 10**6), st.integers(0, 255)), max_size=4))
+def test_cli_fuzz(corpus_files, tmp_path_factory, capsys, argv, base, flips):
+    """Any command line over odd words and mutated files ends in exit 0, 1 or 2 and never a traceback or a hang
+    (an alarm of 120 s; in process, so that the 40 examples take minutes, not a process start each)."""
+    import signal as _signal
+    tmp = tmp_path_factory.mktemp("fuzz")
+    mutated = tmp / ("mutated" + os.path.splitext(str(corpus_files[base]))[1])
+    mutated.write_bytes(_mutated(open(corpus_files[base], "rb").read(), flips))
+    paths = {**corpus_files, "mutated": str(mutated)}
+    argv = [os.fsdecode(a) for a in bad_corpus.expand(argv, paths, str(tmp))]
+
+    def hang(signum, frame):
+        raise AssertionError(f"no answer within 120 s: {argv}")
+
+    old = _signal.signal(_signal.SIGALRM, hang)
+    _signal.alarm(120)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            code = main(argv)
+    finally:
+        _signal.alarm(0)
+        _signal.signal(_signal.SIGALRM, old)
+    out, err = capsys.readouterr()
+    assert code in (0, 1, 2), (argv, err)
+    assert "Traceback" not in err, (argv, err)
+    if code:
+        errors = [line for line in err.splitlines() if ": warning: " not in line]
+        assert len(errors) == 1, (argv, err)
+
+
+@pytest.mark.slow
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(_fuzz_argv())
+def test_cli_fuzz_in_a_real_process(corpus_files, tmp_path_factory, argv):
+    """The same in real processes, with a timeout: a hang or a traceback on the way out fails."""
+    tmp = tmp_path_factory.mktemp("fuzzp")
+    paths = {**corpus_files, "mutated": str(corpus_files["c_good"])}
+    run = subprocess.run([sys.executable, "-m", "prp3mc", *bad_corpus.expand(argv, paths, str(tmp))],
+                         capture_output=True, timeout=300, cwd=tmp)
+    err = run.stderr.decode(errors="replace")
+    assert run.returncode in (0, 1, 2), (argv, err)
+    assert "Traceback" not in err and "Fatal Python error" not in err and "Exception ignored" not in err, (argv, err)
+
+
+@pytest.mark.slow
+def test_signals_near_the_end(tmp_path):
+    """SIGTERM/SIGINT near the end of a study and a discrepancy: exit 0 with a whole folder, or 130/143 and
+    nothing changed (a small version of ``python -m tests.bad_corpus --signals 40``)."""
+    result = bad_corpus.signal_loop(tmp_path, 4, seed=int(os.environ.get("PRP3MC_SIGNAL_SEED", 0)))
+    assert result["bad"] == 0, result["problems"]

@@ -98,8 +98,9 @@ def test_unreadable_files(tmp_path):
 
 
 def test_effect_names_and_units():
-    assert len(EFFECT_NAMES) == 27 + 3 + 3 + 1 + 9
+    assert len(EFFECT_NAMES) == 27 + 3 + 3 + 1 + 3 + 9
     assert effect("alpha_2").unit == "deg" and effect("b_1").unit == "mm"
+    assert effect("cyclic_2").unit == "mm" and effect("cyclic_2").dof == 2 and effect("cyclic_2").leg == 1
     assert effect("scale_3").unit == "1" and effect("thermal").unit == "1/K"
     assert effect("backlash_1").needs == ("dir_1",) and effect("spread_theta_2").budget_input == "theta_2"
     with pytest.raises(BudgetError, match="unknown effect"):

@@ -88,12 +88,12 @@ def test_json_outputs_describe_themselves(argv, tmp_path, capsys):
         assert doc["inputs"]["budget"] == {"name": "paper", "preset": "paper"}
     if "--seed" in argv:
         assert doc["inputs"]["seed"] == 4
-    assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib"}
+    assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib", "numba", "matplotlib"}
 
 
 def test_init_templates_run_as_written(tmp_path, capsys):
     """`prp3mc init` writes templates that every command reads as they are, and refuses to overwrite."""
-    for kind in ("geometry", "budget", "study", "classes"):
+    for kind in ("geometry", "budget", "study", "classes", "region"):
         assert main(["init", kind, str(tmp_path / f"{kind}.toml")]) == 0
     assert main(["init", "budget", str(tmp_path / "budget.toml")]) == 1
     assert "exists" in capsys.readouterr().err
@@ -108,6 +108,9 @@ def test_init_templates_run_as_written(tmp_path, capsys):
                  str(tmp_path / "classes.toml"), "--spec-position-um", "150", "--grid", "11", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["feasible"] and set(doc["choice"]) == {f"{q}_{i}" for q in ("rho", "theta", "b") for i in (1, 2, 3)}
+    assert main(["allocate", "--geometry", "u-shape", "--region", str(tmp_path / "region.toml"), "--classes",
+                 "example", "--spec-position-um", "150", "--grid", "11", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["inputs"]["region"]["sha256"]
 
 
 def test_discrepancy_json_describes_itself(tmp_path, capsys):
@@ -127,7 +130,7 @@ def test_discrepancy_json_describes_itself(tmp_path, capsys):
     for doc in (printed, written):
         assert doc["inputs"]["data"]["sha256"] == hashlib.sha256(data.read_bytes()).hexdigest()
         assert doc["inputs"]["seed"] == 5 and doc["inputs"]["budget"] == {"name": "paper", "preset": "paper"}
-        assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib"}
+        assert set(doc["versions"]) == {"prp3mc", "python", "numpy", "scipy", "pandas", "SALib", "numba", "matplotlib"}
     report = (tmp_path / "out" / "report.html").read_text()
     assert "<h2>Run</h2>" in report and written["inputs"]["data"]["sha256"] in report
 
@@ -192,15 +195,16 @@ def test_discrepancy_records_an_incomplete_budget(tmp_path, capsys):
 
 
 def test_discrepancy_refuses_what_cannot_finish(tmp_path, capsys, monkeypatch):
-    """Sized before it starts: one line with the estimate and the limit, exit 1, nothing written."""
+    """Stopped at its time limit, or refused by its memory before it starts: one line, exit 1, nothing written."""
     import prp3mc.cli.discrepancy as command
     import prp3mc.limits as limits
     data, out = _campaign(tmp_path / "campaign.csv"), tmp_path / "out"
     argv = ["discrepancy", "--geometry", "u-shape", "--budget", "paper", "--data", str(data), "--out", str(out)]
-    assert main(["--max-hours", "1e-6", *argv]) == 1
+    assert main(["--max-hours", "2e-5", *argv]) == 1          # 72 ms: stopped while it runs
     err = capsys.readouterr().err.splitlines()
-    assert len(err) == 1 and "discrepancy analysis of 48 measurements would take ~" in err[0]
-    assert "more than the limit of 0.0036 s" in err[0] and not out.exists()
+    assert err == ["prp3mc discrepancy: error: stopped at the --max-hours limit (0.072 s of wall time): "
+                   "nothing was written"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["campaign.csv"]      # no folder, no lock, no leftovers
     # memory, from the row count alone: the file is not even read
     monkeypatch.setattr(limits, "available_memory", lambda: 1 << 20)
     monkeypatch.setattr(command, "read_campaign", lambda *a, **k: pytest.fail("read before it was sized"))

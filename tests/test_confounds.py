@@ -11,7 +11,7 @@ from prp3mc.measurement.fit.likelihood import Engine
 from prp3mc.measurement.fit.prediction import noise_cov
 from prp3mc.measurement.campaign.simulate import simulate_campaign
 from prp3mc.measurement.fit.workflow import discrepancy
-from prp3mc.reports.discrepancy_report import render_html
+from prp3mc.reports import discrepancy_report
 
 from .realities import BUDGET, SIGMA, campaign_poses, cycled, rising, thermal_campaign
 
@@ -56,7 +56,7 @@ def test_a_warming_machine_is_ambiguous_not_swallowed():
     assert data and data[0]["value"] == pytest.approx(ALPHA_T, rel=0.5)
     assert r.verdict["state"] == "ambiguous" and "may be thermal" in r.verdict["text"]
     assert not r.unexplained
-    html = render_html(r, {})
+    html = discrepancy_report._page(r, None)({})       # the report's page, without its figures
     assert "Verdict: ambiguous." in html and "the temperature follows time" in html
     doc = r.to_dict()
     assert doc["verdict"]["state"] == "ambiguous" and doc["confounded"][0]["effects"]

@@ -243,20 +243,14 @@ def test_result_protocol_conf_int_and_plots(tmp_path, monkeypatch):
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="the system cannot fork")
-def test_stages_on_other_processes_give_the_same_numbers_and_files(tmp_path, monkeypatch):
-    """The predicted accuracy on a forked process, the figures on a process readied while the analysis ran and
-    on worker processes of its own: the files of one process."""
-    import prp3mc._fork as fork
-    from prp3mc.reports._render import drawing_ahead
+def test_figures_on_worker_processes_give_the_same_numbers_and_files(tmp_path):
+    """The figures drawn on worker processes of their own and here: the files of one process."""
     g = Geometry.from_preset("u-shape")
     c = simulate_campaign(g, BUDGET, campaign_poses("u-shape", False), 3, effects={"scale_2": 5e-4}, rng=5, **SIGMA)
     docs, files = {}, {}
     for where, processes in (("here", 1), ("there", 2)):
-        monkeypatch.setattr(fork, "fork_workers", lambda n, k=processes: min(n, k))
-        with drawing_ahead() as ahead:
-            assert ahead.forked == (processes == 2)
-            r = discrepancy(g, BUDGET, c, rng=1, **SIGMA)
-            folder = write_report(r, tmp_path / where, workers=processes, ahead=ahead)
+        r = discrepancy(g, BUDGET, c, rng=1, **SIGMA)
+        folder = write_report(r, tmp_path / where, workers=processes)
         docs[where] = json.loads((folder / "discrepancy.json").read_text())
         docs[where].pop("wall_time_s")
         files[where] = {p.relative_to(folder): p.read_bytes() for p in folder.rglob("*")

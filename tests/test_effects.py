@@ -97,10 +97,10 @@ def brute_force(model, budget, n_dense=20_000):
     return out
 
 
-@pytest.mark.parametrize("keep", [("backlash_1", "thermal"), tuple(VALUES)])
-def test_worst_case_with_effects_equals_brute_force(geometry, region, keep):
-    budget = small_budget(geometry, {k: VALUES[k] for k in keep})
-    poses = random_poses(region, 5, np.random.default_rng(5))
+def check_worst_case(geometry, budget, poses):
+    """The exact worst case of ``budget`` at ``poses`` (P,) against brute force, the fused kernel, its maximiser
+    and its contributions; returns it."""
+    P = len(poses)
     wc = worst_case(geometry, budget, poses)
     model = linear_model(geometry, budget, poses)
     for q, (corner_max, dense_max) in brute_force(model, budget).items():
@@ -115,10 +115,17 @@ def test_worst_case_with_effects_equals_brute_force(geometry, region, keep):
     # the maximiser's factors realise the maximum, and the contributions (shifts included) sum to it
     for q in ("position", "x"):
         X = wc.inputs_at[q]
-        e = np.einsum("pof,pf->po", model.coef, np.stack([model.features(X[p:p + 1])[0] for p in range(5)]))
+        e = np.einsum("pof,pf->po", model.coef, np.stack([model.features(X[p:p + 1])[0] for p in range(P)]))
         got = np.hypot(e[:, 0], e[:, 1]) if q == "position" else np.abs(e[:, 0])
         np.testing.assert_allclose(got, wc.value(q), rtol=1e-12)
         np.testing.assert_allclose(wc.contribution[q].sum(-1), wc.value(q), rtol=1e-12)
+    return wc
+
+
+@pytest.mark.parametrize("keep", [("backlash_1", "thermal"), tuple(VALUES)])
+def test_worst_case_with_effects_equals_brute_force(geometry, region, keep):
+    budget = small_budget(geometry, {k: VALUES[k] for k in keep})
+    wc = check_worst_case(geometry, budget, random_poses(region, 5, np.random.default_rng(5)))
     assert wc.shared_signs["position"].shape == (5, int("thermal" in keep))
 
 

@@ -178,14 +178,12 @@ def test_study_refuses_effects_of_another_machine_in_one_line(tmp_path, capsys):
     assert len(err.strip().splitlines()) == 1 and "s.toml:27: geometry 'delta-shape': budget 'machine'" in err
 
 
-def test_a_sweep_runs_only_the_machine_the_effects_were_fitted_on(tmp_path):
-    """A swept design past the tolerance is another machine: it is reported as failed, with the reason."""
+def test_a_sweep_over_a_machine_fitted_budget_is_refused(tmp_path):
+    """Fitted effects belong to the machine they were measured on: sweeping its geometry is refused up front."""
+    from prp3mc.errors import StudyError
     from prp3mc.study.runner import run_study
-    from prp3mc.study.summary import build_summary
     fixed_budget(Geometry.from_preset("u-shape")).to_toml(tmp_path / "machine.toml")
     text = STUDY.replace("[allocation]", "[x]").split("[x]")[0] + '[[configuration]]\ngeometry = "u-shape"\n'
     (tmp_path / "s.toml").write_text(text + '\n[sweep]\n"leg.3.a_mm" = [180.4, 200]\n')
-    summary = build_summary(run_study(tmp_path / "s.toml"))
-    assert len(summary["configurations"]) == 1
-    (failed,) = summary["sweep"]["failed"]
-    assert failed["parameters"] == {"leg.3.a_mm": 200} and "fitted on geometry 'u-shape'" in failed["reason"]
+    with pytest.raises(StudyError, match="fitted on geometry 'u-shape': a sweep changes that geometry"):
+        run_study(tmp_path / "s.toml")

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from prp3mc import Budget, Geometry, Uniform, linear_model, monte_carlo
-from prp3mc.errors import BudgetError, Prp3mcWarning
+from prp3mc.errors import ParameterError, Prp3mcWarning
 from prp3mc.cli import main
 from prp3mc.montecarlo.propagation import ci_samples
 
@@ -123,7 +123,7 @@ def test_zero_budget_gives_zero_error(geometry):
 ])
 def test_bad_arguments(kwargs, message):
     args = {"n_samples": 100} | kwargs
-    with pytest.raises(BudgetError, match=message):
+    with pytest.raises(ParameterError, match=message):
         monte_carlo(Geometry.from_preset("u-shape"), PAPER, [0.0, 100.0, 0.0], **args)
 
 
@@ -176,7 +176,7 @@ def test_sample_blocks_equal_the_sample():
     X = PAPER.sample(n, 5)
     for k in (2, 0, 1):
         np.testing.assert_array_equal(PAPER.sample_block(5, k, n), X[k * SAMPLE_BLOCK:(k + 1) * SAMPLE_BLOCK])
-    with pytest.raises(BudgetError, match="outside"):
+    with pytest.raises(ParameterError, match="outside"):
         PAPER.sample_block(5, 3, n)
 
 

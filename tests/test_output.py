@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from prp3mc.cli import main
-from prp3mc.errors import Prp3mcError
-from prp3mc.output import (OutputBusyError, OutputExistsError, check_json, claim_output, output_folder, write_csv,
+from prp3mc.errors import OutputBusyError, OutputExistsError, Prp3mcError
+from prp3mc.output import (check_json, claim_output, output_folder, write_csv,
                            write_json)
 
 # A run that writes its PID into the folder, holding it for HOLD seconds (HOLD < 0: until its stdin closes).

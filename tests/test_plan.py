@@ -9,7 +9,7 @@ import pytest
 import prp3mc
 from prp3mc import Geometry, Region
 from prp3mc.cli import main
-from prp3mc.errors import BudgetError, CampaignError
+from prp3mc.errors import CampaignError, ParameterError
 from prp3mc.kinematics.chain import feasible
 from prp3mc.measurement.campaign import plan as planning
 from prp3mc.measurement.campaign.simulate import simulate_campaign
@@ -67,19 +67,17 @@ def test_d_optimal_poses_beat_random_choices():
     assert len(set(chosen)) == 9 and best > max(random)
 
 
-def test_a_simulated_campaign_follows_a_given_schedule(small_plan):
+def test_a_simulated_campaign_follows_the_template(small_plan):
+    """The simulator takes the template as a plan: its rows, its dir_1 (the planned backlash leg) and time_s."""
     p = small_plan
-    c = simulate_campaign(G, BUDGET, p.poses, 4, order=p.order, approach=p.direction, time_s=p.time_s, rng=2,
-                          **SIGMA)
+    c = simulate_campaign(G, BUDGET, None, plan=p.to_frame(), rng=2, **SIGMA)
     np.testing.assert_array_equal(c.commanded, p.poses[p.order])
-    np.testing.assert_array_equal(c.direction, p.direction)
-    np.testing.assert_array_equal(c.extra["time_s"], p.time_s)
-    with pytest.raises(CampaignError, match="order"):
-        simulate_campaign(G, BUDGET, p.poses, 4, order=p.order[p.order != 0], rng=2)
+    np.testing.assert_array_equal(c.direction[:, 0], p.direction[:, 0])
+    np.testing.assert_allclose(c.extra["time_s"], p.time_s, rtol=1e-5)
 
 
 def test_refusals_are_one_line():
-    with pytest.raises(BudgetError, match="spread"):
+    with pytest.raises(ParameterError, match="spread"):
         prp3mc.plan_campaign(G, BUDGET, ["spread_b_1"], 9, 4)
     with pytest.raises(CampaignError, match="candidates"):
         prp3mc.plan_campaign(G, BUDGET, ["scale_1"], 10_000, 2)
@@ -117,9 +115,8 @@ def test_a_planned_campaign_detects_what_the_grid_misses():
     value = plan.detectable["scale_2"]
     hits = {"plan": 0, "grid": 0}
     for seed in range(400, 420):
-        for label, kwargs in (("plan", {"order": plan.order, "approach": plan.direction, "time_s": plan.time_s}),
-                              ("grid", {})):
-            poses = plan.poses if label == "plan" else campaign_poses("u-shape", True)
+        for label, kwargs in (("plan", {"plan": plan.to_frame()}), ("grid", {})):
+            poses = None if label == "plan" else campaign_poses("u-shape", True)
             c = simulate_campaign(G, BUDGET, poses, 8, effects={"scale_2": value}, registration=(0.02, -0.02, 0.005),
                                   rng=seed, **SIGMA, **kwargs)
             frame = c.to_frame().drop(columns=["dir_1", "dir_2", "dir_3"])

@@ -5,12 +5,12 @@ import pytest
 
 from prp3mc import Geometry, Region
 from prp3mc.measurement.fit import identify
-from prp3mc.measurement.fit.signatures import library, signatures
-from prp3mc.measurement.fit.relinearise import controller_geometry, exact_errors, linearise
+from prp3mc.measurement.fit.signatures import signatures
+from prp3mc.measurement.fit.relinearise import candidates, controller_geometry, exact_errors, linearise
 from prp3mc.measurement.campaign.simulate import simulate_campaign
 from prp3mc.measurement.fit.workflow import discrepancy
 from prp3mc.model.effects import SystematicEffect
-from prp3mc.reports.discrepancy_report import render_html
+from prp3mc.reports import discrepancy_report
 
 from .realities import BUDGET, SIGMA, campaign_poses
 from .test_discrepancy import covers
@@ -29,7 +29,7 @@ def test_point_signatures_at_nominal_are_the_linear_signatures():
     """Central differences of the exact chain at the nominal geometry against the J_q signatures (independent code)."""
     g = Geometry.from_preset("u-shape")
     c = simulate_campaign(g, BUDGET, small_poses("u-shape"), 2, rng=1, **SIGMA)
-    names = [e.name for e in library(BUDGET, c.has_dir, True) if e.systematic]
+    names = candidates(g, BUDGET, c)
     point = linearise(g, BUDGET, c, {}, names)
     G = signatures(g, c.poses, c.pose_index, names, c.direction, c.temp_C)
     scale = np.abs(G).max(axis=(0, 1))                      # per candidate; 0 for the invisible c_i, e_i
@@ -94,7 +94,7 @@ def test_the_linearity_guard_refuses_to_name_when_the_iteration_does_not_settle(
     assert "beta_1" in lin["last_estimate"] and lin["advice"]
     assert not r.named_effects and r.unexplained and not r.outliers
     assert r.verdict["state"] == "beyond the linear model" and "did not settle" in r.verdict["text"]
-    html = render_html(r, {})
+    html = discrepancy_report._page(r, None)({})       # the report's page, without its figures
     assert "Verdict: beyond the linear model." in html and "linearity guard tripped" in html
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from prp3mc import exact_pose_error, sensitivity
-from prp3mc.errors import BudgetError
+from prp3mc.errors import ParameterError
 from prp3mc.kinematics.exact import linear_pose_error, linearization_error_um
 from prp3mc.kinematics.sensitivity import FAMILIES, LENGTH_FAMILIES
 
@@ -85,7 +85,7 @@ def test_tidy_frame(geometry):
 
 
 def test_unknown_error_family(geometry):
-    with pytest.raises(BudgetError, match="unknown error family delta"):
+    with pytest.raises(ParameterError, match="unknown error family delta"):
         exact_pose_error(geometry, [0.0, 130.0, 0.0], {"delta": [1, 2, 3]})
 
 

@@ -8,7 +8,7 @@ import pytest
 from SALib.sample import sobol as sobol_sample
 
 from prp3mc import Budget, Disc, Geometry, Normal, Region, Triangular, Uniform, linear_model, worst_case
-from prp3mc.errors import BudgetError, InfeasiblePoseError
+from prp3mc.errors import BudgetError, InfeasiblePoseError, ParameterError
 from prp3mc.cli import main
 from prp3mc.sobol.ranking import ranking
 from prp3mc.sobol.saltelli import design_factors as _factors, saltelli_design as _design
@@ -57,10 +57,10 @@ def test_design_is_salibs_sampler_with_groups():
 
 @pytest.mark.parametrize("budget", [PAPER, general_budget()], ids=["paper", "general"])
 def test_vectorised_equals_salib(geometry, region, budget):
-    """Same samples, same bootstrap resamples: the vectorised estimators reproduce SALib's numbers."""
+    """Same replicated designs: the vectorised estimators reproduce SALib's numbers, replicate by replicate."""
     poses = random_poses(region, 2, np.random.default_rng(3))
     groups = {**LEG_GROUPS, "rho_and_theta_1": ["rho_1", "theta_1"]}
-    kw = dict(rng=11, groups=groups, num_resamples=40, conf_level=0.9)
+    kw = dict(rng=11, groups=groups, replicates=4, conf_level=0.9, shapley_permutations=0)
     salib = sobol_indices(geometry, budget, poses, 256, method="salib", **kw)
     vect = sobol_indices(geometry, budget, poses, 256, method="vectorised", workers=2, max_chunk_bytes=1, **kw)
     assert (salib.method, vect.method) == ("salib", "vectorised")
@@ -105,15 +105,16 @@ def test_salib_matches_closed_forms(geometry, region, budget):
 def test_interval_coverage_over_seeds(geometry, region):
     """Coverage of the 95 % intervals over 24 seeds is not below nominal (mean over seeds - 4 SE).
 
-    Scrambled Sobol' points are better than the independent rows the
-    bootstrap assumes, so the intervals are conservative (about 99 %).
+    The Student t interval over 16 independent scramblings is exact for normal
+    replicate estimates; benchmarks/coverage_sobol.py measures it over 200 seeds
+    (and tests/test_coverage.py, slow, bounds it from both sides).
     """
     poses = random_poses(region, 4, np.random.default_rng(8))
     exact = analytic_indices(geometry, PAPER, poses)
     per_seed = []
     for seed in range(24):
         df = with_exact(sobol_indices(geometry, PAPER, poses, 512, rng=seed, outputs=("x", "y", "phi"),
-                                      method="vectorised"), exact)
+                                      method="vectorised", shapley_permutations=0), exact)
         df = df[df["ST_exact"] > 1e-3]
         covered = [(df[k] - df[f"{k}_exact"]).abs() <= df[f"{k}_conf"] for k in ("S1", "ST")]
         per_seed.append(np.mean(np.concatenate(covered)))
@@ -172,19 +173,23 @@ def test_result_frame_and_seed():
     g = Geometry.from_preset("u-shape")
     grid = Region.from_preset("u-shape").grid((3, 2))
     r = sobol_indices(g, PAPER, grid, 128, outputs=("position", "x"))
-    assert r.S1.shape == (2, 3, 2, 15) and r.seed >= 0 and r.bootstrap_seed == r.seed + 1
+    assert r.S1.shape == r.Sh.shape == (2, 3, 2, 15) and r.seed >= 0 and r.replicates == 16
     assert r.names[:12] == PAPER.names and r.kinds[12:] == ("group",) * 3
     df = r.to_frame()
-    assert list(df.columns) == KEYS + ["S1", "S1_conf", "ST", "ST_conf"] and len(df) == 6 * 2 * 15
+    assert list(df.columns) == KEYS + ["S1", "S1_conf", "ST", "ST_conf", "Sh", "Sh_conf"] and len(df) == 6 * 2 * 15
     again = sobol_indices(g, PAPER, grid, 128, rng=r.seed, outputs=("position", "x"))
     np.testing.assert_array_equal(again.ST, r.ST)
+    np.testing.assert_array_equal(again.Sh, r.Sh)
+    none = sobol_indices(g, PAPER, grid, 128, rng=r.seed, outputs=("position", "x"), shapley_permutations=0)
+    assert none.Sh is None and list(none.to_frame().columns) == KEYS + ["S1", "S1_conf", "ST", "ST_conf"]
+    np.testing.assert_array_equal(none.ST, r.ST)
 
 
 def test_result_is_read_only_with_labelled_intervals():
-    """conf_int(level) is S +- z(level) se with se = S_conf / z(conf_level): SALib's interval at conf_level."""
+    """conf_int(level) is S +- t(level, R - 1) se with se = S_conf / t(conf_level, R - 1)."""
     g = Geometry.from_preset("u-shape")
     r = sobol_indices(g, PAPER, [[0, 100, 0], [10, 90, 2]], 64, rng=2, outputs=("x", "position"),
-                      conf_level=0.9, num_resamples=20)
+                      conf_level=0.9, replicates=8)
     with pytest.raises(ValueError):
         r.ST[0, 0, 0] = 1.0
     with pytest.raises(TypeError):
@@ -192,7 +197,8 @@ def test_result_is_read_only_with_labelled_intervals():
     assert "\n" not in repr(r) and len(repr(r)) < 120
     ci = r.conf_int(0.9)
     assert list(ci.columns) == KEYS + ["statistic", "value", "unit", "se", "ci_low", "ci_high", "level"]
-    for key in ("S1", "ST"):
+    assert set(ci["statistic"]) == {"S1", "ST", "Sh"}
+    for key in ("S1", "ST", "Sh"):
         rows = ci[ci["statistic"] == key]
         np.testing.assert_allclose(rows["value"], getattr(r, key).reshape(-1), rtol=0, atol=0)
         np.testing.assert_allclose(rows["ci_high"] - rows["value"], getattr(r, f"{key}_conf").reshape(-1), rtol=1e-12)
@@ -200,24 +206,27 @@ def test_result_is_read_only_with_labelled_intervals():
     wide = r.conf_int(0.99)
     assert (wide["level"] == 0.99).all()
     np.testing.assert_allclose(wide["se"], ci["se"], rtol=0, atol=0)
-    ratio = 2.5758293035489004 / 1.6448536269514722                   # z(0.99) / z(0.9)
+    ratio = 3.4994832973505026 / 1.894578605090005                    # t(0.99, 7) / t(0.9, 7)
     np.testing.assert_allclose(wide["ci_high"] - wide["ci_low"], ratio * (ci["ci_high"] - ci["ci_low"]),
                                rtol=1e-12, atol=1e-15)
-    with pytest.raises(BudgetError, match="level"):
+    with pytest.raises(ParameterError, match="level"):
         r.conf_int(1.0)
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    (dict(n_samples=1000), "power of two"),
-    (dict(outputs=("z",)), "bad outputs"),
-    (dict(method="fast"), "unknown method"),
-    (dict(groups={"g": ["rho_9"]}), "unknown input"),
-    (dict(groups={"g": "rho_1"}), "list of inputs"),
-    (dict(conf_level=1.0), "conf_level"),
+@pytest.mark.parametrize("kwargs, error, message", [
+    (dict(n_samples=1000), ParameterError, "power of two"),
+    (dict(outputs=("z",)), ParameterError, "bad outputs"),
+    (dict(method="fast"), ParameterError, "unknown method"),
+    (dict(groups={"g": ["rho_9"]}), BudgetError, "unknown input"),
+    (dict(groups={"g": "rho_1"}), BudgetError, "list of inputs"),
+    (dict(conf_level=1.0), ParameterError, "conf_level"),
+    (dict(replicates=12), ParameterError, "power of two"),
+    (dict(replicates=64), ParameterError, "too small for 64 replicates"),
+    (dict(shapley_permutations=-1), ParameterError, "shapley_permutations"),
 ])
-def test_bad_arguments(kwargs, message):
+def test_bad_arguments(kwargs, error, message):
     args = dict(n_samples=64, rng=1) | kwargs
-    with pytest.raises(BudgetError, match=message):
+    with pytest.raises(error, match=message):
         sobol_indices(Geometry.from_preset("u-shape"), PAPER, [0, 100, 0], args.pop("n_samples"), **args)
 
 
@@ -241,21 +250,21 @@ def test_ranking_per_pose_and_region(geometry, region):
     row = area.set_index("name").loc["theta_2"]
     k = r.names.index("theta_2")
     assert row["ST"] == pytest.approx(r.ST[..., 3, k].mean()) and row["ST_max"] == r.ST[..., 3, k].max()
-    with pytest.raises(BudgetError, match="same poses"):
+    with pytest.raises(ParameterError, match="same poses"):
         ranking(r, worst_case(geometry, PAPER, grid[:2]), "position")
 
 
 def test_converge_doubles_until_target():
     g = Geometry.from_preset("u-shape")
     result, history = sobol_converge(g, PAPER, [0, 100, 0], target_width=0.03, n_start=256, rng=1,
-                                     outputs=("x", "position"), method="vectorised")
+                                     outputs=("x", "position"), method="vectorised", shapley_permutations=0)
     assert history["converged"].iloc[-1] and not history["converged"].iloc[:-1].any()
     assert list(history["n_samples"]) == [256 * 2**k for k in range(len(history))]
     assert result.n_samples == history["n_samples"].iloc[-1]
     matters = result.ST > 0.05
     assert 2 * result.ST_conf[matters].max() < 0.03
     _, short = sobol_converge(g, PAPER, [0, 100, 0], target_width=1e-4, n_start=64, n_max=128, rng=1,
-                              method="vectorised")
+                              method="vectorised", shapley_permutations=0)
     assert list(short["n_samples"]) == [64, 128] and not short["converged"].any()
 
 
@@ -279,7 +288,8 @@ def test_cli_json_matches_closed_forms(capsys):
     assert set(doc["outputs"]) == {"x", "y", "phi", "position"}
     for entry in doc["outputs"].values():
         assert set(entry) == names
-        assert all(set(v) == {"S1", "S1_conf", "ST", "ST_conf"} for v in entry.values())
+        assert all(set(v) == {"S1", "S1_conf", "ST", "ST_conf", "Sh", "Sh_conf"} for v in entry.values())
+        assert sum(v["Sh"] for k, v in entry.items() if k in PAPER.names) == pytest.approx(1.0, abs=1e-9)
     exact = analytic_indices(Geometry.from_preset("u-shape"), PAPER, pose)
     for row in exact.itertuples():
         got = doc["outputs"][row.output][row.name]

@@ -44,10 +44,12 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import math
 
 import numpy as np
-from scipy import stats
 
+from ..errors import ResourceError
+from ..limits import MEMORY_MARGIN, available_memory, format_bytes
 from ..units import RAD2DEG
 from ..kinematics.geometry import Geometry
 from .classes import ClassMenu
@@ -60,6 +62,29 @@ __all__ = ["Problem", "Search", "least_cost", "QUANTITIES"]
 #: Constrained quantities: worst-case position (mm), worst-case ``|dphi|`` (deg), screened position quantile (mm).
 QUANTITIES = ("position", "phi", "screen")
 _CHUNK_ELEMENTS = 1 << 21   # K x N elements per evaluated block
+
+
+#: Bytes a queued node holds (its class indices, key and tuple): the queue is refused past the memory.
+_NODE_BYTES = 120
+
+
+def _over_limits(search: "Search", queued: int) -> None:
+    """Refuse (ResourceError) a search whose queue outgrows the memory.
+
+    The number of choices of a menu (6^27 for nine families of six classes
+    on three legs) says nothing of what branch and bound examines, which
+    cannot be told before it runs; time is bounded by ``prp3mc --max-hours``
+    (a wall-clock stop), memory here.
+    """
+    if not queued or queued % 4096:
+        return
+    memory = queued * (_NODE_BYTES + 8 * len(search.pb.inputs))
+    if memory > MEMORY_MARGIN * available_memory():
+        choices = math.prod(int(n) for n in search.pb.n_classes)
+        raise ResourceError(f"tolerance allocation over {len(search.pb.inputs)} inputs ({choices:.3g} choices of "
+                            f"classes) needs more than this machine's memory ({format_bytes(memory)} queued): the "
+                            f"search examined {search.nodes} candidates without proving the least cost; give fewer "
+                            "classes or families, or a looser spec")
 
 
 class Problem:
@@ -110,7 +135,8 @@ class Problem:
         self.Ainv = model.Ainv                                                # (N, 3, 3)
         self._absWu = np.abs(model.scale[:, :J].T[:, :, None] * (legs[:, None] == np.arange(3))[:, None, :])  # (J, N, 3)
         self.fixed = _fixed_parts(model, J, k_sigma)
-        self.kq = None if percentile is None else float(np.sqrt(stats.chi2.ppf(percentile / 100.0, 2)))
+        from scipy.stats import chi2  # imported when used: parsing a study imports this module
+        self.kq = None if percentile is None else float(np.sqrt(chi2.ppf(percentile / 100.0, 2)))
         self.n_classes = np.array([len(menu.classes_of(n)) for n in self.inputs])
         M = int(self.n_classes.max())
         table = np.empty((5, J, M))
@@ -353,6 +379,7 @@ class Search:
         counter, heap = itertools.count(), []
 
         def push(A, depth):
+            _over_limits(self, len(heap))
             r_bound, r_cheap = self._ratios(A, depth)
             costs = self.cost_lb(A)
             for k in np.flatnonzero(r_bound <= 1.0):
@@ -378,6 +405,7 @@ class Search:
         counter, heap = itertools.count(), []
 
         def push(A, depth):
+            _over_limits(self, len(heap))
             r_bound, _ = self._ratios(A, depth)
             costs = self.cost_lb(A)
             for k in range(A.shape[0]):

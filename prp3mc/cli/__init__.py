@@ -8,8 +8,9 @@ message on stderr and exit status 1 (2 for usage errors), never a traceback.
 from __future__ import annotations
 
 import argparse
+import ast
 import contextlib
-import gc
+import difflib
 import importlib
 import math
 import os
@@ -17,14 +18,15 @@ import pkgutil
 import signal
 import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 
 from .._rng import check_seed
 from .._version import __version__
-from ..errors import Prp3mcError, Prp3mcWarning
-from ..limits import Estimate, check
-from ..output import claim_output, dumps_json
+from ..errors import OutputExistsError, Prp3mcError, Prp3mcWarning, ResourceError
+from ..limits import Estimate, check, format_bytes, format_seconds
+from ..output import COMMITTED, claim_output, dumps_json
 from ..provenance import spec_record, versions
 
 __all__ = ["main"]
@@ -52,6 +54,70 @@ def add_pose(p: argparse.ArgumentParser) -> None:
                    help="pose: x mm, y mm, phi deg")
 
 
+def add_pose_or_region(p: argparse.ArgumentParser) -> None:
+    """``--pose X Y PHI``, or ``--region R [--grid N]`` for every pose of a grid, written as a tidy table.
+
+    The table (one row per pose; :func:`emit_table`) goes to stdout as CSV,
+    to ``--out FILE.csv``, or into the ``--json`` object as ``rows``.
+    """
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--pose", nargs=3, type=finite_float, metavar=("X", "Y", "PHI"),
+                       help="one pose: x mm, y mm, phi deg")
+    where.add_argument("--region", metavar="R",
+                       help="every pose of an N x N grid over a test region: a preset (u-shape, delta-shape) or a "
+                            "region TOML file (prp3mc init region); writes a table, one row per pose")
+    p.add_argument("--grid", type=positive_int, default=None, metavar="N",
+                   help=f"grid size per side with --region (default {DEFAULT_GRID})")
+    p.add_argument("--out", dest="out_file", default=None, metavar="FILE.csv",
+                   help="with --region: write the table to FILE.csv (default: CSV on stdout)")
+    p.add_argument("--force", action="store_true", help="replace FILE.csv if it exists")
+
+
+#: Grid size per side of ``--region`` when ``--grid`` is not given.
+DEFAULT_GRID = 21
+
+
+def grid_poses(args) -> tuple[np.ndarray, dict]:
+    """The poses (N, 3) of ``--region R --grid N`` and their record for ``inputs``.
+
+    Raises
+    ------
+    Prp3mcError
+        ``--grid`` or ``--out`` without ``--region``, or a region that cannot be read.
+    """
+    from ..kinematics.geometry import Region
+
+    if args.region is None:
+        if args.grid is not None or args.out_file is not None:
+            raise Prp3mcError("--grid and --out go with --region (a table over a grid), not with --pose")
+        return np.asarray(args.pose, dtype=float)[None, :], {}
+    region = Region.load(args.region)
+    n = DEFAULT_GRID if args.grid is None else args.grid
+    record = {"region": spec_record(args.region, region) | {"x_mm": list(region.x_mm), "y_mm": list(region.y_mm),
+                                                          "phi_deg": region.phi_deg}, "grid": n}
+    return region.grid(n).reshape(-1, 3), record
+
+
+def emit_table(args, frame, doc: dict) -> None:
+    """A tidy table (one row per pose, units in the column names): CSV on stdout or ``--out``, or in ``--json``.
+
+    ``doc`` (the command's provenance) goes into the JSON object beside the
+    ``rows``; a CSV carries the table alone.
+    """
+    if args.json:
+        emit_json({"columns": list(frame.columns), "rows": frame.to_dict("records"), **doc})
+    elif args.out_file is not None:
+        from ..output import write_csv
+
+        path = Path(args.out_file)
+        if path.exists() and not args.force:
+            raise OutputExistsError(f"{path} exists: choose another name or pass --force to replace it")
+        write_csv(frame, path)
+        print(f"wrote {path} ({len(frame)} rows)", file=sys.stderr)
+    else:
+        frame.to_csv(sys.stdout, index=False, lineterminator="\n")
+
+
 def add_budget(p: argparse.ArgumentParser) -> None:
     p.add_argument("--budget", required=True, metavar="B", help="preset name (paper) or budget TOML file")
 
@@ -72,8 +138,12 @@ def add_output(p: argparse.ArgumentParser, help: str = "output folder (must not 
 
 
 def within_limits(args, estimate: Estimate) -> Estimate:
-    """Refuse a request that cannot finish on this machine (see :mod:`prp3mc.limits`)."""
-    return check(estimate, max_hours=args.max_hours)
+    """Refuse a request that will not fit in this machine's memory, or in ``--max-gb`` (:mod:`prp3mc.limits`)."""
+    max_gb = getattr(args, "max_gb", None)
+    if max_gb is not None and not estimate.bytes <= max_gb * (1 << 30):
+        raise ResourceError(f"{estimate.what} needs ~{format_bytes(estimate.bytes)} of memory, more than "
+                            f"--max-gb {max_gb:g}: {estimate.hint}")
+    return check(estimate)
 
 
 def add_progress(p: argparse.ArgumentParser) -> None:
@@ -84,12 +154,20 @@ def add_progress(p: argparse.ArgumentParser) -> None:
 
 
 def positive_int(text: str) -> int:
+    return _integer(text, 1, "a positive integer")
+
+
+def nonnegative_int(text: str) -> int:
+    return _integer(text, 0, "an integer >= 0")
+
+
+def _integer(text: str, least: int, what: str) -> int:
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+    if value < least:
+        raise argparse.ArgumentTypeError(f"expected {what}, got {value}")
     return value
 
 
@@ -163,6 +241,8 @@ def provenance(args, geometry=None, budget=None, **inputs) -> dict:
         record["budget"] = spec_record(args.budget, budget) | budget.effects_record()
         if budget.missing_inputs:
             record["budget"]["missing_inputs"] = list(budget.missing_inputs)
+        if budget.correlated:
+            record["budget"]["correlation"] = dict(budget.correlation)
     if getattr(args, "pose", None) is not None:
         record["pose"] = dict(zip(("x_mm", "y_mm", "phi_deg"), map(float, args.pose)))
     out = {"inputs": record | inputs, "versions": versions()}
@@ -179,8 +259,8 @@ def emit_json(obj: dict) -> None:
 #: How Monte Carlo and Sobol take a budget's [effects] (docs, File formats), said under their tables.
 EFFECTS_NOTE = ("Effects: backlash_i and thermal are factors (the approach direction is unknown: delta b_i = "
                 "±h_i/2 with probability 1/2 each; one temperature, uniform over temp_range_C); offsets "
-                "(offset_q_i) and lead scales (scale_i) are known shifts: no variance share, a systematic part "
-                "of the worst case.")
+                "(offset_q_i), lead scales (scale_i) and cyclic screw errors (cyclic_i) are known shifts: no "
+                "variance share, a systematic part of the worst case.")
 
 LEGS = ("leg 1", "leg 2", "leg 3")
 
@@ -195,7 +275,8 @@ def matrix_table(M: np.ndarray, rows=("dx", "dy", "dphi"), cols=LEGS) -> str:
 
 
 def _one_line(text: str) -> str:
-    return " ".join(str(text).split())
+    """``text`` on one line, printable on any stream (a file name that is not UTF-8 shows as escapes)."""
+    return " ".join(str(text).encode("utf-8", "backslashreplace").decode("utf-8").split())
 
 
 class _Parser(argparse.ArgumentParser):
@@ -203,57 +284,129 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {_one_line(message)}\n")
 
 
+def _command_modules() -> list[str]:
+    return [info.name for info in pkgutil.iter_modules(__path__)]
+
+
 def _command_named(argv: list[str]) -> str | None:
-    """The command ``argv`` names (its first word that is no global option), if it is one of ours."""
+    """The command ``argv`` names (its first word that is no global option), if it is one of ours.
+
+    Raises
+    ------
+    SystemExit
+        (status 2, one line) when that word is no command, with the nearest command names.
+    """
     words = iter(argv)
     for word in words:
-        if word == "--max-hours":
+        if word in ("--max-hours", "--max-gb"):
             next(words, None)
         elif not word.startswith("-"):
-            return word if word in {info.name for info in pkgutil.iter_modules(__path__)} else None
+            names = _command_modules()
+            if word in names:
+                return word
+            near = difflib.get_close_matches(word, names, n=3, cutoff=0.6)
+            hint = f": did you mean {' or '.join(near)}?" if near else f" (commands: {', '.join(sorted(names))})"
+            raise SystemExit(_usage_error(f"unknown command {word!r}{hint}"))
     return None
 
 
-def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+def _usage_error(message: str, prog: str = "prp3mc") -> int:
+    """Print a one-line usage error; the exit status 2."""
+    print(f"{prog}: error: {_one_line(message)}", file=sys.stderr)
+    return 2
+
+
+def _unknown_options(argv: list[str], parser: argparse.ArgumentParser) -> None:
+    """Refuse an option no parser knows, suggesting the nearest ones (``--budgte``: did you mean ``--budget``?).
+
+    argparse would first complain that the misspelt option's intended twin is
+    missing; this says what is wrong instead. Abbreviations argparse accepts
+    (a unique prefix) pass.
+
+    Raises
+    ------
+    SystemExit
+        (status 2, one line) on an option that is neither known nor a prefix of a known one.
+    """
+    known = set(parser._option_string_actions)
+    prog = "prp3mc"
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                if name in argv:
+                    known |= set(sub._option_string_actions)
+                    prog = sub.prog
+    for word in argv:
+        if word == "--":
+            break
+        option = word.split("=", 1)[0]
+        if not option.startswith("--") or option in known or any(k.startswith(option) for k in known):
+            continue
+        names = sorted(k[2:] for k in known if k.startswith("--"))     # compared without the dashes all share
+        near = difflib.get_close_matches(option[2:], names, n=2, cutoff=0.7)
+        hint = f": did you mean {' or '.join('--' + n for n in near)}?" if near else f" (see {prog} --help)"
+        raise SystemExit(_usage_error(f"unknown option {option}{hint}", prog))
+
+
+def _command_helps() -> dict[str, str]:
+    """``{command: one-line help}`` read from the command modules' ``@command(...)`` lines, importing none.
+
+    ``prp3mc --help`` (and a bare ``prp3mc``) only lists the commands: reading
+    their decorators from the source keeps it free of numpy's, scipy's and
+    numba's import time (0.05 s instead of seconds).
+    """
+    helps = {}
+    for name in _command_modules():
+        tree = ast.parse(Path(__path__[0], f"{name}.py").read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Call) and getattr(node.func, "id", None) == "command"
+                    and len(node.args) == 2 and all(isinstance(a, ast.Constant) for a in node.args)):
+                helps[node.args[0].value] = node.args[1].value
+    return helps
+
+
+def build_parser(command: str | None = None, *, listing: bool = False) -> argparse.ArgumentParser:
     """The parser of every command, or of ``command`` alone.
 
     Each command lives in the module of its name in this package and
     registers itself on import; with ``command`` only that module is
-    imported, so a command pays for its own dependencies only.
+    imported, so a command pays for its own dependencies only. With
+    ``listing`` no command module is imported: the commands are listed with
+    their help (:func:`_command_helps`) but take no arguments (for
+    ``prp3mc --help``, ``--version`` and a command line naming no command).
     """
-    for info in pkgutil.iter_modules(__path__):
-        if command in (None, info.name):
-            importlib.import_module(f"{__name__}.{info.name}")
+    if listing:
+        entries = {name: (help_text, None) for name, help_text in _command_helps().items()}
+    else:
+        for name in _command_modules():
+            if command in (None, name):
+                importlib.import_module(f"{__name__}.{name}")
+        entries = COMMANDS
     parser = _Parser(prog="prp3mc", description="Error analysis of planar 3-PRP parallel manipulators.")
     parser.add_argument("--version", action="version", version=f"prp3mc {__version__}")
     parser.add_argument("--max-hours", type=positive_float, default=None, metavar="H",
-                        help="refuse requests estimated to take longer (default 24)")
+                        help="stop the run after H hours of wall time, writing nothing (default: no limit)")
+    parser.add_argument("--max-gb", type=positive_float, default=None, metavar="GB",
+                        help="refuse requests estimated to need more memory, GiB (default: what the machine has)")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    for name, (help_text, cls) in COMMANDS.items():
+    for name, (help_text, cls) in sorted(entries.items()):
         if command in (None, name):
             p = sub.add_parser(name, help=help_text, description=help_text)
-            cls.add_arguments(p)
-            p.set_defaults(run=cls.run)
+            if cls is not None:
+                cls.add_arguments(p)
+                p.set_defaults(run=cls.run)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``prp3mc`` console script; returns the exit status.
 
-    Without ``argv`` (the process's own command line, which ends when the
-    command does) the garbage collector is told so: once the command's
-    modules are imported their objects are frozen out of it, and young
-    objects are collected every 10 000 allocations rather than 700 (a
-    discrepancy analysis spent 0.15-0.35 s of its 3-4 s in collections that
-    walked numba's, scipy's and pandas's objects again and again and freed
-    little); every object alive is frozen again before returning, since the
-    interpreter's collections at exit would walk all of them, about 0.4 s.
-    Objects are still released, files closed and ``atexit`` handlers run as usual.
+    Without ``argv`` (the process's own command line) a SIGTERM ends the run as Ctrl-C does.
     """
     if argv is not None:
         return _run(argv)
     status = _run(sys.argv[1:], own_process=True)
-    gc.freeze()
+    _quiet_exit()
     return status
 
 
@@ -268,21 +421,79 @@ class _Terminated(KeyboardInterrupt):
 
 
 def _terminated(signum, frame):
-    raise _Terminated()
+    """SIGTERM and SIGINT of a command's own process: interrupt the run, unless its output is being installed.
+
+    Once the finished folder is moving into place (:data:`prp3mc.output.COMMITTED`)
+    the run is complete: the signal is let pass, and the run ends with exit 0
+    and its folder whole, never with a folder installed and exit 130/143.
+    """
+    if COMMITTED["value"]:
+        return
+    _SIGNALLED["signum"] = signum
+    raise _Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+
+#: The signal that interrupted the current run, if one did: an error raised on the interrupt's way out
+#: (a figure half drawn, a file half written) is reported as the interruption, not as an error of its own.
+_SIGNALLED = {"signum": None}
+
+
+def _stopped(name: str, signum) -> int:
+    """The one line and the exit status of a run stopped by ``signum`` (130 for SIGINT, 143 for SIGTERM)."""
+    terminated = signum == signal.SIGTERM
+    print(f"{name}: {'terminated' if terminated else 'interrupted'}", file=sys.stderr)
+    return 143 if terminated else 130
+
+
+def _quiet_exit() -> None:
+    """Ignore SIGINT and SIGTERM from here to the process's end (interpreter finalisation).
+
+    A signal handled while the interpreter tears down (threads, weak sets,
+    a figure's draw) ended in tracebacks or a fatal error; the command has
+    decided its exit status by now. ``signal.signal`` runs the handler of a
+    signal already pending before it replaces it, so none is lost half-way.
+    """
+    COMMITTED["value"] = True
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, signal.SIG_IGN)
+
+
+class _TimeUp(KeyboardInterrupt):
+    """The ``--max-hours`` limit, raised where the run is, so that it unwinds as after Ctrl-C."""
+
+
+def _time_up(signum, frame):
+    raise _TimeUp()
+
+
+@contextlib.contextmanager
+def _stopping_after(seconds: float):
+    """Raise :class:`_TimeUp` in this (the main) thread after ``seconds`` of wall time inside the block."""
+    previous = signal.signal(signal.SIGALRM, _time_up)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 def _run(argv: list[str], own_process: bool = False) -> int:
     """Parse ``argv`` and run its command: one line on stderr for any refusal, and the exit status."""
     try:
-        args = build_parser(_command_named(argv)).parse_args(argv)
+        named = _command_named(argv)
+        parser = build_parser(named, listing=named is None)
+        _unknown_options(argv, parser)
+        args = parser.parse_args(argv)
     except SystemExit as exc:  # usage errors (exit 2, one line), --help and --version (exit 0)
         return int(exc.code or 0)
-    if own_process:  # see main(); a SIGTERM (timeout, a batch system) ends the run as Ctrl-C does: no leftovers
+    if own_process:  # a SIGTERM (timeout, a batch system) ends the run as Ctrl-C does: no leftovers
         signal.signal(signal.SIGTERM, _terminated)
-        gc.freeze()
-        gc.set_threshold(10_000, *gc.get_threshold()[1:])
+        signal.signal(signal.SIGINT, _terminated)
+        sys.stdout.reconfigure(errors="surrogateescape")  # a file name that is not UTF-8 prints as its own bytes
     name = f"prp3mc {args.command}"
     WARNINGS.clear()
+    COMMITTED["value"], _SIGNALLED["signum"] = False, None
     show = warnings.showwarning
 
     def one_line_warning(message, category, filename, lineno, file=None, line=None):
@@ -298,21 +509,27 @@ def _run(argv: list[str], own_process: bool = False) -> int:
             if getattr(args, "out", None) is not None:  # claimed before any work (see prp3mc.output)
                 stack.enter_context(claim_output(args.out, force=getattr(args, "force", False),
                                                  inputs=_input_files(args)))
+            if args.max_hours is not None:  # entered last, left first: the unwinding is not cut short
+                stack.enter_context(_stopping_after(3600 * args.max_hours))
             args.run(args)
-    except Prp3mcError as exc:
-        print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
-        return 1
-    except MemoryError:
-        print(f"{name}: error: out of memory: use fewer samples or poses", file=sys.stderr)
+    except _TimeUp:
+        print(f"{name}: error: stopped at the --max-hours limit ({format_seconds(3600 * args.max_hours)} of wall "
+              "time): nothing was written", file=sys.stderr)
         return 1
     except KeyboardInterrupt as exc:
-        print(f"{name}: {'terminated' if isinstance(exc, _Terminated) else 'interrupted'}", file=sys.stderr)
-        return 143 if isinstance(exc, _Terminated) else 130
-    except BrokenPipeError:
-        return 0
-    except OSError as exc:  # the file system or the machine, not the request: still one line
-        print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
-        return 1
+        return _stopped(name, signal.SIGTERM if isinstance(exc, _Terminated) else signal.SIGINT)
+    except Exception as exc:
+        if _SIGNALLED["signum"] is not None:   # raised by what the signal interrupted
+            return _stopped(name, _SIGNALLED["signum"])
+        if isinstance(exc, BrokenPipeError):
+            return 0
+        if isinstance(exc, MemoryError):
+            print(f"{name}: error: out of memory: use fewer samples or poses", file=sys.stderr)
+            return 1
+        if isinstance(exc, (Prp3mcError, OSError)):  # OSError: the file system or the machine, still one line
+            print(f"{name}: error: {_one_line(exc)}", file=sys.stderr)
+            return 1
+        raise
     return 0
 
 

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 from .._version import __version__
-from ..kinematics.geometry import REGION_PRESETS
+from ..kinematics.geometry import REGION_PRESETS, Region
 from ..provenance import spec_record
 from ..allocation.optimum import allocate, allocation_front, front_records
 from ..model.budget import Budget
-from ..units import DEG2ARCSEC, MM2UM
+from ..units import DEG2ARCSEC, MM2UM, quantity_text
 from ..limits import allocate_estimate
 from . import (add_geometry, add_json, add_progress, add_seed, command, emit_json, finite_float, positive_float, positive_int,
                provenance, within_limits)
@@ -18,8 +18,9 @@ class AllocateCommand:
     @staticmethod
     def add_arguments(p):
         add_geometry(p)
-        p.add_argument("--region", required=True, choices=tuple(REGION_PRESETS), metavar="R",
-                       help=f"test region preset ({', '.join(REGION_PRESETS)})")
+        p.add_argument("--region", required=True, metavar="R",
+                       help=f"test region: a preset ({', '.join(REGION_PRESETS)}) or a region TOML file "
+                            "(prp3mc init region)")
         p.add_argument("--classes", required=True, metavar="FILE.toml",
                        help="classes file (docs, File formats), or the bundled example: example")
         p.add_argument("--budget", default=None, metavar="B",
@@ -32,8 +33,8 @@ class AllocateCommand:
         p.add_argument("--spec-percentile", type=finite_float, default=None, metavar="Q",
                        help="bound the Q-th percentile of the position error instead of its worst case "
                             "(screened with closed-form moments, confirmed by Monte Carlo)")
-        p.add_argument("--phi-deg", type=finite_float, default=0.0, metavar="P",
-                       help="platform orientation of the region, deg (default 0)")
+        p.add_argument("--phi-deg", type=finite_float, default=None, metavar="P",
+                       help="platform orientation of the region, deg (default: the region's own, 0 for the presets)")
         p.add_argument("--grid", type=positive_int, default=41, metavar="N", help="N x N grid (default 41)")
         p.add_argument("--k-sigma", type=positive_float, default=None, metavar="K",
                        help="bound unbounded (normal) laws as mean ± K·sd")
@@ -49,9 +50,12 @@ class AllocateCommand:
     @staticmethod
     def run(args) -> None:
         budget = None if args.budget is None else Budget.load(args.budget)
+        region = Region.load(args.region)
+        if args.phi_deg is None:
+            args.phi_deg = region.phi_deg
         within_limits(args, allocate_estimate(args.grid ** 2, 12,  # rho, zeta, theta and b of each leg
                                               args.samples if args.spec_percentile is not None else 0))
-        r = allocate(args.geometry, args.classes, args.region, spec_position_um=args.spec_position_um,
+        r = allocate(args.geometry, args.classes, region, spec_position_um=args.spec_position_um,
                      spec_phi_arcsec=args.spec_phi_arcsec, spec_percentile=args.spec_percentile,
                      grid=args.grid, phi_deg=args.phi_deg, k_sigma=args.k_sigma, n_samples=args.samples,
                      rng=args.seed, budget=budget)
@@ -59,14 +63,15 @@ class AllocateCommand:
         if args.front:
             output = "position" if args.spec_position_um is not None else "phi"
             side = {"spec_phi_arcsec": args.spec_phi_arcsec} if output == "position" else {}
-            front = allocation_front(r.geometry, r.menu, args.region, output=output, grid=args.grid,
+            front = allocation_front(r.geometry, r.menu, region, output=output, grid=args.grid,
                                      phi_deg=args.phi_deg, k_sigma=args.k_sigma, progress=args.progress,
                                      budget=budget, **side)
         if args.json:
             doc = r.to_dict()
             if front is not None:
                 doc["front"] = front_records(front)
-            doc.update(provenance(args, r.geometry, budget, classes=spec_record(args.classes, r.menu), region=args.region,
+            doc.update(provenance(args, r.geometry, budget, classes=spec_record(args.classes, r.menu),
+                                  region=args.region if args.region in REGION_PRESETS else spec_record(args.region, region),
                                   grid=args.grid, phi_deg=args.phi_deg, n_poses=int(r.poses.shape[0]),
                                   k_sigma=args.k_sigma, seed=r.seed,
                                   n_samples=args.samples if args.spec_percentile is not None else None))
@@ -90,7 +95,7 @@ def _text(r, args, front) -> str:
         lines.append(f"  {row.input:9s} {row._2:16s} cost {row.cost:8g}   {row.source}")
     if r.fixed is not None:
         lines += ["", f"held fixed (budget {r.fixed.name}): " + ", ".join(
-            f"{k} = {e.value:g} {e.unit}" for k, e in r.fixed.effects.items())]
+            f"{k} = {quantity_text(e.value, e.unit, 'g')}" for k, e in r.fixed.effects.items())]
     lines += ["", f"worst case over the region: position {MM2UM * r.worst_case_position_mm:.3f} µm, "
                   f"|dphi| {DEG2ARCSEC * r.worst_case_phi_deg:.3f} arcsec",
               f"binding: {r.binding} at " + "; ".join(

@@ -6,12 +6,11 @@ from ..measurement.fit.accuracy import MODELS
 from ..measurement.campaign.data import count_rows, read_campaign
 from ..measurement.fit.workflow import STAGES, discrepancy
 from ..progress import Progress
-from ..reports._render import drawing_ahead
 from ..reports.discrepancy_report import report_document, write_report
 from ..model.budget import Budget
-from ..units import MM2UM
-from . import (WARNINGS, add_budget, add_geometry, add_instrument_noise, add_json, add_progress, add_seed, command,
-               emit_json, probability, provenance, within_limits)
+from ..units import MM2UM, quantity_text
+from . import (WARNINGS, add_budget, add_geometry, add_instrument_noise, add_json, add_output, add_progress, add_seed,
+               command, emit_json, probability, provenance, within_limits)
 
 
 @command("discrepancy", "find where model and measurements disagree and name the missing effect")
@@ -20,9 +19,9 @@ class DiscrepancyCommand:
     def add_arguments(p):
         add_geometry(p)
         add_budget(p)
-        p.add_argument("--data", required=True, metavar="CSV", help="measurement campaign CSV (docs, File formats)")
-        p.add_argument("--out", required=True, metavar="DIR", help="report folder (discrepancy.json, report.html)")
-        p.add_argument("--force", action="store_true", help="replace an existing --out folder")
+        p.add_argument("--data", required=True, metavar="CSV",
+                       help="measurement campaign CSV (docs, File formats), or the bundled one: example")
+        add_output(p, help="report folder (discrepancy.json, report.html)")
         add_instrument_noise(p)
         p.add_argument("--alpha", type=probability, default=0.01, metavar="A",
                        help="family-wise level of the naming tests (default 0.01)")
@@ -44,15 +43,14 @@ class DiscrepancyCommand:
         campaign = read_campaign(args.data, geometry)
         within_limits(args, discrepancy_estimate(campaign.n_measurements, campaign.n_poses,
                                                  int(campaign.repeats.max()), n_inputs=d))
-        # the figures' process imports matplotlib while the analysis runs, where a core is idle
-        with Progress(len(STAGES) + 1, "discrepancy", args.progress) as bar, drawing_ahead() as ahead:
+        with Progress(len(STAGES) + 1, "discrepancy", args.progress) as bar:
             result = discrepancy(geometry, budget, campaign, instrument_sigma_mm=args.instrument_sigma_mm,
                                  instrument_sigma_deg=args.instrument_sigma_deg,
                                  registration=not args.no_registration, alpha=args.alpha,
                                  alpha_unexplained=args.alpha_unexplained, outlier_rate=args.outlier_rate,
                                  progress=bar, rng=args.seed)
             record = provenance(args, geometry, budget)["inputs"]
-            folder = write_report(result, args.out, force=args.force, inputs=record, warnings=WARNINGS, ahead=ahead)
+            folder = write_report(result, args.out, force=args.force, inputs=record, warnings=WARNINGS)
             bar.update(label="discrepancy: report")
         if args.json:
             emit_json(report_document(result, record, WARNINGS))
@@ -72,14 +70,20 @@ def headline(result) -> list[str]:
         lines.append(f"{len(result.outliers)} gross error(s) set aside (data rows {rows}; false-alarm rate "
                      f"{result.outlier_rule['family_wise_rate']:g} over all rows)")
     for n in result.nuisance:
+        alias = " (union over the aliases of the named effects)" if "by_alias" in n else ""
         lines.append(f"nuisance {n['name']} = {n['value']:.4g} {n['unit']}  95% CI [{n['ci95'][0]:.4g}, "
-                     f"{n['ci95'][1]:.4g}]")
+                     f"{n['ci95'][1]:.4g}]{alias}")
     rep = result.repeatability
-    lines.append(f"repeatable fraction {rep['repeatable_fraction']:.2f}  95% CI [{rep['ci95'][0]:.2f}, "
-                 f"{rep['ci95'][1]:.2f}]")
+    if rep["repeatable_fraction"] is None:
+        lines.append(f"repeatable fraction not testable: {rep['not_testable']}")
+    else:
+        lines.append(f"repeatable fraction {rep['repeatable_fraction']:.2f}  95% CI [{rep['ci95'][0]:.2f}, "
+                     f"{rep['ci95'][1]:.2f}]")
     for e in result.named_effects:
         alias = f" (not separable from {', '.join(e.aliases)})" if e.aliases else ""
-        lines.append(f"named {e.name} = {e.value:.4g} {e.unit}  95% CI [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]{alias}")
+        phase = f", phase {e.phase_deg:.1f} deg" if e.phase_deg is not None else ""
+        lines.append(f"named {e.name} = {quantity_text(e.value, e.unit)}  95% CI [{e.ci95[0]:.4g}, {e.ci95[1]:.4g}]"
+                     f"{phase}{alias}")
     if not result.named_effects:
         lines.append("named nothing: the model misses nothing this campaign can see")
     if result.confounded_with_registration:
@@ -92,6 +96,8 @@ def headline(result) -> list[str]:
                      f"{'converged' if lin['converged'] else 'NOT converged'}")
     verdict = ("closed" if g["closed"] else
                f"not closed: UNEXPLAINED disagreement remains ({g['deciding_channel'].replace('_', ' ')})")
+    if g.get("not_tested"):
+        verdict += "; the dispersion channels were not tested (one visit per pose: nothing to compare repeats with)"
     lines.append(f"gap {g['before']:.3g} -> {g['after']:.3g} (null level <= 1, closed at <= {g['closed_at']:.2g}): "
                  f"{verdict}")
     lines.append(f"verdict: {result.verdict['text']}")

@@ -3,10 +3,11 @@
 from importlib import resources
 from pathlib import Path
 
-from ..output import OutputExistsError, write_text
+from ..errors import OutputExistsError
+from ..output import write_text
 from . import command
 
-KINDS = ("geometry", "budget", "study", "classes")
+KINDS = ("geometry", "budget", "study", "classes", "region")
 
 
 def template(kind: str) -> str:
@@ -14,7 +15,7 @@ def template(kind: str) -> str:
     return resources.files("prp3mc").joinpath(f"data/templates/{kind}.toml").read_text(encoding="utf-8")
 
 
-@command("init", "write a commented template file (geometry, budget, study or allocation classes)")
+@command("init", "write a commented template file (geometry, budget, study, allocation classes or region)")
 class InitCommand:
     @staticmethod
     def add_arguments(p):

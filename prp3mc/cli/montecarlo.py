@@ -1,26 +1,30 @@
-"""``prp3mc montecarlo``: Monte Carlo statistics of the pose error at one pose."""
+"""``prp3mc montecarlo``: Monte Carlo statistics of the pose error at one pose or over a grid."""
+
+import pandas as pd
 
 from .._version import __version__
 from ..model.budget import Budget
 from ..kinematics.geometry import Geometry
 from ..limits import montecarlo_estimate
 from ..montecarlo.propagation import monte_carlo
+from ..kinematics.chain import check_poses
+from ..units import probability_text
 from ..model.validity import check_linearity
-from . import (EFFECTS_NOTE, provenance, add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
-               emit_json, nonnegative_float, within_limits)
+from . import (EFFECTS_NOTE, provenance, add_budget, add_geometry, add_json, add_pose_or_region, add_progress,
+               add_sampling, command, emit_json, emit_table, grid_poses, nonnegative_float, within_limits)
 
 
 def _pkey(p: float) -> str:
     return f"p{p:g}"
 
 
-@command("montecarlo", "Monte Carlo statistics of the pose error at one pose")
+@command("montecarlo", "Monte Carlo statistics of the pose error at one pose or over a region")
 class MonteCarloCommand:
     @staticmethod
     def add_arguments(p):
         add_geometry(p)
         add_budget(p)
-        add_pose(p)
+        add_pose_or_region(p)
         add_sampling(p, default_samples=100_000)
         p.add_argument("--tolerance-mm", type=nonnegative_float, default=None, metavar="T",
                        help="also report P(position error > T)")
@@ -32,8 +36,17 @@ class MonteCarloCommand:
     @staticmethod
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
-        within_limits(args, montecarlo_estimate(args.samples, 1, len(budget.factors) + 1))
-        check_linearity(geometry, budget, args.pose)
+        poses, where = grid_poses(args)
+        if args.region is None:   # a refused pose before any warning about the analysis
+            check_poses(geometry, poses)
+        within_limits(args, montecarlo_estimate(args.samples, poses.shape[0], len(budget.factors) + 1))
+        check_linearity(geometry, budget, poses)
+        if args.region is not None:
+            r = monte_carlo(geometry, budget, poses, args.samples, rng=args.seed, tolerance_mm=args.tolerance_mm,
+                            progress=args.progress)
+            emit_table(args, _table(r, poses), provenance(args, geometry, budget, seed=r.seed,
+                                                          n_samples=r.n_samples, **where))
+            return
         r = monte_carlo(geometry, budget, args.pose, args.samples, rng=args.seed,
                         tolerance_mm=args.tolerance_mm, exact_check_poses=1 if args.exact_check else 0,
                         progress=args.progress)
@@ -80,9 +93,8 @@ class MonteCarloCommand:
                          f"{3600 * r.phi_pct[q]:16.3f}")
         lines.append(f"{'max':14s}{1e3 * r.position_max:14.3f}{'':25s}{3600 * r.phi_max:13.3f}")
         if r.exceed_prob is not None:
-            lo, hi = r.exceed_ci
-            lines.append(f"\nP(position error > {args.tolerance_mm:g} mm) = {float(r.exceed_prob):.4g} "
-                         f"[{lo:.4g}, {hi:.4g}]")
+            lines.append(f"\nP(position error > {args.tolerance_mm:g} mm) = "
+                         f"{probability_text(float(r.exceed_prob), r.exceed_ci)} (95% CI)")
         if budget.effects:
             lines.append("\n" + EFFECTS_NOTE)
         if r.linearization is not None:
@@ -90,3 +102,21 @@ class MonteCarloCommand:
             lines.append(f"\nExact vs linear model ({int(row['n_samples'])} samples): max "
                          f"{row['position_max_um']:.4f} µm, RMS {row['position_rms_um']:.4f} µm")
         print("\n".join(lines))
+
+
+def _table(r, poses) -> pd.DataFrame:
+    """One row per pose: mean and sd of dx, dy, dphi, the percentiles and maximum of the position error and
+    |dphi| with their 95 % intervals, and P(position error > T) with its interval when asked (mm, deg)."""
+    cols = {"x_mm": poses[:, 0], "y_mm": poses[:, 1], "phi_deg": poses[:, 2]}
+    for k, name in enumerate(("dx_mm", "dy_mm", "dphi_deg")):
+        cols[f"mean_{name}"], cols[f"sd_{name}"] = r.mean[:, k], r.std[:, k]
+    for what, pct, ci, unit in (("position", r.position_pct, r.position_pct_ci, "mm"),
+                                ("phi_abs", r.phi_pct, r.phi_pct_ci, "deg")):
+        for q, p in enumerate(r.percentiles):
+            cols[f"{what}_{_pkey(p)}_{unit}"] = pct[:, q]
+            cols[f"{what}_{_pkey(p)}_ci95_lo_{unit}"], cols[f"{what}_{_pkey(p)}_ci95_hi_{unit}"] = ci[:, q, 0], ci[:, q, 1]
+    cols["position_max_mm"], cols["phi_abs_max_deg"] = r.position_max, r.phi_max
+    if r.exceed_prob is not None:
+        cols["exceed_probability"] = r.exceed_prob
+        cols["exceed_ci95_lo"], cols["exceed_ci95_hi"] = r.exceed_ci[..., 0], r.exceed_ci[..., 1]
+    return pd.DataFrame(cols)

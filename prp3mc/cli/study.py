@@ -4,15 +4,15 @@ import sys
 import time
 
 from ..errors import Prp3mcError
-from ..limits import study_estimate
-from ..output import figure_formats
+from ..limits import allocate_estimate, study_estimate
+from ..output import figure_formats, table_formats
 from ..units import MM2UM
 from ..reports.study_report import write_study
 from ..study.distributed import parse_scheduler
 from ..study.reader import Study, bundled_studies
 from ..study.runner import run_study
 from ..model.validity import check_linearity
-from . import WARNINGS, add_progress, add_seed, command, within_limits
+from . import WARNINGS, add_output, add_progress, add_seed, command, within_limits
 
 #: Configurations named in the closing line; a sweep's best ones beyond that are in the report.
 _NAMED = 4
@@ -24,8 +24,7 @@ class StudyCommand:
     def add_arguments(p):
         p.add_argument("study", metavar="FILE.toml",
                        help=f"study file, or a bundled study: {', '.join(bundled_studies())}")
-        p.add_argument("--out", required=True, metavar="DIR", help="output folder (must not exist)")
-        p.add_argument("--force", action="store_true", help="replace DIR if it exists")
+        add_output(p)
         add_seed(p, help="override the study's seed")
         p.add_argument("--quick", action="store_true",
                        help="reduced grids and sample sizes (a smoke test, as the golden regression files)")
@@ -34,8 +33,9 @@ class StudyCommand:
                             "tcp://HOST:PORT (an existing scheduler); needs pip install 'prp3mc[dask]'. "
                             "Default: in this process. The numbers do not depend on it")
         p.add_argument("--formats", default="png", metavar="LIST",
-                       help="figure files to write, comma-separated among png, svg (default png; "
-                            "the report embeds the PNG either way)")
+                       help="files to write, comma-separated: figures as png and/or svg (default png; the report "
+                            "embeds the PNG either way), tables as CSV and with xlsx also one workbook "
+                            "(needs pip install 'prp3mc[xlsx]')")
         add_progress(p)
 
     @staticmethod
@@ -46,17 +46,19 @@ class StudyCommand:
         study = Study.load(args.study)
         if args.quick:
             study = study.reduced()
-        formats = figure_formats(args.formats)
+        formats = figure_formats(args.formats) + table_formats(args.formats)[1:]   # refused before the run
         within_limits(args, study_estimate(study))
-        if not study.sweep:  # a sweep's base configuration need not be feasible: its combinations are checked
-            for c in study.configurations:
-                check_linearity(c.geometry, study.budget, c.region.grid((3, 3)))
+        if study.allocation is not None:   # the memory of each configuration's allocation (one after another)
+            nx, ny = study.allocation.grid or study.worstcase_grid
+            within_limits(args, allocate_estimate(nx * ny, len(study.budget.factors), study.allocation.samples
+                                                  if study.allocation.spec_percentile is not None else 0))
         result = run_study(study, rng=args.seed, progress=args.progress, scheduler=args.scheduler)
         if not result.configurations:
             first = result.skipped[0]
             raise Prp3mcError(f"study {study.name}: none of its {len(result.skipped)} configurations ran; "
                               f"{first.name}: {first.reason}")
-        report = write_study(result, args.out, force=args.force, formats=formats, warnings=WARNINGS)
+        report = write_study(result, args.out, force=args.force, formats=formats, warnings=WARNINGS,
+                             progress=args.progress)
         worst = result.to_frame().query("output == 'position' and statistic == 'worst_case'")
         span = worst.pivot(index="configuration", columns="aggregate", values="value") * MM2UM
         names = (list(span.sort_values("max").index[:_NAMED]) if study.sweep

@@ -1,20 +1,24 @@
-"""``prp3mc worstcase``: exact maximum of the linear model over the budget's box."""
+"""``prp3mc worstcase``: exact maximum of the linear model over the budget's box, at a pose or over a grid."""
+
+import pandas as pd
 
 from .._version import __version__
 from ..model.budget import Budget
 from ..kinematics.geometry import Geometry
+from ..kinematics.chain import check_poses
 from ..model.validity import check_linearity
-from ..worstcase.envelope import worst_case
-from . import provenance, add_budget, add_geometry, add_json, add_pose, command, emit_json, positive_float
+from ..worstcase.envelope import CORRELATION_NOTE, worst_case
+from . import (provenance, add_budget, add_geometry, add_json, add_pose_or_region, command, emit_json, emit_table,
+               grid_poses, positive_float)
 
 
-@command("worstcase", "exact worst-case pose error of the linear model at one pose")
+@command("worstcase", "exact worst-case pose error of the linear model at one pose or over a region")
 class WorstCaseCommand:
     @staticmethod
     def add_arguments(p):
         add_geometry(p)
         add_budget(p)
-        add_pose(p)
+        add_pose_or_region(p)
         p.add_argument("--k-sigma", type=positive_float, default=None, metavar="K",
                        help="bound unbounded (normal) laws as mean ± K·sd")
         add_json(p)
@@ -22,7 +26,17 @@ class WorstCaseCommand:
     @staticmethod
     def run(args) -> None:
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
-        check_linearity(geometry, budget, args.pose)
+        poses, where = grid_poses(args)
+        if args.region is None:   # a refused pose before any warning about the analysis
+            check_poses(geometry, poses)
+        check_linearity(geometry, budget, poses)
+        if args.region is not None:
+            wc = worst_case(geometry, budget, poses, k_sigma=args.k_sigma)
+            frame = pd.DataFrame({"x_mm": poses[:, 0], "y_mm": poses[:, 1], "phi_deg": poses[:, 2],
+                                  "position_mm": wc.position_mm, "dx_abs_mm": wc.x_mm, "dy_abs_mm": wc.y_mm,
+                                  "dphi_abs_deg": wc.phi_deg})
+            emit_table(args, frame, provenance(args, geometry, budget, k_sigma=args.k_sigma, **where))
+            return
         wc = worst_case(geometry, budget, args.pose, k_sigma=args.k_sigma)
         frame = wc.contributions_frame("position")
         if args.json:
@@ -32,6 +46,7 @@ class WorstCaseCommand:
                 "maximizer": {q: wc.maximizer(q) for q in ("position", "phi", "x", "y")},
                 "position_contributions_mm": dict(zip(frame["term"], frame["contribution"].astype(float))),
                 "k_sigma": args.k_sigma, "prp3mc_version": __version__,
+                **({"correlation": CORRELATION_NOTE} if budget.correlated else {}),
                 **provenance(args, geometry, budget, k_sigma=args.k_sigma),
             })
             return
@@ -57,7 +72,10 @@ class WorstCaseCommand:
                          f"({100 * row['share']:5.1f} %)")
         if args.k_sigma is not None:
             lines.append(f"Unbounded laws bounded at mean ± {args.k_sigma:g} sd.")
+        if budget.correlated:
+            lines.append(CORRELATION_NOTE)
         if budget.effects:
             lines.append("Effects: backlash_i over ±h_i/2 and thermal over temp_range_C (their drivers are "
-                         "unknown at a pose); offsets (offset_q_i) and lead scales (scale_i) are known shifts.")
+                         "unknown at a pose); offsets (offset_q_i), lead scales (scale_i) and cyclic screw "
+                         "errors (cyclic_i) are known shifts.")
         print("\n".join(lines))

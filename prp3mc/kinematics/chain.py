@@ -20,6 +20,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import ConvergenceError, InfeasiblePoseError
+from .formulas import a_row, adjugate3, dot, leg_ik, offset_vector, perp_dot, turn
 from .geometry import Geometry
 
 __all__ = [
@@ -71,11 +72,15 @@ class Trig(NamedTuple):
 
     def dot(self, u: str, v: str) -> np.ndarray:
         """``u . v`` for two of the vectors named by letter, e.g. ``dot("l", "k")``."""
-        return getattr(self, "c" + u) * getattr(self, "c" + v) + getattr(self, "s" + u) * getattr(self, "s" + v)
+        return dot(*self.of(u), *self.of(v))
 
     def perp_dot(self, u: str, v: str) -> np.ndarray:
         """``(E u) . v`` = sin(angle(v) - angle(u))."""
-        return getattr(self, "c" + u) * getattr(self, "s" + v) - getattr(self, "s" + u) * getattr(self, "c" + v)
+        return perp_dot(*self.of(u), *self.of(v))
+
+    def of(self, u: str) -> tuple[np.ndarray, np.ndarray]:
+        """Cosine and sine of the vector named by letter."""
+        return getattr(self, "c" + u), getattr(self, "s" + u)
 
 
 def legs_first(v, ndim: int) -> np.ndarray:
@@ -105,8 +110,8 @@ def trig(geometry: Geometry, phi_rad, offsets: dict | None = None) -> Trig:
         return np.broadcast_to(np.cos(t), shape), np.broadcast_to(np.sin(t), shape)
 
     def turned(t0):  # cos and sin of t0 + phi by the addition formulas: trig only on t0
-        c0, s0 = np.cos(t0), np.sin(t0)
-        return np.broadcast_to(c0 * cp - s0 * sp, shape), np.broadcast_to(s0 * cp + c0 * sp, shape)
+        c, s = turn(np.cos(t0), np.sin(t0), cp, sp)
+        return np.broadcast_to(c, shape), np.broadcast_to(s, shape)
 
     t_j = ang["alpha"] + ang["beta"]
     t_k = t_j + ang["gamma"]
@@ -145,16 +150,13 @@ def _offset_vector(geometry: Geometry, tr: Trig, off: dict | None = None):
     off = off or {}
     nd = tr.cl.ndim - 1
     a, c, e = (legs_first(geometry.rad(k), nd) + legs_first(off.get(k, 0.0), nd) for k in ("a", "c", "e"))
-    return a * tr.ci + c * tr.ck + e * tr.cm, a * tr.si + c * tr.sk + e * tr.sm
+    return offset_vector(a, c, e, tr.ci, tr.si, tr.ck, tr.sk, tr.cm, tr.sm)
 
 
 def ik_trig(geometry: Geometry, x: np.ndarray, y: np.ndarray, tr: Trig) -> tuple[np.ndarray, np.ndarray]:
     """Eq. (2): slider positions b and guide lengths d (3, ...) at positions x, y (...) in mm."""
     ox, oy = _offset_vector(geometry, tr)
-    rx, ry = x - ox, y - oy
-    b = (rx * tr.sl - ry * tr.cl) / (tr.cj * tr.sl - tr.sj * tr.cl)
-    d = (rx * tr.sj - ry * tr.cj) / (tr.cl * tr.sj - tr.sl * tr.cj)
-    return b, d
+    return leg_ik(x - ox, y - oy, tr.cj, tr.sj, tr.cl, tr.sl)
 
 
 class Frame(NamedTuple):
@@ -175,12 +177,8 @@ class Frame(NamedTuple):
 
 def _inv3(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Inverse and determinant of 3x3 matrices stored as (3, 3, ...), by cofactors."""
-    (a, b, c), (d, e, f), (g, h, i) = A
-    inv = np.empty_like(A)
-    inv[0, 0], inv[1, 0], inv[2, 0] = e * i - f * h, f * g - d * i, d * h - e * g
-    inv[0, 1], inv[1, 1], inv[2, 1] = c * h - b * i, a * i - c * g, b * g - a * h
-    inv[0, 2], inv[1, 2], inv[2, 2] = b * f - c * e, c * d - a * f, a * e - b * d
-    det = a * inv[0, 0] + b * inv[1, 0] + c * inv[2, 0]
+    *adj, det = adjugate3(*A.reshape((9,) + A.shape[2:]))
+    inv = np.stack(adj).reshape(A.shape)
     with np.errstate(divide="ignore", invalid="ignore"):
         inv /= det
     return inv, det
@@ -191,10 +189,8 @@ def frame(geometry: Geometry, poses: np.ndarray) -> Frame:
     phi = np.deg2rad(poses[..., 2])
     tr = trig(geometry, phi)
     b, d = ik_trig(geometry, poses[..., 0], poses[..., 1], tr)
-    nd = phi.ndim
-    w = -(d + legs_first(geometry.rad("c"), nd) * tr.dot("l", "k")
-          + legs_first(geometry.rad("e"), nd) * tr.dot("l", "m"))
-    A = np.stack([-tr.sl, tr.cl, w], axis=1)                        # (3 legs, 3 columns, ...)
+    c, e = (legs_first(geometry.rad(k), phi.ndim) for k in ("c", "e"))
+    A = np.stack(a_row(c, d, e, tr.ck, tr.sk, tr.cl, tr.sl, tr.cm, tr.sm), axis=1)  # (3 legs, 3 columns, ...)
     Ainv, _ = _inv3(A)
     # condition of A D^-1 (unit columns): ||A D^-1||_F ||D A^-1||_F = sqrt(3) ||D A^-1||_F
     col = np.sqrt(np.sum(A * A, axis=0))                             # (3 columns, ...)
@@ -266,7 +262,11 @@ def _reasons(geometry: Geometry, fr: Frame, limits: Limits) -> dict[str, np.ndar
     nd = fr.b.ndim - 1
     lo, hi = legs_first(geometry.stroke_mm[:, 0], nd), legs_first(geometry.stroke_mm[:, 1], nd)
     tol = limits.stroke_tol_mm
-    masks = {
+    masks = {   # singular first: there b, d and A are round-off or infinite, and the other reasons nonsense
+        "parallel": ~(np.abs(fr.transmission) > _SINGULAR),
+        "singular": np.broadcast_to((~(fr.condition < 1.0 / _SINGULAR) | _guides_parallel(fr.tr))
+                                    & (np.abs(fr.b) < _FAR).all(axis=0) & (np.abs(fr.d) < _FAR).all(axis=0),
+                                    fr.b.shape),   # a pose far out (1e300 mm) leaves the stroke: said so
         "below": fr.b < lo - tol,
         "above": fr.b > hi + tol,
         "d": ~(fr.d > 0),
@@ -274,6 +274,28 @@ def _reasons(geometry: Geometry, fr: Frame, limits: Limits) -> dict[str, np.ndar
         "condition": np.broadcast_to(~(fr.condition <= limits.max_condition), fr.b.shape),
     }
     return {k: np.moveaxis(v, 0, -1) for k, v in masks.items()}
+
+
+#: |sin| of the angle between a guide and its slider, or 1 / cond(A), below which a pose is singular (not near one).
+_SINGULAR = 1e-9
+#: Joint values (mm) beyond any machine: a pose that needs them is out of stroke, whatever A's round-off says.
+_FAR = 1e12
+
+
+def _guides_parallel(tr: Trig) -> np.ndarray:
+    """Mask (...) of poses where the three guides l_i are parallel (A's position columns have rank 1)."""
+    sines = [np.abs(tr.cl[i] * tr.sl[j] - tr.sl[i] * tr.cl[j]) for i, j in ((0, 1), (0, 2), (1, 2))]
+    return np.maximum.reduce(sines) < _SINGULAR
+
+
+def _dependent_legs(A: np.ndarray) -> str:
+    """Which legs of a singular A (3, 3) constrain the platform alike, for the refusal."""
+    if np.linalg.matrix_rank(A[:, :2], tol=_SINGULAR) < 2:   # unit vectors (-sin l_i, cos l_i) in the rows
+        return "the guides of legs 1, 2 and 3 are parallel: the platform can slide along them"
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        if np.linalg.norm(np.cross(A[i], A[j])) <= _SINGULAR * np.linalg.norm(A[i]) * np.linalg.norm(A[j]):
+            return f"legs {i + 1} and {j + 1} constrain the platform alike (identical or mirrored legs)"
+    return "the three legs' constraints are linearly dependent"
 
 
 def feasible(geometry: Geometry, poses, limits: Limits = DEFAULT_LIMITS) -> np.ndarray:
@@ -306,15 +328,19 @@ def refusal(geometry: Geometry, pose: np.ndarray, index: tuple, reason: str, leg
             limits: Limits = DEFAULT_LIMITS) -> str:
     """The one-line message refusing ``pose`` (3,) found at ``index`` of its batch.
 
-    ``reason`` is one of ``below, above, d, transmission, condition`` (the
+    ``reason`` is one of ``parallel, singular, below, above, d, transmission, condition`` (the
     order in which they are tested), ``leg`` the 0-based leg breaking it.
     """
     with np.errstate(all="ignore"):
         fr = frame(geometry, np.asarray(pose, dtype=float))
+        why = _dependent_legs(fr.A) if reason == "singular" else ""
     x, y, phi = pose
     at = f"pose ({x:g} mm, {y:g} mm, {phi:g} deg) {_where(index)}"
     lo, hi = geometry.stroke_mm[leg]
     msg = {
+        "parallel": (f"is singular: leg {leg + 1}'s guide is parallel to its slider (l_{leg + 1} along "
+                     f"j_{leg + 1}), so b_{leg + 1} is undetermined: change theta_{leg + 1}, gamma_{leg + 1} or phi"),
+        "singular": f"is singular: A is not invertible ({why}): check the geometry",
         "below": f"leaves leg {leg + 1}'s stroke: b_{leg + 1} = {fr.b[leg]:.6g} mm < {lo:g} mm",
         "above": f"leaves leg {leg + 1}'s stroke: b_{leg + 1} = {fr.b[leg]:.6g} mm > {hi:g} mm",
         "d": f"has d_{leg + 1} = {fr.d[leg]:.6g} mm <= 0 on leg {leg + 1}",
@@ -377,7 +403,11 @@ def solve_closure(geometry: Geometry, b: np.ndarray, pose0_rad: np.ndarray,
         res = tr.cl * wy - tr.sl * wx
         dphi = -(tr.cl * wx + tr.sl * wy) - c * tr.dot("l", "k") - e * tr.dot("l", "m")
         jac = np.moveaxis(np.stack([-tr.sl, tr.cl, dphi], axis=1), (0, 1), (-2, -1))   # (..., 3, 3)
-        return np.linalg.solve(jac, -np.moveaxis(res, 0, -1)[..., None])[..., 0]
+        try:
+            return np.linalg.solve(jac, -np.moveaxis(res, 0, -1)[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            raise ConvergenceError("closure equations are singular at a pose (a guide parallel to its slider "
+                                   "or dependent legs)") from None
 
     for _ in range(max_iter):
         step = newton_step()

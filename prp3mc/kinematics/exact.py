@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import BudgetError
+from ..errors import ParameterError
 from ..units import MM2UM
 from .geometry import Geometry
 from .chain import as_poses, batch_last, frame, solve_closure, validated_frame
@@ -21,13 +21,13 @@ __all__ = ["exact_pose_error", "linear_pose_error", "linearization_error_um"]
 def _to_internal(errors: dict, shape: tuple) -> tuple[dict, np.ndarray | None]:
     unknown = sorted(set(errors) - set(FAMILIES) - {"zeta"})
     if unknown:
-        raise BudgetError(f"unknown error famil{'y' if len(unknown) == 1 else 'ies'} {', '.join(unknown)} "
+        raise ParameterError(f"unknown error famil{'y' if len(unknown) == 1 else 'ies'} {', '.join(unknown)} "
                           f"(known: {', '.join(FAMILIES)}, zeta)")
     out = {}
     for q, v in errors.items():
         arr = np.asarray(v, dtype=float)
         if not np.all(np.isfinite(arr)):
-            raise BudgetError(f"error {q!r} contains NaN or infinity")
+            raise ParameterError(f"error {q!r} contains NaN or infinity")
         arr = np.broadcast_to(arr, shape + (3,))
         out[q] = arr if q in LENGTH_FAMILIES else np.deg2rad(arr)
     zeta = out.pop("zeta", None)

@@ -31,6 +31,8 @@ ANGLES = ("alpha", "beta", "gamma", "theta", "psi")
 
 _LEG_KEYS = ("a_mm", "alpha_deg", "beta_deg", "gamma_deg", "theta_deg",
              "c_mm", "e_mm", "psi_deg", "stroke_mm")
+#: Optional per-leg keys: the lead of the slider's screw (a cyclic screw error repeats with it).
+_OPTIONAL_LEG_KEYS = ("lead_mm",)
 
 
 def _triple(name: str, values: Any) -> tuple[float, float, float]:
@@ -58,6 +60,10 @@ class Geometry:
         part of gamma_i only, phi is added by the model).
     stroke : sequence of 3 (lo, hi) pairs
         Travel of the actuated slider b_i, mm, lo < hi.
+    lead : sequence of 3 (float or None)
+        Lead p_i of each slider's lead screw, mm (> 0), or None where it is
+        not known: the cyclic screw error ``cyclic_i`` repeats with it and
+        needs it (optional; the kinematics do not use it).
     name : str
         Label used in reports.
 
@@ -77,6 +83,7 @@ class Geometry:
     psi: tuple[float, float, float]
     stroke: tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
     name: str = "custom"
+    lead: tuple = (None, None, None)
     _arrays: dict = field(init=False, repr=False, compare=False, hash=False)
 
     def __post_init__(self) -> None:
@@ -94,9 +101,11 @@ class Geometry:
             if not lo < hi:
                 raise GeometryError(f"stroke of leg {i}: lower limit {lo} mm must be below upper limit {hi} mm")
         object.__setattr__(self, "stroke", tuple((float(lo), float(hi)) for lo, hi in stroke))
+        object.__setattr__(self, "lead", _leads(self.lead))
         arrays = {key: np.array(getattr(self, key)) for key in LENGTHS}
         arrays.update({key: np.deg2rad(getattr(self, key)) for key in ANGLES})
         arrays["stroke"] = stroke
+        arrays["lead"] = np.array([np.nan if p is None else p for p in self.lead])
         for arr in arrays.values():
             arr.setflags(write=False)
         object.__setattr__(self, "_arrays", arrays)
@@ -110,9 +119,14 @@ class Geometry:
         """Strokes as a read-only array of shape (3, 2), mm."""
         return self._arrays["stroke"]
 
+    @property
+    def lead_mm(self) -> np.ndarray:
+        """Leads of the sliders' screws as a read-only array of shape (3,), mm; NaN where not known."""
+        return self._arrays["lead"]
+
     def replace(self, **changes: Any) -> "Geometry":
         """Return a copy with some parameters changed (degrees for angles)."""
-        values = {key: getattr(self, key) for key in LENGTHS + ANGLES + ("stroke", "name")}
+        values = {key: getattr(self, key) for key in LENGTHS + ANGLES + ("stroke", "name", "lead")}
         values.update(changes)
         return Geometry(**values)
 
@@ -142,7 +156,8 @@ class Geometry:
         """Build from the TOML layout: ``name`` and three ``[[leg]]`` tables.
 
         Each leg table holds ``a_mm, alpha_deg, beta_deg, gamma_deg, theta_deg,
-        c_mm, e_mm, psi_deg, stroke_mm = [lo, hi]``.
+        c_mm, e_mm, psi_deg, stroke_mm = [lo, hi]`` and optionally
+        ``lead_mm``, the lead of the slider's screw (> 0).
         """
         legs = document.get("leg")
         if not isinstance(legs, list) or len(legs) != 3 or not all(isinstance(g, dict) for g in legs):
@@ -152,7 +167,7 @@ class Geometry:
             raise GeometryError(f"{source}: unknown key(s) {', '.join(unknown)} (expected name and [[leg]])")
         values: dict[str, list] = {key: [] for key in _LEG_KEYS}
         for i, leg in enumerate(legs, start=1):
-            extra = sorted(set(leg) - set(_LEG_KEYS))
+            extra = sorted(set(leg) - set(_LEG_KEYS) - set(_OPTIONAL_LEG_KEYS))
             if extra:
                 hint = " (angles are given in degrees as *_deg, lengths in mm as *_mm)"
                 raise GeometryError(f"{source}: leg {i}: unknown key(s) {', '.join(extra)}{hint}")
@@ -164,11 +179,15 @@ class Geometry:
         for key in ("a_mm", "alpha_deg", "beta_deg", "gamma_deg", "theta_deg", "c_mm", "e_mm", "psi_deg"):
             if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values[key]):
                 raise GeometryError(f"{source}: {key} must be a number in every leg")
+        try:
+            lead = _leads([leg.get("lead_mm") for leg in legs])
+        except GeometryError as exc:
+            raise GeometryError(f"{source}: {exc}") from None
         return cls(
             a=values["a_mm"], alpha=values["alpha_deg"], beta=values["beta_deg"],
             gamma=values["gamma_deg"], theta=values["theta_deg"], c=values["c_mm"],
             e=values["e_mm"], psi=values["psi_deg"], stroke=values["stroke_mm"],
-            name=str(document.get("name", "custom")),
+            name=str(document.get("name", "custom")), lead=lead,
         )
 
     @classmethod
@@ -190,6 +209,8 @@ class Geometry:
                 "gamma_deg": self.gamma[i], "theta_deg": self.theta[i], "c_mm": self.c[i],
                 "e_mm": self.e[i], "psi_deg": self.psi[i], "stroke_mm": list(self.stroke[i]),
             })
+            if self.lead[i] is not None:
+                legs[-1]["lead_mm"] = self.lead[i]
         return {"name": self.name, "leg": legs}
 
     def to_toml(self, path: str | os.PathLike) -> None:
@@ -231,6 +252,26 @@ class Region:
             known = ", ".join(REGION_PRESETS)
             raise UnknownPresetError(f"no test region for {name!r} (known: {known})") from None
 
+    @classmethod
+    def from_toml(cls, path: str | os.PathLike) -> "Region":
+        """Read a region TOML file: ``x_mm = [lo, hi]``, ``y_mm = [lo, hi]``, ``phi_deg`` (``prp3mc init region``)."""
+        doc = load_toml(path)
+        doc.pop("name", None)
+        unknown = sorted(set(doc) - {"x_mm", "y_mm", "phi_deg"})
+        if unknown or not {"x_mm", "y_mm"} <= set(doc):
+            raise GeometryError(f"{path}: a region file holds x_mm = [lo, hi], y_mm = [lo, hi] and phi_deg "
+                                f"(optional name); " + (f"unknown key(s) {', '.join(unknown)}" if unknown
+                                                        else "x_mm or y_mm is missing"))
+        try:
+            return cls(**doc)
+        except (TypeError, ValueError) as exc:
+            raise GeometryError(f"{path}: {exc}") from None
+
+    @classmethod
+    def load(cls, spec: "str | os.PathLike | Region") -> "Region":
+        """A preset name (a reference geometry's test region), a region TOML path or a Region, as ``--region`` takes."""
+        return load_spec(cls, spec, REGION_PRESETS)
+
     def grid(self, n: int | tuple[int, int]) -> np.ndarray:
         """Poses on an ``ny x nx`` grid, shape (ny, nx, 3): x mm, y mm, phi deg."""
         nx, ny = (n, n) if np.isscalar(n) else n
@@ -240,6 +281,19 @@ class Region:
         y = np.linspace(*self.y_mm, int(ny))
         X, Y = np.meshgrid(x, y)
         return np.stack([X, Y, np.full_like(X, self.phi_deg)], axis=-1)
+
+
+def _leads(values: Any) -> tuple:
+    """Three screw leads, each a positive finite float (mm) or None."""
+    if isinstance(values, (str, bytes)) or not hasattr(values, "__len__") or len(values) != 3:
+        raise GeometryError(f"lead_mm: expected one value (or none) per leg, got {values!r}")
+    out = []
+    for i, p in enumerate(values, start=1):
+        if p is not None and (isinstance(p, bool) or not isinstance(p, (int, float, np.floating, np.integer))
+                              or not np.isfinite(p) or not p > 0):
+            raise GeometryError(f"lead_mm of leg {i}: the lead of a screw must be a number > 0 mm, got {p!r}")
+        out.append(None if p is None else float(p))
+    return tuple(out)
 
 
 def _pair(key: str, values: Any) -> tuple[float, float]:

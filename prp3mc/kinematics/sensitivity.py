@@ -31,6 +31,7 @@ import pandas as pd
 
 from .._result import freeze, short_repr
 from ..units import POSE_OUTPUTS
+from .formulas import FAMILIES, LENGTH_FAMILIES, h_entry
 from .geometry import Geometry
 from .chain import (
     DEFAULT_LIMITS, Frame, Limits, _diag, as_poses, batch_last, frame, legs_first, validated_frame,
@@ -38,38 +39,15 @@ from .chain import (
 
 __all__ = ["FAMILIES", "LENGTH_FAMILIES", "Sensitivity", "sensitivity", "h_entries"]
 
-#: The ten error families of the paper's model, in the paper's order.
-FAMILIES = ("a", "alpha", "b", "beta", "rho", "c", "gamma", "theta", "e", "psi")
-#: Families whose parameter is a length (mm); the others are angles (rad).
-LENGTH_FAMILIES = frozenset({"a", "b", "rho", "c", "e"})
-
-
 
 def h_entries(geometry: Geometry, fr: Frame, family: str) -> np.ndarray:
     """Diagonal of H_q for ``family`` at the poses of a :class:`Frame`, legs first: (3, ...)."""
-    tr, b, d = fr.tr, fr.b, fr.d
+    if family not in FAMILIES:
+        raise KeyError(f"unknown error family {family!r}")
+    tr, d = fr.tr, fr.d
     a, c, e = (legs_first(geometry.rad(k), d.ndim - 1) for k in ("a", "c", "e"))
-    if family == "a":
-        return tr.perp_dot("l", "i")
-    if family == "alpha":
-        return a * tr.dot("l", "i") + b * tr.dot("l", "j") + c * tr.dot("l", "k") + d
-    if family == "b":
-        return fr.transmission
-    if family == "beta":
-        return b * tr.dot("l", "j") + c * tr.dot("l", "k") + d
-    if family == "rho":
-        return np.ones_like(d)
-    if family == "c":
-        return tr.perp_dot("l", "k")
-    if family == "gamma":
-        return c * tr.dot("l", "k") + d
-    if family == "theta":
-        return d
-    if family == "e":
-        return tr.perp_dot("l", "m")
-    if family == "psi":
-        return e * tr.dot("l", "m")
-    raise KeyError(f"unknown error family {family!r}")
+    h = h_entry(FAMILIES.index(family), a, fr.b, c, d, e, *tr)
+    return h if np.ndim(h) else np.ones_like(d)
 
 
 @dataclass(frozen=True, slots=True, repr=False)

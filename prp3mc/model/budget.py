@@ -21,10 +21,12 @@ import numpy as np
 from .._toml import dumps_toml, load_spec, load_toml
 from ..output import write_text
 from .._result import FrozenDict
-from ..errors import BudgetError, IncompleteBudgetWarning, UnknownPresetError
+from ..errors import BudgetError, IncompleteBudgetWarning, ParameterError, UnknownPresetError
 from .catalogue import Catalogue
+from .copula import GaussianCopula, parse_correlation
 from .laws import Law, law_from_dict
-from .effects import T_REF_C, FittedOn, SystematicEffect, effect_factors, effects_from_dict
+from .effects import (T_REF_C, FittedOn, SystematicEffect, check_leads, effect_factors, effects_from_dict,
+                      slider_error)
 from ..kinematics.geometry import Geometry
 from ..kinematics.sensitivity import LENGTH_FAMILIES
 
@@ -61,7 +63,7 @@ def input_unit(name: str) -> str:
 
 @dataclass(frozen=True, slots=True)
 class Budget:
-    """An error budget: independent inputs, each with a law, and Sobol groups.
+    """An error budget: inputs, each with a law, Sobol groups and optional rank correlations.
 
     Parameters
     ----------
@@ -77,12 +79,19 @@ class Budget:
     name : str
     effects : dict of str to SystematicEffect
         Fitted systematic effects (the ``[effects]`` table: backlash, lead
-        scale, thermal expansion, offsets), keyed by their library name.
-        Backlash and thermal add random *factors* (:attr:`factors`) drawn
-        with the inputs; offsets and scales are known shifts.
+        scale, thermal expansion, cyclic screw errors, offsets), keyed by
+        their library name. Backlash and thermal add random *factors*
+        (:attr:`factors`) drawn with the inputs; offsets, scales and cyclic
+        errors are known shifts.
     fitted_on : FittedOn, optional
         The geometry the effects were fitted on; a budget that has one
         refuses other geometries (:meth:`check_geometry`).
+    correlation : dict of str to float
+        The ``[correlation]`` table as written: ``"a,b"`` (factors or user
+        groups) or a group's name to a rank (Spearman) correlation in (-1, 1).
+        Realised by a Gaussian copula over the factors' own laws
+        (:mod:`~prp3mc.model.copula`, :attr:`copula`); empty: every
+        factor independent.
 
     Notes
     -----
@@ -99,6 +108,9 @@ class Budget:
     name: str = "custom"
     effects: dict = field(default_factory=dict)
     fitted_on: FittedOn | None = None
+    correlation: dict = field(default_factory=dict)
+    #: The Gaussian copula of ``correlation`` (None when every factor is independent).
+    copula: GaussianCopula | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self):
         if not self.inputs:
@@ -139,11 +151,23 @@ class Budget:
                 raise BudgetError(f"group {gname!r}: unknown input(s) {', '.join(unknown) or '(empty group)'}")
             if gname in factors:
                 raise BudgetError(f"group {gname!r} has the name of an input")
+            twice = sorted({m for m in members if members.count(m) > 1})
+            if twice:
+                raise BudgetError(f"group {gname!r} lists {', '.join(twice)} twice")
+            if gname in groups and set(groups[gname]) != set(members):
+                raise BudgetError(f"group {gname!r} clashes with the clearance group of that name "
+                                  f"({', '.join(groups[gname])}): name it otherwise")
+            same = next((g for g, m in groups.items() if g != gname and set(m) == set(members)), None)
+            if same is not None and not same.startswith("clearance_"):
+                raise BudgetError(f"groups {same!r} and {gname!r} hold the same inputs ({', '.join(members)}): "
+                                  "keep one")
             groups[gname] = members
+        object.__setattr__(self, "copula", parse_correlation(dict(self.correlation), factors, groups))
         object.__setattr__(self, "inputs", FrozenDict(inputs))
         object.__setattr__(self, "groups", FrozenDict(groups))
         object.__setattr__(self, "sources", FrozenDict(self.sources))
         object.__setattr__(self, "effects", FrozenDict(self.effects))
+        object.__setattr__(self, "correlation", FrozenDict({str(k): float(v) for k, v in self.correlation.items()}))
 
     # ------------------------------------------------------------ access
     @property
@@ -168,8 +192,11 @@ class Budget:
     def check_geometry(self, geometry: Geometry) -> None:
         """Refuse a geometry other than the one this budget's effects were fitted on (one line).
 
-        Budgets without effects or without ``fitted_on`` apply to any geometry.
+        Budgets without effects or without ``fitted_on`` apply to any
+        geometry, except that a cyclic screw error needs its leg's
+        ``lead_mm`` in the geometry.
         """
+        check_leads(self.effects, geometry, f"budget {self.name!r}: effect ")
         if self.fitted_on is None or not self.effects:
             return
         diff = self.fitted_on.difference(geometry)
@@ -177,6 +204,11 @@ class Budget:
             raise BudgetError(f"budget {self.name!r} holds effects fitted on geometry {self.fitted_on.name!r}, "
                               f"not on geometry {geometry.name!r}: {diff}; fitted effects belong to the "
                               "machine they were measured on")
+
+    @property
+    def correlated(self) -> bool:
+        """Whether some factors are correlated (a ``[correlation]`` table)."""
+        return self.copula is not None
 
     @property
     def missing_inputs(self) -> tuple[str, ...]:
@@ -198,7 +230,8 @@ class Budget:
         """A copy with some inputs' laws replaced or added (``theta_1=Uniform(...)``)."""
         return Budget({**self.inputs, **laws}, groups=self._user_groups(),
                       sources={k: v for k, v in self.sources.items() if k not in laws},
-                      name=name or self.name, effects=self.effects, fitted_on=self.fitted_on)
+                      name=name or self.name, effects=self.effects, fitted_on=self.fitted_on,
+                      correlation=self.correlation)
 
     def _user_groups(self) -> dict:
         return {k: v for k, v in self.groups.items() if not k.startswith("clearance_")}
@@ -221,18 +254,20 @@ class Budget:
         if isinstance(fitted_on, Geometry):
             fitted_on = FittedOn.of(fitted_on)
         return Budget(self.inputs, groups=self._user_groups(), sources=self.sources, name=name or self.name,
-                      effects={**self.effects, **effects}, fitted_on=fitted_on or self.fitted_on)
+                      effects={**self.effects, **effects}, fitted_on=fitted_on or self.fitted_on,
+                      correlation=self.correlation)
 
     def effects_frame(self):
         """One row per effect: effect, kind, value, unit, ci95_low, ci95_high, temp_lo_C, temp_hi_C,
-        campaign, campaign_sha256, source, and how the analyses take it (``enters``)."""
+        campaign, campaign_sha256, source, phase_deg (cyclic), and how the analyses take it (``enters``)."""
         import pandas as pd
         enters = {"offset": "known shift", "scale": "known shift", "backlash": "±h/2, approach unknown",
-                  "thermal": "temperature over temp_range_C"}
+                  "thermal": "temperature over temp_range_C", "cyclic": "known shift"}
         rows = [{"effect": k, "kind": e.effect.kind, "value": e.value, "unit": e.unit,
                  "ci95_low": (e.ci95 or (np.nan,) * 2)[0], "ci95_high": (e.ci95 or (np.nan,) * 2)[1],
                  "temp_lo_C": (e.temp_range_C or (np.nan,) * 2)[0], "temp_hi_C": (e.temp_range_C or (np.nan,) * 2)[1],
                  "campaign": e.campaign or "", "campaign_sha256": e.campaign_sha256 or "", "source": e.source or "",
+                 "phase_deg": np.nan if e.phase_deg is None else e.phase_deg,
                  "enters": enters[e.effect.kind]} for k, e in self.effects.items()]
         return pd.DataFrame(rows)
 
@@ -247,9 +282,14 @@ class Budget:
         return record
 
     def without_effects(self) -> "Budget":
-        """A copy without the ``[effects]`` table (and its ``fitted_on``): the inputs' laws alone."""
+        """A copy without the ``[effects]`` table (and its ``fitted_on``): the inputs' laws alone.
+
+        Correlations that name an effect's factor (or a group holding one) go with it.
+        """
         groups = {k: v for k, v in self._user_groups().items() if set(v) <= set(self.inputs)}
-        return Budget(self.inputs, groups=groups, sources=self.sources, name=self.name)
+        correlation = {k: v for k, v in self.correlation.items()
+                       if all(n in groups or n in self.inputs for n in (p.strip() for p in k.split(",")))}
+        return Budget(self.inputs, groups=groups, sources=self.sources, name=self.name, correlation=correlation)
 
     def scaled(self, factor: float, family: str | None = None) -> "Budget":
         """A copy with the laws of ``family`` (all but zeta if None) scaled about 0 by ``factor``."""
@@ -263,26 +303,38 @@ class Budget:
 
     # ------------------------------------------------------------ sampling
     def ppf(self, u: np.ndarray) -> np.ndarray:
-        """Map uniforms of shape (n, D) to factor values (n, D) in mm / deg (D factors, see :attr:`factors`)."""
+        """Map independent uniforms of shape (n, D) to factor values (n, D) in mm / deg (D factors, see
+        :attr:`factors`).
+
+        A correlated budget first makes the uniforms of its correlated factors
+        dependent through its Gaussian copula (:meth:`GaussianCopula.correlate`);
+        then each factor's law maps its column (:meth:`marginal_ppf`).
+        """
         u = np.asarray(u, dtype=float)
         laws = self.factor_laws
         if u.ndim != 2 or u.shape[1] != len(laws):
-            raise BudgetError(f"expected uniforms of shape (n, {len(laws)}), got {u.shape}")
-        ut = np.ascontiguousarray(u.T)  # each law maps one contiguous row
+            raise ParameterError(f"expected uniforms of shape (n, {len(laws)}), got {u.shape}")
+        return self.marginal_ppf(u if self.copula is None else self.copula.correlate(u))
+
+    def marginal_ppf(self, u: np.ndarray) -> np.ndarray:
+        """Each factor's inverse CDF on its column of ``u`` (n, D), without the copula: values (n, D)."""
+        laws = self.factor_laws
+        ut = np.ascontiguousarray(np.asarray(u, dtype=float).T)  # each law maps one contiguous row
         out = np.empty_like(ut)
         for k, law in enumerate(laws.values()):
             out[k] = law.ppf(ut[k])
         return out.T  # (n, D) whose columns are contiguous
 
     def sample(self, n: int, rng: "None | int | np.random.Generator" = None) -> np.ndarray:
-        """``n`` independent draws of all factors, shape (n, D), mm / deg (degrees C for thermal).
+        """``n`` independent draws of all factors (with their correlations), shape (n, D), mm / deg
+        (degrees C for thermal).
 
         Drawn in blocks of 65536 from one generator, so the same seed gives
         the same samples whatever the caller's chunking.
         """
         rng = np.random.default_rng(rng)
         if n < 1:
-            raise BudgetError(f"sample count must be positive, got {n}")
+            raise ParameterError(f"sample count must be positive, got {n}")
         D = len(self.factor_laws)
         out = np.empty((n, D))
         for start in range(0, n, SAMPLE_BLOCK):
@@ -299,13 +351,14 @@ class Budget:
         """
         start = k * SAMPLE_BLOCK
         if not 0 <= start < n:
-            raise BudgetError(f"block {k} is outside a sample of {n}")
+            raise ParameterError(f"block {k} is outside a sample of {n}")
         D = len(self.factor_laws)
         bits = np.random.PCG64(seed)
         bits.advance(start * D)
         return self.ppf(np.random.Generator(bits).random((min(n - start, SAMPLE_BLOCK), D)))
 
-    def errors(self, X: np.ndarray, b: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    def errors(self, X: np.ndarray, b: np.ndarray | None = None,
+               lead_mm: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Factor samples ``X`` (n, D) as per-family errors, mm / deg.
 
         The form :func:`~prp3mc.kinematics.exact.exact_pose_error` takes; a
@@ -313,8 +366,9 @@ class Budget:
         Without effects each family's errors are (n, 3). The effects add
         their errors: offsets to their family (``b_i`` to ``b``), backlash
         and, given the nominal slider positions ``b`` (..., 3) (mm) of the
-        poses, lead scale and thermal expansion to ``b``, which is then
-        (..., n, 3).
+        poses, lead scale, thermal expansion and (with the screws' leads
+        ``lead_mm`` (3,), mm: :attr:`Geometry.lead_mm`) cyclic screw errors
+        to ``b``, which is then (..., n, 3).
         """
         X = np.asarray(X, dtype=float)
         errors: dict[str, np.ndarray] = {}
@@ -332,17 +386,22 @@ class Budget:
                 errors.setdefault(e.family, np.zeros((X.shape[0], 3)))[:, e.leg] += eff.value
             elif e.kind == "backlash":
                 slider[:, e.leg] += X[:, factors.index(name)]
-        if kinds & {"scale", "thermal"}:
+        if kinds & {"scale", "thermal", "cyclic"}:
             if b is None:
-                raise BudgetError("lead scale and thermal effects need the nominal slider positions b")
+                raise ParameterError("lead scale, thermal and cyclic effects need the nominal slider positions b")
+            b = np.asarray(b, dtype=float)
             strain = np.zeros((X.shape[0], 3))
+            cyclic = np.zeros(b.shape)
             for name, eff in self.effects.items():
                 if eff.effect.kind == "scale":
                     strain[:, eff.effect.leg] += eff.value
                 elif eff.effect.kind == "thermal":
                     strain += eff.value * (X[:, factors.index(name), None] - T_REF_C)
-            slider = slider + strain * np.asarray(b, dtype=float)[..., None, :]
-        if kinds & {"backlash", "scale", "thermal"}:
+                elif eff.effect.kind == "cyclic":
+                    cyclic += slider_error({name: eff.model_value}, b.reshape(-1, 3),
+                                           lead_mm=lead_mm).reshape(b.shape)
+            slider = slider + strain * b[..., None, :] + cyclic[..., None, :]
+        if kinds & {"backlash", "scale", "thermal", "cyclic"}:
             errors["b"] = errors.get("b", 0.0) + slider
         return errors
 
@@ -353,6 +412,12 @@ class Budget:
     def variances(self) -> np.ndarray:
         """Variance of every factor (D,)."""
         return np.array([law.var for law in self.factor_laws.values()])
+
+    def covariance(self) -> np.ndarray:
+        """Covariance of the factors (D, D): their variances, and the copula's covariances
+        (:meth:`GaussianCopula.covariance`) for correlated pairs."""
+        laws = list(self.factor_laws.values())
+        return np.diag(self.variances()) if self.copula is None else self.copula.covariance(laws)
 
     def bounds(self, k_sigma: float | None = None) -> np.ndarray:
         """Worst-case interval of every factor, shape (D, 2), mm / deg (degrees C for thermal).
@@ -386,12 +451,13 @@ class Budget:
         optional ``[effects]`` of fitted systematic effects
         (:func:`~prp3mc.model.effects.effects_from_dict`) and
         ``[fitted_on]``, the geometry they were fitted on
-        (:class:`~prp3mc.model.effects.FittedOn`).
+        (:class:`~prp3mc.model.effects.FittedOn`); optional
+        ``[correlation]`` of rank correlations (:mod:`~prp3mc.model.copula`).
         """
-        unknown = sorted(set(doc) - {"name", "inputs", "groups", "catalogues", "effects", "fitted_on"})
+        unknown = sorted(set(doc) - {"name", "inputs", "groups", "catalogues", "effects", "fitted_on", "correlation"})
         if unknown:
             raise BudgetError(f"{source}: unknown key(s) {', '.join(unknown)} "
-                              "(expected name, inputs, groups, catalogues, effects, fitted_on)")
+                              "(expected name, inputs, groups, catalogues, effects, fitted_on, correlation)")
         catalogue = (catalogue or Catalogue.bundled()).with_files(doc.get("catalogues", []), base, source)
         raw = doc.get("inputs")
         if not isinstance(raw, dict) or not raw:
@@ -427,7 +493,8 @@ class Budget:
         effects = effects_from_dict(doc.get("effects", {}), source)
         fitted_on = FittedOn.from_dict(doc["fitted_on"], source) if "fitted_on" in doc else None
         try:
-            budget = cls(inputs, groups=groups, sources=sources, name=name, effects=effects, fitted_on=fitted_on)
+            budget = cls(inputs, groups=groups, sources=sources, name=name, effects=effects, fitted_on=fitted_on,
+                         correlation=doc.get("correlation", {}))
         except BudgetError as exc:
             raise BudgetError(f"{source}: {exc}") from None
         if budget.missing_inputs:
@@ -459,6 +526,8 @@ class Budget:
             doc["effects"] = {k: eff.to_dict() for k, eff in self.effects.items()}
         if self.fitted_on is not None:
             doc["fitted_on"] = self.fitted_on.to_dict()
+        if self.correlation:
+            doc["correlation"] = dict(self.correlation)
         return doc
 
     def to_toml(self, path: str | os.PathLike) -> None:

@@ -14,6 +14,9 @@ effect          what it changes                                  unit
 ``scale_i``     slider error delta b_i = kappa_i b_i             1
 ``backlash_i``  delta b_i = dir_i h_i / 2, h_i >= 0              mm
 ``thermal``     delta b_i = alpha_T (temp_C - 20) b_i            1/K
+``cyclic_i``    delta b_i = A_i sin(2 pi b_i / p_i + phi_i),     mm
+                A_i >= 0, p_i the lead of slider i's screw
+                (the geometry's ``lead_mm``)
 ``spread_q_i``  the law of budget input q_i (q in rho, theta,    mm or deg
                 b), scaled about 0 to a new bound
 =============== ================================================ ===========
@@ -25,8 +28,17 @@ effects of that table: a fitted spread is written as the input's new law.
 Thermal expansion needs the operating temperature range ``temp_range_C`` the
 analyses bound it over.
 
-At an analysis pose (docs, *File formats*), offsets and lead scales are
-known shifts of the pose error; a backlash and the thermal expansion have a
+A cyclic screw error has two parameters, its amplitude A_i (the effect's
+value, mm) and its phase phi_i (``phase_deg``). It is linear in its *phasor*
+``z = A_i exp(i phi_i)``: ``delta b_i = Im(z exp(2 pi i b_i / p_i)) =
+Re(z) sin(2 pi b_i / p_i) + Im(z) cos(2 pi b_i / p_i)``, so wherever effects
+are given as ``{name: value}`` (:func:`slider_error`, the simulator, the
+discrepancy workflow's values) a cyclic effect's value is its phasor, a
+complex number in mm (:func:`phasor`), and two cyclic errors of one screw add
+as phasors. It needs the lead p_i of its leg in the geometry.
+
+At an analysis pose (docs, *File formats*), offsets, lead scales and
+cyclic screw errors are known shifts of the pose error; a backlash and the thermal expansion have a
 driver that is not known there (the approach direction, the temperature), so
 they enter as bounded random *factors* (:func:`effect_factors`): backlash_i is
 ``delta b_i = s h_i / 2`` with s = -1 or +1 equally likely, thermal is the
@@ -45,7 +57,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import BudgetError
+from ..errors import BudgetError, ParameterError
 from ..kinematics.geometry import Geometry
 from ..kinematics.sensitivity import LENGTH_FAMILIES
 from .._result import FrozenDict
@@ -53,7 +65,8 @@ from .laws import Discrete, Law, Uniform
 
 __all__ = ["Effect", "EFFECT_NAMES", "OFFSET_FAMILIES", "SPREAD_FAMILIES", "T_REF_C", "effect",
            "slider_error", "offset_errors", "SystematicEffect", "effects_from_dict", "EFFECT_LIMITS",
-           "effect_factors", "FittedOn", "FIT_TOLERANCE"]
+           "effect_factors", "FittedOn", "FIT_TOLERANCE", "phasor", "amplitude_phase", "components",
+           "check_leads", "effect_value"]
 
 #: Parameters whose constant offset is a library effect (``b``: encoder zero offset).
 OFFSET_FAMILIES = ("a", "alpha", "beta", "gamma", "theta", "c", "e", "psi", "b")
@@ -66,7 +79,8 @@ _LEGS = (1, 2, 3)
 #: Every effect name of the library, in library order.
 EFFECT_NAMES = (tuple(f"{q}_{i}" for q in OFFSET_FAMILIES for i in _LEGS)
                 + tuple(f"scale_{i}" for i in _LEGS) + tuple(f"backlash_{i}" for i in _LEGS)
-                + ("thermal",) + tuple(f"spread_{q}_{i}" for q in SPREAD_FAMILIES for i in _LEGS))
+                + ("thermal",) + tuple(f"cyclic_{i}" for i in _LEGS)
+                + tuple(f"spread_{q}_{i}" for q in SPREAD_FAMILIES for i in _LEGS))
 
 _PATTERN = re.compile(r"^(?:(spread)_)?([a-z]+)_([123])$")
 
@@ -80,7 +94,7 @@ class Effect:
     name : str
         Library name, e.g. ``beta_2``, ``backlash_1``, ``spread_b_3``.
     kind : str
-        ``offset``, ``scale``, ``backlash``, ``thermal`` or ``spread``.
+        ``offset``, ``scale``, ``backlash``, ``thermal``, ``cyclic`` or ``spread``.
     family : str or None
         Parameter family (``b`` for the slider effects, the input family of a
         spread; None for ``thermal``).
@@ -100,6 +114,11 @@ class Effect:
     def systematic(self) -> bool:
         """True for effects that add a deterministic pose error (all but spreads)."""
         return self.kind != "spread"
+
+    @property
+    def dof(self) -> int:
+        """Parameters of the effect's pose error: 2 for a cyclic error (its phasor), else 1."""
+        return 2 if self.kind == "cyclic" else 1
 
     @property
     def needs(self) -> tuple[str, ...]:
@@ -126,33 +145,101 @@ def effect(name: str) -> Effect:
         if spread:
             unit = "mm" if family in LENGTH_FAMILIES else "deg"
             return Effect(name, "spread", family, leg, unit)
-        if family in ("scale", "backlash"):
+        if family in ("scale", "backlash", "cyclic"):
             return Effect(name, family, "b", leg, "1" if family == "scale" else "mm")
         return Effect(name, "offset", family, leg, "mm" if family in LENGTH_FAMILIES else "deg")
     raise BudgetError(f"unknown effect {name!r}: the library has "
                       "q_i for q in a, alpha, beta, gamma, theta, c, e, psi, b; scale_i; backlash_i; "
-                      "thermal; spread_rho_i, spread_theta_i, spread_b_i (i = 1, 2, 3)")
+                      "thermal; cyclic_i; spread_rho_i, spread_theta_i, spread_b_i (i = 1, 2, 3)")
 
 
 def _as_effects(effects) -> list[Effect]:
     return [e if isinstance(e, Effect) else effect(e) for e in effects]
 
 
+def phasor(amplitude_mm: float, phase_deg: float) -> complex:
+    """The phasor ``A exp(i phi)`` (mm) of a cyclic error of amplitude A (mm) and phase phi (deg)."""
+    return complex(amplitude_mm * np.exp(1j * np.deg2rad(phase_deg)))
+
+
+def amplitude_phase(z: complex) -> tuple[float, float]:
+    """Amplitude (mm) and phase (deg, in [0, 360)) of a cyclic error's phasor ``z``."""
+    return float(abs(z)), float(np.rad2deg(np.angle(z)) % 360.0)
+
+
+def effect_value(name: str, value) -> float | complex:
+    """An effect's value as ``{name: value}`` tables take it: a float, or a cyclic error's phasor (mm).
+
+    A cyclic error may be given as its phasor (complex), its amplitude (phase
+    0) or the pair ``(amplitude_mm, phase_deg)``.
+
+    Raises
+    ------
+    BudgetError
+        A value that is not a finite number (or such a pair).
+    """
+    eff = effect(name)
+    try:
+        if eff.kind == "cyclic" and isinstance(value, (tuple, list)):
+            amplitude, phase = (float(v) for v in value)
+            out = phasor(amplitude, phase)
+        else:
+            out = complex(value) if eff.kind == "cyclic" else float(value)
+    except (TypeError, ValueError):
+        form = "a phasor, an amplitude or (amplitude_mm, phase_deg)" if eff.kind == "cyclic" else "a number"
+        raise BudgetError(f"effect {name!r} takes {form}, got {value!r}") from None
+    if not np.isfinite(out):
+        raise BudgetError(f"effect {name!r}: value must be finite, got {value!r}")
+    return out
+
+
+def components(effects, values) -> np.ndarray:
+    """The real parameters of effects' values, in order: a value, or a phasor's real and imaginary parts.
+
+    Parameters
+    ----------
+    effects : sequence of str or Effect
+    values : sequence of float or complex
+        One per effect (a cyclic error's phasor, mm).
+
+    Returns
+    -------
+    ndarray, shape (sum of the effects' :attr:`Effect.dof`,)
+        The coefficients of the effects' signature columns (:func:`~prp3mc.measurement.fit.signatures.signatures`).
+    """
+    out = []
+    for eff, value in zip(_as_effects(effects), values):
+        out += [complex(value).real, complex(value).imag] if eff.dof == 2 else [float(value)]
+    return np.array(out, dtype=float)
+
+
+def check_leads(names, geometry: Geometry, where: str = "") -> None:
+    """Refuse cyclic effects among ``names`` whose leg has no ``lead_mm`` in ``geometry`` (one line)."""
+    for eff in _as_effects(names):
+        if eff.kind == "cyclic" and not np.isfinite(geometry.lead_mm[eff.leg]):
+            raise BudgetError(f"{where}{eff.name}: a cyclic screw error repeats with the lead of slider "
+                              f"{eff.leg + 1}'s screw, and geometry {geometry.name!r} has no lead_mm for leg "
+                              f"{eff.leg + 1}: add lead_mm to its [[leg]] table")
+
+
 def slider_error(values: dict, b: np.ndarray, direction: np.ndarray | None = None,
-                 temp_C: np.ndarray | None = None) -> np.ndarray:
+                 temp_C: np.ndarray | None = None, lead_mm: np.ndarray | None = None) -> np.ndarray:
     """Slider position errors delta b of the slider effects in ``values``.
 
     Parameters
     ----------
-    values : dict of str to float
-        Effect name to value; effects other than ``b_i``, ``scale_i``,
-        ``backlash_i`` and ``thermal`` are ignored.
+    values : dict of str to float or complex
+        Effect name to value (a cyclic error's phasor ``A exp(i phi)``, mm,
+        or its amplitude alone for phase 0); effects other than ``b_i``,
+        ``scale_i``, ``backlash_i``, ``thermal`` and ``cyclic_i`` are ignored.
     b : ndarray, shape (M, 3)
         Commanded slider positions, mm.
     direction : ndarray, shape (M, 3), optional
         Approach direction of each actuator, +-1 (needed by backlash).
     temp_C : ndarray, shape (M,), optional
         Temperature (needed by thermal).
+    lead_mm : ndarray, shape (3,), optional
+        Leads of the sliders' screws (needed by cyclic; :attr:`Geometry.lead_mm`).
 
     Returns
     -------
@@ -167,12 +254,17 @@ def slider_error(values: dict, b: np.ndarray, direction: np.ndarray | None = Non
             out[:, eff.leg] += value * b[:, eff.leg]
         elif eff.kind == "backlash":
             if direction is None:
-                raise BudgetError(f"{eff.name} needs approach directions dir_{eff.leg + 1}")
+                raise ParameterError(f"{eff.name} needs approach directions dir_{eff.leg + 1}")
             out[:, eff.leg] += 0.5 * value * direction[:, eff.leg]
         elif eff.kind == "thermal":
             if temp_C is None:
-                raise BudgetError("thermal needs temperatures temp_C")
+                raise ParameterError("thermal needs temperatures temp_C")
             out += value * (np.asarray(temp_C)[:, None] - T_REF_C) * b
+        elif eff.kind == "cyclic":
+            lead = np.nan if lead_mm is None else lead_mm[eff.leg]
+            if not np.isfinite(lead):
+                raise BudgetError(f"{eff.name} needs the lead lead_mm of slider {eff.leg + 1}'s screw")
+            out[:, eff.leg] += np.imag(complex(value) * np.exp(2j * np.pi * b[:, eff.leg] / lead))
     return out
 
 
@@ -191,7 +283,7 @@ def offset_errors(values: dict) -> dict[str, np.ndarray]:
 EFFECT_LIMITS = {"mm": 1000.0, "deg": 720.0, "1": 0.1, "1/K": 1e-3}
 #: Operating temperatures a thermal effect may be bounded over, degrees C.
 TEMP_LIMITS_C = (-100.0, 300.0)
-_KEYS = ("value", "unit", "ci95", "temp_range_C", "campaign", "campaign_sha256", "source")
+_KEYS = ("value", "unit", "ci95", "temp_range_C", "campaign", "campaign_sha256", "source", "phase_deg")
 
 
 def _number(value, where: str) -> float:
@@ -218,10 +310,10 @@ class SystematicEffect:
     Attributes
     ----------
     name : str
-        A systematic library name: ``q_i`` offsets, ``scale_i``, ``backlash_i``, ``thermal``.
+        A systematic library name: ``q_i`` offsets, ``scale_i``, ``backlash_i``, ``thermal``, ``cyclic_i``.
     value : float
         In the effect's unit (:attr:`unit`): mm, deg, 1 or 1/K; a backlash is
-        its full width h_i >= 0.
+        its full width h_i >= 0, a cyclic error its amplitude A_i >= 0.
     ci95 : tuple of float or None
         95 % interval of the value, same unit.
     temp_range_C : tuple of float or None
@@ -230,6 +322,8 @@ class SystematicEffect:
         The campaign file the value was fitted on, and its sha256.
     source : str or None
         Free text (a catalogue or a data sheet) for effects written by hand.
+    phase_deg : float or None
+        Phase phi_i of a cyclic error, degrees (cyclic only, required there).
     """
 
     name: str
@@ -239,6 +333,7 @@ class SystematicEffect:
     campaign: str | None = None
     campaign_sha256: str | None = None
     source: str | None = None
+    phase_deg: float | None = None
 
     def __post_init__(self):
         eff = effect(self.name)
@@ -253,6 +348,14 @@ class SystematicEffect:
                               f"machine (limit ±{limit:g} {eff.unit}); a unit slip?")
         if eff.kind == "backlash" and value < 0:
             raise BudgetError(f"{where}: a backlash width h must be >= 0 mm, got {value:g}")
+        if eff.kind == "cyclic" and value < 0:
+            raise BudgetError(f"{where}: a cyclic error's amplitude must be >= 0 mm, got {value:g} "
+                              "(a negative one is the phase turned by 180 deg)")
+        if eff.kind == "cyclic" and self.phase_deg is None:
+            raise BudgetError(f"{where} needs phase_deg, the phase (degrees) of delta b = A sin(2 pi b / lead + phase)")
+        if eff.kind != "cyclic" and self.phase_deg is not None:
+            raise BudgetError(f"{where}: phase_deg applies to cyclic_i only")
+        phase = None if self.phase_deg is None else _number(self.phase_deg, f"{where}: phase_deg")
         ci = _pair(self.ci95, f"{where}: ci95")
         temps = _pair(self.temp_range_C, f"{where}: temp_range_C")
         if eff.kind == "thermal":
@@ -270,6 +373,7 @@ class SystematicEffect:
         object.__setattr__(self, "value", value)
         object.__setattr__(self, "ci95", ci)
         object.__setattr__(self, "temp_range_C", temps)
+        object.__setattr__(self, "phase_deg", phase)
 
     @property
     def effect(self) -> Effect:
@@ -279,6 +383,11 @@ class SystematicEffect:
     @property
     def unit(self) -> str:
         return self.effect.unit
+
+    @property
+    def model_value(self) -> float | complex:
+        """The value as ``{name: value}`` tables take it: the value, a cyclic error's phasor (:func:`phasor`)."""
+        return phasor(self.value, self.phase_deg) if self.effect.kind == "cyclic" else self.value
 
     def to_dict(self) -> dict[str, Any]:
         """The TOML table of the effect (keys left out when unset)."""
@@ -294,8 +403,9 @@ def effects_from_dict(doc, source: str) -> FrozenDict:
     """Parse a budget's ``[effects]`` table: name -> :class:`SystematicEffect`.
 
     Each entry is a table with ``value`` (required) and optional ``unit``
-    (checked against the effect's unit), ``ci95``, ``temp_range_C`` (thermal),
-    ``campaign``, ``campaign_sha256`` and ``source``.
+    (checked against the effect's unit), ``ci95``, ``temp_range_C`` (thermal,
+    required there), ``phase_deg`` (cyclic, required there), ``campaign``,
+    ``campaign_sha256`` and ``source``.
     """
     if not isinstance(doc, dict):
         raise BudgetError(f"{source}: [effects] must be a table of effects, got {doc!r}")
@@ -328,7 +438,7 @@ def effect_factors(effects: dict) -> dict[str, Law]:
 
     ``backlash_i``: the slider error delta b_i itself, -h_i/2 or +h_i/2 with
     probability 1/2 each (mm); ``thermal``: the temperature T, uniform over
-    ``temp_range_C`` (degrees C). Offsets and scales have no random factor.
+    ``temp_range_C`` (degrees C). Offsets, scales and cyclic errors have no random factor.
     """
     out: dict[str, Law] = {}
     for name in EFFECT_NAMES:

@@ -8,7 +8,8 @@
   methods do not change under such monotone input transforms (elementary
   effects are then per unit of probability).
 - :func:`openturns_distribution`: the budget as an OpenTURNS joint
-  distribution of independent marginals (needs ``pip install openturns``).
+  distribution: its marginals, independent or joined by a ``NormalCopula``
+  (needs ``pip install openturns``).
 - :func:`to_xarray`: a result's tidy frame as an xarray Dataset over the
   poses (needs ``pip install xarray``).
 """
@@ -19,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from .._result import POSE_COLUMNS
-from ..errors import BudgetError
+from ..errors import BudgetError, MissingDependencyError, ParameterError
 from ..units import OUTPUTS, RAD2DEG
 from .budget import Budget
 from .laws import Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
@@ -60,7 +61,7 @@ def salib_model(geometry, budget: Budget, poses, output: str = "position"):
         the output, shape (..., n): (n,) for one pose.
     """
     if output not in OUTPUTS:
-        raise BudgetError(f"unknown output {output!r} (choose from {', '.join(OUTPUTS)})")
+        raise ParameterError(f"unknown output {output!r} (choose from {', '.join(OUTPUTS)})")
     model = linear_model(geometry, budget, poses)
 
     def f(U: np.ndarray) -> np.ndarray:
@@ -91,23 +92,35 @@ def _openturns_marginal(ot, law):
 
 
 def openturns_distribution(budget: Budget):
-    """The budget as an OpenTURNS joint distribution of independent marginals, in factor order.
+    """The budget as an OpenTURNS joint distribution, in factor order.
 
     Each marginal carries the factor's name as its description (the inputs,
-    then the backlash_i and thermal effects). Requires the optional
-    ``openturns`` package.
+    then the backlash_i and thermal effects). The marginals are independent,
+    or, for a correlated budget, joined by OpenTURNS' ``NormalCopula`` of the
+    budget's rank correlations (converted to the latent correlation by
+    OpenTURNS' own ``GetCorrelationFromSpearmanCorrelation``). Requires the
+    optional ``openturns`` package.
     """
     try:
         import openturns as ot
     except ImportError:
-        raise BudgetError("openturns is not installed: pip install openturns") from None
+        raise MissingDependencyError("openturns", "pip install openturns") from None
     marginals = []
     for name, law in budget.factor_laws.items():
         m = _openturns_marginal(ot, law)
         m.setDescription([name])
         marginals.append(m)
     joint = getattr(ot, "JointDistribution", None) or ot.ComposedDistribution
-    dist = joint(marginals)
+    copula = budget.copula
+    if copula is None:
+        dist = joint(marginals)
+    else:
+        D = len(marginals)
+        spearman = ot.CorrelationMatrix(D)
+        for a, i in enumerate(copula.index):
+            for b, j in enumerate(copula.index[:a]):
+                spearman[i, j] = float(copula.spearman[a, b])
+        dist = joint(marginals, ot.NormalCopula(ot.NormalCopula.GetCorrelationFromSpearmanCorrelation(spearman)))
     dist.setDescription(list(budget.factors))
     return dist
 
@@ -126,7 +139,7 @@ def to_xarray(result):
     try:
         import xarray  # noqa: F401  (pandas' to_xarray needs it)
     except ImportError:
-        raise BudgetError("xarray is not installed: pip install xarray") from None
+        raise MissingDependencyError("xarray", "pip install xarray") from None
     frame: pd.DataFrame = result.to_frame()
     index = [c for c in POSE_COLUMNS + _LABELS if c in frame.columns]
     return frame.set_index(index).to_xarray()

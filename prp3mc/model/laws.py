@@ -270,8 +270,9 @@ class Discrete(Law):
         if not all(math.isfinite(v) for v in values + weights) or min(weights) < 0 or sum(weights) <= 0:
             raise BudgetError("discrete law: values must be finite and weights >= 0 with a positive sum")
         order = np.argsort(values)
+        scaled = [w / max(weights) for w in weights]   # their sum may overflow (1e308 each) or underflow
         object.__setattr__(self, "values", tuple(values[i] for i in order))
-        object.__setattr__(self, "weights", tuple(weights[i] / sum(weights) for i in order))
+        object.__setattr__(self, "weights", tuple(scaled[i] / sum(scaled) for i in order))
 
     def ppf(self, u):
         cdf = np.cumsum(self.weights)

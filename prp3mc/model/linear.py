@@ -9,7 +9,8 @@ whole batch of poses x samples is one matrix product.
 
 A budget's systematic effects (its ``[effects]`` table) add terms: an offset
 q_i is a known shift ``J_q[:, i] * value``, a lead scale the shift
-``J_b[:, i] kappa_i b_i`` with b_i from the nominal inverse kinematics; a
+``J_b[:, i] kappa_i b_i`` with b_i from the nominal inverse kinematics, a
+cyclic screw error the shift ``J_b[:, i] A_i sin(2 pi b_i / p_i + phi_i)``; a
 backlash is the factor delta b_i = ±h_i/2 through ``J_b[:, i]``; thermal
 expansion the factor T through ``alpha_T (T - 20) J_b b``, one term of all
 three legs. The shifts share one constant feature (1).
@@ -53,8 +54,9 @@ class LinearModel:
         One term per input except the zeta_i (``rho_i`` stands for the
         clearance term rho_i cos(zeta_i - omega_i)), then one per effect of
         the budget in library order: offsets ``offset_q_i`` (the effect
-        ``q_i``; the input q_i is another term) and ``scale_i`` (known
-        shifts, the term's value is the effect's value), ``backlash_i`` (the
+        ``q_i``; the input q_i is another term), ``scale_i`` and
+        ``cyclic_i`` (known shifts, the term's value is the effect's value:
+        a cyclic error's amplitude A_i), ``backlash_i`` (the
         factor delta b_i, mm) and ``thermal`` (T - 20, K).
     legs : tuple of int
         The (0-based) leg of every term; :data:`ALL_LEGS` for a term of all legs.
@@ -191,18 +193,24 @@ class LinearModel:
     def feature_moments(self) -> tuple[np.ndarray, np.ndarray]:
         """Exact mean (F,) and covariance (F, F) of the sample features (see :meth:`features`).
 
-        Non-clearance features are independent factors; a clearance's features
-        (rho cos zeta, rho sin zeta) have moments E[rho^k] times the
-        trigonometric moments of zeta (:func:`~prp3mc.model.laws.angle_moments`);
-        the constant of the shifts has mean 1 and no variance.
+        A value feature is its factor; a clearance's features (rho cos zeta,
+        rho sin zeta) have moments E[rho^k] times the trigonometric moments of
+        zeta (:func:`~prp3mc.model.laws.angle_moments`); the constant of
+        the shifts has mean 1 and no variance. Features of different factors
+        are independent unless the budget correlates their factors; then, as a
+        contact angle is never correlated, they covary through the factors'
+        covariance (:meth:`Budget.covariance`) times E[cos zeta] or E[sin zeta]
+        for a clearance's features.
         """
         laws = list(self.budget.factor_laws.values())
-        fmean, blocks = [], []
+        fmean, blocks, factor, loading = [], [], [], []
         for kind, *args in self._plan:
             if kind == "value":
                 k, ref = args
                 fmean.append(laws[k].mean - ref)
                 blocks.append(np.array([[laws[k].var]]))
+                factor.append(k)
+                loading.append(1.0)
             elif kind == "clearance":
                 (k, kz), = args
                 rho, zeta = laws[k], laws[kz]
@@ -211,13 +219,19 @@ class LinearModel:
                 m = np.array([r1 * ec, r1 * es])
                 fmean.extend(m)
                 blocks.append(r2 * np.array([[ecc, ecs], [ecs, ess]]) - np.outer(m, m))
+                factor += [k, k]
+                loading += [ec, es]
         if self.has_shift:
             fmean.append(1.0)
             blocks.append(np.zeros((1, 1)))
         nf = len(fmean)
         fcov = np.zeros((nf, nf))
+        if self.budget.copula is not None:           # across the factors the copula correlates
+            cov = self.budget.covariance()
+            idx, load = np.array(factor, dtype=int), np.array(loading)
+            fcov[:idx.size, :idx.size] = np.outer(load, load) * cov[np.ix_(idx, idx)]
         pos = 0
-        for block in blocks:
+        for block in blocks:                          # within one factor (a clearance: rho with its zeta)
             k = block.shape[0]
             fcov[pos:pos + k, pos:pos + k] = block
             pos += k
@@ -295,6 +309,11 @@ def linear_model(geometry: Geometry, budget: Budget, poses, *, check: bool = Tru
             plan.append(("shift", eff.value))
         elif e.kind == "scale":
             weights.append(_one_leg(entries("b") * b, e.leg))
+            plan.append(("shift", eff.value))
+        elif e.kind == "cyclic":                                # A_i sin(2 pi b_i / p_i + phi_i): per unit of A_i
+            wave = np.zeros_like(b)
+            wave[e.leg] = np.sin(2.0 * np.pi * b[e.leg] / geometry.lead_mm[e.leg] + np.deg2rad(eff.phase_deg))
+            weights.append(_one_leg(entries("b") * wave, e.leg))
             plan.append(("shift", eff.value))
         elif e.kind == "backlash":
             weights.append(_one_leg(entries("b"), e.leg))

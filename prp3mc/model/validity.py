@@ -17,7 +17,7 @@ import warnings
 import numpy as np
 
 from ..errors import ConvergenceError, LinearityWarning
-from ..kinematics.chain import as_poses, inverse_kinematics
+from ..kinematics.chain import as_poses, feasible, inverse_kinematics
 from ..kinematics.exact import exact_pose_error, linear_pose_error
 from ..kinematics.geometry import Geometry
 from .budget import Budget
@@ -61,13 +61,17 @@ def linearity_departure(geometry: Geometry, budget: Budget, poses, *, n_poses: i
     float
         ``max |exact - linear| / max |linear|`` over the probes, separately for
         the position error (mm) and dphi, the larger of the two; ``inf`` if
-        the exact chain cannot be closed at a probe.
+        the exact chain cannot be closed at a probe. Only feasible poses are
+        probed (0 if there is none: the analysis refuses them, naming why).
     """
     budget.check_geometry(geometry)
     flat = as_poses(poses).reshape(-1, 3)
+    flat = flat[feasible(geometry, flat)]   # the analysis refuses the others, naming why
+    if not flat.size:
+        return 0.0
     idx = np.unique(np.linspace(0, flat.shape[0] - 1, min(n_poses, flat.shape[0])).round().astype(int))
     b, _ = inverse_kinematics(geometry, flat[idx], check=False)
-    errors = budget.errors(_probe_inputs(budget, n_samples), b=b)
+    errors = budget.errors(_probe_inputs(budget, n_samples), b=b, lead_mm=geometry.lead_mm)
     probes = np.broadcast_to(flat[idx, None, :], (len(idx), n_samples, 3))
     linear = linear_pose_error(geometry, probes, errors, check=False)
     try:

@@ -12,6 +12,10 @@ maxima, and, for each selection window ``[lo, hi)``, the count below it, the
 values inside it (up to a capacity) and a histogram over the window's
 sub-bin edges of the values beyond the capacity. Kernels release the GIL so
 that ranges of blocks run in parallel threads.
+
+Why kept rather than numpy products and ``np.percentile``: 6.2-10.6x the numpy
+code on 441 poses x 2^20 samples, 11.6x at one pose x 2^24, and 1e8 samples
+in 0.28 GB instead of 21.6 GB (``benchmarks/bench_montecarlo.py``, 2 shared cores).
 """
 
 from __future__ import annotations
@@ -216,7 +220,8 @@ def _scan_tile(FT, m, first, C, nf, seg_start, seg_stop, s0, s1, tol, main, lo, 
 
 
 @njit(nogil=True, cache=True)
-def scan_blocks(k0, k1, n, lanes, consts, codes, params, cdf, values, ops, refs, Fext, C, nf, shift, block_segs,
+def scan_blocks(k0, k1, n, lanes, consts, codes, params, cdf, values, ops, refs, cidx, chol, Fext, C, nf, shift,
+                block_segs,
                 seg_start, seg_stop, sums, S1, S2, tol, main, lo, hi, nwin, edges, off, cap,
                 below, inside, sub, buf, vmax, possum, exceed):
     """Fold sample blocks ``k0:k1`` into the summaries of a chunk of poses (one pass of one thread).
@@ -225,7 +230,7 @@ def scan_blocks(k0, k1, n, lanes, consts, codes, params, cdf, values, ops, refs,
     ----------
     k0, k1, n : int
         Blocks (of SAMPLE_BLOCK samples) and the run's sample count.
-    lanes, consts, codes, params, cdf, values, ops, refs
+    lanes, consts, codes, params, cdf, values, ops, refs, cidx, chol
         The compiled sampler (:mod:`._sampler`): lane states at sample ``k0 * SAMPLE_BLOCK`` (updated).
     Fext : (b, F) float64
         Features of block k0 sampled by the caller (then k1 = k0 + 1), or an empty array: draw them.
@@ -276,7 +281,7 @@ def scan_blocks(k0, k1, n, lanes, consts, codes, params, cdf, values, ops, refs,
         for t0 in range(0, b, T):
             m = min(T, b - t0)
             if fused:
-                draw_features(lanes, consts, codes, params, cdf, values, ops, refs, m, U, X, F)
+                draw_features(lanes, consts, codes, params, cdf, values, ops, refs, cidx, chol, m, U, X, F)
             else:
                 for f in range(nF):
                     for s in range(m):

@@ -11,7 +11,10 @@ are independent (they overlap in the processor) and a tile's samples come out
 in their natural order. The laws' inverse CDFs and the model's features
 (values less their reference, rho cos zeta and rho sin zeta of a clearance,
 the constant 1 of the known shifts) follow in the same tile, so no block of
-samples is ever held in memory.
+samples is ever held in memory. A correlated budget's uniforms pass through
+its Gaussian copula first (:meth:`GaussianCopula.correlate
+<prp3mc.model.copula.GaussianCopula.correlate>`: normal quantiles, the
+Cholesky factor, the normal CDF), as :meth:`Budget.ppf` does.
 
 The uniforms are bit for bit numpy's; the values equal
 :meth:`Law.ppf <prp3mc.model.laws.Law.ppf>`'s to round-off (exactly for
@@ -21,6 +24,12 @@ cosines and sines of zeta (degrees) come from a polynomial after an exact
 reduction to [-45, 45] degrees, within one unit in the last place of numpy's.
 A law without a compiled inverse CDF makes :func:`sampler_tables` return
 ``None``; the caller then samples through numpy.
+
+Why kept rather than numpy's Generator: drawing inside the fused kernel
+holds no samples, 1e8 samples at one pose peak at 0.28 GB where the numpy
+code would hold 21.6 GB, and one pose runs 11.6x the numpy code
+(``benchmarks/bench_montecarlo.py``, 2 shared cores; the uniforms alone are
+only 1.2x numpy's ``Generator.random``).
 """
 
 from __future__ import annotations
@@ -34,6 +43,7 @@ from numba.extending import intrinsic
 from scipy import special
 
 from ..model.budget import Budget
+from ..model.copula import U_EDGE
 from ..model.laws import Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
 from ..model.linear import FEATURE_COS, FEATURE_ONE, FEATURE_SIN, FEATURE_VALUE
 
@@ -123,8 +133,9 @@ def sampler_tables(budget: Budget, feature_ops: tuple) -> tuple | None:
 
     ``feature_ops`` is :meth:`LinearModel.feature_ops <prp3mc.model.linear.LinearModel.feature_ops>`.
     Returns ``(codes (D,) int64, params (D, 4) float64, cdf (K,), values (K,), ops (F, 3) int64,
-    refs (F,))`` over the budget's D factors (:attr:`Budget.factors`), or None when a law has
-    no compiled inverse CDF.
+    refs (F,), cidx (k,) int64, chol (k, k))`` over the budget's D factors (:attr:`Budget.factors`),
+    with the correlated factors ``cidx`` and the Cholesky factor of their latent correlation
+    (k = 0 for an independent budget), or None when a law has no compiled inverse CDF.
     """
     laws = list(budget.factor_laws.values())
     codes = np.empty(len(laws), np.int64)
@@ -151,7 +162,10 @@ def sampler_tables(budget: Budget, feature_ops: tuple) -> tuple | None:
         else:
             return None
     ops, refs = feature_ops
-    return codes, params, np.array(cdf, float), np.array(values, float), ops, refs
+    copula = budget.copula
+    cidx = np.array(copula.index if copula else (), np.int64)
+    chol = np.ascontiguousarray(copula.chol) if copula else np.zeros((0, 0))
+    return codes, params, np.array(cdf, float), np.array(values, float), ops, refs, cidx, chol
 
 
 # ---------------------------------------------------------------- inverse CDFs
@@ -225,6 +239,36 @@ def _ppf_row(code, prm, cdf, values, u, x, m):
             x[s] = values[start + min(i, k - 1)]
 
 
+_SQRTH = 0.70710678118654752440  # sqrt(1/2)
+
+
+@njit(inline="always")
+def _ndtr(x):
+    """Standard normal CDF, as scipy's ``ndtr`` (Cephes) computes it from erf and erfc."""
+    t = x * _SQRTH
+    z = abs(t)
+    if z < _SQRTH:
+        return 0.5 + 0.5 * math.erf(t)
+    y = 0.5 * math.erfc(z)
+    return 1.0 - y if t > 0 else y
+
+
+@njit(nogil=True, cache=True)
+def _correlate(cidx, chol, U, z, m):
+    """Rows ``cidx`` of the uniforms U[:, :m] through the Gaussian copula: Phi(L Phi^-1(u)), kept in
+    [U_EDGE, 1 - U_EDGE] (z: (k,) scratch)."""
+    k = cidx.size
+    for s in range(m):
+        for a in range(k):
+            u = min(max(U[cidx[a], s], U_EDGE), 1.0 - U_EDGE)
+            z[a] = _ndtri(u)
+        for a in range(k):
+            acc = 0.0
+            for b in range(a + 1):
+                acc += chol[a, b] * z[b]
+            U[cidx[a], s] = min(max(_ndtr(acc), U_EDGE), 1.0 - U_EDGE)
+
+
 # fdlibm's kernels of sin and cos on [-pi/4, pi/4]
 _S1, _S2, _S3 = -1.66666666666666324348e-01, 8.33333333332248946124e-03, -1.98412698298579493134e-04
 _S4, _S5, _S6 = 2.75573137070700676789e-06, -2.50507602534068634195e-08, 1.58969099521155010221e-10
@@ -278,7 +322,7 @@ def draw_uniforms(lanes, consts, U):
 
 
 @njit(nogil=True, cache=True)
-def draw_features(lanes, consts, codes, params, cdf, values, ops, refs, m, U, X, F):
+def draw_features(lanes, consts, codes, params, cdf, values, ops, refs, cidx, chol, m, U, X, F):
     """Features of the next tile of samples; the lanes move on to the tile after it.
 
     Parameters
@@ -287,7 +331,7 @@ def draw_features(lanes, consts, codes, params, cdf, values, ops, refs, m, U, X,
         :func:`pcg_lanes` states at the tile's first sample.
     consts : (6,) uint64
         :func:`pcg_lanes` constants.
-    codes, params, cdf, values, ops, refs
+    codes, params, cdf, values, ops, refs, cidx, chol
         :func:`sampler_tables`.
     m : int
         Samples of the tile that are used (the lanes draw the whole tile).
@@ -298,6 +342,8 @@ def draw_features(lanes, consts, codes, params, cdf, values, ops, refs, m, U, X,
     """
     d = U.shape[0]
     draw_uniforms(lanes, consts, U)
+    if cidx.size:
+        _correlate(cidx, chol, U, np.empty(cidx.size), m)
     for j in range(d):
         _ppf_row(codes[j], params[j], cdf, values, U[j], X[j], m)
     f = 0

@@ -6,6 +6,10 @@ the range of the keys, the buckets holding the wanted ranks kept, the others
 dropped, and again on what is kept with the next 11 bits (three levels
 at most). Every pass is a linear scan, so the cost is a few nanoseconds per
 value whatever the ranks, ties included (all keys equal ends at once).
+
+Why kept rather than ``np.percentile``: with the streamed kernel, exact
+percentiles of 441 poses x 2^20 samples run 6.2-10.6x the numpy code that sorts
+each pose's errors (``benchmarks/bench_montecarlo.py``, 2 shared cores).
 """
 
 from __future__ import annotations

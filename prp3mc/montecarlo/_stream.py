@@ -90,7 +90,7 @@ class Stream:
                                  for r in self.worker_blocks]
         else:  # numpy sampling, block by block
             self.tables = (np.zeros(0, np.int64), np.zeros((0, 4)), np.zeros(0), np.zeros(0), np.zeros((0, 3), np.int64),
-                           np.zeros(0))
+                           np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 0)))
             self.worker_lanes = [(np.zeros((2, LANES), np.uint64), np.zeros(6, np.uint64))] * len(self.worker_blocks)
 
     def features(self, k: int) -> np.ndarray:

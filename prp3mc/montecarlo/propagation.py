@@ -33,7 +33,7 @@ from .._result import freeze, pose_columns, short_repr
 from ..units import OUTPUT_UNITS, POSE_OUTPUTS, RAD2DEG, Z95, z_value
 from .._version import __version__
 from ..model.budget import Budget
-from ..errors import BudgetError, Prp3mcWarning
+from ..errors import ParameterError, Prp3mcWarning
 from ..kinematics.chain import inverse_kinematics
 from ..kinematics.exact import exact_pose_error
 from ..kinematics.geometry import Geometry
@@ -277,14 +277,14 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     t0 = time.perf_counter()
     n_samples = int(n_samples)
     if n_samples < MIN_SAMPLES:
-        raise BudgetError(f"Monte Carlo needs at least {MIN_SAMPLES} samples (its standard errors come from "
+        raise ParameterError(f"Monte Carlo needs at least {MIN_SAMPLES} samples (its standard errors come from "
                           f"batches of {_MIN_BATCH} or more), got {n_samples}")
     n_batches = min(_N_BATCHES, n_samples // _MIN_BATCH)
     if tolerance_mm is not None and not (math.isfinite(tolerance_mm) and tolerance_mm >= 0):
-        raise BudgetError(f"tolerance must be a finite length >= 0 mm, got {tolerance_mm}")
+        raise ParameterError(f"tolerance must be a finite length >= 0 mm, got {tolerance_mm}")
     pct = tuple(float(p) for p in percentiles)
     if not all(0.0 <= p <= 100.0 for p in pct):
-        raise BudgetError(f"percentiles must lie in [0, 100], got {pct}")
+        raise ParameterError(f"percentiles must lie in [0, 100], got {pct}")
     short = [(p, need) for p in pct if (need := ci_samples(p)) is None or n_samples < need]
     if short:
         warnings.warn(Prp3mcWarning(
@@ -374,7 +374,8 @@ def _linearization(model: LinearModel, budget: Budget, seed: int, n_poses: int, 
     flat = model.poses.reshape(-1, 3)
     idx = np.unique(np.linspace(0, flat.shape[0] - 1, min(n_poses, flat.shape[0])).round().astype(int))
     X = budget.sample(n_samples, seed)
-    errors = budget.errors(X, b=inverse_kinematics(model.geometry, flat[idx], check=False)[0])
+    errors = budget.errors(X, b=inverse_kinematics(model.geometry, flat[idx], check=False)[0],
+                           lead_mm=model.geometry.lead_mm)
     poses = np.broadcast_to(flat[idx, None, :], (len(idx), X.shape[0], 3))
     exact = exact_pose_error(model.geometry, poses, errors, check=False)
     sub = linear_model(model.geometry, budget, flat[idx], check=False)

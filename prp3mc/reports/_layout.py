@@ -7,6 +7,12 @@ they hold (:func:`text_inches` measures a string without drawing anything),
 so each renders in one pass. A figure of :func:`agg_figure` sits on its own
 Agg canvas: pyplot and the matplotlib backend are untouched.
 :func:`lighten` drops what costs most and says least.
+
+Not yet replaced by matplotlib's constrained layout: that engine rendered the
+paper study's report figures 1.4-1.8x slower (``benchmarks/bench_private.py``),
+short of the 2x that would justify this module, but the maps' colour bars and
+the legends below them are placed in these margins by hand and would need
+redrawing first (issue 23); tests/test_report_layout.py guards the layout meanwhile.
 """
 
 from __future__ import annotations

@@ -17,7 +17,15 @@ from ..units import DISPLAY
 from ._layout import text_inches, wrap
 from .plots import legend_below, region_map
 
-__all__ = ["allocation_front_plot", "allocation_map", "class_changes"]
+__all__ = ["allocation_front_plot", "allocation_map", "class_changes", "labels_points", "MAX_LABELLED"]
+
+#: Points of a front labelled with their class changes at most (beyond, the labels would pile up).
+MAX_LABELLED = 15
+
+
+def labels_points(front: pd.DataFrame, output: str = "position") -> bool:
+    """Whether :func:`allocation_front_plot` labels the front's points by default (at most :data:`MAX_LABELLED`)."""
+    return int((front["output"] == output).sum()) <= MAX_LABELLED
 
 
 def class_changes(previous: pd.Series | None, current: pd.Series) -> str:
@@ -43,7 +51,7 @@ def allocation_front_plot(front: pd.DataFrame, output: str = "position", *, spec
         Mark the front point of this cost (the allocation's choice).
     annotate : bool, optional
         Label each point with the classes that changed from the previous one
-        (default: when the front has at most 15 points).
+        (default: when the front has at most :data:`MAX_LABELLED` points, :func:`labels_points`).
     ax : matplotlib Axes, optional
 
     Returns
@@ -60,7 +68,7 @@ def allocation_front_plot(front: pd.DataFrame, output: str = "position", *, spec
     y = scale * rows["value"].to_numpy()
     ax.step(rows["cost"], y, where="post", color="0.6", lw=1)
     ax.plot(rows["cost"], y, "o", color="C0", ms=4, label="Pareto-optimal choices")
-    if annotate or (annotate is None and len(rows) <= 15):
+    if annotate or (annotate is None and labels_points(front, output)):
         previous, labels = None, []
         for (_, row), value in zip(rows.iterrows(), y):
             labels.append(class_changes(previous, row[inputs]))

@@ -9,7 +9,7 @@ the figures as PNG (SVG too on request), per-pose / per-measurement
 tables as CSV and the updated model in ``model/``
 (:mod:`~prp3mc.measurement.fit.updated`); it draws on its own Agg canvases, outside pyplot, and renders
 each figure once (fixed margins, no layout engine, no tight bounding box),
-on worker processes while a core is idle (:mod:`~prp3mc.reports._render`),
+here or on worker processes on request (:mod:`~prp3mc.reports._render`),
 and writes the JSON, tables and model files meanwhile.
 
 The report shows what the measurement carries besides the machine: the
@@ -38,7 +38,7 @@ from ._layout import agg_figure, lighten
 from ._render import rendering
 
 __all__ = ["plot_workspace", "plot_actuators", "plot_temperature", "plot_gap", "plot_candidates", "plot_iso9283",
-           "write_report", "report_document", "render_html"]
+           "write_report", "report_document"]
 
 #: Resolution of the report's figures (dots per inch); one render per figure.
 DPI = 90
@@ -165,7 +165,7 @@ def _draw_iso9283(result: DiscrepancyResult, fig) -> None:
         ax.scatter(rank[~out], meas[~out], s=12, color="tab:blue", label="measured")
         ax.scatter(rank[out], meas[out], s=16, color="tab:red", label="measured, above the band")
         ax.set(ylim=(0, None), title=f"{stat.replace('_phi', ' φ')} ({shown})", xlabel="pose, by predicted value")
-    axes[0].legend(loc="upper left", fontsize=7)
+    axes[0].legend(loc="best", fontsize=7)
 
 
 def _n_steps(result: DiscrepancyResult) -> int:
@@ -336,11 +336,6 @@ def _iso_summary(iso: dict) -> list[dict]:
     return rows
 
 
-def render_html(result: DiscrepancyResult, figures: dict, doc: dict | None = None) -> str:
-    """The HTML report; ``figures`` maps figure names to data URIs, ``doc`` is discrepancy.json (default: the result's)."""
-    return _page(result, doc)(figures)
-
-
 def _page(result: DiscrepancyResult, doc: dict | None):
     """All of the HTML report but its figures (template compiled, tables made): a function of the figures."""
     import jinja2
@@ -365,7 +360,8 @@ def _page(result: DiscrepancyResult, doc: dict | None):
         confounded=list(result.confounded_with_registration), outliers=list(result.outliers),
         outlier_rule=result.outlier_rule, with_outliers=result.with_outliers, repeatability=result.repeatability,
         iso_n_mc=N_MC, iso_rows=_iso_summary(result.iso9283), iso_worst=_table(worst))
-    return lambda figures: template.render(figures=figures, **context)
+    return lambda figures, formats=("png",), written=(): template.render(figures=figures, formats=formats,
+                                                                         written=written, **context)
 
 
 def report_document(result: DiscrepancyResult, inputs: dict | None = None, warnings=None) -> dict:
@@ -384,7 +380,7 @@ def report_document(result: DiscrepancyResult, inputs: dict | None = None, warni
 
 def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bool = False,
                  formats: tuple = ("png",), inputs: dict | None = None, warnings=None,
-                 workers: int | None = None, ahead=None) -> Path:
+                 workers: int = 1) -> Path:
     """Write ``discrepancy.json``, ``report.html``, figures, tables and ``model/`` into ``folder`` (atomically).
 
     Parameters
@@ -403,11 +399,7 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
         The warnings a command gave (see :func:`report_document`); the report shows them.
     workers : int, optional
         Processes drawing the figures (:func:`prp3mc.reports._render.rendering`;
-        default :func:`prp3mc._fork.fork_workers`: 1 plus the idle cores, where the
-        system can fork; 1 draws them here). The files are the same either way.
-    ahead : Background, optional
-        A process readied for the figures while the analysis ran
-        (:func:`prp3mc.reports._render.drawing_ahead`); it draws them.
+        1, the default, draws them here). The files are the same either way.
 
     Returns
     -------
@@ -418,7 +410,7 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
     figures = [(name, functools.partial(_report_figure, name, result)) for name in _REPORT_FIGURES
                if _FIGURES[name][1](result) is not None]
     with output_folder(folder, force) as tmp:
-        with rendering(figures, tmp, formats, workers, DPI, ahead) as pngs:
+        with rendering(figures, tmp, formats, workers, DPI) as pngs:
             write_json(tmp / "discrepancy.json", doc)   # while the figures are drawn
             result.model.write(tmp / "model")
             for label, d in (("before", result.before), ("after", result.after)):
@@ -428,5 +420,6 @@ def write_report(result: DiscrepancyResult, folder: str | os.PathLike, force: bo
             result.iso9283_poses.to_csv(tmp / "iso9283_per_pose.csv", index=False)
             page = _page(result, doc)
             uris = {name: png_data_uri(png) for (name, _), png in zip(figures, pngs)}
-        write_text(tmp / "report.html", page(uris))
+        written = ["report.html", *sorted(str(p.relative_to(tmp)) for p in tmp.rglob("*") if p.is_file())]
+        write_text(tmp / "report.html", page(uris, tuple(formats), written))
     return Path(folder)

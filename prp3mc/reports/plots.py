@@ -23,9 +23,9 @@ from ..units import DISPLAY
 from ._layout import (ROUND_STEPS, fix_layout, grid, lighten, number_inches, set_title, shift, text_inches,
                       tick_width, title_lines, wrap)
 
-__all__ = ["is_constant", "shared_levels", "region_map", "worst_case_map", "montecarlo_map", "compare_maps_figure",
+__all__ = ["is_constant", "within_noise", "noise_range", "shared_levels", "region_map", "worst_case_map", "montecarlo_map", "compare_maps_figure",
            "error_histogram", "histograms_figure", "ecdf_steps", "error_ecdf", "ecdf_figure", "sobol_ranking",
-           "worst_case_shares", "ranking_figure"]
+           "worst_case_shares", "ranking_figure", "contributors_pareto"]
 
 _LABEL = {"position": "position error", "phi": "|δφ|"}
 _QUANTITY = {q: (label, DISPLAY[q][1], DISPLAY[q][0]) for q, label in _LABEL.items()}  # (label, unit, scale)
@@ -73,6 +73,54 @@ def is_constant(values: np.ndarray, rtol: float = CONSTANT_RTOL) -> bool:
     return float(np.ptp(v)) <= rtol * max(float(np.max(np.abs(v))), np.finfo(float).tiny)
 
 
+def noise_range(n: int, level: float = 0.95) -> float:
+    """The ``level`` quantile of the range of ``n`` independent standard normal variables.
+
+    ``P(R <= w) = n ∫ φ(x) (Φ(x + w) − Φ(x))^(n−1) dx``, integrated on a
+    grid and solved for ``w`` (2.77 for n = 2, i.e. 1.96·√2; 5.6 for 49).
+    """
+    from scipy.optimize import brentq
+    from scipy.special import ndtr
+    if n < 2:
+        return 0.0
+    x = np.linspace(-9.0, 9.0, 4001)
+    pdf = np.exp(-0.5 * x * x) / np.sqrt(2 * np.pi)
+
+    def cdf(w):
+        return n * np.trapezoid(pdf * (ndtr(x + w) - ndtr(x)) ** (n - 1), x) - level
+    return float(brentq(cdf, 1e-6, 20.0, xtol=1e-6))
+
+
+def within_noise(values: np.ndarray, se: np.ndarray, level: float = 0.95) -> bool:
+    """Whether a field of Monte Carlo estimates varies no more than their noise alone would make it vary.
+
+    The field is taken as constant when its range is at most
+    :func:`noise_range` ``(n) × max(se)``: the ``level`` quantile of the
+    range of ``n`` independent estimates of one value, each with the largest
+    standard error. A field that varies less cannot be told from a constant
+    one at this sample size (for two poses the rule is range <= 1.96·√2·se,
+    the two-sided 95 % test of their difference). Estimates that share their
+    draws (common random numbers across poses) scatter less than independent
+    ones, so the rule errs towards calling a field constant: it states what
+    the run cannot resolve, not that the true field is flat.
+
+    Parameters
+    ----------
+    values, se : ndarray, same shape
+        Per-pose estimates and their standard errors (same unit).
+    """
+    v, s = np.asarray(values, dtype=float).ravel(), np.asarray(se, dtype=float).ravel()
+    if not np.all(np.isfinite(s)) or float(s.max()) <= 0.0:
+        return False
+    return float(np.ptp(v)) <= noise_range(v.size, level) * float(s.max())
+
+
+def _with_se(value: float, se: float) -> str:
+    """``value ± se`` to the decimal of the standard error's first digit (``115.9 ± 0.2``)."""
+    decimals = max(0, -int(np.floor(np.log10(se)))) if se > 0 else 3
+    return f"{value:.{decimals}f} ± {round(se, decimals):.{decimals}f}"
+
+
 def shared_levels(*arrays: np.ndarray, n: int = 12) -> np.ndarray:
     """Round contour levels spanning all ``arrays`` (one colour scale for several maps)."""
     from matplotlib.ticker import MaxNLocator
@@ -84,25 +132,33 @@ def shared_levels(*arrays: np.ndarray, n: int = 12) -> np.ndarray:
 
 
 def region_map(poses: np.ndarray, values: np.ndarray, *, ax=None, levels=None, cmap: str = "viridis",
-               title: str = "", mark_extrema: bool = True, unit: str = ""):
+               title: str = "", mark_extrema: bool = True, unit: str = "", se: np.ndarray | None = None):
     """Filled contour map of ``values`` (ny, nx) over grid ``poses`` (ny, nx, 3), extrema marked.
 
     A constant field (:func:`is_constant`) is filled in one colour and
-    labelled "constant: value unit", with neither contour lines nor extrema.
+    labelled "constant: value unit", with neither contour lines nor extrema;
+    so is a field of estimates with standard errors ``se`` that varies no
+    more than their noise (:func:`within_noise`), labelled "constant within
+    Monte Carlo noise: mean ± largest se unit". The contour lines carry no
+    labels (the colour bar reads them; labels along close lines overlapped).
     Draws on ``ax`` (a new pyplot figure when None); returns the Figure holding it.
     """
     ax = _axes(ax)
     X, Y = poses[..., 0], poses[..., 1]
+    noise = se is not None and not is_constant(values) and within_noise(values, se)
+    flat = is_constant(values) or noise
     levels = shared_levels(values) if levels is None else levels
-    ax.contourf(X, Y, values, levels=levels, cmap=cmap, extend="neither")
+    ax.contourf(X, Y, np.full_like(values, np.mean(values)) if noise else values, levels=levels, cmap=cmap,
+                extend="neither")
     ax.set(xlabel="x (mm)", ylabel="y (mm)", aspect="equal")
     ax.set_title(title, y=1.0)
-    if is_constant(values):
-        ax.text(0.5, 0.5, f"constant: {float(np.mean(values)):.4g} {unit}".rstrip(), transform=ax.transAxes,
-                ha="center", va="center", fontsize=11, bbox={"boxstyle": "round", "fc": "white", "ec": "0.6"})
+    if flat:
+        text = (f"constant within Monte Carlo noise:\n{_with_se(float(np.mean(values)), float(np.max(se)))} {unit}"
+                if noise else f"constant: {float(np.mean(values)):.4g} {unit}")
+        ax.text(0.5, 0.5, text.rstrip(), transform=ax.transAxes, ha="center", va="center", fontsize=10,
+                bbox={"boxstyle": "round", "fc": "white", "ec": "0.6"})
         return ax.figure
-    lines = ax.contour(X, Y, values, levels=levels, colors="k", linewidths=0.5, alpha=0.6)
-    ax.clabel(lines, lines.levels[::max(1, len(lines.levels) // 8)], fmt="%g", fontsize=7)
+    ax.contour(X, Y, values, levels=levels, colors="k", linewidths=0.5, alpha=0.6)
     if mark_extrema:
         for fn, marker, word in ((np.argmax, "X", "max"), (np.argmin, "o", "min")):
             k = np.unravel_index(fn(values), values.shape)
@@ -122,17 +178,25 @@ def montecarlo_map(mc, percentile: float = 99.73, quantity: str = "position", *,
                    title: str = ""):
     """Contour map of a Monte Carlo percentile of the position error (µm) or ``|δφ|`` (arcsec)."""
     label, unit, f = _QUANTITY[quantity]
+    values, se = _percentile_field(mc, percentile, quantity)
+    return region_map(mc.poses, f * values, ax=ax, levels=levels, title=title, cmap="magma", unit=unit, se=f * se)
+
+
+def _percentile_field(mc, percentile: float, quantity: str) -> tuple[np.ndarray, np.ndarray]:
+    """A Monte Carlo percentile over the grid and its standard errors (from its 95 % intervals), mm or deg."""
+    from ..study.results import pct_se
     q = list(mc.percentiles).index(float(percentile))
-    values = (mc.position_pct if quantity == "position" else mc.phi_pct)[..., q]
-    return region_map(mc.poses, f * values, ax=ax, levels=levels, title=title, cmap="magma", unit=unit)
+    pct, ci = ((mc.position_pct, mc.position_pct_ci) if quantity == "position" else (mc.phi_pct, mc.phi_pct_ci))
+    return pct[..., q], pct_se(ci[..., q, :])
 
 
-def _share_scale(values, share_scale) -> bool:
-    """Whether maps of ``values`` go on one colour scale (``"auto"``: when no varying panel gets too little of it)."""
+def _share_scale(values, share_scale, constant) -> bool:
+    """Whether maps of ``values`` go on one colour scale (``"auto"``: when no varying panel gets too little of it;
+    ``constant``: which panels are drawn as constant)."""
     if share_scale != "auto":
         return bool(share_scale)
     span = max(float(np.max(v)) for v in values) - min(float(np.min(v)) for v in values)
-    return all(np.ptp(v) >= MIN_SCALE_FRACTION * span for v in values if not is_constant(v))
+    return all(np.ptp(v) >= MIN_SCALE_FRACTION * span for v, flat in zip(values, constant) if not flat)
 
 
 def compare_maps_figure(results, kind: str = "worstcase", quantity: str = "position",
@@ -163,14 +227,14 @@ def compare_maps_figure(results, kind: str = "worstcase", quantity: str = "posit
         values = [f * r.worst_case.value(quantity) for r in results]
         poses = [r.worst_case.poses for r in results]
         what, cmap = f"exact worst-case {label}", "viridis"
+        ses = [None] * len(results)
     else:
-        q = list(results[0].montecarlo.percentiles).index(float(percentile))
-        values = [f * (r.montecarlo.position_pct if quantity == "position" else r.montecarlo.phi_pct)[..., q]
-                  for r in results]
+        fields = [_percentile_field(r.montecarlo, percentile, quantity) for r in results]
+        values, ses = [f * v for v, _ in fields], [f * se for _, se in fields]
         poses = [r.montecarlo.poses for r in results]
         what, cmap = f"Monte Carlo p{percentile:g} of the {label}", "magma"
-    shared = _share_scale(values, share_scale)
-    constant = [is_constant(v) for v in values]
+    constant = [is_constant(v) or (se is not None and within_noise(v, se)) for v, se in zip(values, ses)]
+    shared = _share_scale(values, share_scale, constant)
     common = shared_levels(*values, n=20)
     levels = [common if shared else shared_levels(v, n=20) for v in values]
     if all(constant):
@@ -268,7 +332,7 @@ def error_histogram(samples, index: int, quantity: str = "position", *, ax=None,
     ax.axvline(p, ls=":", lw=1.2, color=color, label=f"p{percentile:g} {p:.4g} {unit}")
     ax.set_ylabel("density")
     ax.set_xlabel(f"{name} ({unit})", visible=_labelled(ax.xaxis))
-    ax.legend(fontsize=7, loc="upper right")
+    ax.legend(fontsize=7, loc="best")
     return ax.figure
 
 
@@ -393,30 +457,38 @@ def ranking_basis(frame) -> tuple[str, str]:
     return f"at (x={x:.4g} mm, y={y:.4g} mm, φ={phi:.4g}°)", "worst_case_share"
 
 
+def shapley_only(frame) -> bool:
+    """Whether a ranking frame has Shapley effects and no Sobol indices (a correlated budget)."""
+    return "Sh" in frame and bool(frame["ST"].isna().all()) and bool(frame["Sh"].notna().any())
+
+
 def sobol_ranking(frame, *, ax=None, title: str = ""):
-    """First-order and total Sobol indices with their 95 % intervals, ranked by ST.
+    """First-order and total Sobol indices with their 95 % intervals, ranked by ST; for a correlated
+    budget (:func:`shapley_only`) its Shapley effects, ranked by Sh.
 
     Parameters
     ----------
     frame : DataFrame
-        :func:`prp3mc.sobol.ranking.ranking` (columns name, kind, S1, S1_conf, ST, ST_conf).
+        :func:`prp3mc.sobol.ranking.ranking` (columns name, kind, S1, S1_conf, ST, ST_conf, and Sh, Sh_conf).
 
     Returns
     -------
     Figure
         The figure holding ``ax`` (a new pyplot figure when ``ax`` is None).
     """
-    frame = frame.sort_values("ST", ascending=False, kind="stable")
+    shapley = shapley_only(frame)
+    frame = frame.sort_values("Sh" if shapley else "ST", ascending=False, kind="stable")
     ax = _axes(ax, figsize=(5.0, 0.32 * len(frame) + 1.2))
     y = np.arange(len(frame))
     h = 0.38
-    ax.barh(y - h / 2, frame["ST"], height=h, xerr=frame["ST_conf"], label="total ST", color="#4c72b0",
-            error_kw={"lw": 1, "capsize": 2})
-    ax.barh(y + h / 2, frame["S1"], height=h, xerr=frame["S1_conf"], label="first order S1", color="#dd8452",
-            error_kw={"lw": 1, "capsize": 2})
+    bars = ((("Sh", "Shapley effect Sh", "#8172b2", 0.0, 2 * h),) if shapley else
+            (("ST", "total ST", "#4c72b0", -h / 2, h), ("S1", "first order S1", "#dd8452", h / 2, h)))
+    for key, label, color, shift, height in bars:
+        ax.barh(y + shift, frame[key], height=height, xerr=frame[f"{key}_conf"], label=label, color=color,
+                error_kw={"lw": 1, "capsize": 2})
     ax.set_yticks(y, _bar_labels(frame))
     ax.invert_yaxis()
-    ax.set_xlabel("Sobol index (95 % CI)")
+    ax.set_xlabel(("Shapley effect" if shapley else "Sobol index") + " (95 % CI)")
     ax.set_title(title, fontsize=10, y=1.0)
     ax.legend(fontsize=7, loc="lower right")
     return ax.figure
@@ -469,7 +541,9 @@ def ranking_figure(frame, title: str = "", *, fig=None):
     """
     basis, column = ranking_basis(frame)
     (wa, wb), shares = _RANKING_PANELS, frame.dropna(subset=[column])
-    heads = (wrap(f"Sobol indices (variance shares),\n{basis}", wa + 0.3, 10),
+    kind = "Shapley effects (variance shares; correlated inputs)" if shapley_only(frame) else \
+        "Sobol indices (variance shares)"
+    heads = (wrap(f"{kind},\n{basis}", wa + 0.3, 10),
              wrap(f"share of the exact worst case,\n{basis}", wb + 0.3, 10))
     left = max(text_inches(t)[0] for t in _bar_labels(frame)) + 0.2          # the y tick labels of each panel
     middle = max((text_inches(t)[0] for t in _bar_labels(shares)), default=0.0) + 0.3
@@ -485,3 +559,32 @@ def ranking_figure(frame, title: str = "", *, fig=None):
     lighten(fig, ROUND_STEPS)
     set_title(fig, title)
     return fig
+
+
+def contributors_pareto(contributions, *, ax=None, title: str = ""):
+    """Pareto chart of a worst case's contributors: shares (%) as bars, largest first, and their running total.
+
+    Parameters
+    ----------
+    contributions : DataFrame
+        :meth:`~prp3mc.worstcase.envelope.WorstCase.contributions_frame` at one pose (``term``, ``share``).
+    ax : matplotlib Axes, optional
+    title : str
+
+    Returns
+    -------
+    Figure
+    """
+    ax = _axes(ax, (6.4, 3.4))
+    frame = contributions.sort_values("share", ascending=False, kind="stable")
+    share = 100 * frame["share"].to_numpy(dtype=float)
+    x = np.arange(share.size)
+    ax.bar(x, share, color="C0", width=0.7, label="share of the worst case")
+    ax.plot(x, np.cumsum(share), "o-", color="C3", ms=3.5, lw=1.2, label="running total")
+    ax.set_xticks(x, frame["term"], rotation=45, ha="right", fontsize=8)
+    ax.set(ylim=(0, 105), ylabel="share of the worst case (%)")
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=7, frameon=False, loc="center right")         # under the total, over the smallest bars
+    ax.set_title(f"{title}: contributors to the worst-case position error" if title else
+                 "contributors to the worst-case position error", fontsize=10, y=1.0)
+    return ax.figure

@@ -13,9 +13,9 @@ The report is built from a :class:`~prp3mc.study.results.StudyResult` only;
 it is readable without prp3mc installed. Figures are drawn on figures of
 their own with an Agg canvas: writing a report never touches pyplot or the
 matplotlib backend. Each is laid out once with margins in inches and drawn
-once, without a layout engine (:mod:`prp3mc.reports._layout`). They are drawn
-on worker processes (1 plus the idle cores: :func:`prp3mc._fork.fork_workers`) while the tables are
-written (:mod:`prp3mc.reports._render`).
+once, without a layout engine (:mod:`prp3mc.reports._layout`), in this
+process or, on request, on worker processes while the tables are written
+(:mod:`prp3mc.reports._render`).
 """
 
 from __future__ import annotations
@@ -29,11 +29,13 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from ..output import check_output, figure_formats, output_folder, png_data_uri, write_csv, write_json, write_text
-from ..study.results import StudyResult
+from ..output import (check_output, figure_formats, output_folder, png_data_uri, table_formats, write_csv,
+                      write_json, write_text, write_workbook)
+from ..progress import Progress
+from ..study.results import StudyResult, over_grid, pct_se
 from ..study.summary import build_summary
 from ..study.sweep import best_configurations, design_frame
-from ..units import DEG2ARCSEC, DISPLAY, MM2UM
+from ..units import DEG2ARCSEC, DISPLAY, MM2UM, probability_text
 from ._layout import ROUND_STEPS, Margins, agg_figure, lighten
 from ._render import rendering
 from .plots import LEGEND_DROP
@@ -131,6 +133,21 @@ def _contributions(c) -> pd.DataFrame:
     return c.worst_case.contributions_frame("position", _worst_index(c))
 
 
+#: Unit of a term's value in a contributions table, by family (the budget's inputs and effects).
+_TERM_UNITS = {**dict.fromkeys(("a", "b", "c", "e", "rho", "backlash"), "mm"),
+               **dict.fromkeys(("alpha", "beta", "gamma", "theta", "psi", "zeta"), "deg"),
+               "thermal": "deg C", "scale": "1"}
+
+
+def _contributions_display(frame: pd.DataFrame) -> pd.DataFrame:
+    """Worst-case contributions for the report: largest share first, the term's value with its unit, µm and %."""
+    family = frame["term"].str.replace(r"_\d$", "", regex=True)
+    return (frame.assign(**{"value": frame["term_value"], "unit": family.map(_TERM_UNITS).fillna(""),
+                            "contribution (µm)": MM2UM * frame["contribution"], "share (%)": 100 * frame["share"]})
+            .sort_values("share (%)", ascending=False, kind="stable")
+            [["term", "value", "unit", "contribution (µm)", "share (%)"]])
+
+
 def _grid_frame(c) -> pd.DataFrame:
     wc = c.worst_case
     flat = wc.poses.reshape(-1, 3)
@@ -152,8 +169,12 @@ def _summary_display(frame: pd.DataFrame) -> pd.DataFrame:
     for key, g in frame.groupby(keys, sort=False):
         by = g.set_index("aggregate")
         factor, unit = DISPLAY[key[2]]
+        statistic = key[3].replace("_", " ")
+        if key[3].startswith("exceed_"):          # a probability: % from 1 % up, else ppm
+            factor, unit = (100.0, "%") if by["value"].max() >= 0.01 else (1e6, "ppm")
+            statistic = f"P(> {key[3][len('exceed_'):-2]} mm)"
         rows.append({"configuration": key[0], "analysis": key[1], "output": "|δφ|" if key[2] == "phi" else key[2],
-                     "statistic": key[3].replace("_", " "), "unit": unit,
+                     "statistic": statistic, "unit": unit,
                      **{a: factor * by.at[a, "value"] for a in ("min", "max", "mean")},
                      "se of max": factor * by.at["max", "se"]})
     return pd.DataFrame(rows)
@@ -204,6 +225,10 @@ def _figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
     scale = ("Panels share one colour scale when that helps the comparison, else each has its own "
              "(the title says which); a field constant over a region is labelled so, without extrema.")
     figs = _design_figures(result)
+    figs += [(f"pareto_{r.name}", f"{r.name}: what builds the worst case at its worst pose ({_worst_pose(r)}): each "
+              "term's share of the exact worst-case position error, largest first, and their running total (at this one "
+              "pose; the table above compares both rankings as means over the Sobol grid).",
+              _draw_axes(plots.contributors_pareto, *_PARETO, _contributions(r), title=r.name)) for r in res]
     figs += [("worstcase_position", "Exact worst-case position error (µm) over each test region (the paper's "
              f"Figs. 4-5, computed exactly). ✕ marks the maximum, ○ the minimum. {scale}",
              _draw(plots.compare_maps_figure, res, "worstcase", "position")),
@@ -211,9 +236,12 @@ def _figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
              _draw(plots.compare_maps_figure, res, "worstcase", "phi"))]
     if all(r.montecarlo is not None for r in res):
         pct = _MC_PERCENTILE if _MC_PERCENTILE in res[0].montecarlo.percentiles else res[0].montecarlo.percentiles[-1]
-        figs += [("montecarlo_position", f"Monte Carlo p{pct:g} of the position error (µm). {scale}",
+        noise = (" A map that varies no more than its Monte Carlo noise (range within the 95 % quantile of the range "
+                 "of as many independent estimates with the largest standard error) is labelled constant within "
+                 "Monte Carlo noise, its mean ± that standard error.")
+        figs += [("montecarlo_position", f"Monte Carlo p{pct:g} of the position error (µm). {scale}{noise}",
                   _draw(plots.compare_maps_figure, res, "montecarlo", "position", pct)),
-                 ("montecarlo_phi", f"Monte Carlo p{pct:g} of |δφ| (arcsec). {scale}",
+                 ("montecarlo_phi", f"Monte Carlo p{pct:g} of |δφ| (arcsec). {scale}{noise}",
                   _draw(plots.compare_maps_figure, res, "montecarlo", "phi", pct)),
                  ("histograms_position", "Distribution of the position error at chosen poses; dashed: the exact "
                   f"worst case at that pose, dotted: p{pct:g}.",
@@ -231,14 +259,20 @@ def _figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
                      "no variance to share." if constant else "")
         for output, frame in r.ranking.items():
             basis = plots.ranking_basis(frame)[0]
+            left = (f"Shapley effects with 95 % Student t intervals over {r.sobol.replicates} batches of random "
+                    f"orders (left, ranked by Sh; the budget correlates inputs, so Sobol indices are not defined)"
+                    if plots.shapley_only(frame) else
+                    f"Sobol indices with 95 % Student t intervals over {r.sobol.replicates} independently "
+                    f"scrambled replicates (left, ranked by ST)")
             figs.append((f"sobol_{r.name}_{output}",
-                         f"{r.name}, output {output}: Sobol indices with 95 % bootstrap intervals (left, ranked "
-                         f"by ST) and each input's share of the exact worst case (right, ranked by share); "
-                         f"both the {basis} of the Sobol grid.{undefined}",
+                         f"{r.name}, output {output}: {left} and each input's share of the exact worst case "
+                         f"(right, ranked by share); both the {basis} of the Sobol grid.{undefined}",
                          _draw(plots.ranking_figure, frame, f"{r.name}: {output}")))
     return figs + _allocation_figures(result)
 
 
+#: Size and margins (inches) of a Pareto chart of contributors.
+_PARETO = ((6.4, 3.4), Margins(0.75, 0.2, 0.75, 0.35))
 #: Size and margins (inches) of an allocation's map (its legend below it) and of its Pareto front.
 _ALLOCATION_MAP = ((5.2, 5.6), Margins(0.8, 0.3, LEGEND_DROP + 0.5, 0.6))
 _ALLOCATION_FRONT = ((6.4, 4.4), Margins(0.85, 0.25, 0.55, 0.4))
@@ -246,7 +280,7 @@ _ALLOCATION_FRONT = ((6.4, 4.4), Margins(0.85, 0.25, 0.55, 0.4))
 
 def _allocation_figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
     """The binding-pose map and the Pareto front of every configuration's allocation."""
-    from .allocation_plots import allocation_front_plot, allocation_map
+    from .allocation_plots import allocation_front_plot, allocation_map, labels_points
     spec = result.study.allocation
     figs = []
     for c in result.configurations:
@@ -263,8 +297,11 @@ def _allocation_figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
             limit = spec.spec_phi_arcsec if output == "phi" else (
                 spec.spec_position_um if spec.spec_percentile is None else None)
             figs.append((f"allocation_{c.name}_front", f"{c.name}: the least cost of every reachable worst-case "
-                         f"{'|δφ|' if output == 'phi' else 'position error'} (the Pareto front); each point is "
-                         "labelled with the classes that changed from the previous one; ★ the chosen classes."
+                         f"{'|δφ|' if output == 'phi' else 'position error'} (the Pareto front); "
+                         + ("each point is labelled with the classes that changed from the previous one"
+                            if labels_points(front, output) else f"{front['point'].nunique()} points, too many to "
+                            "label: the classes that change at each step are in the table below")
+                         + "; ★ the chosen classes."
                          + (" The front is of the worst case: the percentile spec is not drawn, and the chosen "
                             "classes are marked only where they lie on it." if limit is None else ""),
                          _draw_axes(allocation_front_plot, *_ALLOCATION_FRONT, front, output, spec=limit,
@@ -272,9 +309,23 @@ def _allocation_figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
     return figs
 
 
+def _summary_frame(result: StudyResult) -> pd.DataFrame:
+    """The summary table (:meth:`StudyResult.to_frame`) and, with a Monte Carlo tolerance, the exceedance:
+    statistic ``exceed_<T>mm``, P(position error > T) over the grid, unit ``1`` (as ``summary.json``'s ``exceed``)."""
+    rows = []
+    for c in result.configurations:
+        mc = c.montecarlo
+        if mc is None or mc.exceed_prob is None:
+            continue
+        for aggregate, (value, se) in over_grid(mc.exceed_prob, pct_se(mc.exceed_ci)).items():
+            rows.append((c.name, "montecarlo", "position", f"exceed_{mc.tolerance_mm:g}mm", aggregate, value, se, "1"))
+    frame = result.to_frame()
+    return pd.concat([frame, pd.DataFrame(rows, columns=frame.columns)], ignore_index=True) if rows else frame
+
+
 def _tables(result: StudyResult) -> dict[str, pd.DataFrame]:
     contributions = {c.name: _contributions(c) for c in result.configurations}
-    tables = {"summary": result.to_frame(), "worstcase_families": _family_shares(result, contributions),
+    tables = {"summary": _summary_frame(result), "worstcase_families": _family_shares(result, contributions),
               "budget": result.study.budget.to_frame()}
     if result.study.budget.effects:
         tables["effects"] = result.study.budget.effects_frame()
@@ -342,8 +393,13 @@ def _allocations(result: StudyResult, tables: dict[str, pd.DataFrame]) -> list[d
 
 
 def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tables: dict[str, pd.DataFrame],
-                  summary: dict) -> str:
-    """The report as one HTML string; ``figures`` are (name, caption, data URI)."""
+                  summary: dict, formats=("png",), table_types=("csv",)) -> str:
+    """The report as one HTML string; ``figures`` are (name, caption, data URI); ``formats`` those written per figure.
+
+    A caption names a figure's files (``figures/NAME.png``, ``.svg`` only
+    when written) and the Run section lists every file of the folder the
+    report describes.
+    """
     import jinja2
     env = jinja2.Environment(loader=jinja2.PackageLoader("prp3mc.reports", "templates"),
                              autoescape=jinja2.select_autoescape(["html", "j2"]))
@@ -351,15 +407,14 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
     meta = result.metadata()
     meta.update(platform=platform.platform(), date=_dt.datetime.now().astimezone().isoformat(timespec="seconds"))
     configs = [{"name": c.name, "geometry": c.configuration.geometry.name,
+                "parameters": ", ".join(f"{k} = {v:g}" if isinstance(v, (int, float)) else f"{k} = {v}"
+                                        for k, v in c.configuration.parameters),
                 "region": f"x ∈ [{c.configuration.region.x_mm[0]:g}, {c.configuration.region.x_mm[1]:g}] mm, "
                           f"y ∈ [{c.configuration.region.y_mm[0]:g}, {c.configuration.region.y_mm[1]:g}] mm, "
                           f"φ = {c.configuration.region.phi_deg:g}°",
                 "reference": c.configuration.reference,
                 "worst_pose": _worst_pose(c),
-                "contributions": _html_table(tables[f"contributions_{c.name}"].drop(columns=["output"]).assign(
-                    **{"contribution (µm)": lambda d: MM2UM * d["contribution"],
-                       "share (%)": lambda d: 100 * d["share"]})
-                    .drop(columns=["contribution", "share"]))}
+                "contributions": _html_table(_contributions_display(tables[f"contributions_{c.name}"]))}
                for c in result.configurations]
     summary_table = _summary_display(tables["summary"])
     families = (tables["worstcase_families"].pivot(index="family", columns="configuration", values="share_pct")
@@ -371,7 +426,18 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
         budget_table=_html_table(tables["budget"]), cmp=comparison(result, summary),
         effects_table=_html_table(tables["effects"].drop(columns=["campaign_sha256"])) if "effects" in tables else None,
         summary=summary, mc_percentile=f"p{_MC_PERCENTILE:g}", tables=sorted(tables),
-        inputs=summary["inputs"], versions=summary["versions"], allocations=_allocations(result, tables))
+        inputs=summary["inputs"], versions=summary["versions"], allocations=_allocations(result, tables),
+        glance=_glance(result, summary),
+        formats=tuple(formats), extras=[ext for ext in formats if ext != "png"],
+        written=_written(figures, tables, formats, table_types))
+
+
+def _written(figures, tables: dict, formats, table_types) -> dict[str, list[str]]:
+    """The files a report's folder holds, by kind (what the Run section lists)."""
+    return {"report": ["report.html", "summary.json"],
+            "figures": [f"figures/{name}.{ext}" for name, *_ in figures for ext in formats],
+            "tables": [f"tables/{name}.csv" for name in sorted(tables)]
+            + (["tables/tables.xlsx"] if "xlsx" in table_types else [])}
 
 
 def _design(result: StudyResult, tables: dict) -> dict | None:
@@ -383,7 +449,8 @@ def _design(result: StudyResult, tables: dict) -> dict | None:
     wide = frame.assign(merit=lambda d: [_merit_name(*m) for m in zip(d.analysis, d.output, d.statistic)],
                         shown=lambda d: [v * DISPLAY[o][0] if s != "ST_top" else v
                                          for v, o, s in zip(d.value, d.output, d.statistic)])
-    table = wide.pivot_table(index=["configuration", *keys], columns="merit", values="shown", sort=False)
+    table = (wide.pivot_table(index=["configuration", *keys], columns="merit", values="shown", sort=False)
+             .rename_axis(columns=None))                 # else the columns' name shows as an empty column
     first = _merit_name("worstcase", "position", "worst_case")
     table = table.sort_values(first).reset_index() if first in table else table.reset_index()
     tops = frame[frame["statistic"] == "ST_top"].set_index("configuration")["input"]
@@ -395,6 +462,36 @@ def _design(result: StudyResult, tables: dict) -> dict | None:
             "best": table["configuration"].iloc[0] if len(table) else None}
 
 
+def _glance(result: StudyResult, summary: dict) -> list[dict]:
+    """The answer first, per configuration shown: the worst case, the Monte Carlo p99.73, P(> tolerance) and the
+    dominant input by Sobol total index and by worst-case share (sorted contributions at the worst pose below)."""
+    from .plots import ranking_basis
+    key = f"p{_MC_PERCENTILE:g}"
+    rows = []
+    for c in _shown(result):
+        s = summary["configurations"][c.name]
+        row = {"name": c.name, "worst_um": s["worst_case_position_um"]["max"], "worst_phi": s["worst_case_phi_arcsec"]["max"],
+               "p_um": None, "p_se": None, "exceed": None, "tolerance_um": None, "st": None, "share": None}
+        mc = s.get("montecarlo", {})
+        if key in mc.get("position_um", {}):
+            row["p_um"], row["p_se"] = mc["position_um"][key]["max"]["value"], mc["position_um"][key]["max"]["se"]
+        if "exceed" in mc:
+            p = mc["exceed"]["probability"]["max"]
+            row["exceed"] = probability_text(p["value"], se=p["se"])
+            row["tolerance_um"] = MM2UM * mc["exceed"]["tolerance_mm"]
+        frame = c.ranking.get("position") if c.ranking else None
+        if frame is not None and len(frame):
+            basis, share = ranking_basis(frame)
+            st = frame.dropna(subset=["ST"]).sort_values("ST", ascending=False)
+            wc = frame.sort_values(share, ascending=False)
+            if len(st):
+                row["st"] = (st["name"].iloc[0], float(st["ST"].iloc[0]))
+            row["share"] = (wc["name"].iloc[0], float(wc[share].iloc[0]))
+            row["basis"] = basis
+        rows.append(row)
+    return rows
+
+
 def _merit_name(analysis: str, output: str, statistic: str) -> str:
     if statistic == "ST_top":
         return f"largest Sobol ST ({output})"
@@ -404,33 +501,43 @@ def _merit_name(analysis: str, output: str, statistic: str) -> str:
 
 
 def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = False,
-                formats=("png",), workers: int | None = None, warnings=None) -> Path:
+                formats=("png",), workers: int = 1, warnings=None, progress: bool | None = False) -> Path:
     """Write the report, figures, tables and summary.json of ``result`` into the folder ``out``.
 
     ``out`` must not exist unless ``force``; it is replaced atomically.
-    ``formats`` (``png``, ``svg`` or both, a sequence or ``"png,svg"``) are
-    the files written per figure; each is rendered once and the report
-    embeds the same PNG. ``workers``: processes drawing the figures
-    (:func:`prp3mc.reports._render.rendering`; default 1 plus the idle cores,
-    where the system can fork, 1 draws them here). ``warnings`` (the
+    ``formats`` (a sequence or ``"png,svg,xlsx"``) are the files written:
+    ``png`` and/or ``svg`` per figure (``png`` when none is named; each is
+    rendered once and the report embeds the same PNG), and ``xlsx``:
+    ``tables.xlsx`` besides the CSV files, one sheet per table
+    (:func:`prp3mc.output.write_workbook`). ``progress`` shows the figures
+    and tables as they are written (None: when stderr is a terminal). ``workers``: processes drawing the figures
+    (:func:`prp3mc.reports._render.rendering`; 1, the default, draws them
+    here). ``warnings`` (the
     messages a command gave while it ran, which include the budget's) replace
     the summary's own when given and not empty; the report shows them.
     Returns the path of ``report.html``.
     """
-    formats = figure_formats(formats)
+    formats, table_types = figure_formats(formats), table_formats(formats)
     check_output(out, force)
     summary = build_summary(result)
     if warnings:
         summary["warnings"] = list(warnings)
     figures = _figures(result)
-    with output_folder(out, force) as tmp:
+    with output_folder(out, force) as tmp, Progress(len(figures) + 2, "report: tables", progress) as bar:
         (tmp / "figures").mkdir()
         (tmp / "tables").mkdir()
         with rendering([(name, draw) for name, _, draw in figures], tmp / "figures", formats, workers) as pngs:
             tables = _tables(result)                # while the figures are drawn
             for name, frame in tables.items():
                 write_csv(frame, tmp / "tables" / f"{name}.csv")
+            if "xlsx" in table_types:
+                write_workbook(tables, tmp / "tables" / "tables.xlsx")
             write_json(tmp / "summary.json", summary)
-            embedded = [(name, caption, png_data_uri(png)) for (name, caption, _), png in zip(figures, pngs)]
-        write_text(tmp / "report.html", render_report(result, embedded, tables, summary))
+            bar.update(label="report: figures")
+            embedded = []
+            for (name, caption, _), png in zip(figures, pngs):
+                embedded.append((name, caption, png_data_uri(png)))
+                bar.update()
+        write_text(tmp / "report.html", render_report(result, embedded, tables, summary, formats, table_types))
+        bar.update(label="report")
     return Path(out) / "report.html"

@@ -65,8 +65,11 @@ def merit_plot(frame: pd.DataFrame, parameter: str, merit: tuple[str, str, str],
     best : list of str, optional
         Configurations to mark (at most three, best first).
     ax : matplotlib Axes, optional
-    ylabel, legend : bool
-        Label the y axis; draw the legend of the marked configurations.
+    ylabel : bool
+        Label the y axis.
+    legend : bool or "outside"
+        Draw the legend of the marked configurations: where it covers the
+        fewest points (True), or right of the axes ("outside").
 
     Returns
     -------
@@ -87,15 +90,17 @@ def merit_plot(frame: pd.DataFrame, parameter: str, merit: tuple[str, str, str],
         ax.plot(order, envelope, "-", color="0.25", lw=1.2, label="best at this value")
     for style, name in zip(_BEST_STYLE, best or []):
         sel = (rows["configuration"] == name).to_numpy()
-        ax.plot(x[sel], y[sel], ls="none", mec="k", zorder=5, label=name, **style)
+        ax.plot(x[sel], y[sel], ls="none", mec="k", zorder=5, clip_on=False, label=name, **style)
     if ticks is not None:
         ax.set_xticks(range(len(ticks)), ticks, rotation=30, fontsize=7)
     ax.set_xlabel(parameter)
     if ylabel:
         ax.set_ylabel(label, fontsize=8)
     ax.grid(alpha=0.3)
-    if legend:
-        ax.legend(fontsize=7, frameon=False)
+    if legend == "outside":
+        ax.legend(fontsize=7, frameon=False, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
+    elif legend:
+        ax.legend(fontsize=7, frameon=False, loc="best")
     return ax.figure
 
 
@@ -124,15 +129,21 @@ def design_space_figure(frame: pd.DataFrame, *, best: list | None = None, fig=No
     slant = max((text_inches(t, 7)[0] / 2 for t in categories), default=0.0)
     left = 0.45 + max(text_inches(_merit_label(*m)[0], 8)[1] for m in rows) + _tick_room(frame, rows)
     below = 0.55 + slant
-    fig = _figure(fig, *grid((2.6, 1.9), (len(rows), len(parameters)), left, 0.2, below, 0.15, wgap=0.25,
-                             hgap=below + 0.1))
+    fig = _figure(fig, *grid((2.6, 1.9), (len(rows), len(parameters)), left, 0.2 + _legend_room(frame, best),
+                             below, 0.15, wgap=0.25, hgap=below + 0.1))
     axes = np.atleast_2d(fig.subplots(len(rows), len(parameters), squeeze=False, sharey="row"))
     for i, merit in enumerate(rows):
         for j, parameter in enumerate(parameters):
             merit_plot(frame, parameter, merit, best=best, ax=axes[i, j], ylabel=j == 0,
-                       legend=j == len(parameters) - 1 and (i == 0 or merit[2] == "ST_top"))
+                       legend="outside" if j == len(parameters) - 1 and (i == 0 or merit[2] == "ST_top") else False)
     lighten(fig, ROUND_STEPS)
     return fig
+
+
+def _legend_room(frame: pd.DataFrame, best) -> float:
+    """Width (inches) of the legends right of the last column: marker, gap and the longest label at 7 pt."""
+    labels = ["best at this value", *(best or []), *(f"top: {v}" for v in frame.get("input", pd.Series()).dropna())]
+    return 0.55 + max(text_inches(str(t), 7)[0] for t in labels)
 
 
 def _merit_values(frame: pd.DataFrame, merit) -> tuple[pd.DataFrame, np.ndarray]:

@@ -16,23 +16,24 @@ vectorised pass per chunk of poses, and the per-input and per-group indices
 come from the same evaluations. The per-input indices are those of SALib's
 problem without groups, a group's those of the problem that groups g alone.
 
-Estimators (as ``SALib.analyze.sobol``): the output of each SALib problem is
-centred and scaled by its own mean and standard deviation, then
+Replicates. The design is drawn R times with independent scramblings
+(randomised quasi-Monte Carlo); each replicate gives its own estimates, the
+reported index is their mean and its interval the Student t interval over
+the R replicates (:func:`combine_replicates`). A bootstrap over the points of
+one scrambled Sobol' design treats them as independent draws and overstates
+the error of the design 10-26 fold (benchmarks/coverage_sobol.py).
+
+Estimators (as ``SALib.analyze.sobol``, per replicate): the output of each
+SALib problem is centred on its own mean, then
 ``S1 = mean(B (AB - A)) / var([A, B])`` (Saltelli 2010) and
-``ST = mean((A - AB)^2) / 2 / var([A, B])`` (Jansen), with a bootstrap of
-``num_resamples`` resamples of the N rows; the interval half-width is
-``z * sd`` of the bootstrap estimates. SALib analyses one output of one pose
-for one problem per call (0.6 s for d = 12, N = 8192, R = 100: hours for a
-21 x 21 grid); the vectorised path computes the same numbers for all poses
-and outputs at once. Every statistic is a weighted sum over the N rows, the
-weights being the multiplicities of each bootstrap resample (the indices
-SALib draws from the same seed) or all ones for the estimate, so they are
-one matrix product of the (R + 1) x N weight matrix with the per-row
-quantities a, a^2, b, b^2 and, per factor, (b - delta_k) D_k and D_k^2
-(D_k = AB_k - A, delta_k the centre of k's SALib problem). For the linear
-outputs δx, δy, δφ = c . f (f the model's sample features) those sums are
-quadratic forms in c of pose-independent weighted sums of feature products,
-so only the position norm needs per-pose, per-sample work.
+``ST = mean((A - AB)^2) / 2 / var([A, B])`` (Jansen). SALib analyses one
+output of one pose for one problem per call; the vectorised path computes the
+same numbers for all poses and outputs at once from sums over the N rows of
+the per-row quantities a, a^2, b, b^2 and, per factor, (b - delta_k) D_k and
+D_k^2 (D_k = AB_k - A, delta_k the centre of k's SALib problem). For the
+linear outputs δx, δy, δφ = c . f (f the model's sample features) those sums
+are quadratic forms in c of pose-independent sums of feature products, so
+only the position norm needs per-pose, per-sample work.
 """
 
 from __future__ import annotations
@@ -43,11 +44,11 @@ import numpy as np
 import pandas as pd
 
 from ..errors import BudgetError
-from ..units import POSE_OUTPUTS
+from ..units import POSE_OUTPUTS, t_value
 from ..model.budget import Budget
 
-__all__ = ["Factors", "design_factors", "saltelli_design", "model_outputs", "resample_weights",
-           "FeatureSums", "feature_sums", "linear_indices", "sample_indices", "salib_indices"]
+__all__ = ["Factors", "design_factors", "saltelli_design", "model_outputs", "FeatureSums", "feature_sums",
+           "linear_sums", "sample_sums", "replicate_indices", "combine_replicates", "salib_indices"]
 
 
 # ---------------------------------------------------------------- factors and design
@@ -79,6 +80,10 @@ def design_factors(budget: Budget, groups: dict | None) -> Factors:
             raise BudgetError(f"group {gname!r}: expected a list of inputs, got the string {members!r}")
         extra[str(gname)] = tuple(members)
     user = {k: v for k, v in budget.groups.items() if not k.startswith("clearance_")}
+    clash = next((k for k in extra if k in user and set(extra[k]) != set(user[k])), None)
+    if clash is not None:
+        raise BudgetError(f"group {clash!r} is defined twice: the budget has {', '.join(user[clash])}, the request "
+                          f"{', '.join(extra[clash])}: name one otherwise")
     merged = Budget(budget.inputs, groups={**user, **extra}, effects=budget.effects).groups  # validates them
     inputs = budget.factors
     d = len(inputs)
@@ -148,17 +153,6 @@ def model_outputs(coef: np.ndarray, F: np.ndarray, outputs: tuple) -> np.ndarray
 
 
 # ---------------------------------------------------------------- estimators
-def resample_weights(n_samples: int, num_resamples: int, bootstrap_seed: int) -> np.ndarray:
-    """Row 0 all ones (the estimate), then the multiplicity of each row in each resample, (R + 1, N).
-
-    The resamples are SALib's: ``default_rng(seed).integers(N, size=(N, R))``.
-    """
-    r = np.random.default_rng(bootstrap_seed).integers(n_samples, size=(n_samples, num_resamples))
-    counts = np.bincount((r + n_samples * np.arange(num_resamples)).ravel(),
-                         minlength=n_samples * num_resamples).reshape(num_resamples, n_samples)
-    return np.concatenate([np.ones((1, n_samples)), counts], axis=0)
-
-
 def _constant(var: np.ndarray, mean_square: np.ndarray) -> np.ndarray:
     """Outputs that do not vary over A and B (variance below 1e-24 of their mean square): indices 0."""
     return var <= 1e-24 * mean_square
@@ -175,39 +169,52 @@ def _problem_shift(sum_A: np.ndarray, sum_B: np.ndarray, sum_AB: np.ndarray, fac
     return ((sum_A + sum_B)[..., None] + sum_AB @ factors.problem.T) / (n_samples * n_rows)
 
 
-def _finish(s: np.ndarray, level: np.ndarray, n_samples: int, z: float):
-    """SALib's indices and half-widths from weighted sums over the design rows.
+def replicate_indices(s: np.ndarray, level: np.ndarray, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """SALib's S1 and ST of every replicate from its sums over the design rows.
 
     Parameters
     ----------
-    s : ndarray (M, 4 + 2K, R + 1)
-        Sums of a, a^2, b, b^2 (the A and B outputs, centred on their mean),
-        then per factor k of (b - delta_k) D_k and D_k^2, with D_k = AB_k - A and
-        delta_k the centre of k's SALib problem; column 0 with unit weights
-        (the estimate), the others with each bootstrap resample's weights.
-    level : ndarray (M,)
+    s : ndarray (M, 4 + 2K, R)
+        Per replicate, sums of a, a^2, b, b^2 (the A and B outputs, centred on
+        their mean), then per factor k of (b - delta_k) D_k and D_k^2, with
+        D_k = AB_k - A and delta_k the centre of k's SALib problem.
+    level : ndarray (M, R)
         Mean square of the uncentred A and B outputs.
+    n_samples : int
+        Rows N of each replicate's A (and B).
 
     Returns
     -------
-    S1, S1_conf, ST, ST_conf : ndarray (M, K)
+    S1, ST : ndarray (M, K, R)
         ``S1 = mean((b - delta) D) / var`` (Saltelli 2010), ``ST = mean(D^2) / 2 / var``
-        (Jansen); half-widths ``z`` times the sd of the resampled estimates.
+        (Jansen), var that of [A, B]; 0 for an output constant over A and B.
     """
     K = (s.shape[1] - 4) // 2
     mean = (s[:, 0] + s[:, 2]) / (2 * n_samples)
-    var = (s[:, 1] + s[:, 3]) / (2 * n_samples) - mean**2           # var([A, B]), (M, R + 1)
-    flat = _constant(var[:, 0], level)
-    var = np.where(flat[:, None], 1.0, var)[:, None, :]
-    out = []
-    for S in (s[:, 4:4 + K] / n_samples / var, 0.5 * s[:, 4 + K:] / n_samples / var):
-        est, conf = S[..., 0], z * S[..., 1:].std(axis=-1, ddof=1)
-        out += [np.where(flat[:, None], 0.0, est), np.where(flat[:, None], 0.0, conf)]
-    return tuple(out)
+    var = (s[:, 1] + s[:, 3]) / (2 * n_samples) - mean**2           # var([A, B]), (M, R)
+    flat = _constant(var, level)[:, None, :]
+    var = np.where(flat, 1.0, var[:, None, :])
+    S1 = np.where(flat, 0.0, s[:, 4:4 + K] / n_samples / var)
+    ST = np.where(flat, 0.0, 0.5 * s[:, 4 + K:] / n_samples / var)
+    return S1, ST
 
 
-def _sample_sums(Y: np.ndarray, factors: Factors, weights: np.ndarray):
-    """Weighted sums for :func:`_finish` from outputs Y (M, K + 2, N) = [A, B, AB_1..AB_K]; any output."""
+def combine_replicates(S: np.ndarray, conf_level: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mean of the replicates' estimates S (..., R) and the half-width of its Student t interval.
+
+    The replicates are independent and identically distributed (independent
+    scramblings), so ``mean ± t(conf_level, R - 1) sd / sqrt(R)`` covers the
+    index at ``conf_level`` as R estimates of a normal law would.
+    """
+    R = S.shape[-1]
+    return S.mean(axis=-1), t_value(conf_level, R - 1) * S.std(axis=-1, ddof=1) / np.sqrt(R)
+
+
+def sample_sums(Y: np.ndarray, factors: Factors) -> tuple[np.ndarray, np.ndarray]:
+    """Sums for :func:`replicate_indices` from outputs Y (M, K + 2, N) = [A, B, AB_1..AB_K]; any output.
+
+    Returns the sums (M, 4 + 2K) and the mean square of the A and B outputs (M,).
+    """
     M, K2, N = Y.shape
     K = K2 - 2
     c0 = Y[:, :2].mean(axis=(-2, -1))
@@ -224,15 +231,15 @@ def _sample_sums(Y: np.ndarray, factors: Factors, weights: np.ndarray):
     np.subtract(Q[:, 2, None, :], delta[..., None], out=BD)
     BD *= D
     np.square(D, out=D)
-    return (Q.reshape(-1, N) @ weights.T).reshape(M, 4 + 2 * K, -1), level
+    return Q.sum(axis=-1), level
 
 
 @dataclass(frozen=True, slots=True)
 class FeatureSums:
-    """Weighted sums over the design rows of products of the centred sample features.
+    """Sums over the design rows (of one replicate) of products of the centred sample features.
 
-    A linear output ``y = c . f`` has every sum :func:`_finish` needs as a
-    quadratic or linear form in c of these pose-independent sums, so the
+    A linear output ``y = c . f`` has every sum :func:`replicate_indices` needs
+    as a quadratic or linear form in c of these pose-independent sums, so the
     outputs dx, dy, dphi of all poses cost a few small contractions. ``D_k``
     (features of AB_k minus those of A) vanishes outside the features of
     factor k (``cols[k]``), which keeps the sums small.
@@ -240,85 +247,69 @@ class FeatureSums:
 
     mean: np.ndarray            # (F,) feature means over the A and B rows
     second: np.ndarray          # (F, F) mean of f f^T over the A and B rows
-    A: np.ndarray               # (R + 1, F)
-    AA: np.ndarray              # (R + 1, F, F)
+    A: np.ndarray               # (F,)
+    AA: np.ndarray              # (F, F)
     B: np.ndarray
     BB: np.ndarray
     shift: np.ndarray           # (F, K): delta_k = c . shift[:, k]
     cols: tuple                 # per factor: the features D_k touches
-    BD: tuple                   # per factor: (R + 1, F, |cols|), sums of b D_k^T
-    D: tuple                    # per factor: (R + 1, |cols|)
-    DD: tuple                   # per factor: (R + 1, |cols|, |cols|)
+    BD: tuple                   # per factor: (F, |cols|), sums of b D_k^T
+    D: tuple                    # per factor: (|cols|,)
+    DD: tuple                   # per factor: (|cols|, |cols|)
 
 
-def feature_sums(Fd: np.ndarray, factors: Factors, weights: np.ndarray) -> FeatureSums:
-    """:class:`FeatureSums` from the design's features Fd (K + 2, N, F)."""
+def feature_sums(Fd: np.ndarray, factors: Factors) -> FeatureSums:
+    """:class:`FeatureSums` from one replicate's design features Fd (K + 2, N, F)."""
     N, nf = Fd.shape[1:]
     AB = Fd[:2].reshape(2 * N, nf)
     mean = AB.mean(axis=0)
     FA, FB = Fd[0] - mean, Fd[1] - mean
-
-    def wsum(*factors_):                                            # sum_n w_rn prod(factors)[n, ...]
-        prod = factors_[0] if len(factors_) == 1 else \
-            factors_[0][:, :, None] * factors_[1][:, None, :]
-        return (weights @ prod.reshape(N, -1)).reshape(weights.shape[:1] + prod.shape[1:])
-
     cols, BD, D, DD, sum_AB = [], [], [], [], []
     for k in range(len(factors.names)):                             # a handful of factors
         Dk = Fd[2 + k] - Fd[0]
         idx = np.flatnonzero(np.any(Dk != 0.0, axis=0))
         Dk = Dk[:, idx]
         cols.append(idx)
-        BD.append(wsum(FB, Dk))
-        D.append(wsum(Dk))
-        DD.append(wsum(Dk, Dk))
+        BD.append(FB.T @ Dk)
+        D.append(Dk.sum(axis=0))
+        DD.append(Dk.T @ Dk)
         sum_AB.append(FA.sum(axis=0))                               # features of AB_k, summed
-        sum_AB[-1][idx] += D[-1][0]
-    GA, GB = wsum(FA), wsum(FB)
-    shift = _problem_shift(GA[0], GB[0], np.stack(sum_AB, axis=-1), factors, N)
-    return FeatureSums(mean=mean, second=AB.T @ AB / (2 * N), A=GA, AA=wsum(FA, FA), B=GB,
-                        BB=wsum(FB, FB), shift=shift, cols=tuple(cols), BD=tuple(BD), D=tuple(D),
-                        DD=tuple(DD))
+        sum_AB[-1][idx] += D[-1]
+    GA, GB = FA.sum(axis=0), FB.sum(axis=0)
+    shift = _problem_shift(GA, GB, np.stack(sum_AB, axis=-1), factors, N)
+    return FeatureSums(mean=mean, second=AB.T @ AB / (2 * N), A=GA, AA=FA.T @ FA, B=GB, BB=FB.T @ FB,
+                       shift=shift, cols=tuple(cols), BD=tuple(BD), D=tuple(D), DD=tuple(DD))
 
 
-def _linear_sums(c: np.ndarray, fs: FeatureSums):
-    """Weighted sums for :func:`_finish` of linear outputs ``c . f``, c (M, F)."""
-    def quad(G, u, v):                                              # u^T G_r v per row and resample
-        return np.einsum("mf,rfg,mg->mr", u, G, v, optimize=True)
+def linear_sums(c: np.ndarray, fs: FeatureSums) -> tuple[np.ndarray, np.ndarray]:
+    """Sums for :func:`replicate_indices` (M, 4 + 2K) and mean squares (M,) of linear outputs ``c . f``, c (M, F)."""
+    def quad(G, u, v):                                              # u^T G v per row
+        return np.einsum("mf,fg,mg->m", u, G, v, optimize=True)
 
     delta = c @ fs.shift                                            # (M, K)
-    rows = [c @ fs.A.T, quad(fs.AA, c, c), c @ fs.B.T, quad(fs.BB, c, c)]
+    rows = [c @ fs.A, quad(fs.AA, c, c), c @ fs.B, quad(fs.BB, c, c)]
     bd, dd = [], []
     for k, idx in enumerate(fs.cols):
         ck = c[:, idx]
-        bd.append(quad(fs.BD[k], c, ck) - delta[:, k, None] * (ck @ fs.D[k].T))
+        bd.append(quad(fs.BD[k], c, ck) - delta[:, k] * (ck @ fs.D[k]))
         dd.append(quad(fs.DD[k], ck, ck))
     level = np.einsum("mf,fg,mg->m", c, fs.second, c)
     return np.stack(rows + bd + dd, axis=1), level
 
 
-def linear_indices(c: np.ndarray, fs: FeatureSums, n_samples: int, z: float):
-    """S1, S1_conf, ST, ST_conf (M, K) of the linear outputs ``c . f``, c (M, F), from the feature sums."""
-    return _finish(*_linear_sums(c, fs), n_samples, z)
+def salib_indices(Y: np.ndarray, factors: Factors, conf_level: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """SALib's ``sobol.analyze`` estimates S1 and ST (M, K) for every row of Y (M, K + 2, N).
 
-
-def sample_indices(Y: np.ndarray, factors: Factors, weights: np.ndarray, n_samples: int, z: float):
-    """S1, S1_conf, ST, ST_conf (M, K) of any outputs Y (M, K + 2, N) = [A, B, AB_1..AB_K]."""
-    return _finish(*_sample_sums(Y, factors, weights), n_samples, z)
-
-
-def salib_indices(Y: np.ndarray, factors: Factors, num_resamples: int, conf_level: float,
-                   bootstrap_seed: int):
-    """SALib's ``sobol.analyze`` on every row of Y (M, K + 2, N): one call per row and problem.
-
-    The reference path (a Python loop over poses and outputs). Outputs
-    constant over A and B get 0 (SALib would divide by a zero sd).
+    The reference path (a Python loop over poses, outputs and problems). SALib's
+    own bootstrap interval is not used (the replicates give the interval), so
+    it runs with two resamples. Outputs constant over A and B get 0 (SALib
+    would divide by a zero sd).
     """
     from SALib.analyze import sobol as sobol_analyze
     M, K2, N = Y.shape
     d = factors.masks.shape[1]
     inputs = factors.names[:d]
-    out = [np.zeros((M, K2 - 2)) for _ in range(4)]
+    out = [np.zeros((M, K2 - 2)) for _ in range(2)]
     calls = [(_salib_problem(inputs), list(range(d)), slice(0, d), slice(0, d))]
     for k in range(d, len(factors.names)):
         problem = _salib_problem(inputs, tuple(np.array(inputs)[factors.masks[k]]))
@@ -330,9 +321,8 @@ def salib_indices(Y: np.ndarray, factors: Factors, num_resamples: int, conf_leve
     for m in np.flatnonzero(~flat):
         for problem, cols, take, put in calls:
             y = np.concatenate([Y[m, :1], Y[m, 2 + np.array(cols)], Y[m, 1:2]], axis=0)  # [A, AB.., B]
-            res = sobol_analyze.analyze(problem, y.T.ravel(), calc_second_order=False,
-                                        num_resamples=num_resamples, conf_level=conf_level,
-                                        seed=bootstrap_seed, print_to_console=False)
-            for arr, key in zip(out, ("S1", "S1_conf", "ST", "ST_conf")):
+            res = sobol_analyze.analyze(problem, y.T.ravel(), calc_second_order=False, num_resamples=2,
+                                        conf_level=conf_level, seed=seed, print_to_console=False)
+            for arr, key in zip(out, ("S1", "ST")):
                 arr[m, put] = np.asarray(res[key])[take]
     return tuple(out)

@@ -8,7 +8,10 @@ Scheduler specs:
 
 - ``local:N`` — a ``dask.distributed.LocalCluster`` of N worker processes with
   one thread each, started for the run and closed after it;
-- ``tcp://HOST:PORT`` (or ``tls://``...) — an existing Dask scheduler.
+- ``tcp://HOST:PORT`` — an existing Dask scheduler. Dask's other schemes
+  (``tls://``, ``ucx://``, ``inproc://``, ``ws://``) are refused in one line:
+  each needs what a command line cannot give it (certificates, a library, the
+  scheduler's own process).
 
 Each configuration is one task. Its random streams come from the study seed
 (:mod:`prp3mc.study.runner`), never from the worker, so the results are the
@@ -26,12 +29,18 @@ import re
 from typing import Any, Iterable, Iterator
 
 from .._threads import cores
-from ..errors import Prp3mcError
+from ..errors import MissingDependencyError, Prp3mcError
 
 __all__ = ["DaskExecutor", "parse_scheduler"]
 
 _LOCAL = re.compile(r"^local:([0-9]+)$")
-_ADDRESS = re.compile(r"^(tcp|tls|inproc|ucx|ws|wss)://\S+$")
+_ADDRESS = re.compile(r"^tcp://(\[[0-9a-fA-F:.]+\]|[A-Za-z0-9_.-]+):([0-9]{1,5})$")
+_SCHEME = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]*)://")
+#: Why the Dask schemes other than tcp:// are refused (each ended in Dask's own traceback).
+_UNSUPPORTED = {"tls": "needs a security context (certificates) that prp3mc does not take",
+                "inproc": "is a scheduler inside one process, which a command line cannot reach",
+                "ucx": "needs the UCX library and its Dask backend",
+                "ws": "needs the websocket backend", "wss": "needs the websocket backend and certificates"}
 
 
 #: Local worker processes per core at most (each holds a Python with numpy, about 0.15 GB).
@@ -52,8 +61,12 @@ def parse_scheduler(spec: str) -> tuple[str, Any]:
                           f"cores: at most {_MAX_LOCAL * cores()} (a cluster's address for more)")
     if match and int(match.group(1)) >= 1:
         return "local", int(match.group(1))
-    if _ADDRESS.match(spec):
+    if _ADDRESS.match(spec) and 0 < int(_ADDRESS.match(spec).group(2)) < 65536:
         return "address", spec
+    scheme = _SCHEME.match(spec)
+    if scheme and scheme.group(1).lower() in _UNSUPPORTED:
+        raise Prp3mcError(f"--scheduler {spec}: the {scheme.group(1)}:// scheme {_UNSUPPORTED[scheme.group(1).lower()]}; "
+                          "give tcp://HOST:PORT (an SSH tunnel for a remote cluster) or local:N")
     raise Prp3mcError(f"--scheduler must be local:N (N >= 1 local workers) or the address of a Dask scheduler "
                       f"such as tcp://HOST:PORT, got {spec!r}")
 
@@ -62,7 +75,7 @@ def _import_distributed():
     try:
         import distributed
     except ImportError:
-        raise Prp3mcError("--scheduler needs Dask, which is not installed: pip install 'prp3mc[dask]'") from None
+        raise MissingDependencyError("Dask", "pip install 'prp3mc[dask]'", "--scheduler") from None
     return distributed
 
 

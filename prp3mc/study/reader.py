@@ -313,7 +313,7 @@ class _Reader:
             value = [value, value]
         if isinstance(value, list) and len(value) == 2 and all(ok_int(v) for v in value):
             try:  # the configurations' grids are checked for feasibility below: refuse what cannot be built
-                check(worstcase_estimate(value[0] * value[1], 0), max_hours=math.inf)
+                check(worstcase_estimate(value[0] * value[1], 0))
             except ResourceError as exc:
                 self.fail(path, f"{'.'.join(path)}: {exc}")
             return (value[0], value[1])
@@ -387,6 +387,10 @@ class _Reader:
         if not isinstance(configs, list) or not configs or not all(isinstance(c, dict) for c in configs):
             self.fail(("configuration",), "a study needs at least one [[configuration]] table")
         kw["sweep"] = read_sweep(self, self.get(doc, ("sweep",), "table", {}))
+        if kw["sweep"] and budget.effects and budget.fitted_on is not None:
+            self.fail(("sweep",), f"budget {budget.name!r} holds effects fitted on geometry {budget.fitted_on.name!r}: "
+                      "a sweep changes that geometry, and fitted effects belong to the machine they were measured "
+                      "on; sweep with the budget's inputs alone (drop its [effects] and fitted_on)")
         # a swept configuration is checked value by value when it runs (infeasible ones are reported)
         check = None if kw["sweep"] else kw["worstcase_grid"]
         parsed = tuple(self.configuration(c, k, check, budget) for k, c in enumerate(configs))

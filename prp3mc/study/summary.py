@@ -56,7 +56,10 @@ grid of the configuration's test region. Standard errors: a percentile's
 from its distribution-free 95 % interval (half-width / 1.96), at the pose
 that gives the min or max; a mean over the grid carries the mean of the
 pose-wise standard errors (an upper bound under the common random numbers
-all poses share); a Sobol index's is its bootstrap half-width / 1.96.
+all poses share); a Sobol index's (and a Shapley effect's) is its half-width over the Student t
+quantile of its replicates (``conf / t(0.95, R - 1)``, the standard error of the mean of R replicates).
+A correlated budget has no Sobol indices (S1 and ST null, with the ``reason``); its Shapley effects ``Sh``
+share the variance.
 A Sobol entry's ``worst_case_share`` is taken at the grid pose where the
 worst case is largest (the report's figures use the mean over the grid, as
 for the indices). ``inputs`` and ``versions`` say what the run was made
@@ -78,19 +81,23 @@ from ..errors import Prp3mcError, Prp3mcWarning
 from ..kinematics.geometry import Geometry
 from ..provenance import file_record, spec_record, versions
 from ..model.budget import Budget
-from ..units import DEG2ARCSEC, MM2UM, Z95
+from ..units import DEG2ARCSEC, MM2UM, t_value
+from ..sobol.indices import DEPENDENT_NOTE
 from .allocation import allocation_summary
 from .results import ConfigurationResult, StudyResult, over_grid, pct_se
 
 __all__ = ["build_summary", "study_inputs"]
 
 
-def _undefined(name: str, kind: str, constant: set) -> str:
+def _undefined(name: str, kind: str, constant: set, correlated: bool) -> str:
     """Why a Sobol index is undefined (it is NaN in the result, null in summary.json)."""
     if kind == "shift":
-        return "undefined: a known shift (an offset or lead scale of the budget's effects) has no variance to share"
+        return ("undefined: a known shift (an offset, lead scale or cyclic screw error of the budget's effects) has "
+                "no variance to share")
     if name in constant:
         return "undefined: a constant input (zero-width law) has no variance to share"
+    if correlated:
+        return f"undefined: {DEPENDENT_NOTE}"
     return "undefined: the output does not vary over the budget"
 
 
@@ -129,16 +136,21 @@ def _montecarlo(c: ConfigurationResult) -> dict:
 
 
 def _sobol(c: ConfigurationResult) -> dict:
-    """Indices of every factor and group; S1 and ST null, with the ``reason``, where undefined (JSON has no NaN)."""
+    """Indices of every factor and group; S1, ST (and Sh) null, with the ``reason``, where undefined (JSON has no NaN)."""
     out = {}
-    constant = set(getattr(c.sobol, "constant", ()))
+    r = c.sobol
+    constant = set(getattr(r, "constant", ()))
+    t = t_value(r.conf_level, r.replicates - 1)
+    stats = r.statistics
     for output, frame in c.ranking.items():
         entries = {}
         for row in frame.itertuples(index=False):
-            entry = {"kind": row.kind, "S1": _stat(row.S1, row.S1_conf / Z95), "ST": _stat(row.ST, row.ST_conf / Z95),
+            entry = {"kind": row.kind, **{k: _stat(getattr(row, k), getattr(row, f"{k}_conf") / t) for k in stats},
                      "worst_case_share": _exact_or_none(row.worst_case_share)}
-            if not np.isfinite([row.S1, row.ST, row.S1_conf, row.ST_conf]).all():
-                entry.update(S1=None, ST=None, reason=_undefined(row.name, row.kind, constant))
+            values = [getattr(row, k) for k in stats] + [getattr(row, f"{k}_conf") for k in stats]
+            if not np.isfinite(values).all():
+                entry.update({k: None for k in stats if not np.isfinite([getattr(row, k), getattr(row, f"{k}_conf")]).all()},
+                             reason=_undefined(row.name, row.kind, constant, r.correlated))
             entries[row.name] = entry
         out[output] = entries
     return out
@@ -148,7 +160,7 @@ def _file_specs(source: str) -> tuple[Path, list[str], list[str]]:
     """The study file's folder and the budget and geometry specs it names (empty if it cannot be read)."""
     path = Path(source)
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        doc = tomllib.loads(path.read_text(encoding="utf-8-sig"))
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
         return path.parent, [], []
     configs = doc.get("configuration", [])

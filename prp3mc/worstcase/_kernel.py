@@ -3,9 +3,11 @@
 Per pose it evaluates what :func:`~prp3mc.worstcase.envelope.worst_case`
 computes through the numpy frame (:func:`~prp3mc.kinematics.chain.frame`,
 :func:`~prp3mc.kinematics.sensitivity.h_entries`, the term intervals and the
-corner maxima), with the same arithmetic: the trigonometry of the chain
-from cos and sin of phi alone (the per-leg angles enter as constants), the
-inverse kinematics, A and A^-1 by cofactors, the feasibility tests of
+corner maxima), with the same formulas (:mod:`~prp3mc.kinematics.formulas`,
+called on scalars): the trigonometry of the chain from cos and sin of phi
+alone (the per-leg angles enter as constants), the inverse kinematics, A and
+A^-1 by cofactors (times 1/det here, divided by det in the numpy frame: they
+differ in the last bit), the feasibility tests of
 :func:`~prp3mc.kinematics.chain.validated_frame`, the h entries of the
 budget's terms, the clearance intervals and the zonotope maxima. Poses go
 through in blocks of :data:`BLOCK`, each step a loop over the block's poses
@@ -15,7 +17,8 @@ their generators as one bit each, the refusal word) plus one scratch array per t
 
 A budget's effects are terms too: known shifts are terms of zero width, a
 backlash a term of its leg, a lead scale and thermal expansion are multiplied
-by the nominal slider position b_i; thermal expansion acts on all legs at
+by the nominal slider position b_i, a cyclic screw error by
+sin(2 pi b_i / p_i + phi_i); thermal expansion acts on all legs at
 once, so it adds a shared generator to the zonotope (16 corners).
 """
 
@@ -31,7 +34,9 @@ from numba import literal_unroll, njit
 from .._threads import cores
 from ..kinematics.chain import DEFAULT_LIMITS, Limits
 from ..kinematics.geometry import Geometry
-from ..kinematics.sensitivity import FAMILIES, LENGTH_FAMILIES
+from ..kinematics.formulas import (
+    FAMILIES, LENGTH_FAMILIES, a_row, adjugate3, cos_range, h_row, leg_ik, offset_vector, turn,
+)
 from ..units import DEG2RAD, RAD2DEG
 from ..model.budget import Budget, parse_input
 from ..model.effects import EFFECT_NAMES, T_REF_C
@@ -45,7 +50,25 @@ REASONS = ("below", "above", "d", "transmission", "condition")
 #: The bit of the ``bad`` word set for a pose holding NaN or infinity (refused whether or not limits are tested).
 NONFINITE = 1 << 15
 
-_RHO = FAMILIES.index("rho")
+_RHO, _TRANSMISSION = FAMILIES.index("rho"), FAMILIES.index("b")
+#: Rows of a pose block's scratch (each BLOCK values; see :func:`_range`): ``cs`` holds rows
+#: _COS_PHI, _SIN_PHI, _X, _Y; ``legs`` per leg i the _LEG_ROWS rows from ``_LEG_ROWS * i``:
+#: _B, _D (b and d, mm), the h entry of family q in row _H + q, _COS_OMEGA, _SIN_OMEGA.
+_COS_PHI, _SIN_PHI, _X, _Y = range(4)
+_B, _D, _H, _COS_OMEGA, _SIN_OMEGA = 0, 1, 2, 2 + len(FAMILIES), 3 + len(FAMILIES)
+_LEG_ROWS = 4 + len(FAMILIES)
+
+
+@njit(inline="always")
+def _row(r):
+    """Offset of row r of a block's scratch (BLOCK values a row)."""
+    return r * BLOCK
+
+
+@njit(inline="always")
+def _leg_row(i, r):
+    """Offset of row r of leg i in a block's ``legs`` scratch."""
+    return (_LEG_ROWS * i + r) * BLOCK
 
 
 def leg_constants(geometry: Geometry, limits: Limits = DEFAULT_LIMITS) -> np.ndarray:
@@ -74,7 +97,7 @@ def kernel_tables(geometry: Geometry, budget: Budget, k_sigma: float | None) -> 
     Kept for the last few (geometry, budget, k_sigma), so that a small batch does not pay for them again.
     """
     bounds = budget.bounds(k_sigma)
-    out = (bounds, leg_constants(geometry), term_table(budget, bounds))
+    out = (bounds, leg_constants(geometry), term_table(budget, bounds, geometry.lead_mm))
     for a in out:
         a.flags.writeable = False
     return out
@@ -84,16 +107,18 @@ def kernel_tables(geometry: Geometry, budget: Budget, k_sigma: float | None) -> 
 TERM_COLUMNS = ("family", "leg", "unit", "mode", "lo", "hi", "zeta_lo", "zeta_hi")
 
 
-def term_table(budget: Budget, bounds: np.ndarray) -> np.ndarray:
+def term_table(budget: Budget, bounds: np.ndarray, lead_mm: np.ndarray | None = None) -> np.ndarray:
     """The budget's terms for the kernel, one row each (T, 8), columns :data:`TERM_COLUMNS`.
 
     ``family``: index in FAMILIES; ``leg``: 0-2, or -1 for a term of every leg;
     ``unit``: 1 for lengths, rad per deg for angles, alpha_T for thermal;
     ``mode``: 1 when the term's u_i is also multiplied by the nominal slider
-    position b_i, else 0; ``lo``, ``hi``: the term's interval, or a clearance's
+    position b_i, 2 when by ``sin(zeta_lo b_i + zeta_hi)`` (a cyclic screw
+    error: ``zeta_lo`` = 2 pi / p_i, rad per mm, ``zeta_hi`` = phi_i, rad),
+    else 0; ``lo``, ``hi``: the term's interval, or a clearance's
     rho interval with its contact angles ``zeta_lo``, ``zeta_hi`` (rad;
     zeta_hi = inf for a full circle, both 0 for other terms). ``bounds`` (D, 2)
-    are the factors' intervals.
+    are the factors' intervals; ``lead_mm`` (3,) the screws' leads (cyclic errors need them).
     """
     names, factors = budget.names, budget.factors
     rows = []
@@ -114,12 +139,14 @@ def term_table(budget: Budget, bounds: np.ndarray) -> np.ndarray:
             unit = 1.0 if e.family in LENGTH_FAMILIES else DEG2RAD
         else:
             unit = eff.value if e.kind == "thermal" else 1.0
-        if e.kind in ("offset", "scale"):
+        if e.kind in ("offset", "scale", "cyclic"):
             lo = hi = eff.value
         else:
             lo, hi = bounds[factors.index(name)] - (T_REF_C if e.kind == "thermal" else 0.0)
+        mode = {"scale": 1, "thermal": 1, "cyclic": 2}.get(e.kind, 0)
+        wave = (2.0 * math.pi / lead_mm[e.leg], math.radians(eff.phase_deg)) if e.kind == "cyclic" else (0.0, 0.0)
         rows.append((FAMILIES.index(e.family if e.kind == "offset" else "b"), -1 if e.kind == "thermal" else e.leg,
-                     unit, 1 if e.kind in ("scale", "thermal") else 0, lo, hi, 0.0, 0.0))
+                     unit, mode, lo, hi, *wave))
     return np.array(rows, dtype=float).reshape(-1, len(TERM_COLUMNS))
 
 
@@ -231,22 +258,21 @@ def _unpack(codes, out):
 
 
 @njit(inline="always")
-def _nonfinite(cs, B, j):
+def _nonfinite(cs, j):
     """NONFINITE if pose ``j`` of a block held NaN or infinity, else 0, from its x, y and cos phi in
     ``cs`` (cos is NaN for an infinite phi; v - v is NaN for those only, and it vectorises)."""
-    x, y, c = cs[2 * B + j], cs[3 * B + j], cs[j]
+    x, y, c = cs[_row(_X) + j], cs[_row(_Y) + j], cs[_row(_COS_PHI) + j]
     return np.int64(not (x - x) + (y - y) + (c - c) == 0.0) * NONFINITE
 
 
-@njit(inline="always", error_model="numpy")
-def _cos_range(lo, hi):
-    """Min and max of cos over [lo, hi] (rad, hi - lo < 2 pi), as in worstcase._cos_range."""
-    two_pi = 2 * math.pi
-    top = math.ceil(lo / two_pi) * two_pi
-    arg_max = top if top <= hi else (lo if math.cos(lo) >= math.cos(hi) else hi)
-    bottom = math.ceil((lo - math.pi) / two_pi) * two_pi + math.pi
-    arg_min = bottom if bottom <= hi else (lo if math.cos(lo) <= math.cos(hi) else hi)
-    return math.cos(arg_min), math.cos(arg_max)
+@njit(inline="always")
+def _slider_factor(mode, b, wavenumber, phase):
+    """What a term's u_i is multiplied by (:func:`term_table`'s ``mode``): 1, b_i, or sin(wavenumber b_i + phase)."""
+    if mode == 1.0:
+        return b
+    if mode == 2.0:
+        return math.sin(wavenumber * b + phase)
+    return 1.0
 
 
 #: Poses per block: the block's scratch rows (about 70 x BLOCK float64) stay in cache and every
@@ -286,26 +312,29 @@ def envelope_kernel(poses, legc, terms, check, values, codes, bad, workers=None)
 def _range(start, stop, poses, legc, terms, check, values, codes, bad):
     """The envelope at poses ``start:stop``, block by block, with scratch rows allocated once; the poses refused.
 
-    Each quantity of a block is a row of BLOCK values at a constant offset of one float
-    array (few allocations: a small call pays for each), so every step is a loop over
-    a row that vectorises.
+    Each quantity of a block is a row of BLOCK values in one float array (few
+    allocations: a small call pays for each), so every step is a loop over a row
+    that vectorises.
     """
     G = 0
     for k in range(terms.shape[0]):
         G += terms[k, 1] < 0
     B = BLOCK
-    f = np.empty((70 + 3 * G) * B)
-    cs = f[:4 * B]                  # cos, sin of phi; x, y
-    A = f[4 * B:13 * B]             # A[i, c] in row 3 i + c
-    hb = f[13 * B:55 * B]           # per leg i, rows 14 i + (b, d, the h entries of the ten families, cos, sin omega)
-    Ai = f[55 * B:64 * B]           # A^-1[r, c] in row 3 r + c
-    um, uh = f[64 * B:67 * B].reshape((3, B)), f[67 * B:70 * B].reshape((3, B))  # centre, half-width of u on the legs
-    ext = f[70 * B:].reshape((G, 3, B))                                         # further generators: terms of all legs
+    n_legs = 3 * _LEG_ROWS
+    f = np.empty((4 + 9 + n_legs + 9 + 6 + 3 * G) * B)
+    cs = f[:4 * B]                          # rows _COS_PHI, _SIN_PHI, _X, _Y
+    A = f[4 * B:13 * B]                     # A[leg, column] in row 3 leg + column
+    legs = f[13 * B:(13 + n_legs) * B]      # per leg, rows _B, _D, _H + q, _COS_OMEGA, _SIN_OMEGA (_leg_row)
+    k0 = 13 + n_legs
+    Ai = f[k0 * B:(k0 + 9) * B]             # A^-1[row, column] in row 3 row + column
+    um = f[(k0 + 9) * B:(k0 + 12) * B].reshape((3, B))    # centre and half-width of u on the legs
+    uh = f[(k0 + 12) * B:(k0 + 15) * B].reshape((3, B))
+    ext = f[(k0 + 15) * B:].reshape((G, 3, B))            # further generators: terms of all legs
     zs = zonotope_scratch(3 + G, B)
     refused = 0
     for b0 in range(start, stop, BLOCK):
         b1 = min(stop, b0 + BLOCK)
-        _block(b0, b1, poses, legc, terms, check, values, codes, bad, cs, A, hb, Ai, um, uh, ext, zs)
+        _block(b0, b1, poses, legc, terms, check, values, codes, bad, cs, A, legs, Ai, um, uh, ext, zs)
         for j in range(b0, b1):
             refused += bad[j] != 0
             values[1, j] *= RAD2DEG
@@ -313,11 +342,12 @@ def _range(start, stop, poses, legc, terms, check, values, codes, bad):
 
 
 @njit(cache=True, error_model="numpy")
-def _block(start, stop, poses, legc, terms, check, values, codes, bad, cs, A, hb, Ai, um, uh, ext, zs):
+def _block(start, stop, poses, legc, terms, check, values, codes, bad, cs, A, legs, Ai, um, uh, ext, zs):
     """The envelope at poses ``start:stop`` (at most BLOCK), one step at a time over all of them.
 
     The block's maxima (|dphi| in rad) and codes (:func:`zonotope_maxima`) go to columns
-    ``start:stop`` of ``values`` and ``codes``; its refusals to ``bad[start:stop]``.
+    ``start:stop`` of ``values`` and ``codes``; its refusals to ``bad[start:stop]``. The
+    formulas are those of :mod:`~prp3mc.kinematics.formulas`, on scalars.
     """
     m, B = stop - start, BLOCK
     phi_deg, cp, sp = math.nan, 1.0, 0.0
@@ -325,47 +355,35 @@ def _block(start, stop, poses, legc, terms, check, values, codes, bad, cs, A, hb
         if poses[start + j, 2] != phi_deg:  # a grid keeps phi: its cosine and sine once
             phi_deg = poses[start + j, 2]
             cp, sp = math.cos(phi_deg * (math.pi / 180.0)), math.sin(phi_deg * (math.pi / 180.0))
-        cs[j], cs[B + j], cs[2 * B + j], cs[3 * B + j] = cp, sp, poses[start + j, 0], poses[start + j, 1]
+        cs[_row(_COS_PHI) + j], cs[_row(_SIN_PHI) + j] = cp, sp
+        cs[_row(_X) + j], cs[_row(_Y) + j] = poses[start + j, 0], poses[start + j, 1]
     for i in literal_unroll((0, 1, 2)):  # constant offsets in every loop below
         ci, si, cj, sj = legc[0, i], legc[1, i], legc[2, i], legc[3, i]
         c4, c5, c6, c7, c8, c9 = legc[4, i], legc[5, i], legc[6, i], legc[7, i], legc[8, i], legc[9, i]
         a, c, e = legc[10, i], legc[11, i], legc[12, i]
-        ra, rh = 3 * i * B, 14 * i * B
+        ra = _row(3 * i)
         for j in range(m):
-            cp, sp = cs[j], cs[B + j]
-            ck, sk = c4 * cp - c5 * sp, c5 * cp + c4 * sp
-            cl, sl = c6 * cp - c7 * sp, c7 * cp + c6 * sp
-            cm, sm = c8 * cp - c9 * sp, c9 * cp + c8 * sp
-            rx = cs[2 * B + j] - (a * ci + c * ck + e * cm)
-            ry = cs[3 * B + j] - (a * si + c * sk + e * sm)
-            den = cj * sl - sj * cl
-            b = (rx * sl - ry * cl) / den
-            d = (rx * sj - ry * cj) / -den
-            lk, lm = cl * ck + sl * sk, cl * cm + sl * sm
-            A[ra + j], A[ra + B + j], A[ra + 2 * B + j] = -sl, cl, -(d + c * lk + e * lm)
-            hb[rh + j], hb[rh + B + j] = b, d
-            hb[rh + 2 * B + j] = cl * si - sl * ci                                         # a
-            hb[rh + 3 * B + j] = a * (cl * ci + sl * si) + b * (cl * cj + sl * sj) + c * lk + d   # alpha
-            hb[rh + 4 * B + j] = cl * sj - sl * cj                                         # b (transmission)
-            hb[rh + 5 * B + j] = b * (cl * cj + sl * sj) + c * lk + d                      # beta
-            hb[rh + 6 * B + j] = 1.0                                                       # rho
-            hb[rh + 7 * B + j] = cl * sk - sl * ck                                         # c
-            hb[rh + 8 * B + j] = c * lk + d                                                # gamma
-            hb[rh + 9 * B + j] = d                                                         # theta
-            hb[rh + 10 * B + j] = cl * sm - sl * cm                                        # e
-            hb[rh + 11 * B + j] = e * lm                                                   # psi
-            hb[rh + 12 * B + j], hb[rh + 13 * B + j] = -sl, cl
+            cp, sp = cs[_row(_COS_PHI) + j], cs[_row(_SIN_PHI) + j]
+            ck, sk = turn(c4, c5, cp, sp)
+            cl, sl = turn(c6, c7, cp, sp)
+            cm, sm = turn(c8, c9, cp, sp)
+            ox, oy = offset_vector(a, c, e, ci, si, ck, sk, cm, sm)
+            b, d = leg_ik(cs[_row(_X) + j] - ox, cs[_row(_Y) + j] - oy, cj, sj, cl, sl)
+            A[ra + j], A[ra + B + j], A[ra + 2 * B + j] = a_row(c, d, e, ck, sk, cl, sl, cm, sm)
+            legs[_leg_row(i, _B) + j], legs[_leg_row(i, _D) + j] = b, d
+            (legs[_leg_row(i, _H) + j], legs[_leg_row(i, _H + 1) + j], legs[_leg_row(i, _H + 2) + j],
+             legs[_leg_row(i, _H + 3) + j], legs[_leg_row(i, _H + 4) + j], legs[_leg_row(i, _H + 5) + j],
+             legs[_leg_row(i, _H + 6) + j], legs[_leg_row(i, _H + 7) + j], legs[_leg_row(i, _H + 8) + j],
+             legs[_leg_row(i, _H + 9) + j]) = h_row(a, b, c, d, e, ci, si, cj, sj, ck, sk, cl, sl, cm, sm)
+            legs[_leg_row(i, _COS_OMEGA) + j], legs[_leg_row(i, _SIN_OMEGA) + j] = -sl, cl
     for j in range(m):  # A^-1 by cofactors
-        p, q, r = A[j], A[B + j], A[2 * B + j]
-        s, t, w0 = A[3 * B + j], A[4 * B + j], A[5 * B + j]
-        v, w, x = A[6 * B + j], A[7 * B + j], A[8 * B + j]
-        a00, a10, a20 = t * x - w0 * w, w0 * v - s * x, s * w - t * v
-        a01, a11, a21 = r * w - q * x, p * x - r * v, q * v - p * w
-        a02, a12, a22 = q * w0 - r * t, r * s - p * w0, p * t - q * s
-        inv_det = 1.0 / (p * a00 + q * a10 + r * a20)
-        Ai[j], Ai[3 * B + j], Ai[6 * B + j] = a00 * inv_det, a10 * inv_det, a20 * inv_det
-        Ai[B + j], Ai[4 * B + j], Ai[7 * B + j] = a01 * inv_det, a11 * inv_det, a21 * inv_det
-        Ai[2 * B + j], Ai[5 * B + j], Ai[8 * B + j] = a02 * inv_det, a12 * inv_det, a22 * inv_det
+        m00, m01, m02, m10, m11, m12, m20, m21, m22, det = adjugate3(
+            A[j], A[B + j], A[2 * B + j], A[3 * B + j], A[4 * B + j], A[5 * B + j],
+            A[6 * B + j], A[7 * B + j], A[8 * B + j])
+        inv_det = 1.0 / det
+        Ai[j], Ai[3 * B + j], Ai[6 * B + j] = m00 * inv_det, m10 * inv_det, m20 * inv_det
+        Ai[B + j], Ai[4 * B + j], Ai[7 * B + j] = m01 * inv_det, m11 * inv_det, m21 * inv_det
+        Ai[2 * B + j], Ai[5 * B + j], Ai[8 * B + j] = m02 * inv_det, m12 * inv_det, m22 * inv_det
     if check:
         for j in range(m):
             cond = 0.0
@@ -375,42 +393,44 @@ def _block(start, stop, poses, legc, terms, check, values, codes, bad, cs, A, hb
             cond = math.sqrt(3.0 * cond)
             word = 0
             for i in literal_unroll((0, 1, 2)):
-                b, d = hb[14 * i * B + j], hb[(14 * i + 1) * B + j]
+                b, d = legs[_leg_row(i, _B) + j], legs[_leg_row(i, _D) + j]
                 word |= (b < legc[13, i]) << i
                 word |= (b > legc[14, i]) << (3 + i)
                 word |= (not d > 0) << (6 + i)
-                word |= (not abs(hb[(14 * i + 4) * B + j]) >= legc[15, 0]) << (9 + i)
+                word |= (not abs(legs[_leg_row(i, _H + _TRANSMISSION) + j]) >= legc[15, 0]) << (9 + i)
                 word |= (not cond <= legc[15, 1]) << (12 + i)
-            bad[start + j] = word | _nonfinite(cs, B, j)
+            bad[start + j] = word | _nonfinite(cs, j)
     else:
         for j in range(m):
-            bad[start + j] = _nonfinite(cs, B, j)
+            bad[start + j] = _nonfinite(cs, j)
     um[:] = 0.0
     uh[:] = 0.0
     g = 0
     for k in range(terms.shape[0]):
-        fam, i, un, by_b = int(terms[k, 0]), int(terms[k, 1]), terms[k, 2], terms[k, 3] != 0
+        fam, i, un, mode = int(terms[k, 0]), int(terms[k, 1]), terms[k, 2], terms[k, 3]
         lo, hi, zlo, zhi = terms[k, 4], terms[k, 5], terms[k, 6], terms[k, 7]
         if i < 0:  # a term of every leg: a further generator, w_l = h_l unit (b_l) on leg l
             mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
             for l in range(3):
-                hf, bl = hb[(14 * l + 2 + fam) * B:(14 * l + 3 + fam) * B], hb[14 * l * B:(14 * l + 1) * B]
+                hf = legs[_leg_row(l, _H + fam):_leg_row(l, _H + fam) + m]
+                bl = legs[_leg_row(l, _B):_leg_row(l, _B) + m]
                 mid_l, gen = um[l, :m], ext[g, l, :m]
                 for j in range(m):
-                    w = hf[j] * un * (bl[j] if by_b else 1.0)
+                    w = hf[j] * un * _slider_factor(mode, bl[j], zlo, zhi)
                     mid_l[j] += w * mid
                     gen[j] = w * half
             g += 1
             continue
         mid_i, half_i = um[i, :m], uh[i, :m]
-        hf, bi = hb[(14 * i + 2 + fam) * B:(14 * i + 3 + fam) * B], hb[14 * i * B:(14 * i + 1) * B]
+        hf = legs[_leg_row(i, _H + fam):_leg_row(i, _H + fam) + m]
+        bi = legs[_leg_row(i, _B):_leg_row(i, _B) + m]
         if fam == _RHO and zhi != math.inf:  # part of a circle: the interval depends on omega
             for j in range(m):
-                omega = math.atan2(hb[(14 * i + 13) * B + j], hb[(14 * i + 12) * B + j])
-                cmin, cmax = _cos_range(zlo - omega, zhi - omega)
+                omega = math.atan2(legs[_leg_row(i, _SIN_OMEGA) + j], legs[_leg_row(i, _COS_OMEGA) + j])
+                cmin, _, cmax, _ = cos_range(zlo - omega, zhi - omega)
                 c_lo = (hi if cmin <= 0 else lo) * cmin  # the term rho cos(zeta - omega)'s interval
                 c_hi = (hi if cmax >= 0 else lo) * cmax
-                scale = hf[j] * un * (bi[j] if by_b else 1.0)
+                scale = hf[j] * un
                 mid_i[j] += scale * (0.5 * (c_lo + c_hi))
                 half_i[j] += abs(scale) * (0.5 * (c_hi - c_lo))
             continue
@@ -418,7 +438,7 @@ def _block(start, stop, poses, legc, terms, check, values, codes, bad, cs, A, hb
             lo, hi = -hi, hi
         mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
         for j in range(m):
-            scale = hf[j] * un * (bi[j] if by_b else 1.0)
+            scale = hf[j] * un * _slider_factor(mode, bi[j], zlo, zhi)
             mid_i[j] += scale * mid
             half_i[j] += abs(scale) * half
     zonotope_maxima(Ai.reshape((3, 3, B)), um, uh, ext, values, codes, start, m, zs)

@@ -88,7 +88,7 @@ def optimizer_worst_case(geometry: Geometry, budget: Budget, pose, *,
         X2 = np.atleast_2d(np.asarray(X).T)                          # (S, D)
         evaluations += X2.shape[0]
         err = exact_pose_error(geometry, np.broadcast_to(pose, X2.shape[:1] + (3,)),
-                               budget.errors(X2, b=b), check=False)
+                               budget.errors(X2, b=b, lead_mm=geometry.lead_mm), check=False)
         value = -np.hypot(err[:, 0], err[:, 1])
         return value if np.ndim(X) > 1 else value[0]
 

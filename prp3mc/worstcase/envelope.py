@@ -41,11 +41,18 @@ from ..units import OUTPUT_UNITS, RAD2DEG
 from ..model.budget import Budget
 from ..kinematics.geometry import Geometry
 from ..kinematics.chain import as_poses, nonfinite_pose, pose_array, refusal
+from ..kinematics.formulas import cos_range
 from ..model.linear import LinearModel, linear_model
 from ._kernel import (NONFINITE, REASONS, TERM_COLUMNS, envelope_kernel, generator_signs, kernel_tables,
                         zonotope_maxima, zonotope_scratch)
 
-__all__ = ["WorstCase", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "term_bounds", "QUANTITIES"]
+__all__ = ["WorstCase", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "term_bounds", "QUANTITIES",
+           "CORRELATION_NOTE"]
+
+#: What outputs say of the worst case of a correlated budget: it is unchanged, the box.
+CORRELATION_NOTE = ("The worst case is the maximum over the box of every input's range: a rank correlation "
+                    "(the budget's [correlation] table) leaves each input its full range and every corner of the "
+                    "box possible, so it does not change the worst case.")
 
 #: Quantities maximised: the position-error norm, ``|dphi|``, ``|dx|`` and ``|dy|``.
 QUANTITIES = ("position", "phi", "x", "y")
@@ -224,18 +231,6 @@ class WorstCase(_Maxima):
         return {name: float(v) for name, v in zip(self.inputs, values)}
 
 
-def _cos_range(lo: np.ndarray, hi: np.ndarray):
-    """Min and max of cos over [lo, hi] (rad, hi - lo < 2 pi) and the arguments attaining them."""
-    two_pi = 2 * math.pi
-    has_max = np.ceil(lo / two_pi) * two_pi <= hi
-    arg_max = np.where(has_max, np.ceil(lo / two_pi) * two_pi,
-                       np.where(np.cos(lo) >= np.cos(hi), lo, hi))
-    has_min = np.ceil((lo - math.pi) / two_pi) * two_pi + math.pi <= hi
-    arg_min = np.where(has_min, np.ceil((lo - math.pi) / two_pi) * two_pi + math.pi,
-                       np.where(np.cos(lo) <= np.cos(hi), lo, hi))
-    return np.cos(arg_min), arg_min, np.cos(arg_max), arg_max
-
-
 def _clearance_interval(rho_bounds, zeta_bounds_deg, omega: np.ndarray):
     """Interval of rho cos(zeta - omega) over the box, and (rho, zeta_deg) at each end.
 
@@ -248,7 +243,7 @@ def _clearance_interval(rho_bounds, zeta_bounds_deg, omega: np.ndarray):
         cmin, amin = np.full(np.shape(omega), -1.0), np.full(np.shape(omega), math.pi)
         cmax, amax = np.full(np.shape(omega), 1.0), np.zeros(np.shape(omega))
     else:
-        cmin, amin, cmax, amax = _cos_range(np.deg2rad(zlo) - omega, np.deg2rad(zhi) - omega)
+        cmin, amin, cmax, amax = cos_range(np.deg2rad(zlo) - omega, np.deg2rad(zhi) - omega)
     rho_hi_end = np.where(cmax >= 0, rhi, rlo)
     rho_lo_end = np.where(cmin <= 0, rhi, rlo)
     to_deg = lambda a: np.mod(np.rad2deg(a + omega), 360.0)  # noqa: E731

@@ -6,6 +6,13 @@ phi_meas``, a ``pose_id`` shared by the repeats of one commanded pose, and
 optionally the approach direction ``dir_1, dir_2, dir_3`` (+-1) of each
 actuator and the temperature ``temp_C``. Other columns are kept and ignored.
 
+Repeats are optional. A campaign that visits every pose once (a laser
+tracker's sweep) is enough for the systematic channels of the discrepancy
+workflow; repeats buy its dispersion channels (spreads, the repeatable
+fraction, the repeat scatter), which compare the visits of a pose. The
+workflow needs at least :data:`MIN_POSES` distinct poses
+(:func:`require_testable`).
+
 Reading refuses, with the row and the column in the message, anything it
 would otherwise have to guess: missing columns, empty or non-numeric cells,
 repeats of one ``pose_id`` with different commands, directions other than
@@ -19,8 +26,10 @@ from __future__ import annotations
 
 import csv
 import os
+import re
 import warnings
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -31,9 +40,10 @@ from ...errors import CampaignError, InputFileError, Prp3mcWarning
 from ...kinematics.chain import check_poses, feasible
 from ...kinematics.geometry import Geometry
 from ...model.effects import TEMP_LIMITS_C
+from ...model.linear import linear_model
 
 __all__ = ["Campaign", "read_campaign", "REQUIRED_COLUMNS", "CMD_COLUMNS", "MEAS_COLUMNS", "DIR_COLUMNS",
-           "MAX_ERROR", "MIN_POSES", "require_testable", "count_rows"]
+           "MAX_ERROR", "MIN_POSES", "require_testable", "count_rows", "CAMPAIGN_PRESETS", "check_error_scale"]
 
 #: Commanded and measured pose columns, ``[x mm, y mm, phi deg]``.
 CMD_COLUMNS, MEAS_COLUMNS = ("x_cmd", "y_cmd", "phi_cmd"), ("x_meas", "y_meas", "phi_meas")
@@ -46,6 +56,8 @@ DIR_COLUMNS = ("dir_1", "dir_2", "dir_3")
 #: a few mm: a base angle error of 3 deg on the delta-shape's leg 3 (a = 240 mm) by 7 mm, 10 deg of guide angle
 #: on the U-shape by 13 mm (issue 24), which the discrepancy workflow follows on the exact chain.
 MAX_ERROR = (25.0, 25.0, 10.0)
+#: Bundled campaigns, by name (``--data example``; how each was made: the script beside it).
+CAMPAIGN_PRESETS = {"example": "data/campaigns/example.csv"}
 _SAME_CMD_TOL = 1e-6  # mm or deg: repeats of a pose must command the same pose
 #: Fewest distinct poses a campaign must visit for the discrepancy workflow to test anything: one pose
 #: is held out to cross-validate the others, and the instrument's registration (a pose-independent
@@ -134,7 +146,7 @@ class Campaign:
 
     def to_csv(self, path: str | os.PathLike) -> None:
         """Write the campaign as a campaign CSV file (full float precision)."""
-        self.to_frame().to_csv(path, index=False, float_format="%.12g")
+        self.to_frame().to_csv(path, index=False)   # shortest repr of each float: reads back exactly
 
     @classmethod
     def from_frame(cls, frame: pd.DataFrame, geometry: Geometry | None = None,
@@ -194,13 +206,14 @@ class Campaign:
             bad = ~np.isfinite(values)
             if bad.any():
                 r = int(np.flatnonzero(bad)[0])
-                shown = "empty" if pd.isna(raw.iloc[r]) else f"{raw.iloc[r]!r}"
+                shown = "empty" if pd.isna(raw.iloc[r]) or not str(raw.iloc[r]).strip() else f"{raw.iloc[r]!r}"
                 raise CampaignError(f"{where(r, column)}: expected a finite number, got {shown}"
                                     + (f" ({int(bad.sum())} such rows)" if bad.sum() > 1 else ""))
             return values
 
         cmd = np.stack([numeric(c) for c in CMD_COLUMNS], axis=1)
         meas = np.stack([numeric(c) for c in MEAS_COLUMNS], axis=1)
+        _check_units(cmd, meas, source)
         far = np.abs(meas - cmd) > np.array(MAX_ERROR)
         if far.any():
             r, k = (int(v) for v in np.argwhere(far)[0])
@@ -218,6 +231,13 @@ class Campaign:
                     raise CampaignError(f"{where(r, c)}: an approach direction must be +1 or -1, got {d[r]:g}")
                 direction[:, k] = d
         temp = numeric("temp_C") if "temp_C" in frame.columns else None
+        if temp is not None and _KELVIN[0] <= temp.min() and temp.max() <= _KELVIN[1]:
+            raise CampaignError(f"{where(int(np.argmin(temp)), 'temp_C')}: every temperature lies in "
+                                f"[{temp.min():g}, {temp.max():g}], {temp.min() - 273.15:.4g} to "
+                                f"{temp.max() - 273.15:.4g} degrees C if in kelvin: temp_C must be in degrees C "
+                                "(subtract 273.15)")
+        if "time_s" in frame.columns:
+            frame = frame.assign(time_s=_seconds(frame["time_s"], where))
         hot_or_cold = np.zeros(0) if temp is None else (temp < TEMP_LIMITS_C[0]) | (temp > TEMP_LIMITS_C[1])
         if hot_or_cold.any():
             r = int(np.flatnonzero(hot_or_cold)[0])
@@ -246,6 +266,7 @@ class Campaign:
                     reason = "is not reachable"
                 except Exception as exc:  # noqa: BLE001 -- its message is the reason
                     reason = str(exc)
+                reason += _unit_hint(geometry, poses)
                 rows = np.flatnonzero(index == p)
                 raise CampaignError(f"{where(rows[0], 'x_cmd, y_cmd, phi_cmd')}: pose_id {labels[order][p]!r}: "
                                     f"{reason} (geometry {geometry.name})")
@@ -255,6 +276,71 @@ class Campaign:
                    temp_C=temp, extra=extra.reset_index(drop=True), poses=poses,
                    pose_labels=tuple(str(v) for v in labels[order]), pose_index=index,
                    source=source, metadata=dict(metadata or {}))
+
+
+#: Temperatures that are plausible machine-room temperatures in kelvin (-50 to 100 degrees C) and
+#: implausible in degrees C (above 220): such a temp_C column is refused as kelvin.
+_KELVIN = (223.15, 373.15)
+#: Factors of the usual unit mistakes, (measured / commanded, what it means).
+_UNIT_FACTORS = ((1 / 25.4, "inches (measured / commanded = 1/25.4)"), (25.4, "mm against a command in inches"),
+                 (1000.0, "µm (measured / commanded = 1000)"), (1e-3, "metres (measured / commanded = 1/1000)"))
+_ANGLE_FACTORS = ((np.pi / 180, "radians (measured / commanded = pi/180)"),
+                  (180 / np.pi, "degrees against a command in radians"))
+
+
+def _check_units(cmd: np.ndarray, meas: np.ndarray, source: str) -> None:
+    """Refuse measured columns whose ratio to the command is a unit factor (inch, µm, m, rad), naming it.
+
+    Only rows far enough from zero to show a ratio count (1 mm, 0.5 deg);
+    the median ratio must match the factor within 2 %, which no error of a
+    machine comes near.
+    """
+    for k, (factors, least) in enumerate(((_UNIT_FACTORS, 1.0), (_UNIT_FACTORS, 1.0), (_ANGLE_FACTORS, 0.5))):
+        big = np.abs(cmd[:, k]) > least
+        if big.sum() < max(3, big.size // 2):
+            continue
+        ratio = float(np.median(meas[big, k] / cmd[big, k]))
+        for factor, unit in factors:
+            if abs(ratio / factor - 1) < 0.02:
+                what = "deg" if k == 2 else "mm"
+                raise CampaignError(f"{source}: column {MEAS_COLUMNS[k]} looks like {unit}: measured poses must be "
+                                    f"in mm and deg, like the command (convert {MEAS_COLUMNS[k]} to {what})")
+
+
+def _unit_hint(geometry: Geometry, poses: np.ndarray) -> str:
+    """A hint when the commanded poses are unreachable but would all be reached in another length unit."""
+    for factor, unit in ((25.4, "inches"), (1000.0, "metres"), (1e-3, "µm")):
+        if feasible(geometry, poses * np.array([factor, factor, 1.0])).all():
+            return f"; every commanded pose is reachable if x_cmd, y_cmd are in {unit}: the campaign must be in mm"
+    return ""
+
+
+def _seconds(column: pd.Series, where) -> np.ndarray:
+    """``time_s`` as seconds: numbers as they are, ISO 8601 timestamps as seconds since the earliest.
+
+    Raises
+    ------
+    CampaignError
+        A row without a time (empty, ``-``, ``NA``), a time that is neither a
+        finite number nor a timestamp, or numbers and timestamps mixed.
+    """
+    missing = column.isna() | (column.astype(str).str.strip() == "")
+    if missing.any():
+        rows = np.flatnonzero(missing.to_numpy())
+        raise CampaignError(f"{where(rows, 'time_s')}: no time ({len(rows)} such rows): give every measurement its "
+                            "time, or drop the column (row order then stands for time)")
+    numbers = pd.to_numeric(column, errors="coerce").to_numpy(dtype=float)
+    if np.isfinite(numbers).all():
+        return numbers
+    text = column.astype(str).str.strip()
+    stamps = pd.to_datetime(text, errors="coerce", utc=True, format="ISO8601")
+    if stamps.notna().all():
+        return (stamps - stamps.min()).dt.total_seconds().to_numpy(dtype=float)
+    bad = np.flatnonzero(~np.isfinite(numbers) & stamps.isna().to_numpy())
+    r = int(bad[0]) if bad.size else int(np.flatnonzero(~np.isfinite(numbers))[0])
+    raise CampaignError(f"{where(r, 'time_s')}: expected seconds (a finite number) or an ISO 8601 timestamp such as "
+                        f"2026-03-01T08:00:00, got {column.iloc[r]!r}"
+                        + ("; the column mixes numbers and timestamps" if bad.size == 0 else ""))
 
 
 def read_campaign(data: "str | os.PathLike | pd.DataFrame | Campaign", geometry: Geometry | None = None) -> Campaign:
@@ -280,18 +366,35 @@ def read_campaign(data: "str | os.PathLike | pd.DataFrame | Campaign", geometry:
     if isinstance(data, pd.DataFrame):
         return Campaign.from_frame(data, geometry, "campaign")
     path = _campaign_file(data)
-    _check_header(path)
+    header, sep, decimal = _check_header(path)
+    # pose_id is a label: "NA", "none" or "null" name a pose (pandas would read them as missing)
+    missing = {name: list(_MISSING) for name in header if name.strip() != "pose_id"}
     try:
-        frame = pd.read_csv(path, dtype={"pose_id": str}, skipinitialspace=True, keep_default_na=True)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"{path}: not a readable CSV file ({str(exc).splitlines()[0]})") from None
-    return Campaign.from_frame(frame, geometry, str(path), line_offset=1)
+        frame = pd.read_csv(path, sep=sep, decimal=decimal, dtype={"pose_id": str}, skipinitialspace=True,
+                            keep_default_na=False, na_values=missing, encoding="utf-8-sig")
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as exc:
+        raise InputFileError(f"{_shown(path)}: not a readable CSV file ({str(exc).splitlines()[0]})") from None
+    return Campaign.from_frame(frame, geometry, _shown(path), line_offset=1)
+
+
+#: Cells read as missing in the numeric columns (pandas' defaults; pose_id keeps them as labels).
+_MISSING = ("", "#N/A", "#N/A N/A", "#NA", "-1.#IND", "-1.#QNAN", "-NaN", "-nan", "1.#IND", "1.#QNAN", "<NA>", "N/A",
+            "NA", "NULL", "NaN", "None", "n/a", "nan", "null", "none", "-")
+
+
+def _shown(path: Path) -> str:
+    """``path`` as text that can be printed whatever its bytes (a name that is not UTF-8 shows escapes)."""
+    return os.fsdecode(path).encode("utf-8", "backslashreplace").decode("utf-8")
 
 
 def _campaign_file(data: "str | os.PathLike") -> Path:
+    """The file ``data`` names: a path, or a bundled campaign's name (:data:`CAMPAIGN_PRESETS`) if no such file exists."""
     path = Path(data)
+    if not path.is_file() and str(data) in CAMPAIGN_PRESETS:
+        path = Path(str(resources.files("prp3mc").joinpath(CAMPAIGN_PRESETS[str(data)])))
     if not path.is_file():
-        raise InputFileError(f"campaign file {path} does not exist")
+        raise InputFileError(f"campaign file {_shown(path)} does not exist"
+                             + (f" (bundled: {', '.join(CAMPAIGN_PRESETS)})" if path.suffix != ".csv" else ""))
     return path
 
 
@@ -313,36 +416,83 @@ def count_rows(data: "str | os.PathLike") -> int:
     return max(lines + (last != b"\n") - 1, 0)
 
 
-def _check_header(path: Path) -> None:
-    """Refuse a header that names a column twice (pandas would rename the second ``x_meas.1``)."""
+def _check_header(path: Path) -> tuple[list[str], str, str]:
+    """The header's column names, the delimiter and the decimal mark of a campaign file.
+
+    A UTF-8 byte-order mark is skipped; the delimiter is sniffed among
+    comma, semicolon and tab (a spreadsheet's export), and a semicolon file
+    whose numbers have decimal commas is read so. Refuses a header that
+    names a column twice (pandas would rename the second ``x_meas.1``).
+    """
     try:
-        with open(path, newline="", encoding="utf-8") as f:
-            header = next(csv.reader(f), [])
-    except (UnicodeDecodeError, csv.Error) as exc:
-        raise InputFileError(f"{path}: not a readable CSV file ({exc})") from None
+        with open(path, newline="", encoding="utf-8-sig") as f:
+            head = f.read(1 << 16)
+    except UnicodeDecodeError as exc:
+        raise InputFileError(f"{_shown(path)}: not a readable CSV file: not UTF-8 text ({exc.reason} at byte "
+                             f"{exc.start}); save it as UTF-8") from None
+    lines = head.splitlines()
+    sep = ","
+    if lines and "," not in lines[0]:
+        try:
+            sep = csv.Sniffer().sniff("\n".join(lines[:20]), delimiters=",;\t").delimiter
+        except csv.Error:
+            sep = ","
+    try:
+        header = next(csv.reader(lines[:1], delimiter=sep), [])
+    except csv.Error as exc:
+        raise InputFileError(f"{_shown(path)}: not a readable CSV file ({exc})") from None
+    # decimal commas: a semicolon or tab file whose cells look like 1,5 (no cell of a comma file can)
+    decimal = "," if sep != "," and any(re.search(r"(^|[;\t])-?\d+,\d+([;\t]|$)", line) for line in lines[1:20]) else "."
     names = [name.strip() for name in header]
     for k, name in enumerate(names):
         if name and name in names[:k]:
-            raise CampaignError(f"{path}: column {name!r} appears twice in the header (columns "
+            raise CampaignError(f"{_shown(path)}: column {name!r} appears twice in the header (columns "
                                 f"{names.index(name) + 1} and {k + 1}): which one holds the data is ambiguous")
+    return names, sep, decimal
+
+
+def check_error_scale(campaign: Campaign, geometry: Geometry, budget, instrument_sigma_mm: float = 0.0) -> None:
+    """Refuse a campaign written wholly in inches (commands and measurements), naming the unit.
+
+    Such a campaign passes every per-row check: its poses are reachable
+    (near the base) and its errors small. Two signs together give it away:
+    every commanded pose is reachable at 25.4 times its coordinates, and
+    the position errors scatter (about their mean) less than a tenth of
+    what the budget and the instrument predict (an inch campaign: 1/25.4).
+
+    Raises
+    ------
+    CampaignError
+        One line naming inches and the scatter ratio.
+    """
+    scaled = campaign.poses * np.array([25.4, 25.4, 1.0])
+    if not feasible(geometry, scaled).all():
+        return
+    _, cov = linear_model(geometry, budget, campaign.poses, check=False).moments()
+    predicted = float(np.mean(cov[:, 0, 0] + cov[:, 1, 1])) + 2 * instrument_sigma_mm ** 2
+    centred = campaign.error[:, :2] - campaign.error[:, :2].mean(axis=0)
+    ratio = np.sqrt(np.mean(np.sum(centred ** 2, axis=1)) / predicted) if predicted > 0 else np.inf
+    if 0 < ratio < 0.1:
+        raise CampaignError(f"{campaign.source}: the campaign looks like inches: every commanded pose is reachable "
+                            f"at 25.4 times its x, y, and the position errors scatter {ratio:.3g} times what the budget "
+                            "predicts (1/25.4 = 0.039 in inches): commands and measurements must be in mm")
 
 
 def require_testable(campaign: Campaign) -> Campaign:
     """Refuse a campaign too small for the discrepancy workflow to test anything.
 
-    It needs at least :data:`MIN_POSES` distinct poses and at least one pose
-    measured twice (the dispersion channel compares repeats).
+    It needs at least :data:`MIN_POSES` distinct poses. A campaign that
+    measures no pose twice is accepted: its systematic channels are tested,
+    its dispersion channels (which compare repeats) are not.
 
     Raises
     ------
     CampaignError
         One line saying what the campaign has and what it would need.
     """
-    repeated = int(np.sum(campaign.repeats >= 2))
-    if campaign.n_poses < MIN_POSES or repeated == 0:
+    if campaign.n_poses < MIN_POSES:
         raise CampaignError(
             f"{campaign.source}: too small to test anything: {campaign.n_measurements} measurement(s) of "
-            f"{campaign.n_poses} pose(s), {repeated} of them repeated; the discrepancy workflow needs at least "
-            f"{MIN_POSES} distinct poses (one is held out, the registration takes 3 degrees of freedom) and at least "
-            "one pose measured twice (the dispersion test compares repeats)")
+            f"{campaign.n_poses} pose(s); the discrepancy workflow needs at least {MIN_POSES} distinct poses (one is "
+            "held out, the registration takes 3 degrees of freedom)")
     return campaign

@@ -51,7 +51,7 @@ import pandas as pd
 from ..._rng import resolve_rng
 from ..._result import freeze, short_repr
 from ..._version import __version__
-from ...errors import BudgetError, CampaignError
+from ...errors import CampaignError, ParameterError
 from ...kinematics.chain import feasible, inverse_kinematics
 from ...kinematics.geometry import REGION_PRESETS, Geometry, Region
 from ...output import write_text
@@ -60,6 +60,7 @@ from ...model.budget import Budget
 from ...model.linear import linear_model
 from .data import CMD_COLUMNS, DIR_COLUMNS, MEAS_COLUMNS, MIN_POSES, Campaign
 from ..fit.confounds import design_confounds
+from ...model.effects import check_leads
 from ..fit.signatures import effect, signatures
 from ..fit.likelihood import Engine
 from ..fit.nuisance import DRIFT, NUISANCE_NAMES, REGISTRATION, nuisance_signatures
@@ -261,7 +262,7 @@ class _Information:
 
     def criterion(self, info: np.ndarray) -> np.ndarray:
         """log det of the information (..., d, d) with the nuisances profiled out (Schur complement)."""
-        k = len(self.effects)
+        k = sum(effect(n).dof for n in self.effects)          # the effects' columns (a cyclic error: two)
         A, B, C = info[..., :k, :k], info[..., :k, k:], info[..., k:, k:]
         ridge = _RIDGE * (np.trace(C, axis1=-2, axis2=-1)[..., None, None] + 1.0) * np.eye(C.shape[-1])
         S = A - B @ np.linalg.solve(C + ridge, np.swapaxes(B, -1, -2))
@@ -372,8 +373,8 @@ def plan_campaign(geometry: Geometry, budget: Budget, effects, n_poses: int, n_v
 
     Raises
     ------
-    BudgetError
-        An effect that is not a systematic library effect.
+    ParameterError
+        No effect, or a spread (unknown names: :class:`~prp3mc.errors.BudgetError`).
     CampaignError
         Too few poses or visits, or more poses than the region has candidates.
     """
@@ -381,11 +382,12 @@ def plan_campaign(geometry: Geometry, budget: Budget, effects, n_poses: int, n_v
     seed, rng = resolve_rng(rng)
     effects = tuple(dict.fromkeys(effects))
     if not effects:
-        raise BudgetError("plan: list at least one effect")
+        raise ParameterError("plan: list at least one effect")
     for name in effects:
         if not effect(name).systematic:
-            raise BudgetError(f"plan: {name} is a spread; plan for systematic effects (offsets, scale_i, "
-                              "backlash_i, thermal)")
+            raise ParameterError(f"plan: {name} is a spread; plan for systematic effects (offsets, scale_i, "
+                              "backlash_i, thermal, cyclic_i)")
+    check_leads(effects, geometry, "plan: ")
     n_poses, n_visits = int(n_poses), int(n_visits)
     if n_poses < MIN_POSES or n_visits < 1:
         raise CampaignError(f"plan: at least {MIN_POSES} poses and 1 visit, got {n_poses} and {n_visits}")

@@ -9,7 +9,7 @@ hidden effects of the library (:mod:`prp3mc.measurement.fit.signatures`), severa
 once if wanted.
 
 Randomness (one seed, recorded in ``metadata["seed"]``): the root generator
-draws, in this order, the visiting order, the approach directions (``both``),
+draws, in this order, the visiting order (``visit_order="random"``), the approach directions (``both``),
 the budget errors of every visit and the instrument noise; the per-pose
 errors (``repeatable_fraction``) come from the stream
 ``child_seed(seed, 1)`` and the outliers from ``child_seed(seed, 2)``. So a
@@ -29,6 +29,7 @@ from ...kinematics.chain import as_poses, check_poses, inverse_kinematics
 from ...kinematics.exact import exact_pose_error
 from ...kinematics.geometry import Geometry
 from ...model.budget import Budget, parse_input
+from ...model.effects import check_leads, effect_value
 from ...units import DEG2RAD
 from .data import CMD_COLUMNS, DIR_COLUMNS, MAX_ERROR, MEAS_COLUMNS, Campaign
 from ..fit.signatures import effect, offset_errors, slider_error, spread_budget
@@ -155,15 +156,23 @@ def _repeat_errors(budget: Budget, X: np.ndarray, pose_of_visit: np.ndarray, n_p
     return out
 
 
-def _schedule(order, n_poses: int) -> np.ndarray:
-    """A given visiting order as indices into the poses, every pose visited."""
-    order = np.asarray(order)
-    if order.ndim != 1 or order.size == 0 or not np.issubdtype(order.dtype, np.integer) \
-            or order.min() < 0 or order.max() >= n_poses:
-        raise CampaignError(f"order must be a 1-d array of pose indices in [0, {n_poses})")
-    if np.unique(order).size != n_poses:
-        raise CampaignError("order must visit every pose")
-    return order
+def _template(plan, geometry: Geometry) -> Campaign:
+    """A campaign template (measured columns empty) validated as a campaign whose measurements equal the commands."""
+    if isinstance(plan, Campaign):
+        return plan
+    frame = pd.DataFrame(plan).rename(columns=lambda c: str(c).strip()).dropna(axis=1, how="all")  # empty columns
+    for cmd, meas in zip(CMD_COLUMNS, MEAS_COLUMNS):
+        if cmd in frame.columns:
+            frame[meas] = frame[cmd]
+    return Campaign.from_frame(frame, geometry, "campaign plan")
+
+
+def _plan_times(template: Campaign) -> np.ndarray:
+    """The template's ``time_s``: finite and never decreasing."""
+    t = pd.to_numeric(template.extra["time_s"], errors="coerce").to_numpy(dtype=float)
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) < 0):
+        raise CampaignError("campaign plan: time_s must be finite numbers that never decrease (row order is time)")
+    return t
 
 
 def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int = 8, *,
@@ -174,12 +183,13 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
                       drift: tuple[float, float, float] | None = None,
                       outliers: tuple[float, float] | None = None,
                       repeatable_fraction: float = 0.0,
-                      slider_error_fn=None, pose_error_fn=None, order=None, time_s=None,
-                      rng: "None | int | np.random.Generator" = None) -> Campaign:
+                      slider_error_fn=None, pose_error_fn=None, visit_order: str = "random",
+                      rng: "None | int | np.random.Generator" = None,
+                      plan: "pd.DataFrame | Campaign | None" = None) -> Campaign:
     """Simulate a measurement campaign with the exact nonlinear model.
 
     The campaign visits every pose once per round, in a fresh random order
-    each round, for ``n_repeats`` rounds; the temperature drifts linearly in
+    each round (or in the order given: ``visit_order``), for ``n_repeats`` rounds; the temperature drifts linearly in
     time over the campaign. Every measurement has a time (``time_s``, from
     the moves between poses: :func:`visit_times`). By default every
     measurement draws fresh budget errors (a clearance settles at a new
@@ -195,19 +205,20 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         Random errors; spread effects in ``effects`` change its laws. The
         systematic effects of its ``[effects]`` table are part of the
         machine too (with the campaign's directions and temperatures).
-    poses : array_like, shape (P, 3)
-        Commanded poses ``[x_mm, y_mm, phi_deg]`` (any batch shape is flattened).
+    poses : array_like, shape (P, 3), or None
+        Commanded poses ``[x_mm, y_mm, phi_deg]`` (any batch shape is
+        flattened); None with ``plan``.
     n_repeats : int
-        Measurements per pose.
+        Measurements per pose (1: a one-visit campaign, as a laser tracker's sweep; ignored with ``plan``).
     effects : dict of str to float, optional
         Hidden effects of the library (:data:`~prp3mc.measurement.fit.signatures.EFFECT_NAMES`, in their units); any number
         at once, their pose errors add up through the exact chain (a hidden effect the budget's
-        ``[effects]`` also holds adds to its value).
-    approach : {"both", "positive", "negative", "sequence"} or array_like, shape (M, 3)
+        ``[effects]`` also holds adds to its value). A cyclic screw error ``cyclic_i`` is its phasor,
+        its amplitude (phase 0) or ``(amplitude_mm, phase_deg)``, and needs ``lead_mm`` of leg i in the geometry.
+    approach : {"both", "positive", "negative", "sequence"}
         Approach direction of each actuator: random +-1 per actuator and
-        measurement; always +1; always -1; the sign of the actuator's
-        move from the previous pose visited; or given, +-1 per measurement
-        (a planned campaign, :func:`~prp3mc.measurement.plan.plan_campaign`).
+        measurement; always +1; always -1; or the sign of the actuator's
+        move from the previous pose visited.
     temp_drift_C : (start, end) or None
         Temperature at the first and last measurement, degrees C; None for
         a campaign without a ``temp_C`` column (thermal effects then need it).
@@ -242,16 +253,21 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         ``f(commanded (M, 3), b (M, 3), direction (M, 3), temp_C (M,) or None)``
         returning an extra slider error delta b (M, 3) mm, or an extra pose
         error (M, 3) ``[mm, mm, deg]`` added to the exact one.
-    order : array_like of int, shape (M,), optional
-        The visiting order, indices into ``poses`` (a planned campaign;
-        ``n_repeats`` is then unused); by default ``n_repeats`` rounds, each
-        in a fresh random order.
-    time_s : array_like, shape (M,), optional
-        Time of each measurement, s, increasing (default :func:`visit_times`).
+    visit_order : {"random", "given"}
+        Each round visits the poses in a fresh random order, or in the order
+        of ``poses`` (a sweep: a raster or serpentine path, as a laser tracker
+        measures a workspace).
     rng : None, int or numpy.random.Generator
         Randomness (Scientific Python SPEC 7; streams in the module notes);
         the integer seed used is recorded in ``metadata["seed"]``, also when
         a Generator is given.
+    plan : DataFrame or Campaign, optional
+        A campaign template (SPEC §11: the campaign columns, measured ones
+        empty, as ``prp3mc plan`` writes): its rows are the measurements, in
+        their order, with their ``pose_id`` and commanded poses, the
+        template's ``dir_i`` (instead of ``approach`` for those legs) and ``time_s``
+        (instead of :func:`visit_times`) when it has them. No visiting order
+        is drawn.
 
     Returns
     -------
@@ -266,41 +282,46 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         A setting out of range.
     """
     seed_used, rng = resolve_rng(rng)
-    poses = as_poses(poses).reshape(-1, 3)
+    template = None if plan is None else _template(plan, geometry)
+    poses = as_poses(poses if template is None else template.poses).reshape(-1, 3)
     check_poses(geometry, poses)
-    n_repeats = int(n_repeats)
+    n_repeats = int(n_repeats) if template is None else int(template.repeats.max())
     if n_repeats < 1:
         raise CampaignError(f"n_repeats must be at least 1, got {n_repeats}")
-    given = not isinstance(approach, str)
-    if not given and approach not in ("both", "positive", "negative", "sequence"):
+    if approach not in ("both", "positive", "negative", "sequence"):
         raise CampaignError(f"approach must be both, positive, negative or sequence, got {approach!r}")
     registration, drift = _triple(registration, "registration"), _triple(drift, "drift")
     outliers = _outlier_setting(outliers)
     r = float(repeatable_fraction)
     if not 0.0 <= r <= 1.0:
         raise CampaignError(f"repeatable_fraction must lie in [0, 1], got {repeatable_fraction!r}")
-    effects = dict(effects or {})
+    if visit_order not in ("random", "given"):
+        raise CampaignError(f"visit_order must be random or given, got {visit_order!r}")
+    effects = {name: effect_value(name, value) for name, value in dict(effects or {}).items()}
     parsed = [effect(name) for name in effects]          # raises on unknown names
     for e, v in zip(parsed, effects.values()):
         if e.kind == "backlash" and v < 0:
             raise CampaignError(f"{e.name}: backlash h must be >= 0, got {v}")
     budget.check_geometry(geometry)
-    machine = {name: eff.value for name, eff in budget.effects.items()}      # the budget's effects, then the hidden
+    check_leads(effects, geometry, "hidden effect ")
+    machine = {name: eff.model_value for name, eff in budget.effects.items()}   # the budget's effects, then the hidden
     for name, value in effects.items():
         machine[name] = machine.get(name, 0.0) + value
     if "thermal" in machine and temp_drift_C is None:
         raise CampaignError("a thermal effect (hidden or in the budget) needs a temperature drift (temp_drift_C)")
     P = poses.shape[0]
-    order = (np.concatenate([rng.permutation(P) for _ in range(n_repeats)]) if order is None    # visiting order
-             else _schedule(order, P))
+    if template is None:
+        order = np.concatenate([rng.permutation(P) if visit_order == "random" else np.arange(P)
+                                for _ in range(n_repeats)])                  # visiting order
+        pose_ids = np.array([f"P{k + 1:03d}" for k in order])
+    else:
+        order, pose_ids = template.pose_index, template.pose_id
     M = order.size
     cmd = poses[order]
     b_pose, _ = inverse_kinematics(geometry, poses, check=False)
     b = b_pose[order]
-    if given:
-        direction = np.asarray(approach, dtype=float)
-        if direction.shape != (M, 3) or not np.all(np.abs(direction) == 1.0):
-            raise CampaignError(f"approach given as directions must be +-1 of shape ({M}, 3)")
+    if template is not None and all(template.has_dir):
+        direction = np.array(template.direction)
     elif approach == "both":
         direction = rng.choice([-1.0, 1.0], size=(M, 3))
     elif approach == "sequence":
@@ -309,12 +330,9 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         direction = pd.DataFrame(direction).ffill().fillna(1.0).to_numpy()
     else:
         direction = np.full((M, 3), 1.0 if approach == "positive" else -1.0)
-    if time_s is None:
-        time_s = visit_times(b)
-    else:
-        time_s = np.asarray(time_s, dtype=float)
-        if time_s.shape != (M,) or not np.all(np.isfinite(time_s)) or np.any(np.diff(time_s) < 0):
-            raise CampaignError(f"time_s must be {M} finite, non-decreasing times (s)")
+    if template is not None and any(template.has_dir) and not all(template.has_dir):   # prp3mc plan: backlash legs
+        direction[:, list(template.has_dir)] = template.direction[:, list(template.has_dir)]
+    time_s = visit_times(b) if template is None or "time_s" not in template.extra else _plan_times(template)
     temp = None if temp_drift_C is None else np.linspace(temp_drift_C[0], temp_drift_C[1], M)
     sim_budget = spread_budget(budget.without_effects(), effects)
     X = sim_budget.sample(M, rng)
@@ -323,7 +341,7 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     errors = sim_budget.errors(X)
     for family, value in offset_errors(machine).items():
         errors[family] = errors.get(family, 0.0) + value
-    db = slider_error(machine, b, direction, temp)
+    db = slider_error(machine, b, direction, temp, geometry.lead_mm)
     if slider_error_fn is not None:
         db = db + np.asarray(slider_error_fn(cmd, b, direction, temp), dtype=float)
     errors["b"] = errors.get("b", 0.0) + db
@@ -344,7 +362,7 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         measured[rows, 0] += outliers[1] * np.cos(angle)
         measured[rows, 1] += outliers[1] * np.sin(angle)
         outlier_rows = rows.tolist()
-    frame = pd.DataFrame({"pose_id": [f"P{k + 1:03d}" for k in order]})
+    frame = pd.DataFrame({"pose_id": pose_ids})
     for k, col in enumerate(CMD_COLUMNS):
         frame[col] = cmd[:, k]
     for k, col in enumerate(MEAS_COLUMNS):
@@ -355,7 +373,7 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         frame["temp_C"] = temp
     frame["time_s"] = time_s
     metadata = {"seed": seed_used, "effects": effects, "machine_effects": machine, "n_repeats": n_repeats,
-                "approach": "given" if given else approach,
+                "visit_order": visit_order, "approach": approach,
                 "temp_drift_C": None if temp_drift_C is None else list(temp_drift_C),
                 "instrument_sigma_mm": instrument_sigma_mm, "instrument_sigma_deg": instrument_sigma_deg,
                 "registration": None if registration is None else list(registration),
@@ -365,5 +383,6 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
                 "rng": "root stream: order, directions, budget, noise; child_seed(seed, 1): per-pose draws; "
                        "child_seed(seed, 2): outliers",
                 "budget": budget.name, "geometry": geometry.name, "version": __version__,
-                "out_of_library": slider_error_fn is not None or pose_error_fn is not None}
+                "out_of_library": slider_error_fn is not None or pose_error_fn is not None,
+                "plan": None if template is None else template.source}
     return Campaign.from_frame(frame, None, "simulated campaign", metadata)

@@ -11,6 +11,7 @@
 - :mod:`~prp3mc.measurement.fit.relinearise` — the exact chain linearised about an estimate (Gauss-Newton).
 - :mod:`~prp3mc.measurement.fit.identify` — gross errors and names, relinearised until stable; the linearity guard.
 - :mod:`~prp3mc.measurement.fit.confounds` — what a campaign cannot tell apart (``confounded``).
+- :mod:`~prp3mc.measurement.fit.cyclic` — a cyclic screw error's amplitude interval (covers near 0).
 - :mod:`~prp3mc.measurement.fit.diagnostics` — the tests, the one verdict and the gap.
 - :mod:`~prp3mc.measurement.fit.holdout` — the gap on poses left out of the fit.
 - :mod:`~prp3mc.measurement.fit.updated` — the updated model and what a controller can compensate.

@@ -33,9 +33,9 @@ from ...model.budget import Budget
 from ..campaign.data import Campaign
 from .updated import UpdatedModel, base_name
 
-__all__ = ["predicted_accuracy", "accuracy_region", "load_propagation", "GRID", "N_SAMPLES", "MODELS"]
+__all__ = ["predicted_accuracy", "accuracy_region", "GRID", "N_SAMPLES", "MODELS"]
 
-#: Grid points per side of the region (7 x 7 keeps the three models' Monte Carlo to about 0.3 s; on the u-shape
+#: Grid points per side of the region (7 x 7 keeps the three models' Monte Carlo short; on the u-shape
 #: region its maxima were within 1 % of an 11 x 11 grid's with 16384 samples).
 GRID = 7
 #: Monte Carlo samples per model (shared by the grid's poses).
@@ -59,8 +59,7 @@ def accuracy_region(geometry: Geometry, campaign: Campaign) -> tuple[Region, str
 
 def load_propagation() -> tuple:
     """:func:`~prp3mc.montecarlo.propagation.monte_carlo` and :func:`~prp3mc.worstcase.envelope.worst_case`,
-    imported on first use: numba, which they load (about 0.3 s), serves this stage only, which
-    :func:`~prp3mc.measurement.fit.workflow.discrepancy` runs on a process of its own where a core is idle."""
+    imported on first use: numba, which they load, serves this stage only."""
     from ...montecarlo.propagation import monte_carlo
     from ...worstcase.envelope import worst_case
     return monte_carlo, worst_case

@@ -34,16 +34,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..._distributions import chi2_isf, chi2_ppf
 from .signatures import effect
-from .likelihood import Engine, Fit
+from .likelihood import Engine, Fit, chi2_equivalent
 from .nuisance import DRIFT, NUISANCE_NAMES, REGISTRATION
 
 __all__ = ["design_confounds", "drift_alternatives", "ambiguities", "VIF_LIMIT", "ADVICE"]
 
 #: Variance inflation at and above which an effect counts as confounded (R^2 >= 0.9).
 VIF_LIMIT = 10.0
-_Q = float(chi2_ppf(0.99, 1))
+#: The chi2(1) 99 % quantile: two fits within it explain the data as well (the aliases' criterion).
+_Q = 6.634896601021214
 #: What would separate an effect from each nuisance, and effects from each other.
 ADVICE = {
     "registration": "spread the poses over the whole region and every slider's stroke and vary the orientation "
@@ -64,14 +64,13 @@ def _blocks(engine: Engine) -> dict:
     return {k: v for k, v in blocks.items() if v}
 
 
-def _r2(A: np.ndarray, X: np.ndarray) -> np.ndarray:
-    """Share of each column of ``A`` in the span of ``X``, (k,)."""
-    total = np.sum(A * A, axis=0)
+def _r2(engine: Engine, A: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """Share of each candidate's whitened signature (columns ``A``, by ``engine.blocks``) in the span of ``X``,
+    (C,): for a cyclic error's two columns, the largest share of a combination of them."""
     if X.shape[1] == 0:
-        return np.zeros(A.shape[1])
+        return np.zeros(len(engine.blocks))
     Q, _ = np.linalg.qr(X)
-    rest = A - Q @ (Q.T @ A)
-    return 1.0 - np.sum(rest * rest, axis=0) / np.where(total > 0, total, 1.0)
+    return 1.0 - engine.kept_share(A, A - Q @ (Q.T @ A))
 
 
 def _time_temperature_r(engine: Engine) -> float | None:
@@ -114,8 +113,8 @@ def design_confounds(engine: Engine, effects=None) -> list[dict]:
     Xall = engine.whitened(fit, (), tuple(range(engine.H.shape[2])))[1]
     blocks = _blocks(engine)
     limit = 1.0 - 1.0 / VIF_LIMIT
-    r2 = {label: _r2(A, Xall[:, cols]) for label, cols in blocks.items()}
-    r2_all = _r2(A, Xall[:, list(engine.nuisance)])
+    r2 = {label: _r2(engine, A, Xall[:, cols]) for label, cols in blocks.items()}
+    r2_all = _r2(engine, A, Xall[:, list(engine.nuisance)])
     temp_r = _time_temperature_r(engine)
     groups: dict = {}                                    # (with, thermal) -> [(name, r2)]
     for j, e in enumerate(engine.systematic):
@@ -154,9 +153,14 @@ def _effect_groups(engine: Engine, A: np.ndarray, X: np.ndarray) -> list[dict]:
         Q, _ = np.linalg.qr(X)
         A = A - Q @ (Q.T @ A)
     norm = np.linalg.norm(A, axis=0)
-    testable = np.flatnonzero((norm > 0) & np.array([e.name not in engine.confounded for e in engine.systematic]))
-    U = A[:, testable] / norm[testable]
-    corr = np.abs(U.T @ U)
+    owner = np.repeat(np.arange(len(engine.blocks)), [len(c) for c in engine.blocks])
+    U = A / np.where(norm > 0, norm, 1.0)
+    column_corr = np.abs(U.T @ U)                        # a candidate's correlation: its columns' largest
+    corr = np.zeros((len(engine.blocks),) * 2)
+    np.maximum.at(corr, (owner[:, None], owner[None, :]), column_corr)
+    testable = np.flatnonzero(np.array([e.name not in engine.confounded and norm[engine.blocks[j]].max() > 0
+                                        for j, e in enumerate(engine.systematic)]))
+    corr = corr[np.ix_(testable, testable)]
     linked = corr >= np.sqrt(1.0 - 1.0 / VIF_LIMIT)
     label = np.arange(testable.size)
     for _ in range(testable.size):                       # connected components by label propagation
@@ -185,7 +189,8 @@ def _time_varying(engine: Engine) -> np.ndarray:
     """Candidates (indices) whose signature changes between visits of a pose (thermal, backlash): only such
     an effect can take a drift's place, which grows within each pose's visits."""
     within = engine.G - engine.pose_mean(engine.G)[engine.idx]
-    return np.flatnonzero(np.sum(within**2, axis=(0, 1)) > 1e-12 * np.sum(engine.G**2, axis=(0, 1)))
+    varies = np.sum(within**2, axis=(0, 1)) > 1e-12 * np.sum(engine.G**2, axis=(0, 1))      # per column
+    return np.array([j for j, cols in enumerate(engine.blocks) if varies[cols].any()], dtype=int)
 
 
 def drift_alternatives(engine: Engine, fit: Fit, alpha: float) -> list[tuple[str, float, float, float]]:
@@ -203,9 +208,10 @@ def drift_alternatives(engine: Engine, fit: Fit, alpha: float) -> list[tuple[str
         Each alternative, its value fitted without a drift, ``2 (loglik(fit) - loglik(effect, no drift))``
         and its likelihood ratio without a drift.
     """
+    from scipy.stats import chi2  # imported when used: prp3mc --help imports this module
     no_drift = tuple(j for j in fit.nuis if NUISANCE_NAMES[j] not in DRIFT)
     K = sum(e.name not in engine.confounded for e in engine.systematic) + len(engine.spreads)
-    threshold = float(chi2_isf(alpha / max(K, 1), 1))
+    threshold = float(chi2.isf(alpha / max(K, 1), 1))
     without = None
     out = []
     for j in _time_varying(engine):
@@ -217,9 +223,9 @@ def drift_alternatives(engine: Engine, fit: Fit, alpha: float) -> list[tuple[str
         if as_drift > _Q:
             continue
         without = without or engine.refit(fit.sys, fit.factors, start_r=fit.r, nuis=no_drift)
-        shown = 2.0 * (trial.loglik - without.loglik)
+        shown = chi2_equivalent(2.0 * (trial.loglik - without.loglik), e.dof)
         if shown > threshold:
-            out.append((e.name, float(trial.theta[-1]), float(as_drift), float(shown)))
+            out.append((e.name, engine.values(trial)[e.name], float(as_drift), float(shown)))
     return out
 
 
@@ -252,12 +258,13 @@ def ambiguities(engine: Engine, fit: Fit, named, drift_test: dict, alpha: float)
     shown = "shown by the data" if drift_test["significant"] else "not significant with the drift fitted"
     for name, value, as_drift, lr in drift_alternatives(engine, fit, alpha):
         unit = effect(name).unit
+        size = abs(value) if isinstance(value, complex) else value        # a cyclic error: its amplitude
         confounds.append({
             "effects": [name], "with": ["drift"],
-            "why": f"{name} = {value:.4g} {unit} explains the data without a drift (likelihood ratio {lr:.3g}) "
+            "why": f"{name} = {size:.4g} {unit} explains the data without a drift (likelihood ratio {lr:.3g}) "
                    f"as well as the drift fitted ({drift}; {shown}) does: twice the log-likelihood "
                    f"{as_drift:.3g} below, within {_Q:.3g}",
             "advice": ADVICE["thermal"] if effect(name).kind == "thermal" else ADVICE["drift"],
-            "value": value, "unit": unit, "lr": lr, "lr_as_drift": as_drift, "source": "data"})
-        reasons.append(f"the drift fitted may be {name} = {value:.4g} {unit}: the campaign cannot tell them apart")
+            "value": float(size), "unit": unit, "lr": lr, "lr_as_drift": as_drift, "source": "data"})
+        reasons.append(f"the drift fitted may be {name} = {size:.4g} {unit}: the campaign cannot tell them apart")
     return confounds, reasons

@@ -38,7 +38,6 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from ..._distributions import bh_adjusted, chi2_logcdf, chi2_logsf, norm_logsf
 from ..._result import POSE_COLUMNS, freeze
 from ...model.linear import linear_model
 from ...units import DISPLAY, MM2UM, OUTPUT_UNITS, POSE_OUTPUTS
@@ -132,24 +131,32 @@ def _span_energy(Z: np.ndarray, A: np.ndarray, X: np.ndarray) -> tuple[float, in
 
 def _chi2_logsf(x, df):
     """log of the chi2(df) upper tail; far in the tail, where it underflows, the Wilson-Hilferty normal law."""
-    out = np.asarray(chi2_logsf(x, df), dtype=float)
+    from scipy.stats import chi2, norm  # imported when used: prp3mc --help imports this module
+    out = np.asarray(chi2.logsf(x, df), dtype=float)
     far = ~np.isfinite(out)
     if far.any():
         x, df = np.broadcast_to(x, out.shape)[far], np.broadcast_to(df, out.shape)[far]
         h = 2.0 / (9.0 * df)
-        out[far] = norm_logsf(((x / df) ** (1.0 / 3.0) - 1.0 + h) / np.sqrt(h))
+        out[far] = norm.logsf(((x / df) ** (1.0 / 3.0) - 1.0 + h) / np.sqrt(h))
     return out if out.ndim else float(out)
 
 
 def _scaled_chi2_logsf(t, mean, var, upper=True):
+    from scipy.stats import chi2
     c = var / (2.0 * mean)
     nu = 2.0 * mean**2 / var
-    return _chi2_logsf(t / c, nu) if upper else chi2_logcdf(t / c, nu)
+    return _chi2_logsf(t / c, nu) if upper else chi2.logcdf(t / c, nu)
+
+
+#: log of the smallest normal double: a p-value that underflows (a statistic of exactly zero, as perfect
+#: measurements give the lower tail) is reported at this floor, so that every score stays finite.
+_LOG_P_FLOOR = float(np.log(np.finfo(float).tiny))
 
 
 def _two_sided(t, mean, var):
-    """log of the two-sided p-value of a scaled chi-square statistic."""
-    return np.minimum(0.0, _LN2 + np.minimum(_scaled_chi2_logsf(t, mean, var), _scaled_chi2_logsf(t, mean, var, False)))
+    """log of the two-sided p-value of a scaled chi-square statistic (floored at :data:`_LOG_P_FLOOR`)."""
+    lower = np.maximum(_scaled_chi2_logsf(t, mean, var, False), _LOG_P_FLOOR)
+    return np.minimum(0.0, _LN2 + np.minimum(_scaled_chi2_logsf(t, mean, var), lower))
 
 
 def _holm_log_min(log_p: np.ndarray) -> float:
@@ -269,6 +276,7 @@ def diagnose(engine: Engine, fit: Fit, n_boot: int = 0, rng=None, *, null: tuple
         these residuals (their degrees of freedom are then taken off);
         False for residuals of measurements left out of the fit.
     """
+    from scipy.stats import false_discovery_control, norm
     c = engine.campaign
     vB, vS, vT = null_variances(engine, fit, n_boot, rng) if null is None else null
     B, S = _pose_stats(engine, fit.zw, fit.zb)
@@ -288,7 +296,7 @@ def diagnose(engine: Engine, fit: Fit, n_boot: int = 0, rng=None, *, null: tuple
     dof = 3.0 * engine.M - n_par
     model_cols = engine.whitened(fit, fit.sys, fit.nuis)[1]
     testable = [j for j, e in enumerate(engine.systematic) if j not in fit.sys and e.name not in engine.confounded]
-    lib_stat, lib_df = _span_energy(fit.z, engine.whitened_candidates(fit)[:, testable], model_cols)
+    lib_stat, lib_df = _span_energy(fit.z, engine.whitened_candidates(fit)[:, engine.cols_of(testable)], model_cols)
     probes = engine.whiten(_probe_basis(engine), fit.Lw, fit.Lb)
     lof_stat, lof_df = _span_energy(fit.z, probes, model_cols)
     summary = {
@@ -307,7 +315,7 @@ def diagnose(engine: Engine, fit: Fit, n_boot: int = 0, rng=None, *, null: tuple
         "log_p_lack_of_fit": float(_chi2_logsf(lof_stat, lof_df)) if lof_df else 0.0,
     }
     moran = _spatial_z(engine, fit, model_cols)
-    summary.update(spatial_z=moran, log_p_spatial=float(norm_logsf(moran)))
+    summary.update(spatial_z=moran, log_p_spatial=float(norm.logsf(moran)))
     if has_rep.any() and gS_mean > 0:
         summary["log_p_dispersion"] = float(_two_sided(S.sum(), gS_mean, gS_var))
         summary["disp_direction"] = "larger" if S.sum() > gS_mean else "smaller"
@@ -316,9 +324,9 @@ def diagnose(engine: Engine, fit: Fit, n_boot: int = 0, rng=None, *, null: tuple
                       ("lack_of_fit_p", "lack_of_fit"), ("library_p", "library"),
                       ("sys_holm_min", "systematic_pose"), ("disp_holm_min", "dispersion_pose")):
         summary[key] = float(np.exp(summary[f"log_p_{name}"]))
-    sys_q, disp_q = bh_adjusted(sys_p), np.ones(engine.P)
+    sys_q, disp_q = false_discovery_control(sys_p, method="bh"), np.ones(engine.P)
     if has_rep.any():
-        disp_q[has_rep] = bh_adjusted(disp_p[has_rep])
+        disp_q[has_rep] = false_discovery_control(disp_p[has_rep], method="bh")
     summary["n_poses_sys_flagged"] = int(np.sum(sys_q < 0.05))
     summary["n_poses_disp_flagged"] = int(np.sum(disp_q < 0.05))
     mean_resid = engine.pose_mean(fit.resid) * _DISPLAY

@@ -43,11 +43,12 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from ..._distributions import chi2_isf
 from . import outliers as gross
-from .signatures import effect, library
+from ...model.effects import amplitude_phase, components
+from .signatures import effect
 from .likelihood import Engine, Fit
-from .relinearise import NonlinearityError, exact_errors, linearise
+from ...errors import NonlinearityError
+from .relinearise import candidates, exact_errors, linearise
 from .selection import STEP_COLUMNS, name_effects, select
 
 __all__ = ["Named", "identify", "name_pass", "MAX_PASSES", "MAX_RESTARTS", "REMAINDER", "CURVATURE"]
@@ -146,8 +147,8 @@ def name_pass(full: Engine, alpha: float, max_effects: int, outlier_rate: float,
 def _energy(named: Named, exact: np.ndarray, values: dict) -> float:
     """Whitened energy of ``exact`` (M, 3 of the whole campaign) less the pass's linear model at ``values``."""
     engine = named.engine
-    cols = [engine.sys_index(n) for n in values]
-    linear = engine.known + engine.G[:, :, cols] @ np.array([values[n] for n in values])
+    cols = engine.cols_of(tuple(engine.sys_index(n) for n in values))
+    linear = engine.known + engine.G[:, :, cols] @ components(list(values), list(values.values()))
     return _whitened_energy(named, exact[engine.keep] - linear)
 
 
@@ -165,11 +166,14 @@ def _curvature(geometry, budget, campaign, named: Named) -> dict:
         return {}
     engine, fit = named.engine, named.fit
     sets, labels = [], []
-    for k, name in enumerate(values):
-        se = float(np.sqrt(max(fit.theta_cov[len(fit.nuis) + k, len(fit.nuis) + k], 0.0)))
-        for sign in (-2.0, 2.0):
-            sets.append({**values, name: values[name] + sign * se})
-            labels.append(name)
+    se = np.sqrt(np.clip(np.diagonal(fit.theta_cov)[len(fit.nuis):], 0.0, None))       # per column
+    k = 0
+    for name in values:
+        for unit in ((1.0, 1j) if effect(name).dof == 2 else (1.0,)):                 # a phasor's two parts
+            for sign in (-2.0, 2.0):
+                sets.append({**values, name: values[name] + sign * se[k] * unit})
+                labels.append(name)
+            k += 1
     exact = exact_errors(geometry, budget, campaign, sets)
     out: dict = {}
     for name, v, e in zip(labels, sets, exact):
@@ -183,8 +187,7 @@ class _Passes:
     def __init__(self, geometry, budget, campaign, make_engine, alpha, max_effects, outlier_rate):
         self.geometry, self.budget, self.campaign, self.make_engine = geometry, budget, campaign, make_engine
         self.alpha, self.max_effects, self.outlier_rate = alpha, max_effects, outlier_rate
-        self.candidates = [e.name for e in library(budget, campaign.has_dir, campaign.temp_C is not None)
-                           if e.systematic]
+        self.candidates = candidates(geometry, budget, campaign)
 
     def run(self, values: dict | None = None) -> tuple[Named, list, str | None]:
         """Passes from the model linearised about ``values`` (None: the nominal geometry): the last pass,
@@ -206,7 +209,7 @@ class _Passes:
                     named = _unnamed(full, self.outlier_rate)
                 return named, passes, str(exc)
             values = named.values
-            record = {"point": dict(point.values) if point is not None else {}, "named": dict(values),
+            record = {"point": _plain(point.values) if point is not None else {}, "named": _plain(values),
                       "gross_errors": int((~named.keep).sum())}
             passes.append(record)
             try:
@@ -242,11 +245,12 @@ class _Passes:
                 if effect(alias).systematic and alias not in named.values and alias not in same.get(e.name, ()):
                     starts.setdefault(alias, fit["value"])
         starts = dict(list(starts.items())[:MAX_RESTARTS])       # the first named effect's aliases first
-        threshold = float(chi2_isf(self.alpha / max(len(self.candidates), 1), 1))
+        from scipy.stats import chi2  # imported when used: prp3mc --help imports this module
+        threshold = float(chi2.isf(self.alpha / max(len(self.candidates), 1), 1))
         best, best_passes, tried = named, None, []
         for alias, value in starts.items():
             other, passes, why = self.run({alias: value})
-            tried.append({"start": {alias: value}, "named": dict(other.values) if other else {},
+            tried.append({"start": _plain({alias: value}), "named": _plain(other.values) if other else {},
                           "settled": why is None})
             if why is not None or other is None or not np.array_equal(other.keep, best.keep):
                 continue
@@ -304,7 +308,7 @@ def identify(geometry, budget, campaign, make_engine, alpha: float, max_effects:
                        + f" (whitened departure {max(curved.values()):.3g} > {CURVATURE:g})")
     doc["guard"] = "ok" if why is None else "tripped"
     if why is not None:
-        doc.update(why=why, last_estimate=dict(passes[-1]["named"]) if passes else {},
+        doc.update(why=why, last_estimate=passes[-1]["named"] if passes else {},
                    advice="nothing is named: the errors are too large for the model linearised about this "
                           "geometry; apply the last estimate's geometric offsets to the geometry (a geometry closer "
                           "to the machine) and analyse again")
@@ -321,5 +325,13 @@ def _unnamed(full: Engine, outlier_rate: float) -> Named:
                  gross.threshold(full.M, outlier_rate))
 
 
+def _plain(values: dict) -> dict:
+    """Effect values as JSON holds them: a cyclic error's phasor as ``[amplitude_mm, phase_deg]``
+    (:func:`~prp3mc.model.effects.effect_value` reads it back)."""
+    return {n: list(amplitude_phase(v)) if isinstance(v, complex) else v if isinstance(v, list) else float(v)
+            for n, v in values.items()}
+
+
 def _text(values: dict) -> str:
-    return ", ".join(f"{n} = {v:.4g} {effect(n).unit}" for n, v in values.items()) or "nothing"
+    return ", ".join(f"{n} = {v[0]:.4g} {effect(n).unit} at {v[1]:.4g} deg" if isinstance(v, list) else
+                     f"{n} = {v:.4g} {effect(n).unit}" for n, v in _plain(values).items()) or "nothing"

@@ -28,7 +28,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import optimize
 
-from ..._distributions import chi2_ppf
 from ...kinematics.chain import inverse_kinematics
 from ...kinematics.geometry import Geometry
 from ...kinematics.sensitivity import sensitivity
@@ -36,11 +35,12 @@ from ...model.budget import Budget
 from ...model.linear import linear_model
 from ...units import z_value
 from ..campaign.data import Campaign
+from .cyclic import amplitude_interval
 from .signatures import EFFECT_NAMES, ROW_TO_DEG, budget_effect_errors, effect, library, signatures, spread_reference
-from .nuisance import DRIFT, NUISANCE_NAMES, REGISTRATION, campaign_time, nuisance_signatures
+from .nuisance import DRIFT, NUISANCE_NAMES, NUISANCE_UNITS, REGISTRATION, campaign_time, nuisance_signatures
 from .relinearise import Point
 
-__all__ = ["Engine", "Fit", "subset_campaign"]
+__all__ = ["Engine", "Fit", "subset_campaign", "chi2_equivalent"]
 
 _FACTOR_BOUNDS = (np.log(0.01), np.log(100.0))
 #: Largest contribution (mm or deg) of an effect at a generous magnitude below which it is invisible.
@@ -50,12 +50,46 @@ _GENEROUS = {"mm": 1.0, "deg": 1.0, "1": 1e-2, "1/K": 1e-3}
 CONFOUNDED = 1e-4
 
 
+def chi2_equivalent(x, df, k=1):
+    """The chi2(``k``) value with the upper tail of chi2(``df``) at ``x``: ``chi2.isf(chi2.sf(x, df), k)``.
+
+    Puts likelihood ratios with different degrees of freedom on one scale (a
+    two-parameter effect's LR on that of one-parameter effects) with their
+    p-values kept. Far in the tail, where the p-value underflows, the
+    chi-square tails' leading terms ``-x/2 + (df/2 - 1) log(x/2) - lgamma(df/2)``
+    are equated instead (monotone in ``x``). Identity when ``df == k``.
+    """
+    from scipy.special import gammaln
+    from scipy.stats import chi2  # imported when used: prp3mc --help imports this module
+    x, df, k = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(df, dtype=np.float64),
+                                   np.asarray(k, dtype=np.float64))
+    out = np.array(x, dtype=np.float64, copy=True)
+    todo = (df != k) & (x > 0)
+    if todo.any():
+        xs, d, kk = x[todo], df[todo], k[todo]
+        logp = np.asarray(chi2.logsf(xs, d), dtype=np.float64)
+        y = np.empty_like(xs)
+        near = logp > -600.0
+        y[near] = chi2.isf(np.exp(logp[near]), kk[near])
+        far = ~near
+        if far.any():
+            target = -xs[far] / 2 + (d[far] / 2 - 1) * np.log(xs[far] / 2) - gammaln(d[far] / 2) + gammaln(kk[far] / 2)
+            yf = xs[far].copy()
+            for _ in range(4):                       # y = -2 target + (k - 2) log(y / 2), a contraction here
+                yf = -2.0 * target + (kk[far] - 2.0) * np.log(yf / 2.0)
+            y[far] = yf
+        out[todo] = y
+    return out[()] if out.ndim == 0 else out
+
+
 @dataclass(frozen=True, slots=True)
 class Fit:
     """One fitted model state of an :class:`Engine`.
 
     ``theta`` holds the nuisance values (those of ``nuis``) then the
-    systematic values (those of ``sys``); ``z`` is the whitened residual
+    systematic values (those of ``sys``, each effect's
+    :attr:`~prp3mc.model.effects.Effect.dof` of them: a cyclic
+    error's phasor as its real and imaginary parts); ``z`` is the whitened residual
     (3M within rows, then 3P between rows), ``zw`` (M, 3) and ``zb`` (P, 3)
     its two parts (``zb``: standardised pose means).
     """
@@ -98,6 +132,12 @@ def subset_campaign(campaign: Campaign, keep: np.ndarray) -> Campaign:
 
 class Engine:
     """Arrays of one campaign under one budget; fits model states.
+
+    Systematic candidates (:attr:`systematic`) have one signature column
+    each in :attr:`G`, but a cyclic screw error two (its phasor's parts):
+    :attr:`blocks` maps each candidate to its columns. Likelihood ratios of
+    candidates are put on the chi2(1) scale (:func:`~prp3mc.measurement.fit.likelihood.chi2_equivalent`),
+    so that every test compares them with one threshold at their own p-value.
 
     Parameters
     ----------
@@ -150,23 +190,31 @@ class Engine:
         self.H = nuisance_signatures(campaign.commanded, s[keep])
         self.nuisance = tuple(j for j, name in enumerate(NUISANCE_NAMES)
                               if name in DRIFT or (registration and name in REGISTRATION))
-        lib = library(budget, campaign.has_dir, campaign.temp_C is not None)
+        #: whether some pose is measured twice: without, the dispersion channels (spreads, r) are not testable
+        self.repeats = bool((campaign.repeats >= 2).any())
+        has_lead = tuple(bool(np.isfinite(p)) for p in geometry.lead_mm)
+        lib = library(budget, campaign.has_dir, campaign.temp_C is not None, has_lead, spreads=self.repeats)
         sys_effects = [e for e in lib if e.systematic]
         G = (signatures(geometry, campaign.poses, self.idx, sys_effects, campaign.direction, campaign.temp_C)
              if point is None else point.signatures([e.name for e in sys_effects])[keep])
-        size = np.abs(G).max(axis=(0, 1)) * np.array([_GENEROUS[e.unit] for e in sys_effects])
-        visible = size > _INVISIBLE
+        owner = np.repeat(np.arange(len(sys_effects)), [e.dof for e in sys_effects])       # candidate of each column
+        size = np.zeros(len(sys_effects))
+        np.maximum.at(size, owner, np.abs(G).max(axis=(0, 1)))
+        visible = size * np.array([_GENEROUS[e.unit] for e in sys_effects]) > _INVISIBLE
         self.invisible = tuple(e.name for e, v in zip(sys_effects, visible) if not v)
         self.systematic = [e for e, v in zip(sys_effects, visible) if v]
-        self.G = G[:, :, visible]
-        # least value of each candidate: a backlash width h >= 0, so its correction to a budget's h is >= -h
+        self.G = G[:, :, visible[owner]]
+        dof = [e.dof for e in self.systematic]
+        #: columns of G of each candidate
+        self.blocks = tuple(np.arange(start, start + k) for start, k in zip(np.cumsum([0] + dof[:-1]), dof))
+        # least value of each column: a backlash width h >= 0, so its correction to a budget's h is >= -h
         self.lower = np.array([(-budget.effects[e.name].value if e.name in budget.effects else 0.0)
-                               if e.kind == "backlash" else -np.inf for e in self.systematic])
+                               if e.kind == "backlash" else -np.inf for e in self.systematic for _ in range(e.dof)])
         self.spreads = [e for e in lib if e.kind == "spread"]
         self.spread_input = {e.name: self.inputs.index(e.budget_input) for e in self.spreads}
         self.spread_ref = {e.name: spread_reference(budget, e) for e in self.spreads}
-        self.not_testable = {e: f"needs {', '.join(effect(e).needs) or 'its budget input'}"
-                             for e in EFFECT_NAMES if e not in {x.name for x in lib}}
+        tested = {x.name for x in lib}
+        self.not_testable = {e: self._why_not(effect(e)) for e in EFFECT_NAMES if e not in tested}
         self._order = np.argsort(self.idx, kind="stable")
         self._starts = np.concatenate([[0], np.cumsum(campaign.repeats)[:-1]])
         self.b_pose, _ = inverse_kinematics(geometry, campaign.poses, check=False)   # (P, 3) mm
@@ -183,6 +231,22 @@ class Engine:
             return self
         return Engine(self.geometry, self.budget, self.full_campaign, self.noise, registration=self.registration,
                       keep=keep, point=self.point)
+
+    def _why_not(self, eff) -> str:
+        """Why the campaign cannot test library effect ``eff``."""
+        if eff.kind == "cyclic":
+            return f"needs lead_mm of leg {eff.leg + 1} in the geometry (the lead its screw's error repeats with)"
+        if eff.kind == "spread" and not self.repeats:
+            return "needs a pose measured twice: a dispersion is seen in the scatter of repeats"
+        return f"needs {', '.join(eff.needs) or 'its budget input'}"
+
+    def cols_of(self, sys: tuple) -> list[int]:
+        """Columns of :attr:`G` of the candidates ``sys`` (indices into :attr:`systematic`), in order."""
+        return [int(c) for j in sys for c in self.blocks[j]]
+
+    def dof(self, sys: tuple) -> int:
+        """Parameters of the candidates ``sys``: their columns' count."""
+        return sum(len(self.blocks[j]) for j in sys)
 
     # -- model moments and whitening
     def moments(self, factors: dict, r: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -283,7 +347,7 @@ class Engine:
     def columns(self, sys: tuple, nuis: tuple | None = None) -> np.ndarray:
         """Signatures (M, 3, n_nuis + k) of the nuisances ``nuis`` (all fitted ones if None), then ``sys``."""
         nuis = self.nuisance if nuis is None else nuis
-        return np.concatenate([self.H[:, :, list(nuis)], self.G[:, :, list(sys)]], axis=2)
+        return np.concatenate([self.H[:, :, list(nuis)], self.G[:, :, self.cols_of(sys)]], axis=2)
 
     def _solve(self, sys: tuple, factors: dict, r: float, nuis: tuple | None) -> tuple:
         """The generalized least squares of a model state: ``sys, nuis, basis, sw, sb, A, theta, theta_cov, z,
@@ -292,7 +356,7 @@ class Engine:
         sys = tuple(sys)
         basis = self._basis(factors)
         sw, sb, logdet = self._scales(basis, r)
-        cols = list(nuis) + [self.H.shape[2] + j for j in sys]
+        cols = list(nuis) + [self.H.shape[2] + c for c in self.cols_of(sys)]
         z0, A = self._stacked(basis, sw, sb, cols)
         if cols:
             theta_cov = np.linalg.pinv(A.T @ A)
@@ -325,9 +389,12 @@ class Engine:
         """Maximum likelihood of the spread factors and (if ``r`` is None) of ``r``, values profiled out.
 
         ``free`` names the spread factors optimised (all by default); the
-        others stay at their value in ``factors``.
+        others stay at their value in ``factors``. Without repeats ``r`` does
+        not change the likelihood (every pose mean has ``Sigma + N``): it is 0.
         """
         names = list(factors) if free is None else list(free)
+        if r is None and not self.repeats:
+            r = 0.0
         free_r = r is None
 
         def state(x):
@@ -360,17 +427,37 @@ class Engine:
         (3M + 3P, k), at ``fit``'s covariance."""
         basis = self._basis(fit.factors)
         sw, sb, _ = self._scales(basis, fit.r)
-        return self._stacked(basis, sw, sb, list(nuis) + [self.H.shape[2] + j for j in sys])
+        return self._stacked(basis, sw, sb, list(nuis) + [self.H.shape[2] + c for c in self.cols_of(sys)])
 
     def whitened_candidates(self, fit: Fit) -> np.ndarray:
-        """Whitened signatures of every systematic candidate at ``fit``'s covariance, (3M + 3P, C)."""
-        return self.whitened(fit, tuple(range(self.G.shape[2])))[1]
+        """Whitened signature columns of every systematic candidate at ``fit``'s covariance, (3M + 3P, C)
+        (candidate j's are ``blocks[j]``)."""
+        return self.whitened(fit, tuple(range(len(self.systematic))))[1]
+
+    def kept_share(self, A: np.ndarray, rest: np.ndarray) -> np.ndarray:
+        """Per candidate, the least share of a combination of its columns' energy (``A``) that ``rest`` keeps.
+
+        ``rest`` is ``A`` with a span projected out; for a one-column candidate
+        the share is ``|rest|^2 / |A|^2``, for a block the smallest generalized
+        eigenvalue of ``(rest' rest, A' A)``.
+        """
+        first = np.array([cols[0] for cols in self.blocks], dtype=int)
+        total, kept = np.sum(A[:, first] ** 2, axis=0), np.sum(rest[:, first] ** 2, axis=0)
+        out = np.where(total > 0, kept / np.where(total > 0, total, 1.0), 0.0)
+        for j in (j for j, cols in enumerate(self.blocks) if len(cols) > 1):
+            a, r = A[:, self.blocks[j]], rest[:, self.blocks[j]]
+            w, U = np.linalg.eigh(a.T @ a)
+            if not w[0] > 1e-300:
+                out[j] = 0.0
+                continue
+            T = U / np.sqrt(w)                             # whitens A' A
+            out[j] = float(np.linalg.eigvalsh(T.T @ (r.T @ r) @ T)[0])
+        return out
 
     def _confounded(self) -> dict:
         """Candidates whose whitened signature lies (almost) in the nuisance span, name -> what with."""
         fit = self.fit((), {}, 0.0)
         A = self.whitened_candidates(fit)
-        total = np.sum(A * A, axis=0)
         out = {}
         X = self.whitened(fit, (), tuple(range(self.H.shape[2])))[1]
         spans = {"registration": [j for j in self.nuisance if NUISANCE_NAMES[j] in REGISTRATION],
@@ -381,12 +468,13 @@ class Engine:
                 continue
             Q, _ = np.linalg.qr(X[:, cols])
             rest = A - Q @ (Q.T @ A)
-            for j in np.flatnonzero(np.sum(rest * rest, axis=0) < CONFOUNDED * total):
+            for j in np.flatnonzero(self.kept_share(A, rest) < CONFOUNDED):
                 out.setdefault(self.systematic[j].name, label)
         return out
 
     def score_systematic(self, fit: Fit) -> tuple[np.ndarray, np.ndarray]:
-        """LR and estimate of adding each systematic candidate to ``fit`` at its covariance (NaN if not testable)."""
+        """LR (on the chi2(1) scale) and estimate of adding each systematic candidate to ``fit`` at its
+        covariance (NaN if not testable); a cyclic error's estimate is its amplitude."""
         Gall = self.whitened_candidates(fit)
         X = self.whitened(fit, fit.sys, fit.nuis)[1]
         if X.shape[1]:
@@ -396,20 +484,28 @@ class Engine:
             Gp = Gall
         den = np.sum(Gp * Gp, axis=0)
         num = Gp.T @ fit.z
-        ok = den > CONFOUNDED * np.sum(Gall * Gall, axis=0)
+        ok = self.kept_share(Gall, Gp) > CONFOUNDED
         ok[list(fit.sys)] = False
         ok &= np.array([e.name not in self.confounded for e in self.systematic], bool)
-        est = np.where(ok, num / np.where(ok, den, 1.0), np.nan)
-        lr = np.where(ok, num**2 / np.where(ok, den, 1.0), np.nan)
+        first = np.array([cols[0] for cols in self.blocks], dtype=int)
+        den1, num1, lower = den[first], num[first], self.lower[first]
+        est = np.where(ok, num1 / np.where(ok, den1, 1.0), np.nan)
+        lr = np.where(ok, num1**2 / np.where(ok, den1, 1.0), np.nan)
         # below its least value (h >= 0) the constrained maximum is at that value
-        low = np.where(np.isfinite(self.lower), self.lower, 0.0)
-        lr = np.where(est < self.lower, den * low * (2.0 * est - low), lr)
+        low = np.where(np.isfinite(lower), lower, 0.0)
+        lr = np.where(est < lower, den1 * low * (2.0 * est - low), lr)
+        for j in np.flatnonzero(ok & np.array([len(c) > 1 for c in self.blocks])):
+            cols = self.blocks[j]
+            theta = np.linalg.solve(Gp[:, cols].T @ Gp[:, cols], num[cols])
+            lr[j] = float(chi2_equivalent(theta @ num[cols], len(cols)))
+            est[j] = float(np.hypot(*theta))
         return lr, est
 
     # -- intervals
     def _profile_interval(self, loglik, x_hat: float, lo: float, hi: float, level: float) -> tuple[float, float]:
         """Ends of {x: 2 (max - loglik(x)) <= chi2_1(level)} within [lo, hi], by root finding."""
-        q = chi2_ppf(level, 1)
+        from scipy.stats import chi2  # imported when used: prp3mc --help imports this module
+        q = chi2.ppf(level, 1)
         top = loglik(x_hat)
 
         def g(x):
@@ -441,25 +537,80 @@ class Engine:
         half = z_value(level) * float(np.sqrt(max(fit.theta_cov[j, j], 0.0)))
         return value, (value - half, value + half)
 
+    def _theta_of(self, fit: Fit, name: str) -> np.ndarray:
+        """Indices into ``fit.theta`` of systematic effect ``name``'s values."""
+        j = self.sys_index(name)
+        start = len(fit.nuis) + self.dof(fit.sys[:list(fit.sys).index(j)])
+        return np.arange(start, start + len(self.blocks[j]))
+
+    def phasor(self, fit: Fit, name: str, offset: complex = 0j, level: float = 0.95) -> dict:
+        """A cyclic error of ``fit``: its phasor (with ``offset`` added: a budget's value it corrects),
+        amplitude and phase, the amplitude's interval (:func:`~prp3mc.measurement.fit.cyclic.amplitude_interval`)
+        and the phasor's covariance (mm^2)."""
+        k = self._theta_of(fit, name)
+        c = fit.theta[k] + np.array([offset.real, offset.imag])
+        V = fit.theta_cov[np.ix_(k, k)]
+        z = complex(c[0], c[1])
+        return {"phasor": z, "amplitude": abs(z), "phase_deg": float(np.rad2deg(np.angle(z)) % 360.0),
+                "ci": amplitude_interval(c, V, level), "cov": V}
+
+    def nuisances(self, fit: Fit, level: float = 0.95) -> dict:
+        """The nuisances of ``fit``, name -> ``{value, unit, ci95}`` at ``level``.
+
+        Wald intervals of the generalized least squares, widened by the
+        uncertainty of the spread factors: a spread scales its input's mean
+        too (a one-sided encoder law's mean moves with its bound), which the
+        registration partly takes up. Each factor's standard error on the log
+        scale (from its profile interval) times the nuisances' derivative in
+        it (central difference over that standard error) adds in quadrature.
+        """
+        var = np.clip(np.diagonal(fit.theta_cov)[:len(fit.nuis)], 0.0, None).copy()
+        for name, f in fit.factors.items():
+            lo, hi = self.spread_interval(fit, name)
+            se = (np.log(hi) - np.log(lo)) / (2.0 * z_value(0.95))
+            if not se > 0:
+                continue
+            ends = [self.fit(fit.sys, {**fit.factors, name: f * np.exp(d)}, fit.r, fit.nuis).theta[:len(fit.nuis)]
+                    for d in (se, -se)]
+            var += (0.5 * (ends[0] - ends[1])) ** 2
+        half = z_value(level) * np.sqrt(var)
+        out = {}
+        for j, col in enumerate(fit.nuis):
+            name = NUISANCE_NAMES[col]
+            value = float(fit.theta[j])
+            out[name] = {"value": value, "unit": NUISANCE_UNITS[name],
+                         "ci95": [value - float(half[j]), value + float(half[j])]}
+        return out
+
     def estimate(self, fit: Fit, name: str, level: float = 0.95) -> tuple[float, tuple[float, float]]:
         """Value and ``level`` confidence interval of effect ``name`` in ``fit``, in the effect's unit.
 
         Systematic values: Wald interval of the generalized least squares
-        estimate (a backlash clipped at its least value, :attr:`lower`); spreads: profile likelihood.
+        estimate (a backlash clipped at its least value, :attr:`lower`; a
+        cyclic error's amplitude: :meth:`phasor`); spreads: profile likelihood.
         """
         if name in fit.factors:
             ref = self.spread_ref[name]
             lo, hi = self.spread_interval(fit, name, level)
             return ref * fit.factors[name], (ref * lo, ref * hi)
-        j = self.sys_index(name)
-        value, (lo, hi) = self.wald(fit, len(fit.nuis) + list(fit.sys).index(j), level)
-        least = self.lower[j]
+        k = self._theta_of(fit, name)
+        if len(k) > 1:
+            cyc = self.phasor(fit, name, level=level)
+            return cyc["amplitude"], cyc["ci"]
+        value, (lo, hi) = self.wald(fit, int(k[0]), level)
+        least = self.lower[self.blocks[self.sys_index(name)][0]]
         return max(value, least), (max(lo, least), max(hi, least))
 
     def values(self, fit: Fit) -> dict:
-        """Fitted nuisance and systematic values of ``fit``, name -> value."""
-        names = [NUISANCE_NAMES[j] for j in fit.nuis] + [self.systematic[j].name for j in fit.sys]
-        return dict(zip(names, (float(v) for v in fit.theta)))
+        """Fitted nuisance and systematic values of ``fit``, name -> value (a cyclic error's phasor, complex)."""
+        out = {NUISANCE_NAMES[j]: float(v) for j, v in zip(fit.nuis, fit.theta)}
+        pos = len(fit.nuis)
+        for j in fit.sys:
+            k = len(self.blocks[j])
+            v = fit.theta[pos:pos + k]
+            out[self.systematic[j].name] = complex(v[0], v[1]) if k == 2 else float(v[0])
+            pos += k
+        return out
 
     def sys_index(self, name: str) -> int:
         """Index of systematic candidate ``name`` in :attr:`systematic`."""
@@ -470,12 +621,14 @@ class Engine:
         Gw = self.whitened_candidates(self.fit((), {}, 0.0))
         norm = Gw / np.linalg.norm(Gw, axis=0)
         corr = np.abs(norm.T @ norm)
+        owner = np.repeat(np.arange(len(self.blocks)), [len(c) for c in self.blocks])
         groups, seen = [], set()
         for c in range(corr.shape[0]):
             if c in seen:
                 continue
             members = [j for j in np.flatnonzero(corr[c] > 1 - 1e-6) if j not in seen]
             seen.update(members)
-            if len(members) > 1:
-                groups.append([self.systematic[j].name for j in members])
+            names = list(dict.fromkeys(self.systematic[owner[j]].name for j in members))
+            if len(names) > 1:
+                groups.append(names)
         return groups

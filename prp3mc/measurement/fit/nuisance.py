@@ -39,7 +39,7 @@ NUISANCE_UNITS = dict(zip(NUISANCE_NAMES, ("mm", "mm", "deg") * 2))
 
 
 def campaign_time(campaign: Campaign) -> tuple[np.ndarray, str]:
-    """Time of each measurement as a fraction of the campaign, 0 at the first and 1 at the last.
+    """Time of each measurement as a fraction of the campaign, 0 at the earliest and 1 at the latest.
 
     Returns
     -------
@@ -62,10 +62,10 @@ def campaign_time(campaign: Campaign) -> tuple[np.ndarray, str]:
         source = "time_s"
     else:
         t, source = np.arange(campaign.n_measurements, dtype=float), "row order"
-    span = t[-1] - t[0] if t.size > 1 else 0.0
+    span = t.max() - t.min() if t.size > 1 else 0.0   # rows may be stored in any order: time is time_s
     if span == 0:
         return np.zeros_like(t), source
-    return (t - t[0]) / span, source
+    return (t - t.min()) / span, source
 
 
 def nuisance_signatures(commanded: np.ndarray, s: np.ndarray) -> np.ndarray:

@@ -10,7 +10,7 @@ covariance ``V = W + B - K B``. Its squared Mahalanobis length
 bounded (uniform clearances, encoder counts and plays), so their tails are
 lighter and chi2(3) is conservative. A measurement is a gross error when
 ``d^2`` exceeds the chi2(3) quantile at the Šidák level ``1 - (1 -
-rate)^(1/M)``: the probability that any of the M measurements of a campaign
+rate)^(1/M)`` (a pose visited once is predicted by the model alone, ``V = W + B``): the probability that any of the M measurements of a campaign
 without gross errors is flagged is at most ``rate`` (1 % by default).
 
 Flagging is iterated (set aside, refit, test again, so one gross error
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..._distributions import chi2_isf
+from .signatures import components
 from .likelihood import Engine
 from .nuisance import NUISANCE_NAMES
 
@@ -36,7 +36,8 @@ _MAX_ROUNDS = 6
 def threshold(n_measurements: int, rate: float) -> float:
     """Squared distance above which one of ``n_measurements`` rows is a gross error (Šidák at ``rate``)."""
     level = -np.expm1(np.log1p(-rate) / n_measurements)
-    return float(chi2_isf(level, 3))
+    from scipy.stats import chi2  # imported when used: prp3mc --help imports this module
+    return float(chi2.isf(level, 3))
 
 
 def distances(engine: Engine, keep: np.ndarray, values: dict, factors: dict, r: float) -> np.ndarray:
@@ -49,7 +50,7 @@ def distances(engine: Engine, keep: np.ndarray, values: dict, factors: dict, r: 
     keep : ndarray of bool, shape (M,)
         Rows that predict the others (a kept row is predicted from the other kept rows of its pose).
     values : dict
-        Fitted nuisance and systematic values, name -> value (:meth:`Engine.values`).
+        Fitted nuisance and systematic values, name -> value (:meth:`Engine.values`; a cyclic error's phasor).
     factors : dict
         Spread factors.
     r : float
@@ -61,12 +62,13 @@ def distances(engine: Engine, keep: np.ndarray, values: dict, factors: dict, r: 
     """
     mean, W, B = engine.moments(factors, r)
     resid = engine.err - mean[engine.idx]
-    sys_names = [e.name for e in engine.systematic]
-    for name, v in values.items():
+    named = [name for name in values if name not in NUISANCE_NAMES]
+    for name in values:
         if name in NUISANCE_NAMES:
-            resid = resid - v * engine.H[:, :, NUISANCE_NAMES.index(name)]
-        else:
-            resid = resid - v * engine.G[:, :, sys_names.index(name)]
+            resid = resid - values[name] * engine.H[:, :, NUISANCE_NAMES.index(name)]
+    if named:
+        resid = resid - engine.columns(tuple(engine.sys_index(n) for n in named), ()) @ components(
+            named, [values[n] for n in named])
     kept = keep.astype(float)
     total = np.zeros((engine.P, 3))
     np.add.at(total, engine.idx, resid * kept[:, None])

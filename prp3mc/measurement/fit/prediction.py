@@ -26,13 +26,13 @@ import numpy as np
 import pandas as pd
 
 from ..._result import freeze, pose_columns, short_repr
-from ...errors import BudgetError
+from ...errors import BudgetError, ParameterError
 from ...kinematics.geometry import Geometry
 from ...model.budget import Budget
 from ...model.linear import linear_model
 from ...units import OUTPUT_UNITS, POSE_OUTPUTS
 from ..campaign.data import Campaign
-from .signatures import budget_effect_errors, effect, signatures, spread_budget
+from .signatures import budget_effect_errors, components, effect, signatures, spread_budget
 
 __all__ = ["Prediction", "predict", "noise_cov"]
 
@@ -99,17 +99,25 @@ class Prediction:
         })
 
 
+#: Largest instrument noise sd accepted, mm or deg (a kilometre: any larger is a unit or typing mistake).
+MAX_INSTRUMENT_SIGMA = 1e6
+
+
 def noise_cov(sigma_mm: float, sigma_deg: float) -> np.ndarray:
     """Instrument noise covariance ``diag(s_mm^2, s_mm^2, s_deg^2)``, shape (3, 3).
 
     Raises
     ------
     BudgetError
-        A standard deviation is negative or not finite.
+        A standard deviation is negative, not finite, or beyond any instrument
+        (above :data:`MAX_INSTRUMENT_SIGMA`: its square would overflow the fit).
     """
     for name, v in (("instrument_sigma_mm", sigma_mm), ("instrument_sigma_deg", sigma_deg)):
         if not (np.isfinite(v) and v >= 0):
-            raise BudgetError(f"{name} must be finite and >= 0, got {v}")
+            raise ParameterError(f"{name} must be finite and >= 0, got {v}")
+        if v > MAX_INSTRUMENT_SIGMA:
+            raise ParameterError(f"{name} = {v:g} is beyond any instrument (at most {MAX_INSTRUMENT_SIGMA:g}): "
+                                 "give the instrument's noise sd in mm and deg")
     return np.diag([sigma_mm**2, sigma_mm**2, sigma_deg**2])
 
 
@@ -123,8 +131,9 @@ def predict(geometry: Geometry, budget: Budget, campaign: Campaign, *, effects: 
     geometry, budget
     campaign : Campaign
     effects : dict of str to float, optional
-        Library effects added to the model (systematic values and spreads);
-        a systematic effect the budget's ``[effects]`` already holds adds to its value.
+        Library effects added to the model (systematic values, a cyclic
+        error's phasor, and spreads); a systematic effect the budget's
+        ``[effects]`` already holds adds to its value.
     instrument_sigma_mm, instrument_sigma_deg : float
     repeatable_fraction : float
         Share ``r`` in [0, 1] of the budget's covariance that repeats at every visit of a pose.
@@ -143,7 +152,7 @@ def predict(geometry: Geometry, budget: Budget, campaign: Campaign, *, effects: 
     effects = dict(effects or {})
     model_budget = spread_budget(budget, effects)
     if not 0.0 <= repeatable_fraction <= 1.0:
-        raise BudgetError(f"repeatable_fraction must lie in [0, 1], got {repeatable_fraction}")
+        raise ParameterError(f"repeatable_fraction must lie in [0, 1], got {repeatable_fraction}")
     mean, sigma = linear_model(geometry, model_budget.without_effects(), campaign.poses, check=False).moments()
     noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
     systematic = {k: v for k, v in effects.items() if effect(k).systematic}
@@ -151,7 +160,7 @@ def predict(geometry: Geometry, budget: Budget, campaign: Campaign, *, effects: 
     if systematic:
         G = signatures(geometry, campaign.poses, campaign.pose_index, list(systematic),
                        campaign.direction, campaign.temp_C)
-        m = m + G @ np.array(list(systematic.values()))
+        m = m + G @ components(list(systematic), list(systematic.values()))
     return Prediction(mean=m, cov=sigma + noise, scatter_cov=(1.0 - repeatable_fraction) * sigma + noise,
                       pose_index=campaign.pose_index, poses=campaign.poses, budget=model_budget, effects=effects,
                       repeatable_fraction=float(repeatable_fraction))

@@ -38,24 +38,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...errors import ConvergenceError, InfeasiblePoseError
+from ...errors import ConvergenceError, InfeasiblePoseError, NonlinearityError
 from ...kinematics.chain import inverse_kinematics
 from ...kinematics.exact import exact_pose_error
 from ...kinematics.geometry import Geometry
 from ...model.budget import Budget
 from ..campaign.data import Campaign
-from .signatures import effect, offset_errors, slider_error
+from ...model.effects import components
+from .signatures import effect, library, offset_errors, slider_error
 
-__all__ = ["Point", "linearise", "exact_errors", "controller_geometry", "NonlinearityError"]
+__all__ = ["Point", "linearise", "exact_errors", "candidates", "controller_geometry"]
 
 #: Central-difference step per unit of an effect's value: small against any value the campaign can
 #: resolve, large against the Newton solve's round-off (1e-13 mm).
 _STEP = {"mm": 1e-3, "deg": 1e-3, "1": 1e-5, "1/K": 1e-7}
 _FAILURES = (ConvergenceError, InfeasiblePoseError, np.linalg.LinAlgError)
-
-
-class NonlinearityError(ValueError):
-    """The exact chain cannot be evaluated at an estimate (no closure, a leg out of its stroke, singular)."""
 
 
 def controller_geometry(geometry: Geometry, budget: Budget) -> Geometry:
@@ -74,7 +71,8 @@ class Point:
     ----------
     values : dict
         The estimate ``theta_0``: systematic effect name -> value (a
-        correction to the budget's value when it holds the effect), its unit.
+        correction to the budget's value when it holds the effect), its unit
+        (a cyclic error's phasor, mm, complex).
     geometry : Geometry
         The machine at the estimate (analysis geometry, the estimate's offsets applied).
     poses : ndarray, shape (P, 3)
@@ -82,9 +80,9 @@ class Point:
     known : ndarray, shape (M, 3)
         ``E(beta + theta_0) - G theta_0``: the linearised model's pose error with every correction at 0.
     names : tuple of str
-        The candidates whose signatures ``G`` holds.
-    G : ndarray, shape (M, 3, K)
-        ``dE/dtheta`` at the estimate, ``[mm, mm, deg]`` per unit of each candidate.
+        The effects whose signatures ``G`` holds, one column each (a cyclic error two: its phasor's parts).
+    G : ndarray, shape (M, 3, C)
+        ``dE/dtheta`` at the estimate, ``[mm, mm, deg]`` per unit of each column.
     exact : ndarray, shape (M, 3)
         ``E(beta + theta_0)``.
     """
@@ -98,44 +96,65 @@ class Point:
     exact: np.ndarray
 
     def signatures(self, names) -> np.ndarray:
-        """Signatures (M, 3, k) of the candidates ``names`` at the point."""
-        index = {n: k for k, n in enumerate(self.names)}
-        return self.G[:, :, [index[n] for n in names]]
+        """Signature columns (M, 3, c) of the effects ``names`` at the point, as :func:`signatures` lays them out."""
+        return self.G[:, :, _columns(self.names, names)]
 
     def predict(self, values: dict) -> np.ndarray:
         """The linearised pose error (M, 3) at corrections ``values`` (name -> value; absent ones 0)."""
-        theta = np.array([values.get(n, 0.0) for n in self.names])
-        return self.known + self.G @ theta
+        return self.known + self.G @ components(self.names, [values.get(n, 0.0) for n in self.names])
+
+
+def _columns(names, wanted) -> list[int]:
+    """Columns of the effects ``wanted`` among the columns of ``names`` (one per effect, two for a cyclic one)."""
+    start = np.cumsum([0] + [effect(n).dof for n in names])
+    where = {n: k for k, n in enumerate(names)}
+    return [int(c) for n in wanted for c in range(start[where[n]], start[where[n] + 1])]
+
+
+def candidates(geometry: Geometry, budget: Budget, campaign: Campaign) -> list[str]:
+    """The systematic effects of the library the campaign can test (before the visibility check)."""
+    has_lead = tuple(bool(np.isfinite(p)) for p in geometry.lead_mm)
+    return [e.name for e in library(budget, campaign.has_dir, campaign.temp_C is not None, has_lead) if e.systematic]
 
 
 class _Chain:
     """``E(v)``: the exact pose error of the campaign's measurements for systematic values ``v``, batched.
 
-    A value set is a row of coefficients over ``names`` (the budget's effects
-    and the candidates): offsets turn the chain's parameters, slider effects
-    add their ``delta b`` (linear in the value) to the commanded sliders.
+    A value set is a row of coefficients over the columns of ``names`` (the
+    budget's effects and the candidates; a cyclic error's phasor has two):
+    offsets turn the chain's parameters, slider effects add their ``delta b``
+    (linear in the column's coefficient) to the commanded sliders.
     """
 
     def __init__(self, geometry: Geometry, budget: Budget, campaign: Campaign, names):
         self.controller = controller_geometry(geometry, budget)
-        self.campaign = campaign
+        self.campaign, self.budget = campaign, budget
         self.names = tuple(names)
+        units = [(n, u) for n in self.names for u in ((1.0, 1j) if effect(n).dof == 2 else (1.0,))]
         b, _ = inverse_kinematics(self.controller, campaign.commanded, check=False)
-        self.families = sorted({f for n in self.names for f in offset_errors({n: 1.0})})
-        self.offset_dir = np.zeros((len(self.names), len(self.families), 3))      # (K, F, 3) per unit
-        self.slider_dir = np.zeros((len(self.names), campaign.n_measurements, 3))  # (K, M, 3) mm per unit
-        for k, name in enumerate(self.names):
-            for family, v in offset_errors({name: 1.0}).items():
+        self.families = sorted({f for n, u in units for f in offset_errors({n: u})})
+        self.offset_dir = np.zeros((len(units), len(self.families), 3))          # (C, F, 3) per unit
+        self.slider_dir = np.zeros((len(units), campaign.n_measurements, 3))     # (C, M, 3) mm per unit
+        for k, (name, unit) in enumerate(units):
+            for family, v in offset_errors({name: unit}).items():
                 self.offset_dir[k, self.families.index(family)] = v
-            self.slider_dir[k] = slider_error({name: 1.0}, b, campaign.direction, campaign.temp_C)
+            self.slider_dir[k] = slider_error({name: unit}, b, campaign.direction, campaign.temp_C,
+                                              geometry.lead_mm)
+
+    def coefficients(self, values: dict) -> np.ndarray:
+        """The coefficient row (C,) of the budget's effects plus the corrections ``values``."""
+        total = {n: e.model_value for n, e in self.budget.effects.items()}
+        for n, v in values.items():
+            total[n] = total.get(n, 0.0) + v
+        return components(self.names, [total.get(n, 0.0) for n in self.names])
 
     def __call__(self, coef: np.ndarray) -> np.ndarray:
-        """Exact pose errors (S, M, 3) of the value sets ``coef`` (S, K).
+        """Exact pose errors (S, M, 3) of the value sets ``coef`` (S, C).
 
         Raises
         ------
         NonlinearityError
-            The chain does not close, or leaves a stroke or the assembly mode, at some value set.
+            The chain does not close (or is singular) at some value set.
         """
         coef = np.atleast_2d(coef)
         errors = {f: np.einsum("sk,kl->sl", coef, self.offset_dir[:, j])[:, None, :]
@@ -151,15 +170,7 @@ class _Chain:
         return out
 
 
-def _coefficients(chain: _Chain, budget: Budget, values: dict) -> np.ndarray:
-    """The coefficient row (K,) of the budget's effects plus the corrections ``values``."""
-    total = {n: e.value for n, e in budget.effects.items()}
-    for n, v in values.items():
-        total[n] = total.get(n, 0.0) + v
-    return np.array([total.get(n, 0.0) for n in chain.names])
-
-
-def linearise(geometry: Geometry, budget: Budget, campaign: Campaign, values: dict, candidates) -> Point:
+def linearise(geometry: Geometry, budget: Budget, campaign: Campaign, values: dict, names) -> Point:
     """The exact chain linearised about the corrections ``values`` (see the module notes).
 
     Parameters
@@ -169,9 +180,10 @@ def linearise(geometry: Geometry, budget: Budget, campaign: Campaign, values: di
     campaign : Campaign
         Every row (an engine on some rows takes its rows of the point).
     values : dict
-        Systematic effect name -> value at the point (corrections to the budget's effects).
-    candidates : sequence of str
-        Systematic candidates whose signatures the point carries.
+        Systematic effect name -> value at the point (corrections to the budget's effects; a cyclic
+        error's phasor, complex).
+    names : sequence of str
+        Systematic candidates whose signatures the point carries (:func:`candidates`).
 
     Returns
     -------
@@ -182,19 +194,18 @@ def linearise(geometry: Geometry, budget: Budget, campaign: Campaign, values: di
     NonlinearityError
         The exact chain cannot be evaluated at or about the estimate.
     """
-    names = tuple(dict.fromkeys([*candidates, *values, *budget.effects]))
+    names = tuple(dict.fromkeys([*names, *values, *budget.effects]))
     chain = _Chain(geometry, budget, campaign, names)
-    c0 = _coefficients(chain, budget, values)
-    steps = np.array([_STEP[effect(n).unit] for n in names])
-    K = len(names)
-    coef = np.concatenate([c0[None], c0 + np.diag(steps), c0 - np.diag(steps)])
-    E = chain(coef)
-    G = np.moveaxis((E[1:K + 1] - E[K + 1:]) / (2.0 * steps[:, None, None]), 0, 2)    # (M, 3, K)
-    theta = np.array([values.get(n, 0.0) for n in names])
+    c0 = chain.coefficients(values)
+    steps = np.array([_STEP[effect(n).unit] for n in names for _ in range(effect(n).dof)])
+    C = c0.size
+    E = chain(np.concatenate([c0[None], c0 + np.diag(steps), c0 - np.diag(steps)]))
+    G = np.moveaxis((E[1:C + 1] - E[C + 1:]) / (2.0 * steps[:, None, None]), 0, 2)    # (M, 3, C)
+    theta = components(names, [values.get(n, 0.0) for n in names])
     reached = np.zeros((campaign.n_poses, 3))
     np.add.at(reached, campaign.pose_index, campaign.commanded + E[0])
     reached /= campaign.repeats[:, None]
-    offsets = offset_errors(values)
+    offsets = offset_errors({n: v for n, v in values.items() if effect(n).kind == "offset"})
     machine = geometry.replace(name=geometry.name,
                                **{f: np.add(getattr(geometry, f), d) for f, d in offsets.items()})
     return Point(values=dict(values), geometry=machine, poses=reached, known=E[0] - G @ theta, names=names,
@@ -205,4 +216,4 @@ def exact_errors(geometry: Geometry, budget: Budget, campaign: Campaign, value_s
     """``E(beta + v)`` (S, M, 3) for each correction set ``v`` of ``value_sets``."""
     names = tuple(dict.fromkeys([n for v in value_sets for n in v] + list(budget.effects)))
     chain = _Chain(geometry, budget, campaign, names)
-    return chain(np.stack([_coefficients(chain, budget, v) for v in value_sets]))
+    return chain(np.stack([chain.coefficients(v) for v in value_sets]))

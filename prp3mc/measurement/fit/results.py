@@ -18,9 +18,9 @@ from ...units import z_value
 from ..campaign.data import Campaign
 from .diagnostics import Diagnosis
 from .likelihood import Engine
-from .signatures import library
+from ...model.effects import effect_value
 from .prediction import Prediction, noise_cov
-from .relinearise import linearise
+from .relinearise import candidates, linearise
 from .updated import UpdatedModel
 
 __all__ = ["NamedEffect", "DiscrepancyResult", "LEVEL"]
@@ -61,7 +61,13 @@ class NamedEffect:
         and, for spreads, ``budget_value`` and ``direction``; for an effect
         the budget's ``[effects]`` already holds, ``value`` is the correction
         to it and the evidence has ``budget_effect`` (the budget's value)
-        and ``total``.
+        and ``total`` (a cyclic error: the corrections add as phasors, and
+        ``total_phase_deg`` and ``total_ci95`` come with it). A cyclic error
+        has ``phasor_mm`` (real and imaginary parts of A exp(i phi)) and
+        ``phasor_cov_mm2``, and ``lr_df2``, its likelihood ratio before it
+        is put on the chi2(1) scale of ``lr``.
+    phase_deg : float or None
+        A cyclic error's phase phi_i, degrees (its value is the amplitude A_i).
     """
 
     name: str
@@ -70,6 +76,7 @@ class NamedEffect:
     ci95: tuple
     aliases: tuple
     evidence: dict
+    phase_deg: float | None = None
 
     def __post_init__(self):
         freeze(self)
@@ -90,8 +97,10 @@ class NamedEffect:
 
     def to_dict(self) -> dict:
         """The effect's entry in ``discrepancy.json``."""
-        return {"name": self.name, "value": self.value, "unit": self.unit, "ci95": list(self.ci95),
-                "aliases": list(self.aliases), "evidence": _thawed(self.evidence)}
+        doc = {"name": self.name, "value": self.value, "unit": self.unit, "ci95": list(self.ci95)}
+        if self.phase_deg is not None:
+            doc["phase_deg"] = self.phase_deg
+        return doc | {"aliases": list(self.aliases), "evidence": _thawed(self.evidence)}
 
 
 @dataclass(frozen=True, slots=True)
@@ -148,7 +157,8 @@ class DiscrepancyResult:
         finds if they are kept (``named_effects, gap_before, gap_after,
         unexplained``).
     repeatability : mapping
-        ``repeatable_fraction`` and its profile-likelihood ``ci95``.
+        ``repeatable_fraction`` and its profile-likelihood ``ci95``; both
+        None, with ``not_testable`` (the reason), when no pose is measured twice.
     iso9283 : mapping or None
         Largest ISO 9283 figures over the poses, ``measured`` and ``predicted``.
     iso9283_poses : DataFrame or None
@@ -245,8 +255,10 @@ class DiscrepancyResult:
 
     @property
     def repeatable_fraction(self) -> float:
-        """The fitted share of the budget's variance that repeats at every visit of a pose."""
-        return float(self.repeatability["repeatable_fraction"])
+        """The fitted share of the budget's variance that repeats at every visit of a pose (NaN when the
+        campaign measures no pose twice: not testable)."""
+        r = self.repeatability["repeatable_fraction"]
+        return float("nan") if r is None else float(r)
 
     def to_frame(self) -> pd.DataFrame:
         """One row per named effect: ``name, value, unit, ci_low, ci_high, level, aliases, identified, lr``.
@@ -343,17 +355,16 @@ def _intervals(result: DiscrepancyResult, level: float) -> list[tuple[float, flo
     """Intervals at ``level`` of ``result``'s named effects, from its fitted model state."""
     keep = np.ones(result.campaign.n_measurements, bool)
     keep[[o["row"] for o in result.outliers]] = False
-    values = result.linearity["passes"][-1]["point"]
+    values = {n: effect_value(n, v) for n, v in result.linearity["passes"][-1]["point"].items()}
     point = None
     if values:                                       # the point the named effects were fitted about
-        candidates = [e.name for e in library(result.budget, result.campaign.has_dir,
-                                              result.campaign.temp_C is not None) if e.systematic]
-        point = linearise(result.geometry, result.budget, result.campaign, values, candidates)
+        point = linearise(result.geometry, result.budget, result.campaign, values,
+                          candidates(result.geometry, result.budget, result.campaign))
     engine = Engine(result.geometry, result.budget, result.campaign,
                     noise_cov(result.instrument_sigma_mm, result.instrument_sigma_deg),
                     registration=result.registration, keep=keep, point=point)
     sys = tuple(engine.sys_index(name) for name in result.systematic)
     factors = {e.name: e.value / e.evidence["budget_value"] for e in result.named_effects
                if "budget_value" in e.evidence}
-    fit = engine.fit(sys, factors, result.repeatable_fraction)
+    fit = engine.fit(sys, factors, 0.0 if np.isnan(result.repeatable_fraction) else result.repeatable_fraction)
     return [engine.estimate(fit, e.name, level)[1] for e in result.named_effects]

@@ -25,6 +25,12 @@ set of the same size explains the data as well. Effects whose signature
 vanishes over the campaign are invisible; effects whose signature lies in
 the span of the nuisances are *confounded* (with registration or drift);
 neither is ever named.
+
+A cyclic screw error has two parameters (its phasor): its likelihood ratios
+are put on the chi2(1) scale at their p-values
+(:func:`~prp3mc.measurement.fit.likelihood.chi2_equivalent`), so every threshold above
+holds for it as it stands; its value is its amplitude, with the phase beside
+it and an interval that covers near zero (:mod:`~prp3mc.measurement.fit.cyclic`).
 """
 
 from __future__ import annotations
@@ -32,17 +38,14 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from ..._distributions import chi2_isf, chi2_ppf, chi2_sf
+from .likelihood import chi2_equivalent
 from .signatures import effect
 from .likelihood import Engine, Fit
-from .results import DiscrepancyResult, NamedEffect
+from .results import NamedEffect
 from .subsets import Gram
 
-#: ``DiscrepancyResult`` is defined in :mod:`~prp3mc.measurement.fit.results` and re-exported here, where the
-#: report and earlier code import it from.
-__all__ = ["DiscrepancyResult", "select", "name_effects", "names_in", "STEP_COLUMNS"]
+__all__ = ["select", "name_effects", "names_in", "STEP_COLUMNS"]
 
-_Q_ALIAS = float(chi2_ppf(0.99, 1))
 #: Most candidates refitted with r and the spreads re-profiled at each step.
 _JOINT = 3
 #: Columns of the selection's ``steps`` table.
@@ -52,6 +55,11 @@ STEP_COLUMNS = ["candidate", "lr", "estimate", "lr_joint", "step", "threshold", 
 def names_in(engine: Engine, fit: Fit) -> list[str]:
     """Names of the effects in ``fit``'s model: systematic ones, then spreads."""
     return [engine.systematic[j].name for j in fit.sys] + list(fit.factors)
+
+
+def _lr(name: str, lr: float) -> float:
+    """A likelihood ratio of adding or removing effect ``name`` on the chi2(1) scale (its p-value kept)."""
+    return float(chi2_equivalent(max(lr, 0.0), effect(name).dof))
 
 
 def _with(engine: Engine, fit: Fit, name: str, r: float | None = None) -> Fit:
@@ -111,20 +119,21 @@ def select(engine: Engine, base: Fit, alpha: float, max_effects: int) -> tuple[F
     fit = base
     accepted: dict[str, dict] = {}
     step_rows = []
-    drop_level = float(chi2_isf(alpha, 1))
+    from scipy.stats import chi2  # imported when used: prp3mc --help imports this module
+    drop_level = float(chi2.isf(alpha, 1))
     for step in range(1, max_effects + 1):
         scan = _scan(engine, fit)
         if scan.empty:
             break
         K = len(scan)
-        threshold = float(chi2_isf(alpha / K, 1))
+        threshold = float(chi2.isf(alpha / K, 1))
         scan = scan.sort_values("lr", ascending=False, ignore_index=True)
         # the LR with r and spreads re-profiled is at least the scan's: refit the strongest, and the next
         # ones only when it fails (a repeatable fraction fitted high may hide an effect's pose pattern)
         trials, joint = {}, {}
         for name in scan["candidate"].head(_JOINT):
             trials[name] = _with(engine, fit, name)
-            joint[name] = 2.0 * (trials[name].loglik - fit.loglik)
+            joint[name] = _lr(name, 2.0 * (trials[name].loglik - fit.loglik))
             if joint[name] > threshold:
                 break
         best = max(joint, key=joint.get)
@@ -145,7 +154,7 @@ def select(engine: Engine, base: Fit, alpha: float, max_effects: int) -> tuple[F
             dropped = False
             for name in names_in(engine, fit):
                 trial = _without(engine, fit, name)
-                if 2.0 * (fit.loglik - trial.loglik) < drop_level:
+                if _lr(name, 2.0 * (fit.loglik - trial.loglik)) < drop_level:
                     fit, dropped = trial, True
                     break
         accepted = {k: v for k, v in accepted.items() if k in names_in(engine, fit)}
@@ -155,15 +164,19 @@ def select(engine: Engine, base: Fit, alpha: float, max_effects: int) -> tuple[F
 
 def name_effects(engine: Engine, fit: Fit, accepted: dict) -> tuple[NamedEffect, ...]:
     """The effects in ``fit``'s model with values, 95 % intervals and aliases given the final model."""
+    from scipy.stats import chi2
+    q_alias = float(chi2.ppf(0.99, 1))
     named = []
     gram = Gram(engine, fit)
     S = tuple(fit.sys)
-    alternatives = gram.alternatives(S, _Q_ALIAS) if S else []
+    alternatives = gram.alternatives(S, q_alias) if S else []
     top = gram.gain(S)
     n_obs = 3 * engine.M
     for name in names_in(engine, fit):
         ev = dict(accepted[name])
-        lr = 2.0 * (fit.loglik - _without(engine, fit, name).loglik)
+        dof = effect(name).dof
+        lr_raw = max(2.0 * (fit.loglik - _without(engine, fit, name).loglik), 0.0)
+        lr = _lr(name, lr_raw)
         alias_sets = []
         if name in fit.factors:
             aliases = []
@@ -172,33 +185,46 @@ def name_effects(engine: Engine, fit: Fit, accepted: dict) -> tuple[NamedEffect,
                     continue
                 factors = {k: v for k, v in fit.factors.items() if k != name}
                 trial = engine.refit(fit.sys, {**factors, other.name: 1.0}, fit.r)
-                if trial.loglik >= fit.loglik - _Q_ALIAS / 2:
+                if trial.loglik >= fit.loglik - q_alias / 2:
                     aliases.append(other.name)
         else:
             j = engine.sys_index(name)
             rest = [s for s in S if s != j]
-            swaps = [c for c in gram.eligible if c not in S and gram.gain(rest + [c]) >= top - _Q_ALIAS]
+            swaps = [c for c in gram.eligible if c not in S and gram.gain(rest + [c]) >= top - q_alias]
             alias_sets = [alt for alt in alternatives if j not in alt]
             aliases = [engine.systematic[c].name for c in swaps]
             for alt in alias_sets:
                 aliases += [engine.systematic[c].name for c in alt if c not in S]
             aliases = list(dict.fromkeys(aliases))
         value, ci = engine.estimate(fit, name)
+        phase = None
         alias_fits = {}
         for alias in aliases:
             trial = _with(engine, _without(engine, fit, name), alias, r=fit.r)
             a_value, a_ci = engine.estimate(trial, alias)
-            alias_fits[alias] = {"value": a_value, "unit": effect(alias).unit, "ci95": list(a_ci)}
-        p = float(chi2_sf(lr, 1))
+            alias_fits[alias] = {"value": a_value, "unit": effect(alias).unit, "ci95": list(a_ci),
+                                 "nuisance": engine.nuisances(trial)}
+        p = float(chi2.sf(lr, 1))
         ev.update(lr=float(lr), p_bonferroni=min(1.0, ev["n_candidates"] * p),
-                  delta_bic=float(lr - np.log(n_obs)), identified=not aliases, alias_fits=alias_fits,
+                  delta_bic=float(lr_raw - dof * np.log(n_obs)), identified=not aliases, alias_fits=alias_fits,
                   alternative_sets=[[engine.systematic[c].name for c in alt] for alt in alias_sets])
+        if effect(name).kind == "cyclic":
+            cyc = engine.phasor(fit, name)
+            phase = cyc["phase_deg"]
+            ev.update(lr_df2=float(lr_raw), phasor_mm=[cyc["phasor"].real, cyc["phasor"].imag],
+                      phasor_cov_mm2=cyc["cov"].tolist(),
+                      amplitude_interval="profile likelihood ratio with Neyman critical values (covers near 0)")
         if name in fit.factors:
             ev.update(budget_value=engine.spread_ref[name],
                       direction="larger" if fit.factors[name] > 1 else "smaller")
+        elif name in engine.budget.effects and phase is not None:   # a correction to the budget's cyclic error
+            old = engine.budget.effects[name]
+            total = engine.phasor(fit, name, offset=old.model_value)
+            ev.update(budget_effect=old.value, budget_phase_deg=old.phase_deg, total=total["amplitude"],
+                      total_phase_deg=total["phase_deg"], total_ci95=list(total["ci"]))
         elif name in engine.budget.effects:                # a correction to the budget's value
             ev.update(budget_effect=engine.budget.effects[name].value,
                       total=engine.budget.effects[name].value + float(value))
         named.append(NamedEffect(name, float(value), effect(name).unit, (float(ci[0]), float(ci[1])),
-                                 tuple(aliases), ev))
+                                 tuple(aliases), ev, phase))
     return tuple(named)

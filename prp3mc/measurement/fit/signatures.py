@@ -13,7 +13,10 @@ law, the largest ``|mean ± 3 sd|``.
 
 Signatures are pose errors ``[dx mm, dy mm, dphi deg]`` per unit of the
 effect's value, one per measurement, since backlash and thermal effects vary
-between repeats of a pose.
+between repeats of a pose. A cyclic screw error has two signature columns,
+one per real parameter of its phasor ``z = A exp(i phi)`` (the pose error is
+``Re(z)`` times the first plus ``Im(z)`` times the second;
+:func:`~prp3mc.model.effects.components`).
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ import numpy as np
 
 from ...model.budget import Budget
 from ...model.effects import (EFFECT_NAMES, OFFSET_FAMILIES, SPREAD_FAMILIES, T_REF_C, Effect, _as_effects,
-                                      effect, offset_errors, slider_error)
+                              components, effect, offset_errors, slider_error)
 from ...errors import BudgetError, CampaignError
 from ...kinematics.geometry import Geometry
 from ...kinematics.chain import inverse_kinematics
@@ -31,18 +34,21 @@ from ...units import DEG2RAD, RAD2DEG
 
 __all__ = ["Effect", "EFFECT_NAMES", "OFFSET_FAMILIES", "SPREAD_FAMILIES", "effect", "library",
            "signatures", "budget_effect_errors", "slider_error", "offset_errors", "spread_reference", "spread_budget",
-           "T_REF_C", "ROW_TO_DEG"]
+           "T_REF_C", "ROW_TO_DEG", "components"]
 
 #: Scale of the rows of a pose error or of J_q, ``[mm, mm, rad] -> [mm, mm, deg]``.
 ROW_TO_DEG = np.array([1.0, 1.0, RAD2DEG])
 ROW_TO_DEG.flags.writeable = False
 
 
-def library(budget: Budget | None = None, has_dir=(True, True, True), has_temp: bool = True) -> tuple[Effect, ...]:
+def library(budget: Budget | None = None, has_dir=(True, True, True), has_temp: bool = True,
+            has_lead=(True, True, True), spreads: bool = True) -> tuple[Effect, ...]:
     """The effects a campaign can test.
 
     Backlash of leg i needs a ``dir_i`` column, ``thermal`` needs ``temp_C``,
-    and a spread needs its input in ``budget`` (all spreads if None).
+    a cyclic screw error of leg i the lead of its screw (``has_lead[i]``: the
+    geometry's ``lead_mm``), and a spread needs its input in ``budget`` (all
+    spreads if None) and a campaign that measures some pose twice (``spreads``).
     """
     out = []
     for name in EFFECT_NAMES:
@@ -51,7 +57,9 @@ def library(budget: Budget | None = None, has_dir=(True, True, True), has_temp: 
             continue
         if eff.kind == "thermal" and not has_temp:
             continue
-        if eff.kind == "spread" and budget is not None and eff.budget_input not in budget.inputs:
+        if eff.kind == "cyclic" and not has_lead[eff.leg]:
+            continue
+        if eff.kind == "spread" and (not spreads or budget is not None and eff.budget_input not in budget.inputs):
             continue
         out.append(eff)
     return tuple(out)
@@ -75,32 +83,36 @@ def signatures(geometry: Geometry, poses: np.ndarray, pose_index: np.ndarray, ef
 
     Returns
     -------
-    ndarray, shape (M, 3, K)
-        ``[dx mm, dy mm, dphi deg]`` per unit of each effect's value.
+    ndarray, shape (M, 3, C)
+        ``[dx mm, dy mm, dphi deg]`` per unit of each effect's value; C is
+        the sum of the effects' :attr:`~prp3mc.model.effects.Effect.dof`
+        (a cyclic error's two columns are per mm of its phasor's real and
+        imaginary parts: ``sin`` and ``cos`` of ``2 pi b_i / p_i``).
     """
     effs = _as_effects(effects)
     s = sensitivity(geometry, poses, check=False)
     b, _ = inverse_kinematics(geometry, poses, check=False)
     Jb = s.J["b"] * ROW_TO_DEG[:, None]                        # (P, 3 rows, 3 legs) per mm
     bm = b[pose_index]                                         # (M, 3)
-    out = np.empty((len(pose_index), 3, len(effs)))
-    for k, eff in enumerate(effs):
+    cols = []
+    for eff in effs:
         if eff.kind == "offset":
             col = s.J[eff.family][:, :, eff.leg] * ROW_TO_DEG
             if eff.family not in LENGTH_FAMILIES:
                 col = col * DEG2RAD
-            out[:, :, k] = col[pose_index]
+            cols.append(col[pose_index])
             continue
-        unit_db = slider_error({eff.name: 1.0}, bm, direction, temp_C)     # (M, 3) mm per unit
-        out[:, :, k] = np.einsum("mol,ml->mo", Jb[pose_index], unit_db)
-    return out
+        for unit in ((1.0, 1j) if eff.dof == 2 else (1.0,)):
+            unit_db = slider_error({eff.name: unit}, bm, direction, temp_C, geometry.lead_mm)   # (M, 3) mm per unit
+            cols.append(np.einsum("mol,ml->mo", Jb[pose_index], unit_db))
+    return np.stack(cols, axis=2) if cols else np.empty((len(pose_index), 3, 0))
 
 
 def budget_effect_errors(geometry: Geometry, budget: Budget, campaign) -> np.ndarray:
     """Pose errors of the budget's ``[effects]`` at every measurement, their drivers taken from the campaign.
 
     A backlash is driven by the campaign's ``dir_i``, thermal expansion by
-    its ``temp_C``, a lead-screw scale by the commanded slider positions.
+    its ``temp_C``, a lead-screw scale and a cyclic screw error by the commanded slider positions.
 
     Parameters
     ----------
@@ -133,7 +145,7 @@ def budget_effect_errors(geometry: Geometry, budget: Budget, campaign) -> np.nda
                                 f"which the campaign lacks: record it, or remove {name} from the budget's [effects]")
     G = signatures(geometry, campaign.poses, campaign.pose_index, list(effects), campaign.direction,
                    campaign.temp_C)
-    return G @ np.array([eff.value for eff in effects.values()])
+    return G @ components(list(effects), [eff.model_value for eff in effects.values()])
 
 
 def spread_reference(budget: Budget, eff: Effect | str) -> float:

@@ -7,7 +7,10 @@ once, the log-likelihood gain of any set ``S`` over the nuisance-only model
 is ``b_S' K_SS^-1 b_S / 2``, so whole families of sets are compared without
 refitting: every set of up to :data:`EXHAUSTIVE` effects exhaustively, larger
 sets by exchange moves (swap one member for one outsider while that
-improves the fit).
+improves the fit). A cyclic screw error has two columns: a set's gain has as
+many degrees of freedom as it has columns, and is put on the scale of one
+per effect (:func:`~prp3mc.measurement.fit.likelihood.chi2_equivalent`), so sets of as
+many effects compare at their p-values.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ from itertools import combinations
 
 import numpy as np
 
-from .likelihood import Engine, Fit
+from .likelihood import Engine, Fit, chi2_equivalent
 
 __all__ = ["Gram", "EXHAUSTIVE"]
 
@@ -44,9 +47,16 @@ class Gram:
                                  dtype=int)
         self.K, self.b = A.T @ A, A.T @ z0
         self.lower = engine.lower
+        width = np.array([len(c) for c in engine.blocks], dtype=int)
+        self._width = width
+        #: columns of each candidate, padded with -1 to the widest
+        self._cols = np.full((width.size, max(width, default=1)), -1, dtype=int)
+        for j, cols in enumerate(engine.blocks):
+            self._cols[j, :cols.size] = cols
 
     def gains(self, sets: np.ndarray) -> np.ndarray:
-        """Twice the log-likelihood gain of each set (rows of ``sets``, shape (N, k)); -inf if not admissible.
+        """Twice the log-likelihood gain of each set (rows of ``sets``, shape (N, k)) on the scale of k degrees
+        of freedom; -inf if not admissible.
 
         A set is not admissible when its signatures are (nearly) collinear or
         a member fits below its least value (a backlash's h >= 0: ``engine.lower``).
@@ -54,6 +64,20 @@ class Gram:
         sets = np.asarray(sets, dtype=int)
         if sets.shape[1] == 0:
             return np.zeros(sets.shape[0])
+        width = self._width[sets].sum(axis=1)
+        out = np.empty(sets.shape[0])
+        for w in np.unique(width):                       # sets with a cyclic error have more columns than members
+            rows = width == w
+            padded = self._cols[sets[rows]].reshape(int(rows.sum()), -1)
+            g = self._column_gains(padded[padded >= 0].reshape(padded.shape[0], w))
+            if w > sets.shape[1]:
+                g = np.where(np.isfinite(g), chi2_equivalent(np.where(np.isfinite(g), g, 0.0), w, sets.shape[1]),
+                             -np.inf)
+            out[rows] = g
+        return out
+
+    def _column_gains(self, sets: np.ndarray) -> np.ndarray:
+        """Twice the log-likelihood gain of each set of signature columns (N, k); -inf if not admissible."""
         Ks = self.K[sets[:, :, None], sets[:, None, :]]
         bs = self.b[sets]
         d = np.sqrt(np.diagonal(Ks, axis1=1, axis2=2))

@@ -7,8 +7,8 @@ A discrepancy analysis ends with the model the campaign supports
   new laws, and in its ``[effects]`` table every systematic error of the
   machine *relative to what its controller commands*: geometric offsets,
   encoder zeros ``b_i``, lead-screw scales, backlash, thermal expansion,
-  each with its value, 95 % interval and the campaign (file name and
-  sha256) it was fitted on. Effects the input budget already held carry
+  cyclic screw errors (amplitude and ``phase_deg``), each with its value,
+  95 % interval and the campaign (file name and sha256) it was fitted on. Effects the input budget already held carry
   over; one named again has its correction added to the old value.
 - **the geometry** (``model/geometry.toml``): the identified geometry, the
   input geometry with the fitted geometric offsets applied, which is the
@@ -53,6 +53,7 @@ COMPENSATION = {
     "scale": "correct slider i's lead (steps per mm) by the factor 1 / (1 + kappa_i)",
     "thermal": "with a temperature sensor: correct every slider's lead by alpha_T (T - 20 degC)",
     "backlash": "with the approach direction known: add dir_i h_i / 2 to slider i's command",
+    "cyclic": "a screw error map of slider i: subtract A_i sin(2 pi b_i / p_i + phi_i) from its command",
 }
 #: Added to the name of an identified geometry (once).
 _SUFFIX = " identified"
@@ -79,7 +80,10 @@ class UpdatedModel:
         One per effect of the model (named by this campaign or carried over):
         ``name, kind, value, unit, ci95, named`` (by this campaign),
         ``compensable`` and ``how`` (compensable: how a controller does it,
-        and ``residual95``, the interval less the value) or ``why`` (not).
+        and ``residual95``, the interval less the value) or ``why`` (not);
+        ``phase_deg`` for a cyclic error, and ``aliases`` (each one's value,
+        unit and interval) for a named effect the campaign cannot tell from
+        others: the files hold the named one.
     """
 
     geometry: Geometry
@@ -140,6 +144,15 @@ def _compensable(kind: str, temperature_sensor: bool, approach_known: bool) -> t
     return True, COMPENSATION[kind]
 
 
+def _aliases(named) -> dict:
+    """``{"aliases": {name: {value, unit, ci95}}}`` of a named effect the campaign cannot tell from others (the
+    model files hold the named one), or ``{}``."""
+    if named is None or not named.aliases:
+        return {}
+    fits = named.evidence["alias_fits"]
+    return {"aliases": {a: {k: fits[a][k] for k in ("value", "unit", "ci95")} for a in named.aliases}}
+
+
 def updated_model(geometry: Geometry, budget: Budget, named_effects, campaign: Campaign, *,
                   temperature_sensor: bool = True, approach_known: bool = True) -> UpdatedModel:
     """The updated model of a discrepancy analysis (see the module notes).
@@ -179,6 +192,13 @@ def updated_model(geometry: Geometry, budget: Budget, named_effects, campaign: C
         if eff.kind == "thermal":
             temps = old.temp_range_C if old is not None else (float(np.min(campaign.temp_C)),
                                                                float(np.max(campaign.temp_C)))
+        if eff.kind == "cyclic":             # amplitude and phase; a correction adds as a phasor (its evidence's total)
+            ev = e.evidence
+            value, phase, ci = ((ev["total"], ev["total_phase_deg"], tuple(ev["total_ci95"])) if old is not None
+                                else (e.value, e.phase_deg, e.ci95))
+            effects[e.name] = SystematicEffect(e.name, value, ci95=ci, phase_deg=phase, campaign=source,
+                                               campaign_sha256=sha)
+            continue
         effects[e.name] = SystematicEffect(e.name, base + e.value, ci95=(base + e.ci95[0], base + e.ci95[1]),
                                            temp_range_C=temps, campaign=source, campaign_sha256=sha)
         if eff.kind == "offset" and eff.family != "b":
@@ -191,12 +211,16 @@ def updated_model(geometry: Geometry, budget: Budget, named_effects, campaign: C
         if not effect(e.name).systematic:
             ok, text = _compensable("spread", temperature_sensor, approach_known)
             entries.append({"name": e.name, "kind": "spread", "value": e.value, "unit": e.unit,
-                            "ci95": list(e.ci95), "named": True, "compensable": ok, "why": text})
+                            "ci95": list(e.ci95), "named": True, "compensable": ok, "why": text,
+                            **_aliases(e)})
     for key, eff in updated.effects.items():
         kind = eff.effect.kind
         ok, text = _compensable(kind, temperature_sensor, approach_known)
         entry = {"name": key, "kind": kind, "value": eff.value, "unit": eff.unit,
                  "ci95": None if eff.ci95 is None else list(eff.ci95), "named": key in named, "compensable": ok}
+        if eff.phase_deg is not None:
+            entry["phase_deg"] = eff.phase_deg
+        entry.update(_aliases(next((e for e in named_effects if e.name == key), None)))
         if ok:
             entry.update(how=text, residual95=None if eff.ci95 is None else [eff.ci95[0] - eff.value,
                                                                              eff.ci95[1] - eff.value])

@@ -10,7 +10,17 @@ disagreement before and after and measures the gap
 campaign: how large an effect its layout can name.
 
 Drift is fitted in every model and *listed* under ``nuisance`` only when a
-likelihood-ratio test (chi2(3) at ``alpha``) shows it. Fitting it always
+likelihood-ratio test (chi2(3) at ``alpha``) shows it. When a named effect
+has aliases, the nuisances fitted with each alias in its place differ (the
+registration takes up what tells them apart); each listed nuisance's
+interval is the union of its intervals over the named model and those
+(``by_alias`` lists each), so that it covers whichever alias is true.
+
+A campaign that visits every pose once (a laser tracker's sweep) is
+analysed too: the systematic channels need no repeats; the dispersion
+channels (spreads, the repeatable fraction, the repeat scatter) compare
+repeats and are reported as not tested (``gap.not_tested``,
+``repeatability.not_testable``, spreads under ``not_testable``). Fitting it always
 (rather than adding it only when significant) keeps the null law of every
 other test free of a pre-test, at a cost of three of the campaign's 3M
 degrees of freedom.
@@ -20,31 +30,31 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from scipy import optimize
 
-from ..._distributions import chi2_isf, chi2_sf
-from ..._fork import in_background
 from ..._rng import child_seed, resolve_rng
 from ..._threads import single_threaded_blas
-from ...errors import BudgetError
+from ...errors import ParameterError
 from ...kinematics.geometry import Geometry
 from ...progress import Progress
 from ...model.budget import Budget
-from ..campaign.data import Campaign, read_campaign, require_testable
+from ..campaign.data import Campaign, check_error_scale, read_campaign, require_testable
 from .confounds import ambiguities, design_confounds
 from .diagnostics import diagnose, gap, gap_value, null_variances, verdict
 from .signatures import effect
+from ...model.effects import amplitude_phase
 from .holdout import held_out_gap
 from .likelihood import Engine, Fit
-from .nuisance import DRIFT, NUISANCE_NAMES, NUISANCE_UNITS, REGISTRATION
+from .nuisance import DRIFT, NUISANCE_NAMES, REGISTRATION
 from .prediction import noise_cov, predict
 from .results import DiscrepancyResult
 from .identify import Named, identify
 from .selection import name_effects, names_in, select
 from .updated import updated_model
-from .accuracy import load_propagation, predicted_accuracy
+from .accuracy import predicted_accuracy
 from ..campaign.iso9283 import iso9283_figures
 
 __all__ = ["discrepancy", "detectable_effect", "STAGES"]
@@ -105,12 +115,13 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     seed, rng = resolve_rng(rng)
     for name, value in (("alpha", alpha), ("alpha_unexplained", alpha_unexplained), ("outlier_rate", outlier_rate)):
         if not 0 < value < 1:
-            raise BudgetError(f"{name} must lie in (0, 1), got {value}")
+            raise ParameterError(f"{name} must lie in (0, 1), got {value}")
     budget.check_geometry(geometry)
     campaign = require_testable(read_campaign(campaign, geometry))
-    # the predicted accuracy needs the named effects only: on another core where one is idle, which loads
-    # numba (the Monte Carlo's and the worst case's kernels) while the effects are named
-    with in_background(predicted_accuracy, prepare=load_propagation) as accuracy:
+    check_error_scale(campaign, geometry, budget, instrument_sigma_mm)
+    # the predicted accuracy needs the named effects only: on a thread of its own (its kernels release the
+    # GIL) while the rest is diagnosed
+    with ThreadPoolExecutor(max_workers=1) as pool:
         noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
         bar = progress if isinstance(progress, Progress) else Progress(len(STAGES), "discrepancy", progress)
         stages = iter(STAGES)
@@ -125,16 +136,19 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
         engine, fit = named.engine, named.fit
         effects = name_effects(engine, fit, named.accepted)
         model = updated_model(geometry, budget, effects, campaign)
-        accuracy.submit(geometry, budget, model, campaign, seed)
+        accuracy = pool.submit(predicted_accuracy, geometry, budget, model, campaign, seed)
         done()
         before, after, gap_doc = _diagnoses(named, n_bootstrap, alpha_unexplained, rng, seed)
         done()
         with_outliers = _with_outliers(named, alpha, max_effects, n_bootstrap, gap_doc["closed_at"], rng)
         done()
-        nuisance, drift_test = _nuisance(engine, fit, alpha)
+        nuisance, drift_test = _nuisance(engine, fit, alpha, effects)
         shown, reasons = ambiguities(engine, fit, effects, drift_test, alpha)
         confounded = tuple(design_confounds(engine) + shown)
-        r_lo, r_hi = engine.r_interval(fit)
+        repeatability = {"repeatable_fraction": fit.r, "ci95": list(engine.r_interval(fit))}
+        if not engine.repeats:
+            repeatability = {"repeatable_fraction": None, "ci95": None, "not_testable": _ONE_VISIT}
+            gap_doc["not_tested"] = {ch: _ONE_VISIT for ch in ("dispersion", "dispersion_pose")}
         effects_after = _effect_values(engine, fit)
         systematic = {n: v for n, v in effects_after.items() if effect(n).systematic}
         prediction = predict(geometry, budget, campaign, effects=effects_after, instrument_sigma_mm=instrument_sigma_mm,
@@ -149,8 +163,8 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
             before=before, after=after, steps=named.steps, prediction_after=prediction,
             budget_after=prediction.budget, systematic=systematic, nuisance=nuisance, drift_test=drift_test,
             registration=registration, outliers=_outlier_rows(named, campaign),
-            outlier_rule=_outlier_rule(named, outlier_rate),
-            with_outliers=with_outliers, repeatability={"repeatable_fraction": fit.r, "ci95": [r_lo, r_hi]},
+            outlier_rule=_outlier_rule(named, outlier_rate), with_outliers=with_outliers,
+            repeatability=repeatability,
             iso9283=iso, iso9283_poses=iso_poses, invisible=engine.invisible,
             confounded_with_registration=tuple(n for n, w in engine.confounded.items() if "registration" in w),
             structural_aliases=tuple(tuple(g) for g in engine.structural_aliases()),
@@ -183,7 +197,7 @@ def _with_outliers(named: Named, alpha: float, max_effects: int, n_bootstrap: in
     n_boot = max(n_bootstrap // 4, 50)               # for the comparison only
     g_before, _ = gap_value(diagnose(engine, base, n_boot, rng))
     g_after, _ = gap_value(diagnose(engine, fit, n_boot, rng))
-    return {"named_effects": [{"name": n, "value": float(v)} for n, v in _effect_values(engine, fit).items()],
+    return {"named_effects": [_value_entry(n, v) for n, v in _effect_values(engine, fit).items()],
             "gap_before": g_before, "gap_after": g_after, "unexplained": bool(g_after > closed_at),
             "repeatable_fraction": fit.r}
 
@@ -210,27 +224,54 @@ def _not_testable(engine: Engine) -> dict:
     out.update({n: f"confounded with {with_}" for n, with_ in engine.confounded.items()})
     if engine.time_source != "time_s":
         out["drift"] = "no time_s column: drift fitted against row order"
+    if not engine.repeats:
+        out["repeatability"] = _ONE_VISIT
     return out
 
 
+#: Why a one-visit campaign tests no dispersion.
+_ONE_VISIT = ("no pose measured twice: the dispersion channels (spreads, the repeatable fraction, the repeat "
+              "scatter) compare repeats; visit some poses again to test them")
+
+
+def _value_entry(name: str, value) -> dict:
+    """``{name, value}`` of an effect's value (a cyclic error's phasor as its amplitude, with ``phase_deg``)."""
+    if isinstance(value, complex):
+        amplitude, phase = amplitude_phase(value)
+        return {"name": name, "value": amplitude, "phase_deg": phase}
+    return {"name": name, "value": float(value)}
+
+
 def _effect_values(engine: Engine, fit: Fit) -> dict:
-    """Named effects of ``fit``: systematic values and spread bounds, name -> value in the effect's unit."""
+    """Named effects of ``fit``: systematic values (a cyclic error's phasor) and spread bounds, name -> value in
+    the effect's unit."""
     values = engine.values(fit)
     return {n: (fit.factors[n] * engine.spread_ref[n] if n in fit.factors else values[n])
             for n in names_in(engine, fit)}
 
 
-def _nuisance(engine: Engine, fit: Fit, alpha: float) -> tuple[tuple, dict]:
-    """The ``nuisance`` entries (registration when fitted, drift when its LR test rejects) and the drift test."""
+def _nuisance(engine: Engine, fit: Fit, alpha: float, named=()) -> tuple[tuple, dict]:
+    """The ``nuisance`` entries (registration when fitted, drift when its LR test rejects) and the drift test.
+
+    A nuisance that an alias of a named effect fits differently has the
+    union of the intervals as its ``ci95``, the named model's own as
+    ``ci95_named_model`` and each alias's fit under ``by_alias`` (module notes).
+    """
     entries = {}
-    for j, col in enumerate(fit.nuis):
-        value, ci = engine.wald(fit, j)
-        name = NUISANCE_NAMES[col]
-        entries[name] = {"name": name, "value": value, "unit": NUISANCE_UNITS[name], "ci95": list(ci)}
+    for name, entry in engine.nuisances(fit).items():
+        entries[name] = {"name": name, **entry}
+        alias = [{"effect": a, **f["nuisance"][name]} for e in named for a, f in e.evidence["alias_fits"].items()
+                 if name in f.get("nuisance", {})]
+        if alias:
+            ci = entry["ci95"]
+            lo = min([ci[0]] + [f["ci95"][0] for f in alias])
+            hi = max([ci[1]] + [f["ci95"][1] for f in alias])
+            entries[name].update(ci95=[lo, hi], ci95_named_model=list(ci), by_alias=alias)
     no_drift = engine.refit(fit.sys, fit.factors, start_r=fit.r,
                             nuis=tuple(j for j in fit.nuis if NUISANCE_NAMES[j] not in DRIFT))
     lr = max(2.0 * (fit.loglik - no_drift.loglik), 0.0)
-    p = float(chi2_sf(lr, 3))
+    from scipy.stats import chi2  # imported when used: prp3mc --help imports this module
+    p = float(chi2.sf(lr, 3))
     drift_test = {"lr": lr, "df": 3, "p": p, "significant": bool(p < alpha), "time": engine.time_source,
                   "values": {n: entries[n]["value"] for n in DRIFT}}
     listed = [n for n in REGISTRATION if n in entries] + (list(DRIFT) if drift_test["significant"] else [])
@@ -244,13 +285,11 @@ def _iso9283(engine: Engine, fit: Fit, seed: int):
     covariance ``W`` and repeating covariance ``r Sigma``; the Monte Carlo
     of :func:`~prp3mc.measurement.campaign.iso9283.iso9283_figures` draws from ``seed``.
     """
-    values = engine.values(fit)
-    nuis = np.array([values[NUISANCE_NAMES[j]] for j in fit.nuis])
-    corrected = engine.campaign.measured - engine.H[:, :, list(fit.nuis)] @ nuis
+    n = len(fit.nuis)
+    corrected = engine.campaign.measured - engine.H[:, :, list(fit.nuis)] @ fit.theta[:n]
     campaign = dataclasses.replace(engine.campaign, measured=corrected)
     mean, W, R = engine.moments(fit.factors, fit.r)
-    sys = np.array([values[engine.systematic[j].name] for j in fit.sys])
-    mean = mean + engine.pose_mean(engine.known + engine.G[:, :, list(fit.sys)] @ sys)
+    mean = mean + engine.pose_mean(engine.known + engine.columns(fit.sys, ()) @ fit.theta[n:])
     figures = iso9283_figures(campaign, mean, W, predicted_repeat_cov=R, rng=seed)
     return {"measured": dict(figures["measured"]), "predicted": dict(figures["predicted"])}, figures["per_pose"]
 
@@ -266,7 +305,8 @@ def detectable_effect(geometry: Geometry, budget: Budget, campaign: Campaign, na
     ``registration`` is False, drift) profiled out and errors drawn afresh
     at every visit. Uses the non-central chi2(1) law of the LR at the
     Bonferroni threshold over the library's testable candidates; aliasing
-    is not accounted for.
+    is not accounted for. A cyclic error's value is its amplitude, at its
+    least detectable phase, with the non-central chi2(2) law.
 
     Returns
     -------
@@ -275,18 +315,18 @@ def detectable_effect(geometry: Geometry, budget: Budget, campaign: Campaign, na
     """
     eff = effect(name)
     if not eff.systematic:
-        raise BudgetError(f"{name}: detectable_effect handles systematic effects; simulate spreads instead")
+        raise ParameterError(f"{name}: detectable_effect handles systematic effects; simulate spreads instead")
     engine = Engine(geometry, budget, read_campaign(campaign, geometry),
                     noise_cov(instrument_sigma_mm, instrument_sigma_deg), registration=registration)
     if name not in [e.name for e in engine.systematic] or name in engine.confounded:
         return float("inf")
     K = len(engine.systematic) - len(engine.confounded) + len(engine.spreads)
-    threshold = chi2_isf(alpha / K, 1)
+    from scipy.stats import chi2, ncx2  # imported when used: prp3mc --help imports this module
+    threshold = chi2.isf(alpha / K, eff.dof)
     fit = engine.fit((), {}, 0.0)
-    g = engine.whitened_candidates(fit)[:, engine.sys_index(name)]
+    g = engine.whitened_candidates(fit)[:, engine.blocks[engine.sys_index(name)]]
     Q, _ = np.linalg.qr(engine.whitened(fit, (), engine.nuisance)[1])
     g = g - Q @ (Q.T @ g)
-    info = float(g @ g)                                            # Fisher information per unit^2
-    from scipy.stats import ncx2  # planning only: the analysis itself does without scipy.stats
-    lam = optimize.brentq(lambda nc: ncx2.sf(threshold, 1, nc) - power, 1e-6, 1e4)
+    info = float(np.linalg.eigvalsh(g.T @ g)[0])                   # Fisher information per unit^2 (least: phase)
+    lam = optimize.brentq(lambda nc: ncx2.sf(threshold, eff.dof, nc) - power, 1e-6, 1e4)
     return float(np.sqrt(lam / info))

@@ -1,0 +1,674 @@
+"""A corpus of bad and odd inputs to every command (issue 25), judged by what a user would see.
+
+Each :class:`Case` is a command line (``{name}`` stands for a prepared file
+of :func:`prepare`, ``{tmp}`` for the corpus folder), the class it belongs
+to, and what must happen: a refusal (non-zero exit, one line on stderr naming
+the fragment, nothing written) or an accepted run (exit 0, and the case's own
+check of what it wrote). ``tests/test_bad_input.py`` runs the cases in
+process; run this module to run every case in a real ``python -m prp3mc``
+process with a timeout and count, by class, the cases that end badly::
+
+    PYTHONPATH=. python -m tests.bad_corpus [--only CLASS] [--jobs N]
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+#: The classes of issue 25, in the order of the closing note.
+CLASSES = ("tracebacks", "hangs", "signals", "row order", "read-back", "messages", "silently accepted",
+           "leftovers & permissions")
+
+G, B, P = ["--geometry", "u-shape"], ["--budget", "paper"], ["--pose", "0", "100", "0"]
+D = ["discrepancy", *G, *B]
+HEADER = "pose_id,x_cmd,y_cmd,phi_cmd,x_meas,y_meas,phi_meas"
+
+
+@dataclass
+class Case:
+    """One corpus entry; see the module docstring."""
+
+    cls: str
+    argv: list
+    expect: str = "refuse"            # or "accept"
+    message: str = ""                 # fragment of the refusal's one line
+    status: tuple = (1,)
+    check: Callable | None = None     # (root) -> problem text or None, after an accepted run
+    slow: bool = False                # an accepted analysis (seconds): in process only in the slow run
+    setup: Callable | None = None     # (root) -> None: what the folder holds before the run
+    left: str = ""                    # why this case still ends badly (counted so, an expected failure in tests)
+    process: bool = False             # run in a real process in the tests too (its stdout takes any file name)
+    id: str = field(default="")
+
+    def __post_init__(self):
+        if not self.id:
+            self.id = " ".join(str(a) for a in self.argv)[:90]
+
+
+def _geometry_text(name: str = "g", legs=None) -> str:
+    """A geometry TOML: the U-shape's legs with some keys changed (``legs``: three dicts of overrides)."""
+    base = [dict(a_mm=140.0, alpha_deg=180.0, beta_deg=-90.0, gamma_deg=-90.0, theta_deg=0.0, c_mm=40.0, e_mm=10.0,
+                 psi_deg=180.0, stroke_mm=[0.0, 200.0]),
+            dict(a_mm=140.0, alpha_deg=0.0, beta_deg=90.0, gamma_deg=90.0, theta_deg=0.0, c_mm=40.0, e_mm=10.0,
+                 psi_deg=0.0, stroke_mm=[0.0, 200.0]),
+            dict(a_mm=180.0, alpha_deg=90.0, beta_deg=-90.0, gamma_deg=-90.0, theta_deg=0.0, c_mm=40.0, e_mm=10.0,
+                 psi_deg=90.0, stroke_mm=[-100.0, 100.0])]
+    for leg, change in zip(base, legs or ({}, {}, {})):
+        leg.update(change)
+    out = f"name = {json.dumps(name)}\n"
+    for leg in base:
+        out += "[[leg]]\n" + "".join(f"{k} = {json.dumps(v)}\n" for k, v in leg.items())
+    return out
+
+
+PAPER = "".join(f'theta_{i} = {{ law = "uniform", lo = -0.04, hi = 0.04 }}\n'
+                f'b_{i} = {{ law = "uniform", lo = -0.005, hi = 0.005 }}\n' for i in (1, 2, 3))
+
+
+def _budget_text(name: str = "b", inputs: str = PAPER, extra: str = "") -> str:
+    return f"name = {json.dumps(name)}\n{extra}[inputs]\n{inputs}"
+
+
+def _campaign(root: Path, drift=None, repeats: int = 3, seed: int = 1, perfect: bool = False):
+    """A small simulated campaign of the U-shape (9 poses), as a DataFrame."""
+    from prp3mc import Budget, Geometry
+    from prp3mc.kinematics.geometry import Region
+    from prp3mc.measurement.campaign.simulate import simulate_campaign
+    g, b = Geometry.from_preset("u-shape"), Budget.from_preset("paper")
+    c = simulate_campaign(g, b, Region.from_preset("u-shape").grid(3), n_repeats=repeats, rng=seed, drift=drift)
+    frame = c.to_frame()
+    if perfect:
+        for a, m in zip(("x_cmd", "y_cmd", "phi_cmd"), ("x_meas", "y_meas", "phi_meas")):
+            frame[m] = frame[a]
+    return frame
+
+
+def _csv(frame, **kw) -> str:
+    return frame.to_csv(index=False, float_format="%.12g", **kw)
+
+
+def prepare(root: Path) -> dict:
+    """Write every input file of the corpus under ``root``; return name -> path (str, or bytes for odd names)."""
+    import numpy as np
+    root.mkdir(parents=True, exist_ok=True)
+    good = _campaign(root)
+    drifted = _campaign(root, drift=(0.03, 0.0, 0.0), repeats=4, seed=2)
+    files: dict[str, str | bytes] = {
+        # singular geometries
+        "g_parallel": _geometry_text("parallel", ({}, {}, {"beta_deg": 0.0, "theta_deg": 180.0})),
+        "g_identical": _geometry_text("identical", ({},) + (dict(a_mm=140.0, alpha_deg=180.0, beta_deg=-90.0,
+                                                                  gamma_deg=-90.0, psi_deg=180.0,
+                                                                  stroke_mm=[0.0, 200.0]),) * 2),
+        "g_guide_parallel": _geometry_text("guide", ({"theta_deg": 90.0}, {}, {})),
+        "g_guide_parallel_3": _geometry_text("guide3", ({}, {}, {"theta_deg": 90.0})),
+        "g_zero_legs": _geometry_text("zero", ({"c_mm": 0.0, "e_mm": 0.0}, {"c_mm": 0.0, "e_mm": 0.0},
+                                               {"c_mm": 0.0, "e_mm": 0.0})),
+        # names that must read back
+        "g_ctrl_name": _geometry_text("bad\x01name\ttab"),
+        "g_unicode_name": _geometry_text("Gerät µ — ☃"),
+        "b_ctrl_name": _budget_text("b\x07ell\x1f"),
+        "b_unicode_group": _budget_text("b", extra='[groups]\n"Führung ☃" = ["theta_1", "theta_2"]\n"ctl\\u0001" = ["b_1"]\n'),
+        # TOML with a BOM
+        "g_bom": "\ufeff" + _geometry_text(),
+        "b_bom": "\ufeff" + _budget_text(),
+        "s_bom": "\ufeff" + 'name = "s"\nseed = 1\n[worstcase]\ngrid = 3\n[[configuration]]\ngeometry = "u-shape"\n',
+        "classes_bom": "\ufeff" + 'name = "c"\n[theta]\nclasses = [{ name = "x", catalogue = "guide_angular_play.paper", cost = 1.0 }]\n',
+        # budgets silently accepted
+        "b_discrete_overflow": _budget_text(inputs="".join(
+            f'theta_{i} = {{ law = "discrete", values = [-0.01, 0.03], weights = [1e308, 1e308] }}\n' for i in (1, 2, 3))),
+        "b_discrete_tiny": _budget_text(inputs="".join(
+            f'theta_{i} = {{ law = "discrete", values = [-0.01, 0.03], weights = [1e-320, 1e-320] }}\n' for i in (1, 2, 3))),
+        "b_discrete_neg": _budget_text(inputs="".join(
+            f'theta_{i} = {{ law = "discrete", values = [-0.01, 0.03], weights = [2, -1] }}\n' for i in (1, 2, 3))),
+        "b_discrete_zero": _budget_text(inputs="".join(
+            f'theta_{i} = {{ law = "discrete", values = [-0.01, 0.03], weights = [0, 0] }}\n' for i in (1, 2, 3))),
+        "b_overlap_groups": _budget_text(extra='[groups]\ng1 = ["theta_1", "theta_2"]\ng2 = ["theta_2", "b_1"]\n'),
+        "b_same_groups": _budget_text(extra='[groups]\ng1 = ["theta_1", "theta_2"]\ng2 = ["theta_2", "theta_1"]\n'),
+        "b_clearance_group": _budget_text("b", PAPER + "".join(
+            f'rho_{i} = {{ law = "uniform", lo = 0, hi = 0.005 }}\nzeta_{i} = {{ law = "uniform", lo = 0, hi = 360 }}\n'
+            for i in (1, 2, 3)), extra='[groups]\nclearance_1 = ["theta_1"]\n'),
+        "b_group_dup": _budget_text(extra='[groups]\ng1 = ["theta_1", "theta_1"]\n'),
+        "b_group_is_input": _budget_text(extra='[groups]\nb_2 = ["theta_1"]\n'),
+        "b_huge_sd": _budget_text(inputs="".join(f'theta_{i} = {{ law = "normal", mu = 0, sd = 1e154 }}\n' for i in (1, 2, 3))),
+        # campaigns
+        "c_good": _csv(good),
+        "c_perfect": _csv(_campaign(root, perfect=True)),
+        "c_perfect_notime": _csv(_campaign(root, perfect=True).drop(columns=["time_s"])),
+        "c_semicolon": _csv(good, sep=";"),
+        "c_semicolon_decimal": _csv(good, sep=";", decimal=","),
+        "c_tab": _csv(good, sep="\t"),
+        "c_bom": "\ufeff" + _csv(good),
+        "c_pose_na": _csv(good.assign(pose_id=np.where(good["pose_id"] == good["pose_id"].iloc[0], "NA",
+                                                       good["pose_id"]))),
+        "c_pose_none": _csv(good.assign(pose_id=np.where(good["pose_id"] == good["pose_id"].iloc[0], "none",
+                                                         good["pose_id"]))),
+        "c_pose_null": _csv(good.assign(pose_id=np.where(good["pose_id"] == good["pose_id"].iloc[0], "null",
+                                                         good["pose_id"]))),
+        "c_time_iso": _csv(good.assign(time_s=(np.datetime64("2026-03-01T08:00:00")
+                                               + good["time_s"].to_numpy().astype("timedelta64[s]")).astype(str))),
+        "c_time_iso_tz": _csv(good.assign(time_s=[f"2026-03-01T08:{int(t) // 60:02d}:{int(t) % 60:02d}+01:00"
+                                                  for t in good["time_s"]])),
+        "c_time_dash": _csv(good.assign(time_s=["-" if k == 3 else str(t) for k, t in enumerate(good["time_s"])])),
+        "c_time_empty": _csv(good.assign(time_s=["" if k == 3 else str(t) for k, t in enumerate(good["time_s"])])),
+        "c_time_text": _csv(good.assign(time_s=["soon" if k == 3 else str(t) for k, t in enumerate(good["time_s"])])),
+        "c_time_inf": _csv(good.assign(time_s=[np.inf if k == 3 else t for k, t in enumerate(good["time_s"])])),
+        "c_time_mixed": _csv(good.assign(time_s=["2026-03-01T08:00:00" if k == 0 else str(t)
+                                                 for k, t in enumerate(good["time_s"])])),
+        "c_drift": _csv(drifted),
+        "c_drift_reversed": _csv(drifted.iloc[::-1]),
+        "c_drift_iso_reversed": _csv(drifted.assign(time_s=(np.datetime64("2026-03-01T08:00:00") + drifted[
+            "time_s"].to_numpy().astype("timedelta64[s]")).astype(str)).iloc[::-1]),
+        "c_drift_shuffled": _csv(drifted.sample(frac=1.0, random_state=3)),
+        "c_inch": _csv(good.assign(**{c: good[c] / 25.4 for c in ("x_meas", "y_meas")})),
+        "c_inch_all": _csv(good.assign(**{c: good[c] / 25.4 for c in ("x_meas", "y_meas", "x_cmd", "y_cmd")})),
+        "c_um": _csv(good.assign(**{c: good[c] * 1000 for c in ("x_meas", "y_meas")})),
+        "c_rad": _csv(good.assign(phi_cmd=5.0, phi_meas=np.deg2rad(5.0 + good["phi_meas"] - good["phi_cmd"]))),
+        "c_kelvin": _csv(good.assign(temp_C=good["temp_C"] + 273.15)),
+        "c_fahrenheit": _csv(good.assign(temp_C=good["temp_C"] * 9 / 5 + 32)),
+        "c_huge_values": _csv(good.assign(x_cmd=1e300, x_meas=1e300)),
+        "c_crlf": _csv(good).replace("\n", "\r\n"),
+        "c_quoted": _csv(good, quoting=1),
+        "c_latin1": _csv(good.assign(note="Gerät")).encode("latin-1"),
+        "c_trailing_comma": _csv(good).replace("\n", ",\n"),
+        "c_blank_lines": _csv(good).replace("\n", "\n\n"),
+        # studies
+        "s_ok": 'name = "s"\nseed = 1\n[worstcase]\ngrid = 3\n[[configuration]]\ngeometry = "u-shape"\n',
+        "s_parallel": 'name = "s"\nseed = 1\n[worstcase]\ngrid = 3\n[[configuration]]\ngeometry = "{g_parallel}"\n'
+                      'region = "u-shape"\n',
+        "s_multiply": ('name = "s"\nseed = 1\n[worstcase]\ngrid = 601\n[montecarlo]\nsamples = 1048576\ngrid = 41\n'
+                       '[sobol]\nsamples = 65536\ngrid = 21\n[[configuration]]\ngeometry = "u-shape"\n'
+                       '[sweep]\n"leg.3.a_mm" = [170, 175, 180, 185, 190, 195, 200, 205]\n'),
+        "s_sweep_sizes": ('name = "s"\nseed = 1\n[montecarlo]\nsamples = 262144\ngrid = 21\n[[configuration]]\n'
+                          'geometry = "u-shape"\n[sweep]\n"leg.3.a_mm" = [' + ", ".join(str(170 + k) for k in range(40))
+                          + ']\n"leg.1.c_mm" = [38, 40, 42, 44]\n'),
+        "s_allocation_big": None,   # filled below (needs the classes file's path)
+        "s_sweep_delta_model": None,
+        "s_ctrl_name": 'name = "s\\u0001x"\nseed = 1\n[worstcase]\ngrid = 3\n[[configuration]]\ngeometry = "u-shape"\n',
+    }
+    # nine families of six classes each: 6^9 = 10 million choices
+    families = ("rho", "theta", "b", "a", "alpha", "beta", "c", "gamma", "psi")
+    big = 'name = "big"\n'
+    for f in families:
+        big += f"[{f}]\nclasses = [\n" + "".join(
+            f'  {{ name = "k{k}", law = "uniform", lo = {0.0 if f == "rho" else -(k + 1) * 0.001}, '
+            f'hi = {(k + 1) * 0.001}, cost = {6 - k}.0 }},\n' for k in range(6)) + "]\n"
+    files["classes_big"] = big
+    from prp3mc import Budget, Geometry
+    from prp3mc._toml import dumps_toml
+    from prp3mc.model.effects import SystematicEffect
+    files["b_u_model"] = dumps_toml(Budget.from_preset("paper").with_effects(
+        {"backlash_1": SystematicEffect("backlash_1", 0.02, campaign="c1.csv")},
+        fitted_on=Geometry.from_preset("u-shape")).to_dict())
+    files["b_delta_model"] = dumps_toml(Budget.from_preset("paper").with_effects(
+        {"backlash_1": SystematicEffect("backlash_1", 0.02, campaign="c1.csv")},
+        fitted_on=Geometry.from_preset("delta-shape")).to_dict())
+    paths: dict[str, str | bytes] = {}
+    ext = {"g": "toml", "b": "toml", "s": "toml", "c": "csv", "classes": "toml"}
+    for name in files:
+        paths[name] = str(root / f"{name}.{ext.get(name.split('_')[0], 'toml')}")
+    files["s_allocation_big"] = ('name = "s"\nseed = 1\n[allocation]\nclasses = "' + paths["classes_big"]
+                                 + '"\nspec_position_um = 30\ngrid = 5\n[[configuration]]\ngeometry = "u-shape"\n')
+    files["s_sweep_delta_model"] = ('name = "s"\nseed = 1\nbudget = "' + paths["b_u_model"] + '"\n[worstcase]\n'
+                                    'grid = 3\n[[configuration]]\ngeometry = "u-shape"\n[sweep]\n'
+                                    '"leg.3.a_mm" = [170, 180]\n')
+    files["s_parallel"] = files["s_parallel"].replace("{g_parallel}", paths["g_parallel"])
+    for name, content in files.items():
+        data = content if isinstance(content, bytes) else content.encode("utf-8")
+        Path(paths[name]).write_bytes(data)
+    # a data file and an output folder whose names are not UTF-8
+    odd = os.fsencode(str(root)) + b"/caf\xe9.csv"
+    with open(odd, "wb") as f:
+        f.write(files["c_good"].encode())
+    paths["c_nonutf8"] = odd
+    paths["g_nonutf8"] = os.fsencode(str(root)) + b"/g\xff.toml"
+    with open(paths["g_nonutf8"], "wb") as f:
+        f.write(_geometry_text().encode())
+    paths["out_nonutf8"] = b"out\xe9"   # relative: the run's own folder
+    # a dangling symlink, a symlink to an earlier output, a read-only folder
+    dangling = root / "dangling"
+    if not dangling.is_symlink():
+        dangling.symlink_to(root / "nowhere")
+    paths["dangling"] = str(dangling)
+    paths["root"] = str(root)
+    return paths
+
+
+def _reads_back(folder: str, *names: str) -> Callable:
+    """Check: every ``model/*.toml`` under ``folder`` is read by prp3mc as geometry or budget."""
+    def check(root: Path) -> str | None:
+        from prp3mc import Budget, Geometry
+        for name in names:
+            path = root / folder / name
+            if not path.exists():
+                return f"{path} was not written"
+            try:
+                (Geometry if "geometry" in name else Budget).from_toml(path)
+            except Exception as exc:  # noqa: BLE001
+                return f"{path} does not read back: {exc}"
+        return None
+    return check
+
+
+def _mode_ok(folder: str) -> Callable:
+    def check(root: Path) -> str | None:
+        mode = (root / folder).stat().st_mode & 0o777
+        umask = os.umask(0)
+        os.umask(umask)
+        want = 0o777 & ~umask
+        return None if mode == want else f"{folder} has mode {oct(mode)}, the umask gives {oct(want)}"
+    return check
+
+
+def _drift_of(folder: str, at_least_mm: float = 0.015) -> Callable:
+    def check(root: Path) -> str | None:
+        doc = json.loads((root / folder / "discrepancy.json").read_text())
+        drift = [n for n in doc["nuisance"] if n["name"] == "drift_x"]
+        if not drift or drift[0]["value"] < at_least_mm:
+            return f"{folder}: drift_x {drift[0]['value'] if drift else 'not named'}, the campaign drifts 0.03 mm"
+        return None
+    return check
+
+
+def _wrote(folder: str, name: str = "discrepancy.json") -> Callable:
+    def check(root: Path) -> str | None:
+        return None if (root / folder / name).is_file() else f"{folder}/{name} missing"
+    return check
+
+
+def cases() -> list[Case]:
+    """The corpus (every case's files come from :func:`prepare`)."""
+    out: list[Case] = []
+    add = out.append
+    T = "tracebacks"
+    # ------------------------------------------------------------------ singular geometries, every command
+    for g, msg in (("{g_parallel}", "singular"), ("{g_identical}", "singular"), ("{g_guide_parallel}", "leg 1"),
+                   ("{g_guide_parallel_3}", "leg 3")):
+        add(Case(T, ["sensitivity", "--geometry", g, *P], message=msg))
+        add(Case(T, ["worstcase", "--geometry", g, *B, *P], message=msg))
+        add(Case(T, ["montecarlo", "--geometry", g, *B, *P, "--samples", "1024", "--seed", "1"], message=msg))
+        add(Case(T, ["sobol", "--geometry", g, *B, *P, "--samples", "256", "--seed", "1"], message=msg))
+        add(Case(T, ["allocate", "--geometry", g, "--region", "u-shape", "--classes", "example",
+                     "--spec-position-um", "150", "--grid", "3"], message=msg))
+    add(Case(T, ["worstcase", "--geometry", "{g_zero_legs}", *B, *P, "--json"], expect="accept"))  # legitimate
+    add(Case(T, ["study", "{s_parallel}", "--out", "{tmp}/s_parallel"], message="singular"))
+    add(Case(T, ["discrepancy", "--geometry", "{g_parallel}", *B, "--data", "{c_good}", "--out", "{tmp}/d_par"],
+             message="singular"))
+    for pose in (["0", "100", "90"], ["0", "100", "-90"], ["0", "100", "89.9999"], ["0", "100", "270"]):
+        add(Case(T, ["worstcase", *G, *B, "--pose", *pose], message="leg"))
+        add(Case(T, ["sensitivity", *G, "--pose", *pose], message="leg"))
+    # ------------------------------------------------------------------ perfect and odd-but-legal campaigns
+    add(Case(T, [*D, "--data", "{c_perfect}", "--out", "{tmp}/d_perfect", "--seed", "1"], expect="accept",
+             check=_wrote("d_perfect"), slow=True))
+    add(Case(T, [*D, "--data", "{c_perfect_notime}", "--out", "{tmp}/d_perfect2", "--seed", "1", "--no-registration"],
+             expect="accept", check=_wrote("d_perfect2"), slow=True))
+    add(Case(T, [*D, "--data", "{c_good}", "--out", "{tmp}/d_sig", "--seed", "1", "--instrument-sigma-mm", "1e300"],
+             message="instrument"))
+    add(Case(T, [*D, "--data", "{c_good}", "--out", "{tmp}/d_sig2", "--seed", "1", "--instrument-sigma-deg", "1e200"],
+             message="instrument"))
+    add(Case(T, [*D, "--data", "{c_good}", "--out", "{tmp}/d_sig3", "--seed", "1", "--instrument-sigma-mm", "1e-300"],
+             expect="accept", check=_wrote("d_sig3"), slow=True))
+    add(Case(T, ["worstcase", *G, "--budget", "{b_huge_sd}", *P], message="beyond any error"))
+    add(Case(T, [*D, "--data", "{c_time_iso}", "--out", "{tmp}/d_iso", "--seed", "1"], expect="accept",
+             check=_wrote("d_iso"), slow=True))
+    add(Case(T, [*D, "--data", "{c_time_iso_tz}", "--out", "{tmp}/d_isotz", "--seed", "1"], expect="accept",
+             check=_wrote("d_isotz"), slow=True))
+    add(Case(T, [*D, "--data", "{c_time_dash}", "--out", "{tmp}/d_dash"], message="time_s"))
+    add(Case(T, [*D, "--data", "{c_time_empty}", "--out", "{tmp}/d_tempty"], message="time_s"))
+    add(Case(T, [*D, "--data", "{c_time_text}", "--out", "{tmp}/d_ttext"], message="time_s"))
+    add(Case(T, [*D, "--data", "{c_time_inf}", "--out", "{tmp}/d_tinf"], message="time_s"))
+    add(Case(T, [*D, "--data", "{c_time_mixed}", "--out", "{tmp}/d_tmixed"], message="time_s"))
+    add(Case(T, [*D, "--data", "{c_huge_values}", "--out", "{tmp}/d_huge"], message="x_cmd"))
+    add(Case(T, ["study", "quick", "--out", ""], message="--out"))
+    add(Case(T, ["study", "quick", "--out", " "], message="--out"))
+    add(Case(T, ["init", "budget", "/"], message="/"))
+    add(Case(T, ["init", "budget", "{tmp}"], message="exists"))
+    add(Case(T, ["init", "budget", "{c_nonutf8}"], message="exists"))
+    for out_dir in ("/", "//", "/.", "."):
+        add(Case(T, ["study", "quick", "--out", out_dir], message="--out"))
+        add(Case(T, [*D, "--data", "{c_good}", "--out", out_dir], message="--out"))
+    add(Case(T, ["study", "quick", "--out", "/", "--force"], message="--out"))
+    add(Case(T, ["study", "quick", "--out", "{tmp}/.."], message="--out"))
+    add(Case(T, [*D, "--data", "{c_nonutf8}", "--out", "{tmp}/d_nonutf8", "--seed", "1"], expect="accept",
+             check=_wrote("d_nonutf8"), slow=True))
+    add(Case(T, ["sensitivity", "--geometry", "{g_nonutf8}", *P, "--json"], expect="accept"))
+    add(Case(T, ["worstcase", "--geometry", "{g_nonutf8}", *B, *P, "--json"], expect="accept"))
+    add(Case(T, ["study", "{s_ok}", "--out", "{out_nonutf8}"], expect="accept", slow=True, process=True,
+             check=lambda root: None if any(n.startswith(b"out") for n in os.listdir(os.fsencode(str(root))))
+             else "the folder was not written"))
+    for spec in ("ucx://127.0.0.1:8786", "tls://127.0.0.1:8786", "inproc://x", "ws://127.0.0.1:1", "wss://h:1",
+                 "tcp://", "tcp://:", "local:0", "local:-1", "local:abc", "http://127.0.0.1:8786", "local:1e3"):
+        add(Case(T, ["study", "{s_ok}", "--out", "{tmp}/sched", "--scheduler", spec], message="--scheduler"))
+    # ------------------------------------------------------------------ hangs
+    H = "hangs"
+    add(Case(H, ["--max-hours", "0.002", "study", "{s_allocation_big}", "--out", "{tmp}/h0"], message="--max-hours",
+             slow=True))
+    add(Case(H, ["--max-hours", "0.005", "allocate", *G, "--region", "u-shape", "--classes", "{classes_big}",
+                 "--spec-position-um", "30", "--grid", "5"], message="--max-hours", slow=True))
+    add(Case(H, ["--max-hours", "0.005", "allocate", *G, "--region", "u-shape", "--classes", "{classes_big}",
+                 "--spec-position-um", "30", "--grid", "5", "--front"], message="--max-hours", slow=True))
+    add(Case(H, ["--max-hours", "0.005", "study", "{s_allocation_big}", "--out", "{tmp}/h1"], message="--max-hours",
+             slow=True))
+    add(Case(H, ["--max-hours", "0.005", "study", "{s_multiply}", "--out", "{tmp}/h2"], message="--max-hours",
+             slow=True))
+    add(Case(H, ["--max-hours", "0.005", "study", "{s_sweep_sizes}", "--out", "{tmp}/h3"], message="--max-hours",
+             slow=True))
+    add(Case(H, ["--max-gb", "0.01", "study", "{s_multiply}", "--out", "{tmp}/h4"], message="GiB"))
+    add(Case(H, ["--max-gb", "0.0001", "montecarlo", *G, *B, *P, "--samples", "1048576"], message="--max-gb"))
+    add(Case(H, ["--max-hours", "0.0001", "sobol", *G, *B, *P, "--samples", "65536"], message="--max-hours"))
+    add(Case(H, ["--max-gb", "0", "sensitivity", *G, *P], status=(2,), message="> 0"))
+    add(Case(H, ["--max-gb", "nan", "sensitivity", *G, *P], status=(2,), message="finite"))
+    # ------------------------------------------------------------------ row order
+    R = "row order"
+    add(Case(R, [*D, "--data", "{c_drift}", "--out", "{tmp}/r1", "--seed", "1"], expect="accept",
+             check=_drift_of("r1"), slow=True))
+    add(Case(R, [*D, "--data", "{c_drift_reversed}", "--out", "{tmp}/r2", "--seed", "1"], expect="accept",
+             check=_drift_of("r2"), slow=True))
+    add(Case(R, [*D, "--data", "{c_drift_iso_reversed}", "--out", "{tmp}/r4", "--seed", "1"], expect="accept",
+             check=_drift_of("r4"), slow=True))
+    add(Case(R, [*D, "--data", "{c_drift_shuffled}", "--out", "{tmp}/r3", "--seed", "1"], expect="accept",
+             check=_drift_of("r3"), slow=True))
+    # ------------------------------------------------------------------ read-back
+    RB = "read-back"
+    add(Case(RB, ["discrepancy", "--geometry", "{g_ctrl_name}", "--budget", "{b_ctrl_name}", "--data", "{c_good}",
+                  "--out", "{tmp}/rb1", "--seed", "1"], expect="accept", slow=True,
+             check=_reads_back("rb1/model", "geometry.toml", "budget.toml", "budget_compensated.toml")))
+    add(Case(RB, ["discrepancy", "--geometry", "{g_unicode_name}", "--budget", "{b_unicode_group}", "--data",
+                  "{c_good}", "--out", "{tmp}/rb2", "--seed", "1"], expect="accept", slow=True,
+             check=_reads_back("rb2/model", "geometry.toml", "budget.toml", "budget_compensated.toml")))
+    add(Case(RB, ["worstcase", "--geometry", "{g_ctrl_name}", "--budget", "{b_ctrl_name}", *P, "--json"],
+             expect="accept"))
+    add(Case(RB, ["sobol", *G, "--budget", "{b_unicode_group}", *P, "--samples", "256", "--seed", "1", "--json"],
+             expect="accept"))
+    add(Case(RB, ["study", "{s_ctrl_name}", "--out", "{tmp}/rb3"], message="control characters"))  # names files
+    add(Case(RB, ["sobol", *G, "--budget", "{b_ctrl_name}", *P, "--samples", "256", "--seed", "1", "--json"],
+             expect="accept"))
+    add(Case("messages", ["montecarlo", *G, "--budget", "{b_bom}", *P, "--samples", "1024", "--seed", "1", "--json"],
+             expect="accept"))
+    add(Case(T, ["study", "{s_ok}", "--out", "{tmp}/sched", "--scheduler", "tcp://127.0.0.1:99999"],
+             message="--scheduler"))
+    for kind in ("geometry", "budget", "study", "classes"):
+        add(Case(RB, ["init", kind, f"{{tmp}}/init_{kind}.toml"], expect="accept",
+                 check=lambda root, kind=kind: _init_reads(root / f"init_{kind}.toml", kind)))
+    # ------------------------------------------------------------------ messages
+    M = "messages"
+    add(Case(M, ["sensitivity", "--geometry", "{g_guide_parallel}", *P], message="parallel"))
+    add(Case(M, ["worstcase", "--geometry", "{g_guide_parallel}", *B, *P], message="parallel"))
+    add(Case(M, ["sensitivity", *G, "--pose", "0", "100", "90"], message="parallel"))
+    add(Case(M, ["sensitivity", "--geometry", "{g_bom}", *P, "--json"], expect="accept"))
+    add(Case(M, ["worstcase", *G, "--budget", "{b_bom}", *P, "--json"], expect="accept"))
+    add(Case(M, ["study", "{s_bom}", "--out", "{tmp}/m_sbom"], expect="accept", slow=True))
+    add(Case(M, ["allocate", *G, "--region", "u-shape", "--classes", "{classes_bom}", "--spec-position-um", "1000",
+                 "--grid", "3", "--json"], expect="accept"))
+    add(Case(M, [*D, "--data", "{c_bom}", "--out", "{tmp}/m_cbom", "--seed", "1"], expect="accept", slow=True,
+             check=_wrote("m_cbom")))
+    add(Case(M, [*D, "--data", "{c_semicolon}", "--out", "{tmp}/m_semi", "--seed", "1"], expect="accept", slow=True,
+             check=_wrote("m_semi")))
+    add(Case(M, [*D, "--data", "{c_semicolon_decimal}", "--out", "{tmp}/m_semi2", "--seed", "1"], expect="accept",
+             slow=True, check=_wrote("m_semi2")))
+    add(Case(M, [*D, "--data", "{c_tab}", "--out", "{tmp}/m_tab", "--seed", "1"], expect="accept", slow=True,
+             check=_wrote("m_tab")))
+    for name in ("c_pose_na", "c_pose_none", "c_pose_null"):
+        add(Case(M, [*D, "--data", f"{{{name}}}", "--out", f"{{tmp}}/m_{name}", "--seed", "1"], expect="accept",
+                 slow=True, check=_wrote(f"m_{name}")))
+    add(Case(M, ["study", "{s_ok}", "--out", "{dangling}"], message="dangling"))
+    add(Case(M, [*D, "--data", "{c_good}", "--out", "{dangling}"], message="dangling"))
+    add(Case(M, [*D, "--data", "{c_latin1}", "--out", "{tmp}/m_latin1"], message="UTF-8"))
+    add(Case(M, ["worstcase", *G, "--budget", "{c_good}", *P], message="c_good.csv"))
+    add(Case(M, [*D, "--data", "{b_bom}", "--out", "{tmp}/m_tomlascsv"], message="b_bom.toml"))
+    add(Case(M, [*D, "--data", "{c_crlf}", "--out", "{tmp}/m_crlf", "--seed", "1"], expect="accept", slow=True,
+             check=_wrote("m_crlf")))
+    add(Case(M, [*D, "--data", "{c_quoted}", "--out", "{tmp}/m_quoted", "--seed", "1"], expect="accept", slow=True,
+             check=_wrote("m_quoted")))
+    add(Case(M, [*D, "--data", "{c_trailing_comma}", "--out", "{tmp}/m_trail", "--seed", "1"], expect="accept",
+             slow=True, check=_wrote("m_trail")))
+    add(Case(M, [*D, "--data", "{c_blank_lines}", "--out", "{tmp}/m_blank", "--seed", "1"], expect="accept",
+             slow=True, check=_wrote("m_blank")))
+    # ------------------------------------------------------------------ silently accepted
+    S = "silently accepted"
+    add(Case(S, [*D, "--data", "{c_inch}", "--out", "{tmp}/s_inch"], message="inch"))
+    add(Case(S, [*D, "--data", "{c_inch_all}", "--out", "{tmp}/s_inch_all"], message="inch"))
+    add(Case(S, [*D, "--data", "{c_um}", "--out", "{tmp}/s_um"], message="µm"))
+    add(Case(S, [*D, "--data", "{c_rad}", "--out", "{tmp}/s_rad"], message="radian"))
+    add(Case(S, [*D, "--data", "{c_kelvin}", "--out", "{tmp}/s_kelvin"], message="kelvin"))
+    add(Case(S, [*D, "--data", "{c_fahrenheit}", "--out", "{tmp}/s_fahrenheit"], message="Fahrenheit",
+             left="20-28 degrees C in Fahrenheit (68-82) are legal temperatures in degrees C: left undetected"))
+    add(Case(S, ["study", "{s_sweep_delta_model}", "--out", "{tmp}/s_sweep"], message="a sweep changes"))
+    # overlapping groups are legitimate (each group's closed index is its own); clashing names are not
+    add(Case(S, ["sobol", *G, "--budget", "{b_overlap_groups}", *P, "--samples", "256", "--json"], expect="accept"))
+    add(Case(S, ["sobol", *G, "--budget", "{b_overlap_groups}", *P, "--samples", "256", "--group",
+                 "g1=theta_3,b_1"], message="defined twice"))
+    add(Case(S, ["sobol", *G, "--budget", "{b_same_groups}", *P, "--samples", "256"], message="same inputs"))
+    add(Case(S, ["sobol", *G, "--budget", "{b_clearance_group}", *P, "--samples", "256"], message="clearance"))
+    add(Case(S, ["sobol", *G, *B, *P, "--samples", "256", "--group", "g1=theta_1,theta_2", "--group",
+                 "g2=theta_2,theta_1"], message="same inputs"))
+    add(Case(S, ["sobol", *G, "--budget", "{b_group_dup}", *P, "--samples", "256"], message="theta_1"))
+    add(Case(S, ["sobol", *G, "--budget", "{b_group_is_input}", *P, "--samples", "256"], message="b_2"))
+    add(Case(S, ["montecarlo", *G, "--budget", "{b_discrete_overflow}", *P, "--samples", "4096", "--seed", "1",
+                 "--json"], expect="accept", check=None))
+    add(Case(S, ["montecarlo", *G, "--budget", "{b_discrete_tiny}", *P, "--samples", "4096", "--seed", "1",
+                 "--json"], expect="accept"))
+    add(Case(S, ["montecarlo", *G, "--budget", "{b_discrete_neg}", *P], message="weights"))
+    add(Case(S, ["montecarlo", *G, "--budget", "{b_discrete_zero}", *P], message="weights"))
+    # ------------------------------------------------------------------ leftovers and permissions
+    L = "leftovers & permissions"
+    add(Case(L, ["study", "{s_ok}", "--out", "{tmp}/l_mode"], expect="accept", slow=True, check=_mode_ok("l_mode")))
+    add(Case(L, [*D, "--data", "{c_good}", "--out", "{tmp}/l_dmode", "--seed", "1"], expect="accept", slow=True,
+             check=_mode_ok("l_dmode")))
+    add(Case(L, ["study", "{s_ok}", "--out", "{tmp}/link", "--force"], expect="accept", slow=True,
+             setup=_earlier_output_behind_link, check=_no_leftovers("link")))
+    add(Case(L, [*D, "--data", "{c_good}", "--out", "{tmp}/link", "--force", "--seed", "1"], expect="accept",
+             slow=True, setup=_earlier_output_behind_link, check=_no_leftovers("link")))
+    add(Case(L, ["study", "{s_ok}", "--out", "{tmp}/link"], message="exists", setup=_earlier_output_behind_link))
+    add(Case(L, ["study", "{s_ok}", "--out", "{tmp}/earlier", "--force"], expect="accept", slow=True,
+             setup=lambda root: _earlier_output(root / "earlier"), check=_mode_ok("earlier")))
+    for kind in ("geometry", "budget"):
+        add(Case(L, ["init", kind, f"{{tmp}}/mode_{kind}.toml"], expect="accept",
+                 check=lambda root, kind=kind: _file_mode_ok(root / f"mode_{kind}.toml")))
+    return out
+
+
+def _earlier_output(folder: Path) -> None:
+    folder.mkdir(parents=True)
+    (folder / "summary.json").write_text("{}")
+
+
+def _earlier_output_behind_link(root: Path) -> None:
+    _earlier_output(root / "target")
+    (root / "link").symlink_to(root / "target")
+
+
+def _no_leftovers(name: str) -> Callable:
+    def check(root: Path) -> str | None:
+        left = [p.name for p in root.iterdir() if p.name.startswith(f".{name}.") or p.name.startswith(".target.")]
+        if left:
+            return f"left behind: {', '.join(left)}"
+        if not (root / name / "report.html").exists():
+            return f"{name}/report.html was not written"
+        return None
+    return check
+
+
+def _file_mode_ok(path: Path) -> str | None:
+    umask = os.umask(0)
+    os.umask(umask)
+    mode, want = path.stat().st_mode & 0o777, 0o666 & ~umask
+    return None if mode == want else f"{path.name} has mode {oct(mode)}, the umask gives {oct(want)}"
+
+
+def _init_reads(path: Path, kind: str) -> str | None:
+    from prp3mc import Budget, Geometry
+    from prp3mc.allocation.classes import ClassMenu
+    from prp3mc.study.reader import Study
+    reader = {"geometry": Geometry.from_toml, "budget": Budget.from_toml, "study": Study.from_toml,
+              "classes": ClassMenu.from_toml}[kind]
+    try:
+        reader(path)
+    except Exception as exc:  # noqa: BLE001
+        return f"{path.name} does not read back: {exc}"
+    return None
+
+
+def expand(argv: list, paths: dict, tmp: str) -> list:
+    """``argv`` with its placeholders filled (bytes where a path is not UTF-8)."""
+    out = []
+    for a in argv:
+        key = a[1:-1] if a.startswith("{") and a.endswith("}") else None
+        if key in paths and isinstance(paths[key], bytes):
+            out.append(paths[key])
+        else:
+            out.append(a.format(tmp=tmp, **{k: v for k, v in paths.items() if isinstance(v, str)}))
+    return out
+
+
+def judge(case: Case, code: int | None, out: str, err: str, root: Path, existed: bool, out_dir) -> str | None:
+    """What went wrong with one run (None: nothing)."""
+    if code is None:
+        return "hang (timeout)"
+    for marker in ("Traceback", "Fatal Python error", "Exception ignored"):
+        if marker in err:
+            return f"{marker}: {err.strip().splitlines()[-1][:160]}"
+    if case.expect == "refuse":
+        if code not in case.status:
+            return f"exit {code}, expected {case.status}: {err.strip()[:160]}"
+        if err.count("\n") != 1:
+            return f"{err.count(chr(10))} lines on stderr: {err.strip()[:160]}"
+        if case.message not in err:
+            return f"message lacks {case.message!r}: {err.strip()[:200]}"
+        if out_dir is not None and not existed and os.path.lexists(out_dir) and not os.path.islink(out_dir):
+            return f"wrote {out_dir!r} although it refused"
+        return None
+    if code != 0:
+        return f"exit {code}: {err.strip()[:200]}"
+    return case.check(root) if case.check else None
+
+
+def _out_of(argv: list):
+    return argv[argv.index("--out") + 1] if "--out" in argv else None
+
+
+def run_one(case: Case, argv: list, tmp: Path, timeout: float = 300.0) -> str | None:
+    """Run one case (its argv expanded) in a real process in the folder ``tmp``; what went wrong, or None."""
+    if case.setup:
+        case.setup(tmp)
+    out_dir = _out_of(argv)
+    existed = out_dir is not None and os.path.lexists(out_dir)
+    try:
+        r = subprocess.run([sys.executable, "-m", "prp3mc", *argv], capture_output=True, timeout=timeout, cwd=tmp)
+        code, out, err = r.returncode, r.stdout.decode(errors="replace"), r.stderr.decode(errors="replace")
+    except subprocess.TimeoutExpired:
+        code, out, err = None, "", ""
+    return judge(case, code, out, err, tmp, existed, out_dir)
+
+
+def run(only: str | None = None, timeout: float = 300.0, root: Path | None = None, jobs: int = 1,
+        ids: set | None = None) -> dict:
+    """Run the corpus (or the cases of class ``only``, or of ``ids``) in real processes; return
+    {class: [total, bad]} and print each case."""
+    from concurrent.futures import ThreadPoolExecutor
+    root = root or Path(os.environ.get("TMPDIR", "/tmp")) / f"prp3mc_corpus_{os.getpid()}"
+    paths = prepare(root / "files")
+    selected = [c for c in cases() if only in (None, c.cls) and (ids is None or c.id in ids)]
+
+    def one(k_case):
+        k, case = k_case
+        tmp = str(root / f"run{k}")
+        os.makedirs(tmp, exist_ok=True)
+        argv = expand(case.argv, paths, tmp)
+        t0 = time.time()
+        return case, run_one(case, argv, Path(tmp), timeout), time.time() - t0
+
+    counts = {c: [0, 0] for c in CLASSES}
+    with ThreadPoolExecutor(jobs) as pool:
+        for case, problem, took in pool.map(one, enumerate(selected)):
+            counts[case.cls][0] += 1
+            counts[case.cls][1] += problem is not None
+            print(f"{'BAD ' if problem else 'ok  '}{took:6.1f}s [{case.cls}] {case.id}"
+                  + (f"\n      {problem}" if problem else ""), flush=True)
+    return counts
+
+
+def signal_loop(root: Path, n: int, seed: int = 0, paths: dict | None = None) -> dict:
+    """Send SIGTERM or SIGINT at a random time near the end of a study and of a discrepancy, ``n`` runs.
+
+    Each run is timed once undisturbed; the signal comes at 60-110 % of that
+    time. A run ends well when it completed (exit 0, its folder whole, no
+    traceback) or did not and changed nothing (exit 130 or 143, no folder,
+    no traceback, no leftovers). Returns ``{"total", "bad", "outcomes", "problems"}``.
+    """
+    import random
+    import shutil
+    import signal
+    paths = paths or prepare(root / "files")
+    rng = random.Random(seed)
+    commands = {"study": ["study", paths["s_ok"], "--out", "OUT"],
+                "discrepancy": [*D, "--data", paths["c_good"], "--out", "OUT", "--seed", "1"]}
+    marks = {"study": "summary.json", "discrepancy": "discrepancy.json"}
+
+    def start(argv, out):
+        return subprocess.Popen([sys.executable, "-m", "prp3mc", *[str(out) if a == "OUT" else a for a in argv]],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=root)
+
+    took = {}
+    for kind, argv in commands.items():
+        out = root / f"calibrate_{kind}"
+        shutil.rmtree(out, ignore_errors=True)
+        t0 = time.time()
+        start(argv, out).communicate()
+        took[kind] = time.time() - t0
+    result = {"total": 0, "bad": 0, "outcomes": {}, "problems": [], "calibration_s": took}
+    for t in range(n):
+        kind = ("study", "discrepancy")[t % 2]
+        sig = signal.SIGTERM if rng.random() < 0.6 else signal.SIGINT
+        out = root / f"sig{t}"
+        shutil.rmtree(out, ignore_errors=True)
+        run = start(commands[kind], out)
+        when = took[kind] * rng.uniform(0.6, 1.1)
+        try:
+            run.wait(timeout=when)
+        except subprocess.TimeoutExpired:
+            run.send_signal(sig)
+        _, err = run.communicate(timeout=600)
+        err = err.decode(errors="replace")
+        whole = (out / marks[kind]).is_file() and (out / "report.html").is_file()
+        left = [p.name for p in root.iterdir() if p.name.startswith(f".sig{t}.")]
+        clean = not any(m in err for m in ("Traceback", "Fatal Python error", "Exception ignored"))
+        ok = clean and not left and ((run.returncode == 0 and whole)
+                                     or (run.returncode in (130, 143) and not os.path.lexists(out)))
+        key = f"{kind} {sig.name} exit {run.returncode}{' folder whole' if whole else ''}"
+        result["outcomes"][key] = result["outcomes"].get(key, 0) + 1
+        result["total"] += 1
+        if not ok:
+            result["bad"] += 1
+            result["problems"].append(f"{key} at {when:.1f} s: leftovers {left}; {err.strip()[-300:]}")
+    return result
+
+
+if __name__ == "__main__":
+    import argparse
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--only", default=None)
+    parser.add_argument("--jobs", type=int, default=1)
+    parser.add_argument("--root", type=Path, default=None)
+    parser.add_argument("--timeout", type=float, default=300.0)
+    parser.add_argument("--signals", type=int, default=0, help="run the signal loop this many times instead")
+    parser.add_argument("--rerun-bad", type=Path, default=None, help="run only the cases a log of this runner "
+                        "printed as BAD")
+    a = parser.parse_args()
+    rerun = None
+    if a.rerun_bad:
+        rerun = {line.split("] ", 1)[1] for line in a.rerun_bad.read_text(errors="replace").splitlines()
+                 if line.startswith("BAD ")}
+    if a.signals:
+        root = a.root or Path(os.environ.get("TMPDIR", "/tmp")) / f"prp3mc_signals_{os.getpid()}"
+        root.mkdir(parents=True, exist_ok=True)
+        result = signal_loop(root, a.signals)
+    else:
+        result = run(a.only, timeout=a.timeout, root=a.root, jobs=a.jobs, ids=rerun)
+    print(json.dumps(result))
