@@ -12,7 +12,7 @@ from prp3mc.measurement.fit.workflow import discrepancy
 from prp3mc.model.effects import SystematicEffect
 from prp3mc.reports import discrepancy_report
 
-from .realities import BUDGET, SIGMA, campaign_poses
+from .realities import BUDGET, SIGMA, campaign_poses, with_leads
 from .test_discrepancy import covers
 
 REGISTRATION = (0.02, -0.02, 0.005)
@@ -26,10 +26,12 @@ def small_poses(preset: str) -> np.ndarray:
 
 
 def test_point_signatures_at_nominal_are_the_linear_signatures():
-    """Central differences of the exact chain at the nominal geometry against the J_q signatures (independent code)."""
-    g = Geometry.from_preset("u-shape")
+    """Central differences of the exact chain at the nominal geometry against the J_q signatures (independent code),
+    a cyclic error's two columns (its phasor's parts) among them."""
+    g = with_leads(Geometry.from_preset("u-shape"))
     c = simulate_campaign(g, BUDGET, small_poses("u-shape"), 2, rng=1, **SIGMA)
     names = candidates(g, BUDGET, c)
+    assert {"cyclic_1", "cyclic_2", "cyclic_3"} <= set(names)
     point = linearise(g, BUDGET, c, {}, names)
     G = signatures(g, c.poses, c.pose_index, names, c.direction, c.temp_C)
     scale = np.abs(G).max(axis=(0, 1))                      # per candidate; 0 for the invisible c_i, e_i
@@ -38,15 +40,16 @@ def test_point_signatures_at_nominal_are_the_linear_signatures():
 
 
 def test_point_is_exact_at_its_values_and_gauss_newton_is_second_order():
-    g = Geometry.from_preset("delta-shape")
+    g = with_leads(Geometry.from_preset("delta-shape"))
     c = simulate_campaign(g, BUDGET, small_poses("delta-shape"), 2, rng=2, **SIGMA)
-    values = {"beta_3": 2.0, "scale_1": 3e-4}
+    values = {"beta_3": 2.0, "scale_1": 3e-4, "cyclic_2": 0.01 + 0.005j}
     point = linearise(g, BUDGET, c, values, list(values) + ["alpha_2"])
-    exact = exact_errors(g, BUDGET, c, [values, {"beta_3": 2.01, "scale_1": 3e-4}, {"beta_3": 2.1, "scale_1": 3e-4}])
+    near, far = {**values, "beta_3": 2.01}, {**values, "beta_3": 2.1}
+    exact = exact_errors(g, BUDGET, c, [values, near, far])
     np.testing.assert_allclose(point.predict(values), exact[0], atol=1e-12)
     # the departure of the linearised chain grows with the square of the step from the point
-    d1 = np.abs(point.predict({"beta_3": 2.01, "scale_1": 3e-4}) - exact[1]).max()
-    d2 = np.abs(point.predict({"beta_3": 2.1, "scale_1": 3e-4}) - exact[2]).max()
+    d1 = np.abs(point.predict(near) - exact[1]).max()
+    d2 = np.abs(point.predict(far) - exact[2]).max()
     assert 50 < d2 / d1 < 200 and d2 < 1e-3
 
 
