@@ -131,3 +131,19 @@ def test_an_alias_set_found_far_from_nominal_gives_way_to_the_effect():
     assert r.named_effects[0].ci95[0] <= -2.0 <= r.named_effects[0].ci95[1]
     restarts = r.linearity["restarts"]
     assert "psi_1" in r.linearity["passes"][0]["named"] and any(x.get("chosen") for x in restarts)
+
+
+@pytest.mark.slow
+def test_a_large_angle_error_and_a_cyclic_error_are_named_together():
+    """2 deg on beta_1 and a 20 µm cyclic error on leg 2 (leads of 5 mm): the passes relinearise with the
+    cyclic error's two columns among the candidates and name both, each value in its interval."""
+    g = with_leads(Geometry.from_preset("u-shape"))
+    hidden = {"beta_1": 2.0, "cyclic_2": (0.02, 30.0)}
+    c = simulate_campaign(g, BUDGET, campaign_poses("u-shape", True), 8, effects=hidden, registration=REGISTRATION,
+                          rng=6, **SIGMA)
+    r = discrepancy(g, BUDGET, c, rng=6, **SIGMA)
+    assert sorted(e.name for e in r.named_effects) == ["beta_1", "cyclic_2"], r.to_frame()
+    assert r.linearity["guard"] == "ok" and len(r.linearity["passes"]) >= 2 and not r.outliers
+    for e in r.named_effects:
+        true = 2.0 if e.name == "beta_1" else 0.02
+        assert e.ci95[0] <= true <= e.ci95[1], e
