@@ -13,7 +13,7 @@ The names below are the whole everyday API. Everything else lives in one
 package per concept or method, from the ground up: :mod:`prp3mc.kinematics`
 (geometry, chain, J_q), :mod:`prp3mc.model` (laws, budgets, effects, the
 linear model), the methods side by side (:mod:`prp3mc.montecarlo`,
-:mod:`prp3mc.worstcase`, :mod:`prp3mc.sobol`, :mod:`prp3mc.allocation`),
+:mod:`prp3mc.worstcase`, :mod:`prp3mc.stackup` (exact yields), :mod:`prp3mc.sobol`, :mod:`prp3mc.allocation`),
 :mod:`prp3mc.measurement` (campaigns and the discrepancy fit),
 :mod:`prp3mc.study`, :mod:`prp3mc.reports` (figures and report writers),
 :mod:`prp3mc.cli`, :mod:`prp3mc.errors` (every exception type) and
@@ -44,6 +44,7 @@ _API = {
     "SobolResult": "sobol.indices", "sobol_indices": "sobol.indices",
     "ShapleyResult": "sobol.shapley", "shapley_effects": "sobol.shapley",
     "sobol_ranking": "sobol.ranking:ranking",
+    "exact_yield": "stackup.exceedance", "YieldResult": "stackup.result",
     "Study": "study.reader", "StudyResult": "study.results", "run_study": "study.runner",
     "build_summary": "study.summary",
     "Campaign": "measurement.campaign.data", "read_campaign": "measurement.campaign.data",
@@ -52,7 +53,7 @@ _API = {
     "CampaignPlan": "measurement.campaign.plan", "plan_campaign": "measurement.campaign.plan",
 }
 #: The wings, importable as attributes too (``prp3mc.measurement`` after ``import prp3mc``).
-_WINGS = ("kinematics", "model", "montecarlo", "worstcase", "sobol", "allocation", "measurement", "study",
+_WINGS = ("kinematics", "model", "montecarlo", "worstcase", "stackup", "sobol", "allocation", "measurement", "study",
           "reports", "cli", "errors", "testing")
 
 __all__ = [
@@ -65,6 +66,7 @@ __all__ = [
     "linear_model", "LinearModel", "monte_carlo", "MonteCarloResult", "worst_case", "WorstCase", "worst_case_maxima", "WorstCaseMaxima",
     "allocate", "AllocationResult",
     "sobol_indices", "SobolResult", "sobol_ranking", "shapley_effects", "ShapleyResult",
+    "exact_yield", "YieldResult",
     # studies
     "Study", "StudyResult", "run_study", "build_summary",
     # measurements

@@ -15,6 +15,7 @@ __all__ = [
     "StudyError",
     "CampaignError",
     "AllocationError",
+    "SpecError",
     "ResourceError",
     "ParameterError",
     "NonlinearityError",
@@ -70,6 +71,10 @@ class CampaignError(Prp3mcError, ValueError):
 
 class AllocationError(Prp3mcError, ValueError):
     """A tolerance-allocation problem is malformed (classes file, costs, specs)."""
+
+
+class SpecError(Prp3mcError, ValueError):
+    """A specification of the pose error (a tolerance on the position or the orientation) is malformed."""
 
 
 class ResourceError(Prp3mcError, ValueError):

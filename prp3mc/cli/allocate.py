@@ -5,8 +5,6 @@ from __future__ import annotations
 from .._version import __version__
 from ..kinematics.geometry import REGION_PRESETS, Region
 from ..provenance import spec_record
-from ..allocation.optimum import allocate, allocation_front, front_records
-from ..model.budget import Budget
 from ..units import DEG2ARCSEC, MM2UM, quantity_text
 from ..limits import allocate_estimate
 from . import (add_geometry, add_json, add_progress, add_seed, command, emit_json, finite_float, positive_float, positive_int,
@@ -49,6 +47,8 @@ class AllocateCommand:
 
     @staticmethod
     def run(args) -> None:
+        from ..model.budget import Budget
+        from ..allocation.optimum import allocate, allocation_front, front_records
         budget = None if args.budget is None else Budget.load(args.budget)
         region = Region.load(args.region)
         if args.phi_deg is None:

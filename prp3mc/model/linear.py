@@ -25,19 +25,60 @@ import numpy as np
 from .._result import freeze, short_repr
 from ..units import DEG2RAD, RAD2DEG
 from .budget import Budget, parse_input
-from .laws import angle_moments
+from .laws import Law, angle_moments
 from .effects import EFFECT_NAMES, T_REF_C
 from ..kinematics.geometry import Geometry
 from ..kinematics.chain import as_poses, frame, validated_frame
 from ..kinematics.sensitivity import LENGTH_FAMILIES, h_entries
 
-__all__ = ["LinearModel", "linear_model", "ALL_LEGS", "FEATURE_VALUE", "FEATURE_COS", "FEATURE_SIN", "FEATURE_ONE"]
+__all__ = ["LinearModel", "TermLaw", "linear_model", "ALL_LEGS", "FEATURE_VALUE", "FEATURE_COS", "FEATURE_SIN", "FEATURE_ONE"]
 
 #: The leg of a term that acts on all three legs at once (thermal expansion).
 ALL_LEGS = -1
 #: Feature codes of :meth:`LinearModel.feature_ops`: factor a's value less a reference; X_a cos(X_b deg);
 #: X_a sin(X_b deg); the constant 1 of the known shifts.
 FEATURE_VALUE, FEATURE_COS, FEATURE_SIN, FEATURE_ONE = range(4)
+
+
+@dataclass(frozen=True, slots=True)
+class TermLaw:
+    """The scalar X_t a term of a :class:`LinearModel` multiplies: the pose error is ``sum_t columns[..., t] X_t``.
+
+    The X_t of the terms are independent. ``kind`` says what X_t is:
+
+    - ``"factor"``: a factor of the budget less a reference, ``X_t = F - reference``
+      with F distributed as ``law`` (mm, deg, or degrees C for thermal, whose
+      reference is 20 degrees C);
+    - ``"clearance"``: ``X_t = rho cos(zeta - omega_i)`` with rho distributed as
+      ``law`` (mm) and the contact angle zeta as ``zeta`` (deg), independent;
+      omega_i is the pose's contact direction (:attr:`LinearModel.omega`);
+    - ``"shift"``: the known constant ``X_t = value`` (an offset or lead scale).
+
+    Attributes
+    ----------
+    name : str
+        The term (:attr:`LinearModel.terms`).
+    kind : str
+        ``"factor"``, ``"clearance"`` or ``"shift"``.
+    leg : int
+        0-based leg, :data:`ALL_LEGS` for a term of all legs (thermal).
+    law : Law or None
+        The factor's law, or the clearance's radius law; None for a shift.
+    reference : float
+        Subtracted from a factor (20 for thermal, else 0).
+    zeta : Law or None
+        The contact angle's law (clearance only).
+    value : float
+        The shift's value (mm, deg or 1), 0 for the other kinds.
+    """
+
+    name: str
+    kind: str
+    leg: int
+    law: Law | None = None
+    reference: float = 0.0
+    zeta: Law | None = None
+    value: float = 0.0
 
 
 @dataclass(frozen=True, slots=True, repr=False)
@@ -107,6 +148,21 @@ class LinearModel:
         for t in self.shared:
             cols[..., :, t] = np.einsum("...ij,...j->...i", self.Ainv, self.weights[..., :, t])
         return cols
+
+    @property
+    def term_laws(self) -> tuple[TermLaw, ...]:
+        """What each term's scalar X_t is and its law, in :attr:`terms` order (see :class:`TermLaw`)."""
+        laws = list(self.budget.factor_laws.values())
+        out = []
+        for name, leg, (kind, *args) in zip(self.terms, self.legs, self._plan):
+            if kind == "value":
+                out.append(TermLaw(name, "factor", leg, law=laws[args[0]], reference=args[1]))
+            elif kind == "clearance":
+                (k, kz), = args
+                out.append(TermLaw(name, "clearance", leg, law=laws[k], zeta=laws[kz]))
+            else:
+                out.append(TermLaw(name, "shift", leg, value=args[0]))
+        return tuple(out)
 
     @property
     def omega(self) -> np.ndarray:

@@ -1,0 +1,27 @@
+"""The exact distribution of the linear stack-up: yields against a spec without sampling.
+
+The linear model's pose error is a sum of independent scalar terms, each a
+column times a budget input, an effect's factor or a clearance term
+(:class:`~prp3mc.model.linear.TermLaw`). Its distribution follows from the
+terms' characteristic functions, which are closed forms for every law prp3mc
+has; this package inverts them with a guaranteed error bound:
+
+- :mod:`~prp3mc.stackup.exceedance` — :func:`exact_yield`, the public entry:
+  P(position > S), P(``|dphi|`` > Z), P(either) and the quantiles, per pose;
+- :mod:`~prp3mc.stackup.result` — :class:`YieldResult`, and the Ppk of an exceedance;
+- :mod:`~prp3mc.stackup.characteristic` — each law's characteristic function and
+  a decreasing bound of its modulus;
+- :mod:`~prp3mc.stackup.lattice` — the alias-free lattice of each channel (dphi,
+  the position, both) at a batch of poses;
+- :mod:`~prp3mc.stackup.truncation` — which lattice points to sum, and the bound
+  of what is left out;
+- :mod:`~prp3mc.stackup.series` — the sums, the quantiles and the per-pose driver (compiled);
+- :mod:`~prp3mc.stackup._special` — the Bessel functions the kernels call.
+
+Imports kinematics, model and the foundations, never study, measurement or reports.
+"""
+
+from .exceedance import DEFAULT_TARGET, exact_yield
+from .result import YieldResult, ppk
+
+__all__ = ["exact_yield", "YieldResult", "ppk", "DEFAULT_TARGET"]

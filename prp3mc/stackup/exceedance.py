@@ -1,0 +1,318 @@
+"""The exact yield of the linear model against a position and orientation spec: :func:`exact_yield`."""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+from scipy import special
+
+from .._threads import cores
+from ..errors import BudgetError, Prp3mcWarning, SpecError
+from ..kinematics.geometry import Geometry
+from ..model.budget import Budget
+from ..model.linear import linear_model
+from ..units import DEG2ARCSEC, DEG2RAD, MM2UM, RAD2DEG
+from ._special import special_args
+from .characteristic import term_table
+from .lattice import LEVELS, leg_powers, channel
+from .result import YieldResult
+from .series import batch_series
+
+__all__ = ["exact_yield", "METHOD", "DEFAULT_TARGET"]
+
+#: Default bound of the absolute error of every probability: 1e-9 (1e-3 ppm).
+DEFAULT_TARGET = 1e-9
+METHOD = ("exact distribution of the linear model: Fourier series of its characteristic function (the "
+          "product of the terms' closed forms) on a lattice whose periods keep the support off the spec's "
+          "region, truncated with a rigorous bound (decreasing envelopes of every term, analytic tails); "
+          "error bound = truncation + floating point (1e-13 per coefficient) + normal laws' mass past their cut")
+#: Decay power every leg's envelopes need before the joint (3-D) series is tried: the paper's legs (three
+#: uniform-like laws, power 3) would need ~1e12 lattice points for 1e-9; a leg with a normal law has power inf.
+_JOINT_POWER = 6.0
+_CHUNK = 64                      # poses per task of the thread pool
+
+
+def _spec(name: str, value, unit: str, big_unit: str, per_big: float) -> float:
+    """A spec > 0 in ``unit``; below 1 it is taken, with a warning, as a value typed in ``big_unit``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+            or not math.isfinite(value) or value <= 0:
+        raise SpecError(f"{name} must be a finite number > 0 {unit}, got {value!r}")
+    if value < 1.0:
+        warnings.warn(Prp3mcWarning(f"{name} = {value:g} {unit} is below 1 {unit}: a spec in {big_unit} typed as "
+                                    f"{unit}? ({value:g} {big_unit} = {per_big * value:g} {unit})"), stacklevel=3)
+    return float(value)
+
+
+def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_arcsec: float | None = None,
+                quantiles: bool = True, target: float = DEFAULT_TARGET, workers: int | None = None) -> YieldResult:
+    """The exact distribution of the linear model's pose error against a spec, at a batch of poses.
+
+    For each pose: P(``|(dx, dy)|`` > S), P(``|dphi|`` > Z), P(either), and the
+    quantiles p99.73, p99.9937, p99.9999 of the position error and of ``|dphi|``,
+    each with a guaranteed bound of its error; no sampling. The budget's
+    inputs are independent; its ``[effects]`` enter as in the other
+    analyses (known shifts, backlash ±h/2 with probability 1/2 each, one
+    temperature uniform over its range). Every law prp3mc has is exact:
+    uniform, normal, truncated normal, triangular, discrete classes, and the
+    clearance rho cos(zeta - omega) with any radius law (the contact angle
+    uniform over whole turns).
+
+    Method (:mod:`prp3mc.stackup`): P(Y in D) for a channel Y of the pose
+    error (dphi, the position, or both) and its spec region D (an interval, a
+    disc, a cylinder) is the Fourier series of Y's characteristic function,
+    ``prod_t phi_t(c_t . w)`` in closed form, on a lattice whose periods keep
+    Y's support away from D (so the periodised density equals the density
+    on D); it is summed over the lattice points a rigorous bound says matter,
+    and the bound on everything left out (decreasing envelopes of every
+    term's ``|phi_t|``, analytic power-law tails) is the reported error, with
+    floating point and the mass of normal laws past their cut. Quantiles solve
+    P(z) = p on the same series; their bracket P(z) = p -/+ bound bounds their error.
+
+    P(either) needs the 3-D series, which converges in time only when every
+    leg's characteristic function decays fast (a normal law in each leg, say);
+    otherwise it is the midpoint of ``[max(P_pos, P_phi), P_pos + P_phi]``
+    with the half-width (plus both bounds) as its bound, flagged in
+    ``bracketed_any``: the bound holds, but exceeds the target (a warning says so).
+
+    Parameters
+    ----------
+    geometry : Geometry or str
+        A Geometry, preset name or TOML path.
+    budget : Budget or str
+        A Budget, preset name or TOML path.
+    poses : array_like, shape (..., 3)
+        ``[x_mm, y_mm, phi_deg]``; poses out of stroke or near a singularity are refused.
+    spec_position_um : float
+        S, µm: the position error ``|(dx, dy)|`` must stay within it.
+    spec_phi_arcsec : float, optional
+        Z, arcsec: ``|dphi|`` must stay within it.
+    quantiles : bool
+        Compute the quantiles too (the most time-consuming part on grids).
+    target : float
+        Bound of the absolute error of every probability (default 1e-9, i.e. 1e-3 ppm); in (0, 1e-2].
+    workers : int, optional
+        Threads (default: the CPU count).
+
+    Raises
+    ------
+    SpecError
+        A spec or target out of range.
+    BudgetError
+        A budget with ``[correlation]`` (the series needs independent inputs: use Monte Carlo), or whose
+        position has no 2-D density (one leg random).
+
+    Returns
+    -------
+    YieldResult
+
+    Examples
+    --------
+    >>> from prp3mc import exact_yield
+    >>> r = exact_yield("u-shape", "paper", [0.0, 100.0, 0.0], spec_position_um=100.0)
+    >>> round(float(r.exceed_position) * 1e6, 1), bool(r.error_bound < 1e-9)
+    (1159.9, True)
+    """
+    t0 = time.perf_counter()
+    S_um = _spec("spec_position_um", spec_position_um, "µm", "mm", MM2UM)
+    Z_as = None if spec_phi_arcsec is None else _spec("spec_phi_arcsec", spec_phi_arcsec, "arcsec", "deg", DEG2ARCSEC)
+    if not (isinstance(target, (int, float)) and 0 < target <= 1e-2):
+        raise SpecError(f"target must be a probability in (0, 1e-2], got {target!r}")
+    geometry, budget = Geometry.load(geometry), Budget.load(budget)
+    if budget.correlated:
+        raise BudgetError(f"exact yield: budget {budget.name!r} correlates inputs ([correlation]); the exact "
+                          "distribution needs independent ones: use Monte Carlo (prp3mc yield falls back on it)")
+    model = linear_model(geometry, budget, poses)
+    shape = model.poses.shape[:-1]
+    T = len(model.terms)
+    laws = model.term_laws
+    n_normal = sum(1 for tl in laws if tl.law is not None and tl.law.kind == "normal" and tl.kind == "factor")
+    share = 0.01 * target / max(n_normal, 1)        # mass of one normal law past its cut
+    k_normal = math.sqrt(2.0) * float(special.erfcinv(share))
+    table = term_table(laws, k_normal)
+    C = np.ascontiguousarray(model.columns.reshape(-1, 3, T))
+    Ainv = model.Ainv.reshape(-1, 3, 3)
+    N = C.shape[0]
+    S, Z = S_um / MM2UM, (None if Z_as is None else Z_as / DEG2ARCSEC * DEG2RAD)
+    legs = np.array(model.legs)
+    levels = np.array(LEVELS if quantiles else (), dtype=float)
+    mean, cov = _moments(C, table)
+    run = _Runner(table, workers, target, budget.name)
+
+    # position
+    z1 = np.full(N, S)
+    pos = channel("position", C, Ainv, legs, table, z1, alias_one=share)
+    if quantiles:
+        z1 = np.maximum(z1, pos.zmax)
+        pos = channel("position", C, Ainv, legs, table, z1, alias_one=share)
+    lam2 = np.linalg.eigvalsh(cov[:, :2, :2])[:, -1]
+    z0 = np.hypot(mean[:, 0], mean[:, 1])[:, None] + np.sqrt(-2.0 * np.log1p(-levels) * lam2[:, None])
+    p_pos, b_pos, n_pos, s_pos, q_pos, qe_pos = run(pos, z1, np.zeros(N), np.full(N, S), levels, z0,
+                                                    "the position error")
+    # orientation
+    p_phi = b_phi = q_phi = qe_phi = None
+    n_phi = np.zeros(N, np.int64)
+    phi = None
+    if quantiles or Z is not None:
+        zs = np.full(N, Z if Z is not None else 0.0)
+        phi = channel("phi", C, Ainv, legs, table, zs, alias_one=share)
+        z1 = np.maximum(zs, phi.zmax) if quantiles else zs
+        phi = channel("phi", C, Ainv, legs, table, z1, alias_one=share)
+        z0 = np.abs(mean[:, 2])[:, None] + np.sqrt(cov[:, 2, 2])[:, None] * special.ndtri(0.5 + 0.5 * levels)
+        p_phi, b_phi, n_phi, s_phi, q_phi, qe_phi = run(phi, z1, np.zeros(N), np.where(zs > 0, zs, z1), levels, z0,
+                                                        "|dphi|")
+    e_pos = np.clip(1.0 - p_pos, 0.0, 1.0)
+    e_phi = None if Z is None else np.clip(1.0 - p_phi, 0.0, 1.0)
+    # either: the joint series where it converges; else the bracket [max(P_pos, P_phi), P_pos + P_phi]
+    bracketed = np.zeros(N, dtype=bool)
+    n_any = n_pos
+    if Z is None:
+        e_any, b_any = e_pos, b_pos
+    else:
+        e_any, b_any, n_any, bracketed = _either(run, C, Ainv, legs, table, share, S, Z, e_pos, b_pos, e_phi, b_phi)
+    above = np.maximum(b_pos, b_phi if b_phi is not None else 0.0) > target
+    if np.any(above):
+        warnings.warn(Prp3mcWarning(
+            f"exact yield: the error bound exceeds the target {target:g} at {int(above.sum())} of {N} pose(s) "
+            f"(largest {float(np.max(np.maximum(b_pos, b_phi if b_phi is not None else 0.0))):.3g})"), stacklevel=2)
+    loose = bracketed & (b_any > target)
+    if np.any(loose):
+        warnings.warn(Prp3mcWarning(
+            f"exact yield: P(position or phi out of spec) is bracketed by [max, sum] of the two exceedances at "
+            f"{int(loose.sum())} of {N} pose(s) (bound up to {float(b_any.max()):.3g}; the joint series does not "
+            "converge in time when a leg has few continuous laws); each channel's own exceedance keeps its "
+            "bound"), stacklevel=2)
+    worst_pos, worst_phi = _worst(pos, phi, C, table)
+    rss_pos, rss_phi = _rss(C, table)
+
+    def shaped(a, tail=()):
+        return None if a is None else a.reshape(shape + tail)
+
+    Q = levels.size
+    return YieldResult(
+        poses=model.poses, spec_position_mm=S, spec_phi_deg=None if Z is None else Z * RAD2DEG,
+        exceed_position=shaped(e_pos), bound_position=shaped(b_pos),
+        exceed_phi=shaped(e_phi), bound_phi=None if Z is None else shaped(b_phi),
+        exceed_any=shaped(e_any), bound_any=shaped(b_any),
+        levels=tuple(100.0 * v for v in LEVELS) if quantiles else (),
+        quantile_position_mm=shaped(q_pos, (Q,)) if quantiles else None,
+        quantile_position_err_mm=shaped(qe_pos, (Q,)) if quantiles else None,
+        quantile_phi_deg=shaped(q_phi * RAD2DEG, (Q,)) if quantiles else None,
+        quantile_phi_err_deg=shaped(qe_phi * RAD2DEG, (Q,)) if quantiles else None,
+        worst_position_mm=shaped(worst_pos), worst_phi_deg=shaped(worst_phi * RAD2DEG),
+        rss_position_mm=shaped(rss_pos), rss_phi_deg=shaped(rss_phi * RAD2DEG),
+        bracketed_any=shaped(bracketed),
+        lattice_points={"position": shaped(n_pos), "phi": shaped(n_phi), "any": shaped(n_any)},
+        target=float(target), method=METHOD, wall_time_s=time.perf_counter() - t0)
+
+
+class _Runner:
+    """Runs :func:`~.series.batch_series` over a channel's poses in chunks on a pool of threads."""
+
+    def __init__(self, table, workers, target, budget: str):
+        self.table, self.target, self.budget = table, target, budget
+        self.workers = workers or cores()
+        self.tab, self.sp = table.arrays(), special_args()
+
+    def __call__(self, ch, z1, z2, zs, levels, z0, what: str, fallback: bool = False):
+        """The series of channel ``ch`` at every pose: (P(Y in D), bound, points, status, quantiles,
+        their bounds). Without quantiles, a pose whose spec covers the whole support (no normal law acting)
+        has P = 1 exactly. A pose the series cannot serve raises (what: the quantity, for the message), or
+        keeps its status (2, 3) when the caller has a ``fallback``."""
+        N = z1.size
+        out = (np.empty(N), np.empty(N), np.empty(N, np.int64), np.empty(N, np.int64),
+               np.empty((N, levels.size)), np.empty((N, levels.size)))
+        sure = (zs >= ch.zmax * (1 + 1e-12)) & (ch.alias == 0) if levels.size == 0 else np.zeros(N, bool)
+        z0 = np.ascontiguousarray(np.broadcast_to(z0, (N, levels.size)))
+        t = self.table
+        args = (ch.d, t.kind, t.par, t.env, self.tab, self.sp, ch.grp, ch.mu, ch.snu, ch.Q, ch.Vinv, ch.mnorm, ch.ab,
+                ch.lam, np.ascontiguousarray(z1), np.ascontiguousarray(z2), np.ascontiguousarray(zs), self.target,
+                ch.alias, levels, z0, ch.zmax, ch.ok & ~sure, *out)
+        starts = range(0, N, _CHUNK)
+        if self.workers == 1 or N <= _CHUNK:
+            batch_series(0, N, *args)
+        else:
+            with ThreadPoolExecutor(max_workers=self.workers) as pool:
+                list(pool.map(lambda s: batch_series(s, min(N, s + _CHUNK), *args), starts))
+        p, b, n, status = out[:4]
+        p[sure], b[sure], n[sure], status[sure] = 1.0, 0.0, 0, 0
+        for code, why in ((2, "fewer legs with a continuous law, whose terms decay, than it has dimensions: it "
+                              "has no density"),
+                          (3, "the series needs more than 2^23 terms (too few continuous laws)")):
+            if np.any(status == code) and not fallback:
+                raise BudgetError(f"exact yield: {what} of budget {self.budget!r} at {int(np.sum(status == code))} "
+                                  f"pose(s): {why}; use Monte Carlo")
+        return out
+
+
+def _either(run, C, Ainv, legs, table, share, S, Z, e_pos, b_pos, e_phi, b_phi):
+    """P(position > S or ``|dphi|`` > Z) and its bound, per pose: the 3-D series of the cylinder where it is
+    certified, else the Fréchet bracket ``[max(P_pos, P_phi), P_pos + P_phi]`` (its midpoint, the half-width
+    plus both channels' bounds as the bound), whichever bound is smaller. The joint series converges slowly
+    when a leg has few continuous laws (its characteristic function decays slowly along that leg's axis):
+    it is tried only when every leg's envelopes decay at least as ``n^-_JOINT_POWER`` (e.g. a normal law in each
+    leg), at the first pose and, if that fails, at no other. Returns (P, bound, points, bracketed)."""
+    N = e_pos.size
+    lo, hi = np.maximum(e_pos, e_phi), np.minimum(1.0, e_pos + e_phi)
+    e_br, b_br = 0.5 * (lo + hi), 0.5 * (hi - lo) + b_pos + b_phi
+    e_any, b_any, n_any = e_br.copy(), b_br.copy(), np.zeros(N, np.int64)
+    if not np.all(leg_powers(table, C[:1], legs, 1.0 / 3.0) >= _JOINT_POWER):
+        return e_any, b_any, n_any, np.ones(N, dtype=bool)
+    both = channel("both", C, Ainv, legs, table, np.full(N, S), np.full(N, Z), alias_one=share)
+    probe = run(_subset(both, slice(0, 1)), np.full(1, S), np.full(1, Z), np.full(1, S), np.zeros(0),
+                np.zeros((1, 0)), "the pose error", fallback=True)
+    if probe[3][0] <= 1 and N > 1:
+        p_both, b_both, n_both, status = run(both, np.full(N, S), np.full(N, Z), np.full(N, S), np.zeros(0),
+                                             np.zeros((N, 0)), "the pose error", fallback=True)[:4]
+    else:
+        p_both, b_both, n_both, status = (a[:1] for a in probe[:4])
+    k = p_both.size
+    series = (status <= 1) & (b_both < b_br[:k])
+    e_any[:k] = np.where(series, np.clip(1.0 - p_both, 0.0, 1.0), e_br[:k])
+    b_any[:k] = np.where(series, b_both, b_br[:k])
+    n_any[:k] = n_both
+    return e_any, b_any, n_any, ~np.pad(series, (0, N - k))
+
+
+def _subset(ch, index):
+    """Channel ``ch`` at the poses ``index`` (a slice)."""
+    return type(ch)(**{f: (v if f == "d" else v[index]) for f, v in vars(ch).items()})
+
+
+def _moments(C: np.ndarray, table) -> tuple[np.ndarray, np.ndarray]:
+    """Mean (N, 3) and covariance (N, 3, 3) of the pose error (mm, mm, rad) from the terms' moments."""
+    mean = np.einsum("not,t->no", C, table.mean)
+    cov = np.einsum("not,t,nqt->noq", C, table.var, C)
+    return mean, cov
+
+
+def _worst(pos, phi, C, table) -> tuple[np.ndarray, np.ndarray]:
+    """The exact worst case of the position (mm) and ``|dphi|`` (rad); NaN where a normal law acts."""
+    normal_xy = (np.abs(C[:, :2, :]).max(axis=1) > 0) & table.normal[None, :]
+    normal_phi = (np.abs(C[:, 2, :]) > 0) & table.normal[None, :]
+    worst_pos = np.where(normal_xy.any(axis=1), np.nan, pos.zmax)
+    if phi is None:
+        lo, hi = np.where(table.random, table.lo, 0.0), np.where(table.random, table.hi, 0.0)
+        a, b = C[:, 2, :] * lo, C[:, 2, :] * hi
+        s = C[:, 2, :] @ table.constant
+        zmax = np.maximum(np.abs(s + np.minimum(a, b).sum(-1)), np.abs(s + np.maximum(a, b).sum(-1)))
+    else:
+        zmax = phi.zmax
+    return worst_pos, np.where(normal_phi.any(axis=1), np.nan, zmax)
+
+
+def _rss(C: np.ndarray, table) -> tuple[np.ndarray, np.ndarray]:
+    """RSS stack of the position (mm) and ``|dphi|`` (rad): ``|centre|`` + sqrt(sum_t (``|c_t|`` h_t)²), h_t the
+    half-width of term t's interval (3 sd for a normal law)."""
+    sd = np.sqrt(table.var)
+    half = np.where(table.normal, 3.0 * sd, 0.5 * (table.hi - table.lo))
+    half = np.where(table.random, half, 0.0)
+    mid = np.where(table.normal, table.mean, 0.5 * (table.hi + table.lo))
+    centre = np.einsum("not,t->no", C, mid)
+    rss_xy = np.sqrt(np.einsum("not,t->n", C[:, :2, :] ** 2, half ** 2))
+    rss_phi = np.sqrt(np.einsum("nt,t->n", C[:, 2, :] ** 2, half ** 2))
+    return np.hypot(centre[:, 0], centre[:, 1]) + rss_xy, np.abs(centre[:, 2]) + rss_phi
+

@@ -1,0 +1,291 @@
+"""The Fourier series of a bounded stack-up and its certified truncation (compiled, one pose at a time).
+
+Let Y (dimension d = 1, 2 or 3) be a channel of the pose error: dphi, (dx, dy)
+or (dx, dy, dphi), ``Y = s + sum_t c_t X_t`` with independent X_t of bounded
+support, and D the region whose probability is wanted: ``|dphi|`` <= z, a disc
+``|(dx, dy)|`` <= z, or the cylinder of both. Periodising Y over a lattice L
+whose shifts move Y's support off D (no aliasing) leaves the probability of
+D unchanged, and the periodised density is a Fourier series whose
+coefficients are Y's characteristic function on the dual lattice:
+
+    P(Y in D) = (1 / ``|L|``) sum_{w in L*} phi_Y(w) T_D(w),
+
+with T_D the Fourier transform of D's indicator (real and even):
+2 sin(w z) / w, 2 pi z J1(z ``|w|``) / ``|w|``, and their product for the cylinder.
+``phi_Y(w) = exp(i w.s) prod_t phi_t(c_t . w)`` (:mod:`.characteristic`).
+
+**The lattice.** Every term of leg i acts along one direction m_i (the
+channel's rows of column i of A^-1), so the legs' sums are independent
+scalars. The dual lattice is taken rectangular in nu_j = m_j . w over a basis
+of d legs (the 1-D channel has the single direction 1): nu_j = 2 pi n_j / Q_j,
+so the characteristic function of a basis leg depends on n_j alone (computed
+once per n_j) and the lattice's y-space shifts are Q_j m_j. The periods Q_j
+are the smallest for which the support, shifted by any lattice vector, misses
+D (their bounding boxes in the coordinates w of y = sum_j w_j m_j).
+
+**The certified truncation.** Each term's ``|phi_t|`` is below a non-increasing
+envelope (:func:`~.characteristic.term_env`), and ``|T_D(w)|`` below a bound
+tau(``|w|``) that falls with ``|w|`` (for every z up to the largest used, so one
+lattice serves every quantile). Since ``|nu_j|`` <= ``|m_j|`` ``|w|``, every summand
+is below a *separable* product ``prod_j g_j(|n_j|)`` with
+
+    g_j(n) = prod_{t in basis leg j} env_t(``|kappa_t|`` nu_j) * (tau(nu_j / ``|m_j|``) / ``|L|``)^(1/d)
+
+(the other terms' envelopes are dropped, being <= 1). The series keeps the
+lattice points of the *cross* ``prod_j g_j(|n_j|) >= eta``; what it leaves
+out is below ``B(eta) = sum over the rest of prod_j g_j``, computed exactly
+from the 1-D sums of the g_j: explicit up to N_j, then the analytic tail
+``sum_{n > N} g(n) <= g(N) N / (p - 1)``, where p is the decay power of g
+past N (:func:`~.characteristic.term_pow`; it must exceed 1). eta is the
+largest value with B(eta) within half the target. Inside the cross a point
+is dropped when its full envelope (every term, the exact transform bound)
+is below a threshold whose dropped points add up to at most 0.4 of the
+target; their sum is counted exactly. With floating point (an assumed
+accuracy of each characteristic-function value, :data:`~._special.CF_ACCURACY`)
+and the mass of normal laws beyond their cut (mean ± k sd, which alone may
+alias) the four parts make the reported bound.
+
+Quantiles (d = 1, 2) solve ``P(z) = p`` by Newton's method with bisection
+as a safeguard on the same series, and bracket the true quantile by solving
+``P(z) = p -/+ bound``: the true quantile lies between (the true P is within
+the bound of the series' and non-decreasing).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ._special import CF_ACCURACY
+from .lattice import MIXED_LEG
+from .characteristic import common_cf, term_cf
+from .truncation import select_points, transform_bound
+
+__all__ = ["pose_series", "STATUS"]
+
+#: Status of a pose's series: ok; the bound is above the target; no bound (a basis leg's envelope does
+#: not decay faster than 1/n: no density to speak of); too many terms (more than 2^23 lattice points).
+STATUS = ("ok", "bound above target", "no bound", "too many terms")
+_TWO_PI = 2.0 * math.pi
+
+
+# ------------------------------------------------------------------ the transform of D
+
+@njit(cache=True, nogil=True)
+def _transform(d, z1, z2, a, b, j1):
+    """T_D at a point (a, b as in :func:`_tb`)."""
+    if d == 1:
+        return 2.0 * z1 if a == 0.0 else 2.0 * math.sin(a * z1) / a
+    disc = math.pi * z1 * z1 if a == 0.0 else 2.0 * math.pi * z1 * j1(z1 * a, 0) / a
+    if d == 2:
+        return disc
+    return disc * (2.0 * z2 if b == 0.0 else 2.0 * math.sin(b * z2) / b)
+
+
+# ------------------------------------------------------------------ the series at one pose
+
+@njit(cache=True, nogil=True)
+def _prob(d, lam, re, a, b, n, z1, z2, j1):
+    """The series' P(Y in D) at z1 (and z2 for the cylinder)."""
+    s = 0.0
+    for k in range(n):
+        s += re[k] * _transform(d, z1, z2, a[k], b[k], j1)
+    return (_transform(d, z1, z2, 0.0, 0.0, j1) + 2.0 * s) / lam
+
+
+@njit(cache=True, nogil=True)
+def _density(d, lam, re, a, n, z, j0):
+    """d/dz of the series' P(``|Y|`` <= z), d = 1 or 2."""
+    s = 0.0
+    if d == 1:
+        for k in range(n):
+            s += re[k] * 2.0 * math.cos(a[k] * z)
+        return (2.0 + 2.0 * s) / lam
+    for k in range(n):
+        s += re[k] * j0(z * a[k], 0)
+    return 2.0 * math.pi * z * (1.0 + 2.0 * s) / lam
+
+
+@njit(cache=True, nogil=True)
+def _solve(d, lam, re, a, b, n, target, z0, zmax, sp):
+    """z in [0, zmax] with the series' P(z) = target: Newton's method, bisection where it strays."""
+    lo, hi = 0.0, zmax
+    z = min(max(z0, 1e-3 * zmax), 0.999 * zmax)
+    for _ in range(100):
+        f = _prob(d, lam, re, a, b, n, z, 0.0, sp[1]) - target
+        if f < 0:
+            lo = z
+        else:
+            hi = z
+        if hi - lo <= 1e-13 * zmax:
+            break
+        dens = _density(d, lam, re, a, n, z, sp[0])
+        step = z - f / dens if dens > 0 else -1.0
+        if not (lo < step < hi):
+            step = 0.5 * (lo + hi)
+        if abs(step - z) <= 1e-14 * zmax:
+            z = step
+            break
+        z = step
+    return z
+
+
+@njit(cache=True, nogil=True)
+def _beyond(d, lam, re, a, b, n, target, z, zmax, side, sp):
+    """A z' on ``side`` (-1: below, +1: above) of z where the series' P is <= target (below) or >= target
+    (above): the root of P = target, then steps of doubling length until the inequality holds; 0 or
+    zmax (where the true P is 0 or 1) when the target is out of (0, 1)."""
+    if side < 0 and target <= 0.0:
+        return 0.0
+    if side > 0 and target >= 1.0:
+        return zmax
+    zt = _solve(d, lam, re, a, b, n, target, z, zmax, sp)
+    step = 1e-12 * zmax
+    for _ in range(200):
+        p = _prob(d, lam, re, a, b, n, zt, 0.0, sp[1])
+        if (side < 0 and p <= target) or (side > 0 and p >= target):
+            return zt
+        zt = min(max(zt + side * step, 0.0), zmax)
+        if zt == 0.0 or zt == zmax:
+            return zt
+        step *= 2.0
+    return 0.0 if side < 0 else zmax
+
+
+@njit(cache=True, nogil=True)
+def pose_series(d, kind, par, ev, tab, sp, grp, mu, snu, Q, Vinv, mnorm, ab, lam, z1, z2, zs, eps, alias, levels, z0,
+                zmax, out_q, out_qerr):
+    """The probability of D (radius zs; the cylinder's half-height z2) and the quantiles at one pose.
+
+    Parameters
+    ----------
+    d : int
+        The channel's dimension (1: ``|dphi|``, 2: position, 3: both).
+    kind, par, tab, sp
+        The term table (:class:`~.characteristic.TermTable`), its arrays and the special functions.
+    grp : (T,) int
+        Basis leg 0..d-1 of each term, -1 for a term off the basis (mixed), -2 for a term absent
+        from the channel.
+    mu : (T, 3)
+        Each term's coefficients in nu (c_t . w = mu_t . nu); columns d.. are 0.
+    snu : (3,)
+        The known shift in nu (phase exp(i snu . nu)).
+    Q, mnorm : (3,)
+        Periods and ``|m_j|`` (1 past d).
+    Vinv : (3, 3)
+        w = Vinv nu (the channel's frequency from nu; zero past d).
+    lam : float
+        The lattice's cell volume ``|L|``.
+    z1, z2 : float
+        The largest radius (or half-width) of D the series serves (the periods and bounds hold
+        up to it), and the cylinder's half-height.
+    zs : float
+        The radius (or half-width) of D at which the probability is wanted (<= z1).
+    eps : float
+        Target of the error bound (absolute, in probability).
+    alias : float
+        Mass of the normal laws beyond their cut (added to the bound).
+    levels : (K,)
+        Probabilities of the quantiles (d <= 2; empty for none); ``z0`` (K,) their starting guesses,
+        ``zmax`` the largest value of ``|Y|`` (a quantile lies below).
+    out_q, out_qerr : (K,)
+        Written: the quantiles and bounds of their errors.
+
+    Returns
+    -------
+    p_in : float
+        The series' P(Y in D) at zs (and z2).
+    bound : float
+        Bound of its absolute error.
+    n_terms : int
+        Lattice points summed (half of them: the others are their conjugates).
+    status : int
+        Index into :data:`STATUS`.
+    """
+    atoms, weights = tab[0], tab[1]
+    T = kind.size
+    buf = np.empty(2)
+    pts, b_trunc, walked, status = select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps)
+    if status >= 2:
+        out_q[:] = np.nan
+        out_qerr[:] = np.nan
+        return np.nan, np.inf, walked, status
+    n = pts.shape[0]
+    # each basis leg's characteristic function up to its extent among the kept points
+    Phis = [np.ones(1, np.complex128), np.ones(1, np.complex128), np.ones(1, np.complex128)]
+    for j in range(d):
+        M = 0
+        for k in range(n):
+            M = max(M, abs(pts[k, j]))
+        Phi = np.ones(M + 1, np.complex128)
+        for m in range(1, M + 1):
+            nu_j = _TWO_PI * m / Q[j]
+            for t in range(T):
+                if grp[t] == j:
+                    x = mu[t, j] * nu_j
+                    c = common_cf(kind[t], par[t, 0], par[t, 1], x)
+                    Phi[m] *= c if c.real == c.real else term_cf(kind[t], par, t, tab, sp, buf, x)
+        Phis[j] = Phi
+    re = np.empty(max(n, 1))
+    ta = np.empty(max(n, 1))
+    tb = np.empty(max(n, 1))
+    tb_sum = transform_bound(d, z1, z2, 0.0, 0.0)
+    nu = np.zeros(3)
+    for k in range(n):
+        n0, n1, n2 = pts[k, 0], pts[k, 1], pts[k, 2]
+        nu[0] = _TWO_PI * n0 / Q[0]
+        nu[1] = _TWO_PI * n1 / Q[1]
+        nu[2] = _TWO_PI * n2 / Q[2]
+        phi = np.exp(1j * (snu[0] * nu[0] + snu[1] * nu[1] + snu[2] * nu[2]))
+        phi *= Phis[0][n0] if n0 >= 0 else np.conj(Phis[0][-n0])
+        phi *= Phis[1][n1] if n1 >= 0 else np.conj(Phis[1][-n1])
+        phi *= Phis[2][n2] if n2 >= 0 else np.conj(Phis[2][-n2])
+        for t in range(T):
+            if grp[t] == -1 or grp[t] == MIXED_LEG:
+                x = mu[t, 0] * nu[0] + mu[t, 1] * nu[1] + mu[t, 2] * nu[2]
+                c = common_cf(kind[t], par[t, 0], par[t, 1], x)
+                phi *= c if c.real == c.real else term_cf(kind[t], par, t, tab, sp, buf, x)
+        wx = Vinv[0, 0] * nu[0] + Vinv[0, 1] * nu[1] + Vinv[0, 2] * nu[2]
+        wy = Vinv[1, 0] * nu[0] + Vinv[1, 1] * nu[1] + Vinv[1, 2] * nu[2]
+        wz = Vinv[2, 0] * nu[0] + Vinv[2, 1] * nu[1] + Vinv[2, 2] * nu[2]
+        if d == 1:
+            pa, pb = abs(nu[0]), 0.0
+        elif d == 2:
+            pa, pb = math.sqrt(wx * wx + wy * wy), 0.0
+        else:
+            pa, pb = math.sqrt(wx * wx + wy * wy), abs(wz)
+        re[k] = phi.real
+        ta[k] = pa
+        tb[k] = pb
+        tb_sum += 2.0 * transform_bound(d, z1, z2, pa, pb)
+    fp = CF_ACCURACY * tb_sum / lam + 1e-15
+    bound = b_trunc + fp + alias
+    p_in = _prob(d, lam, re, ta, tb, n, zs, z2, sp[1])
+    # --- quantiles (d <= 2): the series' root, and where the series is below p - bound and above p + bound
+    for q in range(levels.size):
+        z = _solve(d, lam, re, ta, tb, n, levels[q], z0[q], zmax, sp)
+        zl = _beyond(d, lam, re, ta, tb, n, levels[q] - bound, z, zmax, -1.0, sp)
+        zh = _beyond(d, lam, re, ta, tb, n, levels[q] + bound, z, zmax, 1.0, sp)
+        out_q[q] = z
+        out_qerr[q] = max(z - zl, zh - z)
+    if status == 0 and bound > eps:
+        status = 1
+    return p_in, bound, walked, status
+
+
+@njit(cache=True, nogil=True)
+def batch_series(start, stop, d, kind, par, ev, tab, sp, grp, mu, snu, Q, Vinv, mnorm, ab, lam, z1, z2, zs, eps, alias,
+                 levels, z0, zmax, ok, out_p, out_b, out_n, out_s, out_q, out_qerr):
+    """:func:`pose_series` at poses ``start`` to ``stop`` of a batch (per-pose arrays indexed first); a pose
+    that is not ``ok`` (no basis of legs with a density) gets status 2 and NaN."""
+    for i in range(start, stop):
+        if not ok[i]:
+            out_p[i], out_b[i], out_n[i], out_s[i] = np.nan, np.inf, 0, 2
+            out_q[i, :] = np.nan
+            out_qerr[i, :] = np.nan
+            continue
+        out_p[i], out_b[i], out_n[i], out_s[i] = pose_series(
+            d, kind, par, ev, tab, sp, grp[i], mu[i], snu[i], Q[i], Vinv[i], mnorm[i], ab[i], lam[i], z1[i], z2[i], zs[i],
+            eps, alias[i], levels, z0[i], zmax[i], out_q[i], out_qerr[i])

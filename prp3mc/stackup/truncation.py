@@ -1,0 +1,596 @@
+"""Which lattice points the series keeps, and a rigorous bound of what it leaves out (compiled).
+
+The summand at a lattice point n is ``phi_Y(w) T_D(w) / |L|`` (:mod:`.series`).
+Its modulus is below the *envelope*
+
+    F(n) = prod_t env_t(``|c_t . w|``) * Tb(w) / ``|L|``,
+
+with env_t the terms' decreasing bounds (:func:`~.characteristic.envelope`)
+and Tb a bound of ``|T_D|`` valid for every radius up to the largest served.
+Both are symmetric under n -> -n, so half of the lattice is enumerated and
+every point stands for two.
+
+The lattice is cut into *rows*, lines along n_1 (the first basis leg), at
+fixed (n_2, n_3). Along a row, beyond the peaks of its factors (n_1 = 0 for
+the basis legs; where nu_3 = 0 for the position's third, "mixed" leg), the
+row's majorant
+
+    h(n_1) = E_1(nu_1) E_2(nu_2) E_3(nu_3) G_m(nu_m) tau(r) / ``|L|``
+
+(E_j: the product of basis leg j's envelopes; G_m: the mixed leg's; tau: a
+radial bound of ``|T_D|``; r = max_j ``|nu_j|`` / ``|m_j|`` <= ``|w|``) falls, and past a point
+U it falls at least as fast as (U / n_1)^p, p the sum of its factors' local
+powers (:func:`~.characteristic.envelope_power`), so ``sum_{n_1 > U} h <= h(U) kappa U / (p - 1)``
+(kappa >= 1 corrects for a peak on the other side). Each row is walked
+outward until both of its tails are within the row's share of the target.
+
+Which rows: all of them but a set whose whole sum is bounded at once. In 1-D
+there is one row. For the position, the rows with ``|n_2|`` > K_2: there the
+separable majorant ``g_1(n_1) g_2(n_2) G_m(nu_m)`` (g_j: E_j times the share
+(tau / ``|L|``)^(1/d)) sums along a row to at most ``min(S_1, G_m(|beta nu_2| / 2) S_1
++ g_1(|beta nu_2| / (2 |alpha|)) C_m)`` (nu_m = alpha nu_1 + beta nu_2, so one of
+``|nu_1|``, ``|nu_m|`` is large where ``|nu_2|`` is; S_1 = sum of g_1; C_m bounds the sum of
+G_m along a row by its integral), and K_2 is the smallest that leaves out
+at most a quarter of the target. For both channels (d = 3), every basis leg
+is separable: the rows are the points (n_2, n_3) of the cross
+``S_1 g_2(n_2) g_3(n_3) >= eta``, and what the cross leaves out is summed exactly
+from the 1-D sums of the g_j (explicit, then the analytic tail
+``sum_{n > N} g(n) <= g(N) N / (p - 1)``).
+
+Of the points walked, the smallest are dropped while their sum stays within
+0.4 of the target (log2 bins of F; the sum dropped is counted exactly).
+The bound is outer rows + row tails + dropped points.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ._special import C_J1
+from .lattice import MIXED_LEG
+from .characteristic import envelope, envelope_power
+
+__all__ = ["leg_envelope", "select_points", "transform_bound"]
+
+_TWO_PI = 2.0 * math.pi
+_SQRT2 = math.sqrt(2.0)
+_N_CAP = 1 << 20            # longest 1-D envelope array of a basis leg
+_BINS = 1400                # log2 bins of the envelope, from 2^-1300 up
+_WALK_CAP = 1 << 22         # farthest point of a row walk
+_MAX_POINTS = (1 << 23, 1 << 23, 1 << 18)   # most points walked at one pose, per dimension (beyond: status 3)
+
+
+# ------------------------------------------------------------------ bounds of the transform of D
+
+@njit(cache=True, nogil=True)
+def _disc_bound(S, u):
+    """Bound of ``|2 pi S' J1(S' u) / u|`` over S' <= S (``|J1(v)|`` <= v / 2 and <= C_J1 / sqrt(v))."""
+    if u <= 0.0:
+        return math.pi * S * S
+    return min(math.pi * S * S, 2.0 * math.pi * C_J1 * math.sqrt(S) / (u * math.sqrt(u)))
+
+
+@njit(cache=True, nogil=True)
+def _interval_bound(Z, u):
+    """Bound of ``|2 sin(Z' u) / u|`` over Z' <= Z."""
+    if u <= 0.0:
+        return 2.0 * Z
+    return min(2.0 * Z, 2.0 / u)
+
+
+@njit(cache=True, nogil=True)
+def _tau(d, z1, z2, r):
+    """Bound of ``|T_D(w)|`` over ``|w|`` >= r (every radius up to z1; the cylinder's half-height z2), non-increasing."""
+    if d == 1:
+        return _interval_bound(z1, r)
+    if d == 2:
+        return _disc_bound(z1, r)
+    u = r / _SQRT2          # either |w_xy| or |w_z| is at least |w| / sqrt 2
+    return max(_disc_bound(z1, u) * 2.0 * z2, math.pi * z1 * z1 * _interval_bound(z2, u))
+
+
+@njit(cache=True, nogil=True)
+def _tau_pow(d, z1, z2, r0):
+    """A power p with tau(r) <= tau(r0) (r0 / r)^p for r >= r0 > 0."""
+    if d == 1:
+        return 1.0 if 1.0 / r0 <= z1 else 0.0
+    if d == 2:
+        return 1.5 if 2.0 * C_J1 / (r0 * math.sqrt(r0 * z1)) <= z1 else 0.0
+    u = r0 / _SQRT2
+    pa = 1.5 if 2.0 * C_J1 / (u * math.sqrt(u * z1)) <= z1 else 0.0
+    pb = 1.0 if 1.0 / u <= z2 else 0.0
+    return min(pa, pb)
+
+
+@njit(cache=True, nogil=True)
+def transform_bound(d, z1, z2, a, b):
+    """Bound of ``|T_D|`` at a point: a = ``|nu|`` (d = 1), ``|w|`` (d = 2), ``|w_xy|`` (d = 3); b = ``|w_z|`` (d = 3)."""
+    if d == 1:
+        return _interval_bound(z1, a)
+    if d == 2:
+        return _disc_bound(z1, a)
+    return _disc_bound(z1, a) * _interval_bound(z2, b)
+
+
+# ------------------------------------------------------------------ a basis leg's envelope along its axis
+
+@njit(cache=True, nogil=True)
+def _leg_at(j, m, d, ev, grp, mu, Q, mnorm, lam, z1, z2):
+    """Basis leg j at n_j = m: its envelope product E_j, its share g_j = E_j (tau(nu_j / ``|m_j|``) / ``|L|``)^(1/d),
+    and the decay powers of g_j and of E_j there (0 at m = 0)."""
+    nu = _TWO_PI * m / Q[j]
+    e = 1.0
+    pe = 0.0
+    for t in range(ev.shape[0]):
+        if grp[t] == j:
+            x = abs(mu[t, j]) * nu
+            e *= envelope(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], x)
+            if m > 0:
+                pe += envelope_power(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], x)
+    r = nu / mnorm[j]
+    pg = pe + _tau_pow(d, z1, z2, r) / d if m > 0 else 0.0
+    return e, e * (_tau(d, z1, z2, r) / lam) ** (1.0 / d), pg, pe
+
+
+@njit(cache=True, nogil=True)
+def leg_envelope(j, d, ev, grp, mu, Q, mnorm, lam, z1, z2, g0, eta_lo):
+    """Leg j's E_j and g_j (:func:`_leg_at`) at n = 0..N, and ``Rs[m + 1] = sum_{|n| > m} g_j(|n|)``
+    (Rs[0]: the whole sum), the tail past N analytic: ``2 g(N) N / (p - 1)``. N: where g_j times the other
+    legs' g(0) is below ``eta_lo`` with a decay power above 1 (past it, :func:`_leg_at` gives E_j on demand).
+    Returns (g, E, Rs, SE, ok): SE = sum_{n in Z} E_j(``|n|``) (inf when E_j's power stays at or below 1); not
+    ok when g_j's does (no finite sum)."""
+    cap = 256
+    g = np.empty(cap)
+    E = np.empty(cap)
+    m = 0
+    p = 0.0
+    while True:
+        e, gm, p, pe = _leg_at(j, m, d, ev, grp, mu, Q, mnorm, lam, z1, z2)
+        if m == cap:
+            cap *= 2
+            g2 = np.empty(cap)
+            E2 = np.empty(cap)
+            g2[:m] = g[:m]
+            E2[:m] = E[:m]
+            g, E = g2, E2
+        g[m] = gm
+        E[m] = e
+        if m >= 1 and p > 1.0 and gm * g0 ** (d - 1) < eta_lo:
+            break
+        if m >= _N_CAP:
+            if p <= 1.0:
+                return g[:m + 1], E[:m + 1], np.full(m + 2, np.inf), np.inf, False
+            break
+        m += 1
+    N = m
+    Rs = np.empty(N + 2)
+    Rs[N + 1] = 2.0 * g[N] * N / (p - 1.0)
+    for k in range(N, 0, -1):
+        Rs[k] = Rs[k + 1] + 2.0 * g[k]
+    Rs[0] = Rs[1] + g[0]
+    SE = np.inf
+    if pe > 1.0:
+        SE = E[0] + 2.0 * (E[1:N + 1].sum() + E[N] * N / (pe - 1.0))
+    return g[:N + 1], E[:N + 1], Rs, SE, True
+
+
+@njit(cache=True, nogil=True)
+def _at(g, x):
+    """g at a real index x >= 0 from below (g non-increasing): g[floor x], or its last value beyond."""
+    i = int(x)
+    return g[min(i, g.size - 1)]
+
+
+# ------------------------------------------------------------------ the position's third (mixed) leg
+
+@njit(cache=True, nogil=True)
+def _mixed(ev, grp, mu, ab, ax3):
+    """The mixed leg's envelope product G_m at ``|nu_m|`` = ax3 and its decay power there (0 at ax3 = 0)."""
+    e = 1.0
+    p = 0.0
+    norm = math.sqrt(ab[0] * ab[0] + ab[1] * ab[1])
+    for t in range(ev.shape[0]):
+        if grp[t] == MIXED_LEG:
+            x = math.sqrt(mu[t, 0] ** 2 + mu[t, 1] ** 2) / norm * ax3
+            e *= envelope(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], x)
+            if ax3 > 0:
+                p += envelope_power(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], x)
+    return e, p
+
+
+@njit(cache=True, nogil=True)
+def _mixed_row_sum(ev, grp, mu, ab, delta):
+    """Bound of sum_k G_m(x0 + k delta) over k in Z, any x0: max G_m + (2 / delta) int_0^inf G_m
+    (G_m even and non-increasing in ``|x|``); the integral by left sums on a geometric grid (ratio 1.02,
+    from x0 with G_m <= 1 below it), then its analytic tail. inf when there is no mixed leg or G_m
+    does not decay faster than 1/x."""
+    kmax = 0.0
+    norm = math.sqrt(ab[0] * ab[0] + ab[1] * ab[1])
+    for t in range(ev.shape[0]):
+        if grp[t] == MIXED_LEG:
+            kmax = max(kmax, math.sqrt(mu[t, 0] ** 2 + mu[t, 1] ** 2) / norm)
+    if kmax == 0.0 or delta <= 0.0:
+        return np.inf
+    x = 1e-6 / kmax
+    acc = x
+    for _ in range(20000):
+        e, p = _mixed(ev, grp, mu, ab, x)
+        if p > 1.0 and e * x / (p - 1.0) <= 1e-6 * acc:
+            return 1.0 + 2.0 * (acc + e * x / (p - 1.0)) / delta
+        acc += e * 0.02 * x
+        x *= 1.02
+    return np.inf
+
+
+@njit(cache=True, nogil=True)
+def _row_bound(nu2, S1, cm, g1, Q0, ev, grp, mu, ab):
+    """Bound of a position row's sum of g_1(n_1) G_m(nu_m) at ``|nu_2|`` = nu2 (g_1 non-increasing, S1 its sum over
+    the row): at most S1 (G_m <= 1), and, as one of ``|nu_1|`` >= ``|beta|`` nu2 / (2 ``|alpha|``), ``|nu_m|`` >= ``|beta|`` nu2 / 2
+    holds at every point, G_m(``|beta|`` nu2 / 2) S1 + g_1(``|beta|`` nu2 / (2 ``|alpha|``)) C_m."""
+    alpha, beta = ab[0], ab[1]
+    b = S1
+    if beta != 0.0 and cm < np.inf:
+        gmv, _ = _mixed(ev, grp, mu, ab, 0.5 * abs(beta) * nu2)
+        g1v = _at(g1, abs(beta) * nu2 / (2.0 * abs(alpha)) * Q0 / _TWO_PI) if alpha != 0.0 else 0.0
+        b = min(b, gmv * S1 + g1v * cm)
+    return b
+
+
+# ------------------------------------------------------------------ the rows
+
+@njit(cache=True, nogil=True)
+def _point(d, n1, n2, n3, E1, E2, E3, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2, nu):
+    """The envelope F at n (``nu`` is set to the point's nu)."""
+    nu[0] = _TWO_PI * n1 / Q[0]
+    nu[1] = _TWO_PI * n2 / Q[1]
+    nu[2] = _TWO_PI * n3 / Q[2]
+    f = (_leg_value(0, abs(n1), E1, d, ev, grp, mu, Q, mnorm, lam, z1, z2)
+         * _leg_value(1, abs(n2), E2, d, ev, grp, mu, Q, mnorm, lam, z1, z2)
+         * _leg_value(2, abs(n3), E3, d, ev, grp, mu, Q, mnorm, lam, z1, z2))
+    for t in range(ev.shape[0]):
+        if grp[t] == MIXED_LEG or grp[t] == -1:
+            x = mu[t, 0] * nu[0] + mu[t, 1] * nu[1] + mu[t, 2] * nu[2]
+            f *= envelope(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], abs(x))
+    wx = Vinv[0, 0] * nu[0] + Vinv[0, 1] * nu[1] + Vinv[0, 2] * nu[2]
+    wy = Vinv[1, 0] * nu[0] + Vinv[1, 1] * nu[1] + Vinv[1, 2] * nu[2]
+    if d == 1:
+        tb = transform_bound(d, z1, z2, abs(nu[0]), 0.0)
+    elif d == 2:
+        tb = transform_bound(d, z1, z2, math.sqrt(wx * wx + wy * wy), 0.0)
+    else:
+        wz = Vinv[2, 0] * nu[0] + Vinv[2, 1] * nu[1] + Vinv[2, 2] * nu[2]
+        tb = transform_bound(d, z1, z2, math.sqrt(wx * wx + wy * wy), abs(wz))
+    return f * tb / lam
+
+
+@njit(cache=True, nogil=True)
+def _factor_tail(value, c, U, p, acc):
+    """Fold a factor of the row (its value at U, its peak c along the row, its decay power p at U) into
+    ``acc = (product of dropped factors, total power, smallest peak)``: past U >= c the factor falls at
+    least as ((U - c) / (n - c))^p, and (U - c) / (x - c) only grows as c falls, so the product of the
+    factors kept falls at least as ((U - c_min) / (x - c_min))^P; a factor whose peak lies beyond U may
+    still rise: it is dropped (bounded by 1)."""
+    if c > U:
+        acc[0] *= value
+    elif p > 0.0:
+        acc[1] += p
+        acc[2] = min(acc[2], c)
+
+
+@njit(cache=True, nogil=True)
+def _row_tail(d, s, U, f, n2, n3, ev, grp, mu, Q, Vinv, lam, z1, z2):
+    """Bound of F summed over the row's points beyond U on side s (n_1 = s U, s U + s, ...), from F's value
+    f there: every factor of F is an envelope of ``|an affine function of n_1|`` (the transform's of the
+    norm of one), non-increasing past its peak (see :func:`_factor_tail`), so
+    ``sum_{n > U} F <= int_U^inf f / dropped ((U - c_min) / (x - c_min))^P dx = f / dropped (U - c_min) / (P - 1)``."""
+    acc = np.array([1.0, 0.0, float(U)])      # dropped factors' product, total power, smallest peak
+    nu1 = _TWO_PI * s * U / Q[0]
+    nu2 = _TWO_PI * n2 / Q[1]
+    nu3 = _TWO_PI * n3 / Q[2]
+    step = _TWO_PI * s / Q[0]                 # nu_1 per step along the side
+    for t in range(ev.shape[0]):
+        g = grp[t]
+        if g == 0 or g == MIXED_LEG or g == -1:
+            slope = mu[t, 0] * step
+            x = mu[t, 0] * nu1 + mu[t, 1] * nu2 + mu[t, 2] * nu3
+            if slope == 0.0:
+                continue                      # constant along the row
+            c = U - x / slope                 # where the argument crosses 0, in steps from the origin
+            ax = abs(x)
+            _factor_tail(envelope(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], ax), c, U, envelope_power(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], ax), acc)
+    # the transform: |w_xy| is the norm of an affine function of n_1, |w_z| and |nu_1| are affine
+    vx, vy, vz = Vinv[0, 0] * step, Vinv[1, 0] * step, Vinv[2, 0] * step
+    wx = Vinv[0, 0] * nu1 + Vinv[0, 1] * nu2 + Vinv[0, 2] * nu3
+    wy = Vinv[1, 0] * nu1 + Vinv[1, 1] * nu2 + Vinv[1, 2] * nu3
+    wz = Vinv[2, 0] * nu1 + Vinv[2, 1] * nu2 + Vinv[2, 2] * nu3
+    if d == 1:
+        _factor_tail(_interval_bound(z1, abs(nu1)), 0.0, U, _tau_pow(1, z1, z2, abs(nu1)), acc)
+    else:
+        a = math.sqrt(wx * wx + wy * wy)
+        vv = vx * vx + vy * vy
+        if vv > 0.0:
+            c = U - (wx * vx + wy * vy) / vv
+            _factor_tail(_disc_bound(z1, a), c, U, _tau_pow(2, z1, z2, a) if a > 0 else 0.0, acc)
+        if d == 3 and vz != 0.0:
+            _factor_tail(_interval_bound(z2, abs(wz)), U - wz / vz, U,
+                         _tau_pow(1, z2, z2, abs(wz)) if wz != 0 else 0.0, acc)
+    if acc[1] <= 1.0 or acc[0] <= 0.0:
+        return np.inf
+    return f / acc[0] * (U - acc[2]) / (acc[1] - 1.0)
+
+
+@njit(cache=True, nogil=True)
+def _walk_row(d, n2, n3, origin, budget, E1, E2, E3, ev, grp, mu, Q, Vinv, mnorm, lam,
+              z1, z2, nu, pts, F, count):
+    """Walk the row (n2, n3) outward from n_1 = 0, appending its points (n, F) from ``count`` on, until each
+    tail (:func:`_row_tail`, tried at every 4th point) is within half the budget. Returns
+    (count, tails, pts, F, ok)."""
+    tails = 0.0
+    ok = True
+    for side in range(2):
+        if origin and side == 1:
+            break
+        s = 1 if side == 0 else -1
+        U = 1 if (origin or side == 1) else 0             # side 0 holds n1 = 0 (origin row: n1 >= 1)
+        while True:
+            if U > _WALK_CAP:
+                ok = False
+                break
+            f = _point(d, s * U, n2, n3, E1, E2, E3, ev, grp, mu, Q, Vinv, mnorm, lam, z1,
+                       z2, nu)
+            if count == F.size:
+                F2 = np.empty(2 * F.size)
+                F2[:count] = F
+                P2 = np.empty((2 * F.size, 3), np.int64)
+                P2[:count] = pts
+                F, pts = F2, P2
+            pts[count, 0], pts[count, 1], pts[count, 2] = s * U, n2, n3
+            F[count] = f
+            count += 1
+            if U >= 1 and U % 4 == 0:
+                tail = _row_tail(d, s, U, f, n2, n3, ev, grp, mu, Q, Vinv, lam, z1, z2)
+                if tail <= 0.5 * budget:
+                    tails += tail
+                    break
+            U += 1
+        if not ok:
+            tails += np.inf
+    return count, tails, pts, F, ok
+
+
+@njit(cache=True, nogil=True)
+def _leg_value(j, m, E, d, ev, grp, mu, Q, mnorm, lam, z1, z2):
+    """E_j at ``|n_j|`` = m: from the array, or on demand past its end."""
+    if m < E.size:
+        return E[m]
+    return _leg_at(j, m, d, ev, grp, mu, Q, mnorm, lam, z1, z2)[0]
+
+
+@njit(cache=True, nogil=True)
+def _rows_3d(E2, E3, SE, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2, e_part):
+    """The rows (n2, n3) of the 3-D channel (half-plane, the origin's first), each with a bound of its whole
+    sum, and the bound of what they leave out (outer rows, tails of the row walks). A row's points lie on
+    a line in w, w(n_1) = n_1 v + w_0: ``|T_D|`` <= D(d_xy) 2Z along it, d_xy = ``|a_2 nu_2 + a_3 nu_3|`` its closest
+    approach to 0 in xy; so the row sums to at most E_2 E_3 D(d_xy) S_1 2Z / ``|L|`` (S_j: sum of E_j). For
+    ``|n_3|`` > K_3 the sum over n_2 of E_2 D(``|a_2 nu_2 + a_3 nu_3|``) is at most S_2 D(``|a_3 nu_3|`` / 2)
+    + E_2(``|a_3 nu_3|`` / (2 ``|a_2|``)) C_D (one of the two arguments is that large; C_D bounds D's sum along
+    n_2 by its integral); for each ``|n_3|`` <= K_3, n_2 is walked from its peaks until the tail is within budget.
+    Returns (rows, row_sum, outer, tails, status)."""
+    d = 3
+    S1E, S2E = SE[0], SE[1]
+    head = S1E * 2.0 * z2 / lam
+    vx, vy = Vinv[0, 0], Vinv[1, 0]
+    vn = math.sqrt(vx * vx + vy * vy)
+    ux, uy = vx / vn, vy / vn
+    a2 = ux * Vinv[1, 1] - uy * Vinv[0, 1]
+    a3 = ux * Vinv[1, 2] - uy * Vinv[0, 2]
+    cj = 2.0 * math.pi * C_J1 * math.sqrt(z1)        # D(u) = min(pi S², cj u^-1.5)
+    knee = (cj / (math.pi * z1 * z1)) ** (2.0 / 3.0)
+    int_d = knee * math.pi * z1 * z1 + 2.0 * cj / math.sqrt(knee)
+    cd = math.pi * z1 * z1 + 2.0 * int_d / (abs(a2) * _TWO_PI / Q[1]) if a2 != 0.0 else np.inf
+    N3 = E3.size - 1
+
+    def b3(k):
+        nu3 = _TWO_PI * k / Q[2]
+        b = S2E * math.pi * z1 * z1
+        if a2 != 0.0 and a3 != 0.0:
+            e2 = _leg_value(1, int(abs(a3) * nu3 / (2.0 * abs(a2)) * Q[1] / _TWO_PI), E2, d, ev, grp, mu, Q, mnorm,
+                            lam, z1, z2)
+            b = min(b, e2 * cd + _disc_bound(z1, 0.5 * abs(a3) * nu3) * S2E)
+        return b
+
+    pe3 = _leg_at(2, N3, d, ev, grp, mu, Q, mnorm, lam, z1, z2)[3]
+    suffix = np.empty(N3 + 2)
+    suffix[N3 + 1] = 2.0 * E3[N3] * N3 / (pe3 - 1.0) * b3(N3) * head if pe3 > 1.0 else np.inf
+    for k in range(N3, 0, -1):
+        suffix[k] = suffix[k + 1] + 2.0 * E3[k] * b3(k) * head
+    K3 = N3
+    for k in range(N3 + 1):
+        if suffix[k + 1] <= e_part:
+            K3 = k
+            break
+    outer = suffix[K3 + 1]
+    status = 1 if outer > e_part else 0
+    budget = e_part / (2.0 * (K3 + 1))
+    rows = np.zeros((256, 2), np.int64)
+    row_sum = np.empty(256)
+    row_sum[0] = np.inf                   # the origin's row
+    count = 1
+    tails = 0.0
+    acc = np.zeros(3)
+    for n3 in range(K3 + 1):
+        nu3 = _TWO_PI * n3 / Q[2]
+        e3 = E3[n3]
+        for side in range(2):
+            if n3 == 0 and side == 1:
+                break
+            s = 1 if side == 0 else -1
+            U = 1 if (n3 == 0 or side == 1) else 0
+            while True:
+                nu2 = _TWO_PI * s * U / Q[1]
+                x = a2 * nu2 + a3 * nu3
+                e2 = _leg_value(1, U, E2, d, ev, grp, mu, Q, mnorm, lam, z1, z2)
+                rb = e2 * e3 * head * _disc_bound(z1, abs(x))
+                if count == rows.shape[0]:
+                    r2 = np.zeros((2 * count, 2), np.int64)
+                    s2 = np.empty(2 * count)
+                    r2[:count] = rows
+                    s2[:count] = row_sum
+                    rows, row_sum = r2, s2
+                rows[count, 0], rows[count, 1] = s * U, n3
+                row_sum[count] = rb
+                count += 1
+                if U >= 1 and U % 4 == 0:
+                    acc[0], acc[1], acc[2] = 1.0, 0.0, float(U)
+                    _factor_tail(e2, 0.0, U, _leg_at(1, U, d, ev, grp, mu, Q, mnorm, lam, z1, z2)[3], acc)
+                    slope = a2 * _TWO_PI * s / Q[1]
+                    if slope != 0.0:
+                        ax = abs(x)
+                        _factor_tail(_disc_bound(z1, ax), U - x / slope, U,
+                                     1.5 if ax > 0 and cj / (ax * math.sqrt(ax)) <= math.pi * z1 * z1 else 0.0, acc)
+                    tail = np.inf if acc[1] <= 1.0 or acc[0] <= 0.0 else rb / acc[0] * (U - acc[2]) / (acc[1] - 1.0)
+                    if tail <= 0.5 * budget:
+                        tails += tail
+                        break
+                if U > _WALK_CAP or count > _MAX_POINTS[2]:
+                    return rows[:count], row_sum[:count], np.inf, np.inf, 3
+                U += 1
+    return rows[:count], row_sum[:count], outer, 2.0 * tails, status
+
+
+@njit(cache=True, nogil=True)
+def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
+    """The lattice points the series keeps (half of the lattice; n -> -n gives the rest) and the bound.
+
+    Returns
+    -------
+    pts : ndarray (n, 3) int64
+        The kept points.
+    bound : float
+        Outer rows + row tails + dropped points (the series' truncation error is below it).
+    lattice_points : int
+        Points walked (before dropping).
+    status : int
+        0; 1 when the bound could not be brought within 0.9 eps; 2 when there is none (a basis leg's
+        envelope sums to infinity); 3 when the points needed exceed 2^23 (2^18 for d = 3, whose caller
+        then falls back on a bracket).
+    """
+    empty = np.zeros((0, 3), np.int64)
+    g_origin = (_tau(d, z1, z2, 0.0) / lam) ** (1.0 / d)
+    eta_lo = 1e-2 * eps                          # the 1-D arrays' end: past it E_j comes on demand
+    one = np.ones(1)
+    zero_tail = np.array([1.0, 0.0])
+    gs = [one, one, one]
+    Es = [one, one, one]
+    Rs = [zero_tail, zero_tail, zero_tail]
+    SEs = np.ones(3)
+    for j in range(d):
+        g, E, R, SEs[j], ok = leg_envelope(j, d, ev, grp, mu, Q, mnorm, lam, z1, z2,
+                                   g_origin, eta_lo)
+        if not ok:
+            return empty, np.inf, 0, 2
+        gs[j], Es[j], Rs[j] = g, E, R
+    status = 0
+    e_outer, e_skip, e_rows, e_drop = 0.2 * eps, 0.15 * eps, 0.15 * eps, 0.4 * eps
+    # --- the rows: (n2, n3) pairs of the half-plane, the origin's row first
+    rows = np.zeros((1, 2), np.int64)
+    row_sum = np.full(1, np.inf)         # a bound of each row's whole sum (the origin's row is never skipped)
+    outer = 0.0
+    if d == 2:
+        S1, S1E = Rs[0][0], SEs[0]
+        cm = _mixed_row_sum(ev, grp, mu, ab, abs(ab[0]) * _TWO_PI / Q[0])
+        g1, g2, R2, E1, E2 = gs[0], gs[1], Rs[1], Es[0], Es[1]
+        N2 = g2.size - 1
+        # a row's whole sum, two ways: g_1 g_2 G_m (the transform shared) summed along the row, or
+        # E_1 E_2 G_m times the transform's bound at the row's closest approach to w = 0 (|nu_2| d_perp)
+        v0x, v0y, v1x, v1y = Vinv[0, 0], Vinv[1, 0], Vinv[0, 1], Vinv[1, 1]
+        along = (v1x * v0x + v1y * v0y) / (v0x * v0x + v0y * v0y)
+        d_perp = math.sqrt((v1x - along * v0x) ** 2 + (v1y - along * v0y) ** 2)
+        RB = np.zeros(N2 + 1)
+        for k in range(1, N2 + 1):
+            nu2 = _TWO_PI * k / Q[1]
+            RB[k] = g2[k] * _row_bound(nu2, S1, cm, g1, Q[0], ev, grp, mu, ab)
+            if S1E < np.inf:
+                RB[k] = min(RB[k], E2[k] * _disc_bound(z1, nu2 * d_perp) / lam
+                            * _row_bound(nu2, S1E, cm, E1, Q[0], ev, grp, mu, ab))
+        # rows |n2| > K: the rows up to the arrays' end, then g_2's tail times the bound at the end (non-increasing)
+        suffix = np.empty(N2 + 2)
+        suffix[N2 + 1] = R2[N2 + 1] * _row_bound(_TWO_PI * N2 / Q[1], S1, cm, g1, Q[0], ev, grp, mu, ab)
+        for k in range(N2, 0, -1):
+            suffix[k] = suffix[k + 1] + 2.0 * RB[k]
+        K2 = N2
+        for k in range(N2 + 1):
+            if suffix[k + 1] <= e_outer:
+                K2 = k
+                break
+        outer = suffix[K2 + 1]
+        if outer > e_outer:
+            status = 1
+        rows = np.zeros((K2 + 1, 2), np.int64)
+        row_sum = np.full(K2 + 1, np.inf)
+        for k in range(K2 + 1):
+            rows[k, 0] = k
+            if k > 0:
+                row_sum[k] = RB[k]
+    elif d == 3:
+        if not (SEs[0] < np.inf and SEs[1] < np.inf and SEs[2] < np.inf):
+            return empty, np.inf, 0, 2
+        rows, row_sum, outer, tails2, st = _rows_3d(Es[1], Es[2], SEs, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2,
+                                                    0.5 * e_outer)
+        outer += tails2
+        status = max(status, st)
+    # --- skip the rows of smallest whole sums while they add up to at most e_skip; walk the others
+    order = np.argsort(row_sum)
+    skipped = 0.0
+    walk = np.ones(rows.shape[0], np.bool_)
+    for k in order:
+        if skipped + 2.0 * row_sum[k] > e_skip:
+            break
+        skipped += 2.0 * row_sum[k]
+        walk[k] = False
+    n_rows = max(1, int(walk.sum()))
+    budget = e_rows / (2.0 * n_rows)
+    pts = np.empty((4096, 3), np.int64)
+    F = np.empty(4096)
+    count = 0
+    tails = 0.0
+    nu = np.zeros(3)
+    for k in range(rows.shape[0]):
+        if count > _MAX_POINTS[d - 1]:
+            return empty, np.inf, count, 3
+        if not walk[k]:
+            continue
+        n2, n3 = rows[k, 0], rows[k, 1]
+        count, t, pts, F, ok = _walk_row(d, n2, n3, k == 0, budget, Es[0], Es[1], Es[2], ev, grp, mu, Q, Vinv,
+                                         mnorm, lam, z1, z2, nu, pts, F, count)
+        tails += 2.0 * t
+        if not ok:
+            status = max(status, 1)
+    # --- drop the smallest points while their sum stays within e_drop (log2 bins)
+    bins = np.zeros(_BINS)
+    for i in range(count):
+        if F[i] > 0.0:
+            bins[min(_BINS - 1, max(0, int(math.floor(math.log2(F[i]))) + 1300))] += 2.0 * F[i]
+    cut = 0
+    acc = 0.0
+    for k in range(_BINS):
+        if acc + bins[k] > e_drop:
+            break
+        acc += bins[k]
+        cut = k + 1
+    threshold = 2.0 ** (cut - 1300)
+    kept = 0
+    dropped = 0.0
+    for i in range(count):
+        if F[i] >= threshold:
+            pts[kept] = pts[i]
+            kept += 1
+        else:
+            dropped += 2.0 * F[i]
+    bound = outer + skipped + tails + dropped
+    if status == 0 and bound > 0.9 * eps:
+        status = 1
+    return pts[:kept].copy(), bound, count, status
