@@ -2,10 +2,7 @@
 
 from pathlib import Path
 
-from ..kinematics.geometry import Geometry, Region
-from ..measurement.campaign.plan import plan_campaign
 from ..output import OutputExistsError
-from ..model.budget import Budget
 from . import (add_budget, add_geometry, add_instrument_noise, add_json, add_seed, command, emit_json, finite_float,
                positive_float, positive_int, probability, provenance)
 
@@ -50,6 +47,9 @@ class PlanCommand:
 
     @staticmethod
     def run(args) -> None:
+        from ..kinematics.geometry import Geometry, Region
+        from ..measurement.campaign.plan import plan_campaign
+        from ..model.budget import Budget
         if args.template.exists() and not args.force:
             raise OutputExistsError(f"{args.template} exists: choose another name or pass --force to replace it")
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
