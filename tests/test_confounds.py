@@ -73,7 +73,7 @@ def test_a_cycled_temperature_names_thermal():
 
 @pytest.mark.slow
 def test_warming_and_cycled_rates_over_seeds():
-    """20 seeds each (bench_plan.py --thermal measured 20 seeds, docs/guide/discrepancy.md). Rising: thermal
+    """20 seeds each (bench_plan.py --thermal measured 16 seeds, docs/guide/discrepancy.md). Rising: thermal
     is never swallowed (not named while the verdict says explained or nothing missing); a true swallow rate of
     5 % gives at most 3 of 20 with probability 0.98. Cycled: named with its value in its interval; at a true
     rate of 0.9, 16 or more of 20 with probability 0.96."""
