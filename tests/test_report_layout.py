@@ -5,7 +5,7 @@ layout engine (prp3mc.reports._layout). Drawn here for small studies that
 vary what the margins must hold: two configurations, one of them over a
 wide region, with long names; a budget of constant inputs (constant fields, no extrema,
 undefined Sobol indices), a sweep (the design-space figure, its best three
-configurations; slow) and an allocation (its map and Pareto front). In every
+configurations; slow), an allocation (its map and Pareto front) and a spec (the exceedance curves; slow). In every
 figure, every panel with its tick labels, labels, title and legend, and the
 figure's title, lies inside the canvas, and no two of them overlap.
 """
@@ -32,6 +32,7 @@ STUDIES = {
              '["theta_1", "theta_2", "theta_3"] }').replace('name = "delta"', 'name = "delta-shape, a wide region"'),
     "constant budget": _replace('budget = "paper"', 'budget = "zero.toml"').replace("grid = 9", "grid = 3", 1),
     "sweep": SWEEP.format(outputs='["montecarlo", "sobol"]'),
+    "spec": SMALL + "\n[spec]\nposition_um = 80\n",            # the exceedance curves (slow: the exact yield)
     "allocation": ALLOCATION,
 }
 
@@ -57,7 +58,7 @@ def _parts(fig):
     return parts
 
 
-@pytest.fixture(scope="module", params=[pytest.param(k, marks=pytest.mark.slow) if k == "sweep" else k
+@pytest.fixture(scope="module", params=[pytest.param(k, marks=pytest.mark.slow) if k in ("sweep", "spec") else k
                                         for k in STUDIES])
 def figures(request, tmp_path_factory):
     folder = tmp_path_factory.mktemp("layout")

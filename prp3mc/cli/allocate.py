@@ -30,7 +30,7 @@ class AllocateCommand:
                        help="worst-case |dphi| bound, arcsec")
         p.add_argument("--spec-percentile", type=finite_float, default=None, metavar="Q",
                        help="bound the Q-th percentile of the position error instead of its worst case "
-                            "(screened with closed-form moments, confirmed by Monte Carlo)")
+                            "(decided on the exact distribution, confirmed by Monte Carlo)")
         p.add_argument("--phi-deg", type=finite_float, default=None, metavar="P",
                        help="platform orientation of the region, deg (default: the region's own, 0 for the presets)")
         p.add_argument("--grid", type=positive_int, default=41, metavar="N", help="N x N grid (default 41)")
@@ -106,7 +106,8 @@ def _text(r, args, front) -> str:
         lines.append(f"p{st['percentile']:g} of the position error: screen {MM2UM * st['screen_mm']:.3f} µm; "
                      f"Monte Carlo {MM2UM * st['percentile_mm']:.3f} µm, 95 % upper bound "
                      f"{MM2UM * st['ci_high_mm']:.3f} µm ({st['n_samples']} samples, seed {st['seed']}): "
-                     + ("confirmed" if st["confirmed"] else "NOT confirmed"))
+                     + ("confirmed" if st["confirmed"] else "NOT confirmed")
+                     + f"; decided by {st['method']}" + (" (proven least cost)" if st["proven"] else ""))
     if front is not None:
         lines += ["", "Pareto front (cost, worst-case position µm, |dphi| arcsec):"]
         wide = front.pivot_table(index=["point", "cost"], columns="output", values="value").reset_index()

@@ -6,7 +6,7 @@
     report.html            self-contained (figures embedded as PNG data URIs)
     summary.json           summary statistics with standard errors (prp3mc.summary)
     figures/*.png          every figure of the report (and *.svg on request)
-    tables/*.csv           summary, worst-case and Monte Carlo grids, Sobol indices and rankings,
+    tables/*.csv           summary, worst-case, Monte Carlo and exact-yield grids, Sobol indices and rankings,
                            worst-case contributions, the budget, allocated classes and fronts
 
 The report is built from a :class:`~prp3mc.study.results.StudyResult` only;
@@ -114,7 +114,7 @@ def _family_shares(result: StudyResult, contributions: dict[str, pd.DataFrame]) 
     rows = []
     for c in result.configurations:
         frame = contributions[c.name]
-        fam = pd.Series(frame["contribution"].to_numpy(), index=[t.rsplit("_", 1)[0] for t in frame["term"]])
+        fam = pd.Series(frame["contribution_mm"].to_numpy(), index=[t.rsplit("_", 1)[0] for t in frame["term"]])
         worst = float(c.worst_case.position_mm[_worst_index(c)])
         for f, v in fam.groupby(level=0).sum().items():  # no share of a zero worst case (a budget of constant inputs)
             rows.append({"configuration": c.name, "family": f, "contribution_um": MM2UM * v,
@@ -122,15 +122,37 @@ def _family_shares(result: StudyResult, contributions: dict[str, pd.DataFrame]) 
     return pd.DataFrame(rows)
 
 
-def _worst_pose(c) -> str:
-    """The pose where a configuration's worst-case position error is largest, for labels."""
-    x, y, phi = c.worst_case.poses[_worst_index(c)]
+def _pose_text(pose) -> str:
+    """``x = .. mm, y = .. mm, φ = ..°`` of a pose ``[x_mm, y_mm, phi_deg]``, for labels."""
+    x, y, phi = pose
     return f"x = {x:.4g} mm, y = {y:.4g} mm, φ = {phi:.4g}°"
 
 
+def _worst_pose(c) -> str:
+    """The pose where a configuration's worst-case position error is largest, for labels."""
+    return _pose_text(c.worst_case.poses[_worst_index(c)])
+
+
 def _contributions(c) -> pd.DataFrame:
-    """Worst-case contributions at the configuration's worst pose."""
-    return c.worst_case.contributions_frame("position", _worst_index(c))
+    """Worst-case contributions at the configuration's worst pose, largest share first, a unit in every name.
+
+    Columns: the pose (``x_mm``, ``y_mm``, ``phi_deg``), ``output``, ``term``,
+    the term's value at the maximum in its unit (``term_value_mm`` for
+    lengths, ``term_value_deg`` for angles, ``term_value_other`` with
+    ``term_unit_other`` for a temperature or a scale; empty elsewhere),
+    ``contribution_mm`` (its projection on the worst error vector) and
+    ``share`` (of the worst case, 0-1).
+    """
+    frame = c.worst_case.contributions_frame("position", _worst_index(c))
+    unit = frame["term"].str.replace(r"_\d$", "", regex=True).map(_TERM_UNITS).fillna("")
+    value = frame["term_value"]
+    other = ~unit.isin(["mm", "deg"])
+    out = frame.drop(columns=["term_value", "contribution", "share"]).assign(
+        term_value_mm=value.where(unit == "mm"), term_value_deg=value.where(unit == "deg"))
+    if other.any():
+        out = out.assign(term_value_other=value.where(other), term_unit_other=unit.where(other, ""))
+    out = out.assign(contribution_mm=frame["contribution"], share=frame["share"])
+    return out.sort_values("share", ascending=False, kind="stable").reset_index(drop=True)
 
 
 #: Unit of a term's value in a contributions table, by family (the budget's inputs and effects).
@@ -140,12 +162,13 @@ _TERM_UNITS = {**dict.fromkeys(("a", "b", "c", "e", "rho", "backlash"), "mm"),
 
 
 def _contributions_display(frame: pd.DataFrame) -> pd.DataFrame:
-    """Worst-case contributions for the report: largest share first, the term's value with its unit, µm and %."""
-    family = frame["term"].str.replace(r"_\d$", "", regex=True)
-    return (frame.assign(**{"value": frame["term_value"], "unit": family.map(_TERM_UNITS).fillna(""),
-                            "contribution (µm)": MM2UM * frame["contribution"], "share (%)": 100 * frame["share"]})
-            .sort_values("share (%)", ascending=False, kind="stable")
-            [["term", "value", "unit", "contribution (µm)", "share (%)"]])
+    """Worst-case contributions for the report (largest share first): the term's value in µm or arcsec (or its
+    own unit), its contribution in µm and its share in %."""
+    out = pd.DataFrame({"term": frame["term"], "value (µm)": MM2UM * frame["term_value_mm"],
+                        "value (arcsec)": DEG2ARCSEC * frame["term_value_deg"]})
+    if "term_value_other" in frame:
+        out = out.assign(**{"value (other)": frame["term_value_other"], "unit (other)": frame["term_unit_other"]})
+    return out.assign(**{"contribution (µm)": MM2UM * frame["contribution_mm"], "share (%)": 100 * frame["share"]})
 
 
 def _grid_frame(c) -> pd.DataFrame:
@@ -162,18 +185,30 @@ def _html_table(df: pd.DataFrame, digits: int = 4) -> str:
                       na_rep="")
 
 
+#: The exact yield's statistics the summary table shows, and how it names them.
+_YIELD_SHOWN = {"exceed_ppm": "P(> spec)", "p99.73": "p99.73", "p99.9937": "p99.9937", "p99.9999": "p99.9999",
+                "rss": "RSS stack"}
+
+
 def _summary_display(frame: pd.DataFrame) -> pd.DataFrame:
     """The summary frame in report units (µm, arcsec): one row per statistic with min, max, mean, se of max."""
     keys = ["configuration", "analysis", "output", "statistic"]
     rows = []
     for key, g in frame.groupby(keys, sort=False):
         by = g.set_index("aggregate")
-        factor, unit = DISPLAY[key[2]]
-        statistic = key[3].replace("_", " ")
-        if key[3].startswith("exceed_"):          # a probability: % from 1 % up, else ppm
+        if key[1] == "exact_yield":              # the figures the glance does not show in full: P(> spec), quantiles
+            if key[3] not in _YIELD_SHOWN:
+                continue
+            factor, unit = (1.0, "ppm") if key[3] == "exceed_ppm" else DISPLAY[key[2]]
+            statistic = _YIELD_SHOWN[key[3]]
+        else:
+            factor, unit = DISPLAY[key[2]]
+            statistic = key[3].replace("_", " ")
+        if key[1] != "exact_yield" and key[3].startswith("exceed_"):    # a probability: % from 1 %, else ppm
             factor, unit = (100.0, "%") if by["value"].max() >= 0.01 else (1e6, "ppm")
             statistic = f"P(> {key[3][len('exceed_'):-2]} mm)"
-        rows.append({"configuration": key[0], "analysis": key[1], "output": "|δφ|" if key[2] == "phi" else key[2],
+        rows.append({"configuration": key[0], "analysis": key[1].replace("_", " "),
+                     "output": {"phi": "|δφ|", "any": "position or |δφ|"}.get(key[2], key[2]),
                      "statistic": statistic, "unit": unit,
                      **{a: factor * by.at[a, "value"] for a in ("min", "max", "mean")},
                      "se of max": factor * by.at["max", "se"]})
@@ -229,6 +264,7 @@ def _figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
               "term's share of the exact worst-case position error, largest first, and their running total (at this one "
               "pose; the table above compares both rankings as means over the Sobol grid).",
               _draw_axes(plots.contributors_pareto, *_PARETO, _contributions(r), title=r.name)) for r in res]
+    figs += _exceedance_figures(res)
     figs += [("worstcase_position", "Exact worst-case position error (µm) over each test region (the paper's "
              f"Figs. 4-5, computed exactly). ✕ marks the maximum, ○ the minimum. {scale}",
              _draw(plots.compare_maps_figure, res, "worstcase", "position")),
@@ -303,6 +339,26 @@ def _correlation_figures(result: StudyResult) -> list[tuple[str, str, Callable]]
                    f"{budget.name}: rank correlations of the inputs"))]
 
 
+def _exceedance_figures(results) -> list[tuple[str, str, Callable]]:
+    """The exceedance curve of every configuration with an exact yield, per output with a spec."""
+    from .yield_plots import exceedance_plot
+    figs = []
+    for r in results:
+        for curve in r.curves:
+            what = "position error" if curve.output == "position" else "|δφ|"
+            mc = (f" Dots: Monte Carlo at the same pose ({curve.n_samples} samples, the study's draws) with 95 % "
+                  "Wilson intervals; ▽ where no sample lies beyond s (the interval's upper end)."
+                  if curve.mc_s is not None else "")
+            figs.append((f"exceedance_{r.name}_{curve.output}",
+                         f"{r.name}: the share of assemblies whose {what} exceeds s, exact (no sampling), at the pose "
+                         f"of the Monte Carlo grid where it exceeds the spec most; log axis from 1 to 1e-9. Dashed: "
+                         f"the spec, dotted: the exact worst case (nothing exceeds it).{mc}",
+                         _draw_axes(exceedance_plot, *_EXCEEDANCE, curve, title=r.name)))
+    return figs
+
+
+#: Size and margins (inches) of an exceedance curve.
+_EXCEEDANCE = ((8.8, 3.8), Margins(0.75, 3.0, 0.55, 0.35))       # the legend right of the panel
 #: Size and margins (inches) of a Pareto chart of contributors.
 _PARETO = ((6.4, 3.4), Margins(0.75, 0.2, 0.75, 0.35))
 #: Size and margins (inches) of an allocation's map (its legend below it) and of its Pareto front.
@@ -383,6 +439,8 @@ def _tables(result: StudyResult, summary: dict | None = None) -> dict[str, pd.Da
         tables[f"contributions_{c.name}"] = contributions[c.name]
         if c.montecarlo is not None:
             tables[f"montecarlo_{c.name}"] = c.montecarlo.to_frame()
+        if c.yield_ is not None:
+            tables[f"yield_{c.name}"] = c.yield_.to_frame()
         if c.sobol is not None:
             tables[f"sobol_{c.name}"] = c.sobol.to_frame()
             for output, frame in c.ranking.items():
@@ -537,8 +595,48 @@ def _glance(result: StudyResult, summary: dict) -> list[dict]:
                 row["st"] = (st["name"].iloc[0], float(st[index].iloc[0]), index)
             row["share"] = (wc["name"].iloc[0], float(wc[share].iloc[0]))
             row["basis"] = basis
+        if c.yield_ is not None:
+            row.update(_yield_glance(c, s["yield"]))
         rows.append(row)
     return rows
+
+
+def _ppm_text(p_ppm: float, bound_ppm: float) -> str:
+    """An exact probability in ppm (and %, from 1 %), with its error bound."""
+    pct = f" ({p_ppm / 1e4:.3g} %)" if p_ppm >= 1e4 else ""
+    value = f"{p_ppm:.0f}" if p_ppm >= 100 else f"{p_ppm:.3g}"
+    return f"{value} ppm{pct} ± {bound_ppm:.2g}"
+
+
+def _yield_glance(c, doc: dict) -> dict:
+    """The exact yield of a configuration for the first screen: its figures against the spec, and how
+    conservative each way of stating the error is, at the pose where the exact p99.73 is largest."""
+    y = c.yield_
+    bounds = doc["error_bounds_ppm"]
+    out = {"spec": doc["spec"], "region": doc["region"],
+           "exceed_position": _ppm_text(doc["exceed_position_ppm"]["max"], bounds["position"]),
+           "where": _pose_text(doc["region"]["argmax_pose"]), "ppk": doc["ppk_min"]["position"],
+           "area_pct": 100 * doc["region"]["area_fraction_above_1ppm"],
+           "exceed_phi": None if doc["exceed_phi_ppm"] is None else
+           _ppm_text(doc["exceed_phi_ppm"]["max"], bounds["phi"]),
+           "exceed_any": None if doc["exceed_phi_ppm"] is None else
+           _ppm_text(doc["exceed_any_ppm"]["max"], bounds["any"]),
+           "bracketed": int(np.count_nonzero(y.bracketed_any)) if doc["exceed_phi_ppm"] is not None else 0}
+    q = y.levels.index(_MC_PERCENTILE) if _MC_PERCENTILE in y.levels else 0
+    k = np.unravel_index(np.argmax(y.quantile_position_mm[..., q]), y.exceed_position.shape)
+    cons = {"pose": _pose_text(y.poses[k]), "level": f"p{y.levels[q]:g}",
+            "worst": MM2UM * float(y.worst_position_mm[k]), "rss": MM2UM * float(y.rss_position_mm[k]),
+            "exact": MM2UM * float(y.quantile_position_mm[k][q]),
+            "exact_err": MM2UM * float(y.quantile_position_err_mm[k][q]),
+            "exact_top": MM2UM * float(y.quantile_position_mm[k][-1]), "top_level": f"p{y.levels[-1]:g}",
+            "mc": None}
+    mc = c.montecarlo
+    if mc is not None and _MC_PERCENTILE in mc.percentiles and mc.position_pct.shape[:-1] == y.exceed_position.shape:
+        j = mc.percentiles.index(_MC_PERCENTILE)
+        cons["mc"] = MM2UM * float(mc.position_pct[k][j])
+        cons["mc_ci"] = tuple(MM2UM * float(v) for v in mc.position_pct_ci[k][j])
+    out["conservative"] = cons
+    return out
 
 
 def _dependence(summary: dict, tables: dict) -> dict | None:

@@ -12,7 +12,8 @@ optional; paths are relative to the study file)::
     description = "..."               # a paragraph for the report
     seed = 20240611                   # default: fresh, recorded in the outputs
     budget = "paper"                  # budget preset or TOML file
-    outputs = ["montecarlo", "sobol"] # analyses besides the exact worst case, which always runs
+    outputs = ["montecarlo", "sobol", "yield"]  # analyses besides the exact worst case, which always runs
+                                      # (yield: the exact yield, with a [spec])
 
     [worstcase]                       # exact worst case of the linear model
     grid = 201                        # n (n x n poses) or [nx, ny]
@@ -22,7 +23,11 @@ optional; paths are relative to the study file)::
     samples = 131072                  # budget samples, shared by all poses and configurations
     grid = 21
     percentiles = [50, 95, 99, 99.73]
-    tolerance_mm = 0.15               # also P(position error > tolerance)
+    tolerance_mm = 0.15               # the position spec in mm (older files): see [spec]
+
+    [spec]                            # the accuracy spec: exact yield at every pose of the Monte Carlo grid
+    position_um = 150.0               # the position error |(dx, dy)| must stay within it, µm (> 1)
+    phi_arcsec = 60.0                 # |dphi| must stay within it, arcsec (optional, > 1)
 
     [sobol]
     samples = 4096                    # base sample size N, a power of two
@@ -53,6 +58,14 @@ optional; paths are relative to the study file)::
     [sweep]                           # optional: expand every configuration over the cartesian
     "leg.3.a_mm" = [200, 220, 240]    # product of geometry parameters (keys as in a geometry
     "leg.*.e_mm" = [10, 20, 30]       # file, legs 1-3 or * for all; see prp3mc.study.sweep)
+
+With a spec (and ``yield`` among the outputs, as by default), every configuration gets its exact yield (P(position > S),
+P(|δφ| > Z), P(either), Ppk, the exact quantiles; :mod:`prp3mc.study.spec`) at
+every pose of its Monte Carlo grid. One spec, not two: ``[montecarlo]
+tolerance_mm`` is the same position spec in mm; without ``[spec]`` it is
+taken as ``position_um = 1000 * tolerance_mm``, with ``[spec]`` it may be
+left out (the Monte Carlo run counts against ``[spec]``), and if both are given
+they must agree. A spec below 1 µm or 1 arcsec is refused, naming the unit.
 
 The allocation runs for every configuration (or those listed), each over
 its own geometry and test region; its budget is the classes' laws, with the
@@ -90,13 +103,14 @@ from ..montecarlo.propagation import MIN_SAMPLES as MIN_MC_SAMPLES, PERCENTILES
 from ..units import OUTPUTS
 from .allocation import AllocationSpec, read_allocation
 from .bundled import STUDIES_DIR, bundled_studies
+from .spec import YieldSpec, read_spec
 from .sweep import is_number, read_sweep
 
 __all__ = ["Study", "StudyConfiguration", "bundled_studies", "STUDIES_DIR", "ANALYSES"]
 
 
 #: Analyses a study can ask for besides the exact worst case (which always runs).
-ANALYSES = ("montecarlo", "sobol")
+ANALYSES = ("montecarlo", "sobol", "yield")
 _DEFAULT = {"worstcase_grid": (101, 101), "mc_samples": 1 << 16, "mc_grid": (11, 11), "sobol_samples": 1 << 12,
             "sobol_grid": (5, 5), "sobol_outputs": ("position", "phi")}
 _REDUCED = {"worstcase_grid": 21, "mc_samples": 1 << 14, "mc_grid": 5, "sobol_samples": 1 << 10, "sobol_grid": 3}
@@ -150,6 +164,9 @@ class Study:
     mc_samples : int
     percentiles : tuple of float
     tolerance_mm : float or None
+        The Monte Carlo run's tolerance, mm: the position spec (``spec.position_um / 1000``).
+    spec : YieldSpec or None
+        The accuracy spec (``[spec]``, or ``[montecarlo] tolerance_mm`` alone).
     sobol_samples : int
         Base sample size N of Saltelli's scheme, a power of two.
     sobol_outputs : tuple of str
@@ -175,6 +192,7 @@ class Study:
     mc_grid: tuple = _DEFAULT["mc_grid"]
     percentiles: tuple = PERCENTILES
     tolerance_mm: float | None = None
+    spec: YieldSpec | None = None
     sobol_samples: int = _DEFAULT["sobol_samples"]
     sobol_grid: tuple = _DEFAULT["sobol_grid"]
     sobol_outputs: tuple = _DEFAULT["sobol_outputs"]
@@ -238,6 +256,8 @@ class Study:
             out.update(montecarlo_samples=self.mc_samples, montecarlo_grid=list(self.mc_grid))
         if "sobol" in self.outputs:
             out.update(sobol_samples=self.sobol_samples, sobol_grid=list(self.sobol_grid))
+        if self.spec is not None and "yield" in self.outputs:
+            out.update(yield_grid=list(self.mc_grid))
         if self.allocation is not None:
             out.update(self.allocation.sizes(self.worstcase_grid))
         return out
@@ -247,7 +267,7 @@ class _Reader:
     """Validation of a parsed study document, pointing errors at their lines."""
 
     _TOP = {"name", "title", "description", "seed", "budget", "outputs", "worstcase", "montecarlo",
-            "sobol", "configuration", "allocation", "sweep"}
+            "sobol", "configuration", "allocation", "sweep", "spec"}
     _TABLES = {"worstcase": {"grid", "k_sigma"},
                "montecarlo": {"samples", "grid", "percentiles", "tolerance_mm"},
                "sobol": {"samples", "grid", "outputs", "groups"}}
@@ -348,8 +368,12 @@ class _Reader:
             budget.bounds(kw["k_sigma"])
         except Prp3mcError as exc:
             self.fail(("budget",), f"budget {budget_spec!r}: {exc} (set [worstcase] k_sigma)")
-        if kw["tolerance_mm"] is not None and kw["tolerance_mm"] < 0:
-            self.fail(("montecarlo", "tolerance_mm"), f"tolerance_mm must be >= 0, got {kw['tolerance_mm']}")
+        if kw["tolerance_mm"] is not None and kw["tolerance_mm"] <= 0:
+            self.fail(("montecarlo", "tolerance_mm"), f"tolerance_mm must be > 0 mm (the position spec), "
+                      f"got {kw['tolerance_mm']}")
+        kw["spec"] = read_spec(self, doc, kw["tolerance_mm"])
+        if kw["spec"] is not None:
+            kw["tolerance_mm"] = kw["spec"].position_mm
         pct = self.get(mc, ("montecarlo", "percentiles"), "list", list(PERCENTILES))
         if not pct or not all(isinstance(p, (int, float)) and not isinstance(p, bool) and 0 < p < 100
                               for p in pct) or sorted(set(pct)) != list(pct):

@@ -18,6 +18,7 @@ from .._version import __version__
 from ..units import OUTPUT_UNITS, Z95
 from ..allocation.optimum import AllocationResult
 from ..montecarlo.propagation import MonteCarloResult
+from ..stackup import YieldResult
 from ..worstcase.envelope import WorstCase
 from .reader import Study, StudyConfiguration
 
@@ -123,6 +124,10 @@ class ConfigurationResult:
         The least-cost tolerance classes (the study's ``[allocation]``), on the allocation grid.
     allocation_front : DataFrame or None
         Its cost-accuracy Pareto front (tidy, :func:`~prp3mc.allocation.optimum.allocation_front`).
+    yield_ : YieldResult or None
+        The exact yield against the study's spec (``[spec]``), on the Monte Carlo grid.
+    curves : tuple of ExceedanceCurve
+        P(output > s) at the pose of the largest exceedance, per output with a spec (position, phi).
     """
 
     configuration: StudyConfiguration
@@ -133,6 +138,8 @@ class ConfigurationResult:
     ranking: dict = field(default_factory=dict)
     allocation: AllocationResult | None = None
     allocation_front: pd.DataFrame | None = None
+    yield_: YieldResult | None = None
+    curves: tuple = ()
 
     def __post_init__(self):
         freeze(self)
@@ -143,9 +150,10 @@ class ConfigurationResult:
 
     @property
     def analyses(self) -> tuple[str, ...]:
-        """The analyses that ran: ``worstcase`` and those of ``montecarlo``, ``sobol``, ``allocation`` present."""
-        return ("worstcase",) + tuple(a for a in ("montecarlo", "sobol", "allocation")
-                                      if getattr(self, a) is not None)
+        """The analyses that ran: ``worstcase`` and those of ``montecarlo``, ``sobol``, ``allocation``, ``yield``
+        present."""
+        return ("worstcase",) + tuple(a for a in ("montecarlo", "sobol", "allocation", "yield")
+                                      if getattr(self, "yield_" if a == "yield" else a) is not None)
 
     def __repr__(self) -> str:
         return f"ConfigurationResult(name={self.name!r}, analyses={self.analyses!r})"
@@ -153,16 +161,30 @@ class ConfigurationResult:
     def to_frame(self) -> pd.DataFrame:
         """Summary over the analyses' grids: one row per analysis, output, statistic and aggregate.
 
-        Columns: ``configuration``, ``analysis`` (``worstcase``, ``montecarlo``),
-        ``output`` (``position``, ``phi``: ``|δφ|``), ``statistic`` (``worst_case``,
-        ``p50`` ...), ``aggregate`` (``min``, ``max``, ``mean`` over the grid),
-        ``value``, ``se`` (0 where exact; see :func:`over_grid`), ``unit`` (mm, deg).
+        Columns: ``configuration``, ``analysis`` (``worstcase``, ``montecarlo``,
+        ``exact_yield``), ``output`` (``position``, ``phi``: ``|δφ|``, and ``any``
+        for the yield: position or |δφ| beyond spec), ``statistic``
+        (``worst_case``, ``p50`` ...), ``aggregate`` (``min``, ``max``, ``mean``
+        over the grid), ``value``, ``se`` (0 where exact; see :func:`over_grid`),
+        ``unit`` (mm, deg).
+
+        The exact yield (with a spec, on the Monte Carlo grid) adds, per output
+        (``any`` only with an orientation spec):
+        ``exceed_ppm`` (unit ppm) and ``exceed_pct`` (%), the probability beyond
+        spec; ``ppk`` (1; aggregate ``min`` only: infinite where P = 0);
+        ``above_1ppm`` (1: the mean is the area fraction above 1 ppm);
+        ``error_bound_ppm`` (aggregate ``max``); and for position and phi the exact
+        quantiles ``p99.73``, ``p99.9937``, ``p99.9999`` and ``rss`` (mm, deg),
+        and ``argmax_x``, ``argmax_y``, ``argmax_phi`` (aggregate ``max``: the pose
+        of the largest exceedance, mm, mm, deg).
         """
         rows = []
 
-        def add(analysis, output, statistic, values, se):
+        def add(analysis, output, statistic, values, se, unit=None, aggregates=("min", "max", "mean")):
             for aggregate, (v, s) in over_grid(values, se).items():
-                rows.append((self.name, analysis, output, statistic, aggregate, v, s, OUTPUT_UNITS[output]))
+                if aggregate in aggregates:
+                    rows.append((self.name, analysis, output, statistic, aggregate, v, s,
+                                 unit or OUTPUT_UNITS[output]))
 
         wc = self.worst_case
         for output, values in (("position", wc.position_mm), ("phi", wc.phi_deg)):
@@ -173,7 +195,32 @@ class ConfigurationResult:
                 for output, est, ci in (("position", mc.position_pct, mc.position_pct_ci),
                                         ("phi", mc.phi_pct, mc.phi_pct_ci)):
                     add("montecarlo", output, f"p{p:g}", est[..., q], pct_se(ci[..., q, :]))
+        if self.yield_ is not None:
+            self._yield_rows(add)
         return pd.DataFrame(rows, columns=list(SUMMARY_COLUMNS))
+
+    def _yield_rows(self, add) -> None:
+        """The exact yield's rows of :meth:`to_frame` (see there)."""
+        y = self.yield_
+        zero = np.zeros(y.exceed_position.shape)
+        outputs = ("position",) if y.exceed_phi is None else ("position", "phi", "any")   # any = position alone
+        bounds = {"position": y.bound_position, "phi": y.bound_phi, "any": y.bound_any}
+        for o in outputs:
+            p = y.exceedance(o)
+            add("exact_yield", o, "exceed_ppm", 1e6 * p, zero, "ppm")
+            add("exact_yield", o, "exceed_pct", 100 * p, zero, "%")
+            add("exact_yield", o, "ppk", y.ppk(o), zero, "1", ("min",))
+            add("exact_yield", o, "above_1ppm", (p > 1e-6).astype(float), zero, "1")
+            add("exact_yield", o, "error_bound_ppm", 1e6 * bounds[o], zero, "ppm", ("max",))
+            k = np.unravel_index(np.argmax(p), p.shape)
+            for axis, unit in enumerate(("mm", "mm", "deg")):
+                add("exact_yield", o, f"argmax_{('x', 'y', 'phi')[axis]}", np.full(p.shape, y.poses[k][axis]),
+                    zero, unit, ("max",))
+        for o, q, rss in (("position", y.quantile_position_mm, y.rss_position_mm), ("phi", y.quantile_phi_deg,
+                                                                                    y.rss_phi_deg)):
+            for j, level in enumerate(y.levels):
+                add("exact_yield", o, f"p{level:g}", q[..., j], zero)
+            add("exact_yield", o, "rss", rss, zero)
 
 
 @dataclass(frozen=True, slots=True)

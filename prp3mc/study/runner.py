@@ -26,6 +26,7 @@ import contextlib
 import os
 import sys
 import time
+import warnings
 from dataclasses import dataclass, replace
 from typing import Any, Iterable, Iterator
 
@@ -33,7 +34,7 @@ import numpy as np
 
 from .._rng import child_seed, resolve_rng
 from .._threads import single_threaded_blas
-from ..errors import GeometryError, InfeasiblePoseError
+from ..errors import GeometryError, InfeasiblePoseError, Prp3mcWarning
 from ..model.budget import Budget
 from ..model.linear import linear_model
 from ..montecarlo.propagation import monte_carlo
@@ -43,6 +44,7 @@ from ..worstcase.envelope import WorstCase, worst_case
 from ..units import RAD2DEG
 from .allocation import ALLOCATION_STREAM, run_allocation
 from .reader import Study, StudyConfiguration
+from .spec import exceedance_curve, run_yield
 from .results import ConfigurationResult, PoseSamples, SkippedConfiguration, StudyResult
 from .sweep import Variant, expand
 
@@ -141,7 +143,8 @@ def run_configuration(plan: Plan, variant: Variant) -> Outcome:
 
 def _timings(study: Study) -> dict[str, float]:
     """Zero time for every analysis the study runs."""
-    return dict.fromkeys(("worstcase",) + study.outputs + (("allocation",) if study.allocation else ()), 0.0)
+    return dict.fromkeys(("worstcase",) + tuple(o for o in study.outputs if o != "yield" or study.spec)
+                         + (("allocation",) if study.allocation else ()), 0.0)
 
 
 def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple[ConfigurationResult, dict]:
@@ -182,6 +185,19 @@ def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple
         kw["sobol"] = s
         kw["ranking"] = {o: ranking(s, wc_s, output=o) for o in study.sobol_outputs}
         timings["sobol"] += time.perf_counter() - t
+    if study.spec is not None and "yield" in study.outputs and b.correlated:
+        warnings.warn(Prp3mcWarning(f"study {study.name}: no exact yield for {config.name}: the budget correlates "
+                                    "inputs ([correlation]) and the exact series needs independent ones; the Monte "
+                                    "Carlo run counts P(position > spec) instead"), stacklevel=2)
+    elif study.spec is not None and "yield" in study.outputs:
+        nx, ny = study.mc_grid
+        stage(f"exact yield against the spec on {nx} x {ny} poses")
+        t = time.perf_counter()
+        y = kw["yield_"] = run_yield(config, b, study.spec, study.mc_grid)
+        draws = b.sample(study.mc_samples, mc_seed) if "montecarlo" in study.outputs else None
+        kw["curves"] = tuple(exceedance_curve(config, b, y, o, draws)
+                             for o in ("position",) + (("phi",) if study.spec.phi_arcsec is not None else ()))
+        timings["yield"] += time.perf_counter() - t
     allocation = study.allocation
     if allocation is not None and allocation.applies_to(variant.base.name):  # a swept one: by its base's name
         stage("tolerance allocation" + (" and its Pareto front" if allocation.front else ""))

@@ -24,6 +24,20 @@ Layout (µm and arcsec)::
                         "binding": "position", "binding_poses": [{"x_mm": ..., "y_mm": ..., "phi_deg": ...}],
                         "front": [{"cost": 12.0, "worst_case_position_um": ..., "worst_case_phi_arcsec": ...}, ...]}},
                                             # with [allocation]; layout in prp3mc.study.allocation
+         "yield": {"spec": {"position_um": 100.0, "phi_arcsec": null, "source": "[spec]"},
+                   "grid": [21, 21],                      # the Monte Carlo grid's poses
+                   "exceed_position_ppm": {"min": ..., "max": ..., "mean": ...}, "exceed_position_pct": {...},
+                   "exceed_phi_ppm": {...} or null, "exceed_phi_pct": ..., "exceed_any_ppm": ..., "exceed_any_pct": ...,
+                   "ppk_min": {"position": 1.02, "phi": null, "any": ...},   # null: no spec, or P = 0 (infinite)
+                   "error_bound_ppm": 0.001,              # the largest bound of every exceedance at every pose
+                   "error_bounds_ppm": {"position": ..., "phi": ..., "any": ...},
+                   "quantiles_position_um": {"p99.73": {"min", "max", "mean"}, "p99.9937": ..., "p99.9999": ...},
+                   "quantile_error_bounds_position_um": {"p99.73": ..., ...},     # largest over the grid
+                   "quantiles_phi_arcsec": {...}, "rss_position_um": {"min", "max", "mean"},
+                   "region": {"max_exceed_position_ppm": ..., "mean_exceed_position_ppm": ...,
+                              "area_fraction_above_1ppm": ..., "argmax_pose": [x, y, phi]},   # as prp3mc yield
+                   "method": "..."}},             # with a spec ([spec] or [montecarlo] tolerance_mm);
+                                                  # layout in prp3mc.study.spec
        "delta-shape": {...}},
      "metadata": {"prp3mc_version": ..., "seed": ..., "montecarlo_samples": ..., "wall_time_s": ...},
      "inputs": {"study": {"name": "quick", "file": "/abs/quick.toml", "sha256": "..."},
@@ -96,6 +110,7 @@ from ..units import DEG2ARCSEC, MM2UM, t_value
 from ..sobol.indices import DEPENDENT_NOTE
 from ..worstcase.envelope import CORRELATION_NOTE
 from .allocation import allocation_summary
+from .spec import yield_summary
 from .results import ConfigurationResult, StudyResult, over_grid, pct_se
 
 __all__ = ["build_summary", "study_inputs", "correlation_summary"]
@@ -294,6 +309,8 @@ def build_summary(result: StudyResult) -> dict:
             doc["sobol"] = _sobol(c)
         if c.allocation is not None:
             doc["allocation"] = allocation_summary(c.allocation, c.allocation_front)
+        if c.yield_ is not None:
+            doc["yield"] = yield_summary(c.yield_, result.study.spec, result.study.mc_grid)
         if result.study.sweep:
             doc["parameters"] = dict(c.configuration.parameters)
         configs[c.name] = doc
