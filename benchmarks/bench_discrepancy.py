@@ -9,7 +9,9 @@ noise 2 µm / 0.0005 deg), it measures
   error alone or with a drift, errors that repeat, or gross outliers;
 - **found**: campaigns in which every hidden effect is named or listed as an
   alias of a named one, and **exact**: named set = hidden set;
-- **unexplained**: campaigns the workflow flags as unexplained;
+- **unexplained**: campaigns the workflow flags as unexplained; **ambiguous**:
+  campaigns whose verdict says the cause is ambiguous (a named effect with
+  aliases, or a drift an effect explains as well);
 - **outliers found / false alarms**: share of the gross errors listed under
   ``outliers``, and listed rows that were not gross errors (per campaign),
   and the seconds per campaign (a campaign with gross errors also runs the
@@ -89,7 +91,7 @@ def score(result, hidden: tuple, outlier_rows: list) -> dict:
     row = {"false_name": any(e.name not in hidden and not set(e.aliases) & hidden for e in result.named_effects),
            "found": hidden <= covered if hidden else None,
            "exact": named == hidden if hidden else None,
-           "unexplained": bool(result.unexplained)}
+           "unexplained": bool(result.unexplained), "ambiguous": result.verdict["state"] == "ambiguous"}
     rows = {int(o["row"]) for o in result.outliers}
     row["outliers_found"] = len(rows & set(outlier_rows)) / len(outlier_rows) if outlier_rows else None
     row["outlier_false_alarms"] = len(rows - set(outlier_rows))
@@ -137,7 +139,7 @@ def run_case(preset: str, name: str, seeds: range) -> dict:
         seconds.append(time.perf_counter() - t0)
     out = {"geometry": preset, "case": name, "hidden": list(hidden), "n": len(rows),
            "seconds_per_campaign": float(np.mean(seconds))}
-    for key in ("false_name", "found", "exact", "unexplained", "held_out_open"):
+    for key in ("false_name", "found", "exact", "unexplained", "ambiguous", "held_out_open"):
         values = [r[key] for r in rows if r.get(key) is not None]
         out[key] = None if not values else {"k": int(sum(values)), "n": len(values),
                                              "rate": sum(values) / len(values),
@@ -159,12 +161,14 @@ def _cell(v) -> str:
 
 
 def table(results: list[dict]) -> str:
-    head = ["geometry", "case", "false names", "found", "exact", "unexplained", "held-out gap after: mean; open",
+    head = ["geometry", "case", "false names", "found", "exact", "unexplained", "ambiguous",
+            "held-out gap after: mean; open",
             "outliers found", "false alarms/campaign", "s/campaign"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in results:
         cells = [r["geometry"], r["case"], _cell(r["false_name"]), _cell(r["found"]), _cell(r["exact"]),
-                 _cell(r["unexplained"]), f"{_cell(r['held_out_after_mean'])}; {_cell(r['held_out_open'])}",
+                 _cell(r["unexplained"]), _cell(r["ambiguous"]),
+                 f"{_cell(r['held_out_after_mean'])}; {_cell(r['held_out_open'])}",
                  _cell(r["outliers_found"]), _cell(r["outlier_false_alarms_per_campaign"]),
                  f"{r['seconds_per_campaign']:.1f}"]
         lines.append("| " + " | ".join(cells) + " |")

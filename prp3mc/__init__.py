@@ -50,6 +50,7 @@ _API = {
     "Campaign": "measurement.campaign.data", "read_campaign": "measurement.campaign.data",
     "DiscrepancyResult": "measurement.fit.results", "simulate_campaign": "measurement.campaign.simulate",
     "detectable_effect": "measurement.fit.workflow", "discrepancy": "measurement.fit.workflow",
+    "CampaignPlan": "measurement.campaign.plan", "plan_campaign": "measurement.campaign.plan",
 }
 #: The wings, importable as attributes too (``prp3mc.measurement`` after ``import prp3mc``).
 _WINGS = ("kinematics", "model", "montecarlo", "worstcase", "stackup", "sobol", "allocation", "measurement", "study",
@@ -70,6 +71,7 @@ __all__ = [
     "Study", "StudyResult", "run_study", "build_summary",
     # measurements
     "Campaign", "read_campaign", "simulate_campaign", "discrepancy", "DiscrepancyResult", "detectable_effect",
+    "plan_campaign", "CampaignPlan",
 ]
 
 

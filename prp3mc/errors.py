@@ -18,6 +18,7 @@ __all__ = [
     "SpecError",
     "ResourceError",
     "ParameterError",
+    "NonlinearityError",
     "MissingDependencyError",
     "OutputError",
     "OutputExistsError",
@@ -83,6 +84,11 @@ class ResourceError(Prp3mcError, ValueError):
 class ParameterError(Prp3mcError, ValueError):
     """An analysis was asked for something outside its domain: a sample count, a level or percentile, an
     output, statistic or method it does not know, results that do not belong together."""
+
+
+class NonlinearityError(Prp3mcError, ValueError):
+    """The exact chain cannot be evaluated at an estimate (its closure does not converge, or is singular), or the
+    discrepancy workflow's relinearisation does not settle: what trips its linearity guard."""
 
 
 class MissingDependencyError(Prp3mcError, ImportError):

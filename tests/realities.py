@@ -8,6 +8,7 @@ keyword arguments.
 import numpy as np
 
 from prp3mc import Budget, Region
+from prp3mc.measurement.campaign.simulate import simulate_campaign, visit_times
 
 SIGMA = {"instrument_sigma_mm": 0.002, "instrument_sigma_deg": 0.0005}
 BUDGET = Budget.from_preset("paper")
@@ -89,3 +90,40 @@ def saturated(campaign, ceiling_C: float):
     """``campaign`` with its temperature sensor saturating at ``ceiling_C`` (the machine saw the true one)."""
     import dataclasses
     return dataclasses.replace(campaign, temp_C=np.minimum(campaign.temp_C, ceiling_C))
+
+
+# ------------------------------------------------------------------ temperature following time, or cycled
+def thermal_campaign(geometry, poses, n_repeats: int, alpha_T: float, temperature, rng, **kwargs):
+    """A campaign of a machine whose lead screws expand with the temperature, made apart from the library.
+
+    The slider error ``alpha_T (T - 20) b_i`` is added by the simulator's
+    out-of-library hook with this module's own temperature: ``temperature(s)``
+    degrees C at the campaign's time fraction ``s`` (0 at the first
+    measurement, 1 at the last, from ``time_s``), which also fills ``temp_C``.
+    ``kwargs`` go to the simulator (a campaign template, ``plan``, among them: its ``time_s`` is the time).
+
+    Returns
+    -------
+    DataFrame
+        The campaign in the file layout.
+    """
+    def expansion(cmd, b, direction, temp):
+        plan = kwargs.get("plan")
+        t = visit_times(b) if plan is None else np.asarray(plan["time_s"], dtype=float)
+        return alpha_T * (temperature((t - t[0]) / (t[-1] - t[0]))[:, None] - 20.0) * b
+
+    c = simulate_campaign(geometry, BUDGET, poses, n_repeats, slider_error_fn=expansion, rng=rng, **SIGMA, **kwargs)
+    frame = c.to_frame()
+    t = frame["time_s"].to_numpy()
+    frame["temp_C"] = temperature((t - t[0]) / (t[-1] - t[0]))
+    return frame
+
+
+def rising(s):
+    """A machine warming up: 20 -> 28 degC, steadily with time."""
+    return 20.0 + 8.0 * s
+
+
+def cycled(s):
+    """The temperature cycled three times through the campaign between 20 and 28 degC."""
+    return 24.0 - 4.0 * np.cos(2.0 * np.pi * 3.0 * s)

@@ -77,6 +77,27 @@ def test_cyclic_effects_round_trip_through_toml(tmp_path):
     assert set(frame["enters"]) == {"known shift"} and frame["phase_deg"].tolist() == [40.0, -120.0]
 
 
+def test_fitted_on_records_the_leads(tmp_path):
+    """[fitted_on] keeps the leads the cyclic errors were fitted with (0: a leg without); another lead is
+    another machine, refused in one line; a record without leads (older files) checks none."""
+    g = Geometry.from_preset("u-shape").replace(lead=(None, 10.0, 4.0))
+    budget = cyclic_budget(g)
+    path = tmp_path / "b.toml"
+    budget.to_toml(path)
+    assert "lead_mm = [0.0, 10.0, 4.0]" in path.read_text()
+    again = Budget.from_toml(path)
+    assert again.fitted_on == budget.fitted_on and again.fitted_on.lead == (None, 10.0, 4.0)
+    again.check_geometry(g.replace(lead=(5.0, 10.0, 4.0)))        # a lead where none was fitted (leg 1)
+    with pytest.raises(BudgetError) as info:
+        again.check_geometry(g.replace(lead=(None, 8.0, 4.0)))
+    assert "lead_mm of leg 2 is 8" in str(info.value) and "\n" not in str(info.value)
+    path.write_text(path.read_text().replace("lead_mm = [0.0, 10.0, 4.0]\n", ""))
+    Budget.from_toml(path).check_geometry(g.replace(lead=(None, 8.0, 4.0)))
+    path.write_text(path.read_text().replace("[fitted_on]\n", "[fitted_on]\nlead_mm = [5.0, -1.0, 0.0]\n"))
+    with pytest.raises(BudgetError, match="lead_mm must be >= 0"):
+        Budget.from_toml(path)
+
+
 @pytest.mark.parametrize("table, message", [
     ("[effects.cyclic_1]\nvalue = 0.01", "needs phase_deg"),
     ("[effects.cyclic_1]\nvalue = -0.01\nphase_deg = 0", "amplitude must be >= 0"),
@@ -312,6 +333,7 @@ def test_round_trip_of_a_cyclic_error_through_the_model_files(tmp_path):
     first.model.write(tmp_path)
     g, b = Geometry.from_toml(tmp_path / "geometry.toml"), Budget.from_toml(tmp_path / "budget.toml")
     assert g.lead == (LEAD_MM,) * 3 and b.effects["cyclic_2"].phase_deg is not None
+    assert b.fitted_on.lead == (LEAD_MM,) * 3                   # [fitted_on] records the leads fitted with
     truth = with_leads(Geometry.from_preset("u-shape"))
     c2 = simulate_campaign(truth, BUDGET, campaign_poses("u-shape", True), 8, rng=4, effects={"cyclic_2": (0.02, 30.0)},
                            registration=(0.02, -0.02, 0.005), **SIGMA)

@@ -51,13 +51,7 @@ def covers(ci, value, widen=2.0):
 
 def fit_of(result, name):
     """Value and interval of ``name`` if it was named or is in a named effect's alias set, else None."""
-    for e in result.named_effects:
-        if e.name == name:
-            return e.value, e.ci95
-        if name in e.aliases:
-            f = e.evidence["alias_fits"][name]
-            return f["value"], f["ci95"]
-    return None
+    return result.effect_fit(name)
 
 
 # every effect family of SPEC §5 at a realistic magnitude, on a campaign that can see it. Registration is

@@ -226,6 +226,14 @@ def probability(text: str) -> float:
     return value
 
 
+def add_instrument_noise(p: argparse.ArgumentParser, mm: float = 0.0, deg: float = 0.0) -> None:
+    """``--instrument-sigma-mm`` and ``--instrument-sigma-deg``: the instrument's noise, with these defaults."""
+    p.add_argument("--instrument-sigma-mm", type=nonnegative_float, default=mm, metavar="S",
+                   help=f"instrument noise sd of x and y, mm (default {mm:g})")
+    p.add_argument("--instrument-sigma-deg", type=nonnegative_float, default=deg, metavar="S",
+                   help=f"instrument noise sd of phi, deg (default {deg:g})")
+
+
 def add_json(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON object to stdout")
 

@@ -9,8 +9,8 @@ from ..limits import discrepancy_estimate
 from ..progress import Progress
 from ..errors import Prp3mcWarning
 from ..units import MM2UM, quantity_text
-from . import (WARNINGS, add_budget, add_geometry, add_json, add_output, add_progress, add_seed, command, emit_json,
-               nonnegative_float, probability, provenance, within_limits)
+from . import (WARNINGS, add_budget, add_geometry, add_instrument_noise, add_json, add_output, add_progress, add_seed,
+               command, emit_json, probability, provenance, within_limits)
 
 
 @command("discrepancy", "find where model and measurements disagree and name the missing effect")
@@ -22,10 +22,7 @@ class DiscrepancyCommand:
         p.add_argument("--data", required=True, metavar="CSV",
                        help="measurement campaign CSV (docs, File formats), or the bundled one: example")
         add_output(p, help="report folder (discrepancy.json, report.html)")
-        p.add_argument("--instrument-sigma-mm", type=nonnegative_float, default=0.0, metavar="S",
-                       help="instrument noise sd of x and y, mm (default 0)")
-        p.add_argument("--instrument-sigma-deg", type=nonnegative_float, default=0.0, metavar="S",
-                       help="instrument noise sd of phi, deg (default 0)")
+        add_instrument_noise(p)
         p.add_argument("--alpha", type=probability, default=0.01, metavar="A",
                        help="family-wise level of the naming tests (default 0.01)")
         p.add_argument("--alpha-unexplained", type=probability, default=0.05, metavar="A",
@@ -122,12 +119,19 @@ def headline(result) -> list[str]:
         lines.append("named nothing: the model misses nothing this campaign can see")
     if result.confounded_with_registration:
         lines.append("not testable, confounded with registration: " + ", ".join(result.confounded_with_registration))
+    for c in result.confounded:
+        lines.append(f"confounded: {', '.join(c['effects'])} with {', '.join(c['with'])} ({c['source']}): {c['why']}")
+    lin = result.linearity
+    if len(lin["passes"]) > 1:
+        lines.append(f"relinearised on the exact chain: {len(lin['passes'])} passes, "
+                     f"{'converged' if lin['converged'] else 'NOT converged'}")
     verdict = ("closed" if g["closed"] else
                f"not closed: UNEXPLAINED disagreement remains ({g['deciding_channel'].replace('_', ' ')})")
     if g.get("not_tested"):
         verdict += "; the dispersion channels were not tested (one visit per pose: nothing to compare repeats with)"
     lines.append(f"gap {g['before']:.3g} -> {g['after']:.3g} (null level <= 1, closed at <= {g['closed_at']:.2g}): "
                  f"{verdict}")
+    lines.append(f"verdict: {result.verdict['text']}")
     h = g["held_out"]
     lines.append(f"held-out gap (cross-validation by pose, {h['folds']} folds; trust this one) "
                  f"{h['before']:.3g} -> {h['after']:.3g}")

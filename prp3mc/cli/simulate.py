@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from . import (add_budget, add_geometry, add_json, add_seed, command, emit_json, nonnegative_float, positive_int,
-               provenance, within_limits)
+from . import (add_budget, add_geometry, add_instrument_noise, add_json, add_seed, command, emit_json,
+               nonnegative_float, positive_int, provenance, within_limits)
 from ..errors import CampaignError, InputFileError
 from ..limits import simulate_estimate
 from ..output import OutputExistsError
@@ -110,10 +110,7 @@ class SimulateCommand:
         p.add_argument("--temperature", default="20,28", metavar="START,END",
                        help="temperature at the first and last measurement, deg C (default 20,28; 'none' for "
                             "no temp_C column)")
-        p.add_argument("--instrument-sigma-mm", type=nonnegative_float, default=0.002, metavar="S",
-                       help="instrument noise sd of x and y, mm (default 0.002)")
-        p.add_argument("--instrument-sigma-deg", type=nonnegative_float, default=0.0005, metavar="S",
-                       help="instrument noise sd of phi, deg (default 0.0005)")
+        add_instrument_noise(p, 0.002, 0.0005)
         add_seed(p)
         p.add_argument("--out", dest="out_file", required=True, metavar="CAMPAIGN.csv",
                        help="the campaign file to write ('-': stdout)")

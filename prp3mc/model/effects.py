@@ -465,17 +465,23 @@ class FittedOn:
 
     The TOML table ``[fitted_on]`` holds ``name`` and one list of three
     values (legs 1-3) per parameter: ``a_mm, alpha_deg, beta_deg, gamma_deg,
-    theta_deg, c_mm, e_mm, psi_deg`` (strokes do not change the model).
+    theta_deg, c_mm, e_mm, psi_deg`` (strokes do not change the model), and
+    ``lead_mm`` when a leg of the geometry has a screw lead (0 for a leg
+    without: a cyclic error's phase runs with its leg's lead).
 
     Attributes
     ----------
     name : str
     legs : dict of str to tuple of 3 float
         Parameter key (as above) to its values for legs 1-3, mm or deg.
+    lead : tuple of 3 (float or None)
+        Each leg's screw lead, mm, None where the geometry had none (or the
+        record is older than leads).
     """
 
     name: str
     legs: dict
+    lead: tuple = (None, None, None)
 
     def __post_init__(self):
         if not isinstance(self.name, str):
@@ -493,11 +499,18 @@ class FittedOn:
                 raise BudgetError(f"fitted_on: {key} must list three values (legs 1-3), got {values!r}")
             legs[key] = tuple(_number(v, f"fitted_on: {key}") for v in values)
         object.__setattr__(self, "legs", FrozenDict(legs))
+        if not isinstance(self.lead, (list, tuple)) or len(self.lead) != 3:
+            raise BudgetError(f"fitted_on: lead_mm must list three values (legs 1-3), got {self.lead!r}")
+        lead = tuple(None if p is None else _number(p, "fitted_on: lead_mm") for p in self.lead)
+        if any(p is not None and p < 0 for p in lead):
+            raise BudgetError(f"fitted_on: lead_mm must be >= 0 mm (0: no lead), got {list(self.lead)!r}")
+        object.__setattr__(self, "lead", tuple(None if p is None or p == 0 else p for p in lead))
 
     @classmethod
     def of(cls, geometry: Geometry) -> "FittedOn":
         """The fingerprint of ``geometry``."""
-        return cls(geometry.name, {key: getattr(geometry, key.rsplit("_", 1)[0]) for key in _FIT_KEYS})
+        return cls(geometry.name, {key: getattr(geometry, key.rsplit("_", 1)[0]) for key in _FIT_KEYS},
+                   tuple(geometry.lead))
 
     @classmethod
     def from_dict(cls, doc, source: str) -> "FittedOn":
@@ -505,12 +518,16 @@ class FittedOn:
         if not isinstance(doc, dict):
             raise BudgetError(f"{source}: [fitted_on] must be a table (name and the legs' parameters), got {doc!r}")
         try:
-            return cls(doc.get("name", "custom"), {k: v for k, v in doc.items() if k != "name"})
+            return cls(doc.get("name", "custom"), {k: v for k, v in doc.items() if k not in ("name", "lead_mm")},
+                       doc.get("lead_mm", (None, None, None)))
         except BudgetError as exc:
             raise BudgetError(f"{source}: {exc}") from None
 
     def to_dict(self) -> dict[str, Any]:
-        return {"name": self.name, **{k: list(v) for k, v in self.legs.items()}}
+        doc = {"name": self.name, **{k: list(v) for k, v in self.legs.items()}}
+        if any(p is not None for p in self.lead):
+            doc["lead_mm"] = [0.0 if p is None else p for p in self.lead]
+        return doc
 
     def difference(self, geometry: Geometry) -> str | None:
         """The largest departure of ``geometry`` beyond :data:`FIT_TOLERANCE`, as text, or None."""
@@ -527,4 +544,8 @@ class FittedOn:
                 text = (f"{key} of leg {leg + 1} is {getattr(geometry, key.rsplit('_', 1)[0])[leg]:g} in "
                         f"{geometry.name!r} and {self.legs[key][leg]:g} in {self.name!r} "
                         f"(more than {FIT_TOLERANCE[unit]:g} {unit} apart)")
+        for leg, (fitted, now) in enumerate(zip(self.lead, geometry.lead)):
+            if text is None and fitted is not None and now is not None and not np.isclose(fitted, now, rtol=1e-9):
+                text = (f"lead_mm of leg {leg + 1} is {now:g} in {geometry.name!r} and {fitted:g} in {self.name!r} "
+                        "(a cyclic error's phase runs with the lead it was fitted on)")
         return text

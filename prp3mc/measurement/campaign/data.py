@@ -52,8 +52,11 @@ CMD_COLUMNS, MEAS_COLUMNS = ("x_cmd", "y_cmd", "phi_cmd"), ("x_meas", "y_meas", 
 REQUIRED_COLUMNS = ("pose_id", *CMD_COLUMNS, *MEAS_COLUMNS)
 #: Optional approach-direction columns.
 DIR_COLUMNS = ("dir_1", "dir_2", "dir_3")
-#: Largest ``|measured - commanded|`` accepted (mm, mm, deg): beyond it a row is a unit or sign mistake.
-MAX_ERROR = (5.0, 5.0, 5.0)
+#: Largest ``|measured - commanded|`` accepted (mm, mm, deg): beyond it a row is a unit, sign or column
+#: mistake, which moves a pose by its coordinates (tens to hundreds of mm). A misassembled machine moves it by
+#: a few mm: a base angle error of 3 deg on the delta-shape's leg 3 (a = 240 mm) by 7 mm, 10 deg of guide angle
+#: on the U-shape by 13 mm (issue 24), which the discrepancy workflow follows on the exact chain.
+MAX_ERROR = (25.0, 25.0, 10.0)
 #: Bundled campaigns, by name (``--data example``; how each was made: the script beside it).
 CAMPAIGN_PRESETS = {"example": "data/campaigns/example.csv"}
 _SAME_CMD_TOL = 1e-6  # mm or deg: repeats of a pose must command the same pose

@@ -265,7 +265,7 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         A campaign template (SPEC §11: the campaign columns, measured ones
         empty, as ``prp3mc plan`` writes): its rows are the measurements, in
         their order, with their ``pose_id`` and commanded poses, the
-        template's ``dir_1..dir_3`` (instead of ``approach``) and ``time_s``
+        template's ``dir_i`` (instead of ``approach`` for those legs) and ``time_s``
         (instead of :func:`visit_times`) when it has them. No visiting order
         is drawn.
 
@@ -321,7 +321,7 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     b_pose, _ = inverse_kinematics(geometry, poses, check=False)
     b = b_pose[order]
     if template is not None and all(template.has_dir):
-        direction = template.direction
+        direction = np.array(template.direction)
     elif approach == "both":
         direction = rng.choice([-1.0, 1.0], size=(M, 3))
     elif approach == "sequence":
@@ -330,6 +330,8 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
         direction = pd.DataFrame(direction).ffill().fillna(1.0).to_numpy()
     else:
         direction = np.full((M, 3), 1.0 if approach == "positive" else -1.0)
+    if template is not None and any(template.has_dir) and not all(template.has_dir):   # prp3mc plan: backlash legs
+        direction[:, list(template.has_dir)] = template.direction[:, list(template.has_dir)]
     time_s = visit_times(b) if template is None or "time_s" not in template.extra else _plan_times(template)
     temp = None if temp_drift_C is None else np.linspace(temp_drift_C[0], temp_drift_C[1], M)
     sim_budget = spread_budget(budget.without_effects(), effects)

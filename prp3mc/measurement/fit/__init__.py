@@ -8,6 +8,9 @@
 - :mod:`~prp3mc.measurement.fit.outliers` — gross errors at a stated family-wise false-alarm rate.
 - :mod:`~prp3mc.measurement.fit.subsets` — best subsets and alias sets of systematic effects.
 - :mod:`~prp3mc.measurement.fit.selection` — naming effects with exchange moves, aliases.
+- :mod:`~prp3mc.measurement.fit.relinearise` — the exact chain linearised about an estimate (Gauss-Newton).
+- :mod:`~prp3mc.measurement.fit.identify` — gross errors and names, relinearised until stable; the linearity guard.
+- :mod:`~prp3mc.measurement.fit.confounds` — what a campaign cannot tell apart (``confounded``).
 - :mod:`~prp3mc.measurement.fit.cyclic` — a cyclic screw error's amplitude interval (covers near 0).
 - :mod:`~prp3mc.measurement.fit.diagnostics` — the tests, the one verdict and the gap.
 - :mod:`~prp3mc.measurement.fit.holdout` — the gap on poses left out of the fit.

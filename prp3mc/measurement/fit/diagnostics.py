@@ -44,7 +44,7 @@ from ...units import DISPLAY, MM2UM, OUTPUT_UNITS, POSE_OUTPUTS
 from .signatures import ROW_TO_DEG, spread_budget
 from .likelihood import Engine, Fit
 
-__all__ = ["Diagnosis", "diagnose", "null_variances", "gap", "gap_value", "CHANNELS"]
+__all__ = ["Diagnosis", "diagnose", "null_variances", "gap", "gap_value", "verdict", "CHANNELS", "VERDICTS"]
 
 #: ``[mm, mm, deg] -> [µm, µm, arcsec]``: the display scale of the pose error rows in tables.
 _DISPLAY = np.array([DISPLAY[o][0] for o in POSE_OUTPUTS])
@@ -53,6 +53,8 @@ CHANNELS = ("library", "systematic", "dispersion", "systematic_pose", "dispersio
 #: Per-pose statistics of :meth:`Diagnosis.to_frame` besides the mean residual (all dimensionless).
 _POSE_STATISTICS = ("sys_stat", "sys_p", "sys_q", "disp_ratio", "disp_p", "disp_q")
 _LN2 = float(np.log(2.0))
+#: The states of the verdict, the first that holds (:func:`verdict`).
+VERDICTS = ("beyond the linear model", "unexplained", "ambiguous", "explained", "nothing missing")
 
 
 @dataclass(frozen=True, slots=True)
@@ -169,7 +171,7 @@ def null_variances(engine: Engine, fit: Fit, n_boot: int, rng) -> tuple[np.ndarr
     every visit: ``mu + sqrt(r) (e_pose - mu) + sqrt(1 - r) (e_visit - mu)``.
     """
     bud = spread_budget(engine.budget.without_effects(), {n: f * engine.spread_ref[n] for n, f in fit.factors.items()})
-    model = linear_model(engine.geometry, bud, engine.campaign.poses, check=False)
+    model = linear_model(engine.model_geometry, bud, engine.model_poses, check=False)
     mean = engine.moments(fit.factors, fit.r)[0]
     coef = model.coef[engine.idx]
     F = model.features(bud.sample(n_boot * engine.M, rng)).reshape(n_boot, engine.M, -1)
@@ -388,3 +390,31 @@ def gap(before: Diagnosis, after: Diagnosis, alpha_unexplained: float) -> dict:
                      "before": before.summary["gap"], "after": after.summary["gap"], "null_level": 1.0,
                      "null_sd_before": before.summary["gap_null_sd"], "null_sd": after.summary["gap_null_sd"]},
     }
+
+
+def verdict(gap_doc: dict, named, linearity: dict, ambiguities: list, confounded=()) -> dict:
+    """The analysis's one verdict: ``{"state", "text"}``, the first of :data:`VERDICTS` that holds.
+
+    ``beyond the linear model``: the linearity guard refused to name
+    (:mod:`~prp3mc.measurement.fit.identify`); ``unexplained``: the gap is not
+    closed; ``ambiguous``: it is closed, but by a cause the campaign cannot
+    tell from another or from the instrument's drift (``ambiguities``,
+    :func:`~prp3mc.measurement.confounds.ambiguities`); ``explained``: named
+    effects close it; ``nothing missing``: it is closed without one. The
+    last two say which effects the design cannot tell from the drift
+    (``confounded`` entries with ``drift``), which may hide in it.
+    """
+    if linearity["guard"] != "ok":
+        return {"state": VERDICTS[0], "text": f"beyond the linear model: {linearity['why']}; {linearity['advice']}"}
+    if not gap_doc["closed"]:
+        channel = gap_doc["deciding_channel"].replace("_", " ")
+        return {"state": VERDICTS[1], "text": f"unexplained disagreement remains ({channel}) that no effect of the "
+                                              "library explains"}
+    if ambiguities:
+        return {"state": VERDICTS[2], "text": "the cause is ambiguous: " + "; ".join(ambiguities)}
+    names = {e.name for e in named}
+    hidden = [n for c in confounded if "drift" in c["with"] for n in c["effects"] if n not in names]
+    caveat = f"; this campaign cannot tell {', '.join(hidden)} from a drift (see confounded)" if hidden else ""
+    if named:
+        return {"state": VERDICTS[3], "text": "explained by " + ", ".join(e.name for e in named) + caveat}
+    return {"state": VERDICTS[4], "text": "the model misses nothing this campaign can see" + caveat}

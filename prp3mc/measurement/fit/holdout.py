@@ -124,8 +124,7 @@ def held_out_fits(engine: Engine, states: dict, seed: int) -> tuple[dict, int]:
     for f in range(k):
         train_keep = engine.keep.copy()
         train_keep[engine.rows[fold_rows == f]] = False
-        train = Engine(engine.geometry, engine.budget, engine.full_campaign, engine.noise,
-                       registration=engine.registration, keep=train_keep)
+        train = engine.with_rows(train_keep)
         rows, poses = np.flatnonzero(fold_rows == f), np.flatnonzero(fold == f)
         for label, fit in states.items():
             trained, names = _train_fit(train, fit, engine)

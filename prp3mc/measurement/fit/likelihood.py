@@ -38,6 +38,7 @@ from ..campaign.data import Campaign
 from .cyclic import amplitude_interval
 from .signatures import EFFECT_NAMES, ROW_TO_DEG, budget_effect_errors, effect, library, signatures, spread_reference
 from .nuisance import DRIFT, NUISANCE_NAMES, NUISANCE_UNITS, REGISTRATION, campaign_time, nuisance_signatures
+from .relinearise import Point
 
 __all__ = ["Engine", "Fit", "subset_campaign", "chi2_equivalent"]
 
@@ -147,22 +148,31 @@ class Engine:
         Fit the instrument's registration (else the campaign is taken as registered).
     keep : ndarray of bool, shape (M,), optional
         Rows used (outliers set aside); time and row numbers stay those of the whole campaign.
+    point : Point, optional
+        The exact chain linearised about an estimate of the systematic
+        effects (:mod:`~prp3mc.measurement.fit.relinearise`): the model's known
+        pose error, the candidates' signatures and the budget's moments are
+        taken there. By default the model is linear about the nominal geometry.
     """
 
     def __init__(self, geometry: Geometry, budget: Budget, campaign: Campaign, noise: np.ndarray, *,
-                 registration: bool = True, keep: np.ndarray | None = None):
+                 registration: bool = True, keep: np.ndarray | None = None, point: Point | None = None):
         self.geometry, self.budget, self.noise, self.registration = geometry, budget, noise, registration
-        self.full_campaign = campaign
+        self.full_campaign, self.point = campaign, point
         s, self.time_source = campaign_time(campaign)
         keep = np.ones(campaign.n_measurements, bool) if keep is None else np.asarray(keep, bool)
         self.keep, self.rows = keep, np.flatnonzero(keep)
+        kept_poses = np.unique(campaign.pose_index[keep])
         campaign = campaign if keep.all() else subset_campaign(campaign, keep)
         self.campaign = campaign
         self.idx = campaign.pose_index
         self.P, self.M = campaign.n_poses, campaign.n_measurements
         self.n = campaign.repeats.astype(float)
+        #: the machine the budget's moments are taken at: its geometry and the poses it reaches (P, 3)
+        self.model_geometry, self.model_poses = ((geometry, campaign.poses) if point is None else
+                                                 (point.geometry, point.poses[kept_poses]))
         #: (M, 3) pose errors of the budget's [effects] (their drivers from the campaign): part of every model
-        self.known = budget_effect_errors(geometry, budget, campaign)
+        self.known = budget_effect_errors(geometry, budget, campaign) if point is None else point.known[keep]
         self.err = campaign.error - self.known
         # per-input moment contributions: a spread scales them by (f, f^2)
         self.inputs = [k for k in budget.names if not k.startswith("zeta_")]
@@ -171,7 +181,7 @@ class Engine:
             laws = {name: budget.inputs[name]}
             if name.startswith("rho_"):
                 laws["zeta" + name[3:]] = budget.inputs["zeta" + name[3:]]
-            mu, cov = linear_model(geometry, Budget(laws), campaign.poses, check=False).moments()
+            mu, cov = linear_model(self.model_geometry, Budget(laws), self.model_poses, check=False).moments()
             mus.append(mu)
             covs.append(cov)
         self.mu_k, self.cov_k = np.stack(mus), np.stack(covs)            # (I, P, 3), (I, P, 3, 3)
@@ -185,7 +195,8 @@ class Engine:
         has_lead = tuple(bool(np.isfinite(p)) for p in geometry.lead_mm)
         lib = library(budget, campaign.has_dir, campaign.temp_C is not None, has_lead, spreads=self.repeats)
         sys_effects = [e for e in lib if e.systematic]
-        G = signatures(geometry, campaign.poses, self.idx, sys_effects, campaign.direction, campaign.temp_C)
+        G = (signatures(geometry, campaign.poses, self.idx, sys_effects, campaign.direction, campaign.temp_C)
+             if point is None else point.signatures([e.name for e in sys_effects])[keep])
         owner = np.repeat(np.arange(len(sys_effects)), [e.dof for e in sys_effects])       # candidate of each column
         size = np.zeros(len(sys_effects))
         np.maximum.at(size, owner, np.abs(G).max(axis=(0, 1)))
@@ -213,6 +224,13 @@ class Engine:
         C = np.linalg.cholesky(noise + self.jitter)      # the same for every model state: factorised once
         self._noise_factor = (np.linalg.inv(C), 2.0 * np.log(np.diagonal(C, axis1=-2, axis2=-1)).sum(-1))
         self.confounded = self._confounded()
+
+    def with_rows(self, keep: np.ndarray) -> "Engine":
+        """The engine of the rows ``keep`` (bool, shape (M,) of the whole campaign) at the same point."""
+        if np.array_equal(keep, self.keep):
+            return self
+        return Engine(self.geometry, self.budget, self.full_campaign, self.noise, registration=self.registration,
+                      keep=keep, point=self.point)
 
     def _why_not(self, eff) -> str:
         """Why the campaign cannot test library effect ``eff``."""
@@ -416,7 +434,7 @@ class Engine:
         (candidate j's are ``blocks[j]``)."""
         return self.whitened(fit, tuple(range(len(self.systematic))))[1]
 
-    def _kept_share(self, A: np.ndarray, rest: np.ndarray) -> np.ndarray:
+    def kept_share(self, A: np.ndarray, rest: np.ndarray) -> np.ndarray:
         """Per candidate, the least share of a combination of its columns' energy (``A``) that ``rest`` keeps.
 
         ``rest`` is ``A`` with a span projected out; for a one-column candidate
@@ -450,7 +468,7 @@ class Engine:
                 continue
             Q, _ = np.linalg.qr(X[:, cols])
             rest = A - Q @ (Q.T @ A)
-            for j in np.flatnonzero(self._kept_share(A, rest) < CONFOUNDED):
+            for j in np.flatnonzero(self.kept_share(A, rest) < CONFOUNDED):
                 out.setdefault(self.systematic[j].name, label)
         return out
 
@@ -466,7 +484,7 @@ class Engine:
             Gp = Gall
         den = np.sum(Gp * Gp, axis=0)
         num = Gp.T @ fit.z
-        ok = self._kept_share(Gall, Gp) > CONFOUNDED
+        ok = self.kept_share(Gall, Gp) > CONFOUNDED
         ok[list(fit.sys)] = False
         ok &= np.array([e.name not in self.confounded for e in self.systematic], bool)
         first = np.array([cols[0] for cols in self.blocks], dtype=int)

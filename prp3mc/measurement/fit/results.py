@@ -18,7 +18,9 @@ from ...units import z_value
 from ..campaign.data import Campaign
 from .diagnostics import Diagnosis
 from .likelihood import Engine
+from ...model.effects import effect_value
 from .prediction import Prediction, noise_cov
+from .relinearise import candidates, linearise
 from .updated import UpdatedModel
 
 __all__ = ["NamedEffect", "DiscrepancyResult", "LEVEL"]
@@ -110,7 +112,16 @@ class DiscrepancyResult:
     named_effects : tuple of NamedEffect
         Empty when the model misses nothing the campaign can see.
     unexplained : bool
-        Disagreement remains that no candidate explains; exactly ``not gap["closed"]``.
+        Disagreement remains that no candidate explains: ``not gap["closed"]``, or the linearity guard tripped.
+    verdict : mapping
+        ``state`` (one of :data:`~prp3mc.measurement.diagnostics.VERDICTS`:
+        ``beyond the linear model``, ``unexplained``, ``ambiguous``,
+        ``explained``, ``nothing missing``) and a one-line ``text``.
+    confounded : tuple of mapping
+        What the campaign cannot tell apart (:mod:`~prp3mc.measurement.fit.confounds`):
+        ``{effects, with, why, advice, source}``, ``source`` ``design`` (from
+        the signatures, with ``vif`` or ``r``) or ``data`` (an effect that
+        explains the drift the data show as well).
     gap : mapping
         ``metric, before, after, null_level, closed_at, closed,
         deciding_channel`` and every channel's evidence (see
@@ -160,6 +171,12 @@ class DiscrepancyResult:
         Groups of effects with collinear signatures over the campaign.
     not_testable : mapping
         Effects the campaign cannot test, with the reason.
+    linearity : mapping
+        How the model was linearised (:func:`~prp3mc.measurement.identify.identify`):
+        the ``passes`` of relinearisation on the exact chain, ``converged``,
+        ``curvature`` per named effect and the linearity ``guard`` (``ok``,
+        or ``tripped`` with ``why``, ``advice`` and ``last_estimate``: then
+        nothing is named and the analysis is unexplained).
     model : UpdatedModel
         The updated model: identified geometry, updated and compensated
         budgets, the compensable and non-compensable effects.
@@ -179,6 +196,8 @@ class DiscrepancyResult:
 
     named_effects: tuple
     unexplained: bool
+    verdict: dict
+    confounded: tuple
     gap: dict
     before: Diagnosis
     after: Diagnosis
@@ -199,6 +218,7 @@ class DiscrepancyResult:
     confounded_with_registration: tuple
     structural_aliases: tuple
     not_testable: dict
+    linearity: dict
     model: UpdatedModel
     accuracy: dict
     campaign: Campaign
@@ -221,6 +241,17 @@ class DiscrepancyResult:
         return (f"DiscrepancyResult(named={tuple(e.name for e in self.named_effects)}, "
                 f"unexplained={self.unexplained}, gap={g['before']:.4g}->{g['after']:.4g}, "
                 f"outliers={len(self.outliers)}, seed={self.seed})")
+
+    def effect_fit(self, name: str) -> tuple[float, tuple] | None:
+        """Value and 95 % interval of effect ``name``: named, or an alias of a named effect (its alias fit);
+        None when it is neither."""
+        for e in self.named_effects:
+            if e.name == name:
+                return e.value, tuple(e.ci95)
+            if name in e.aliases:
+                f = e.evidence["alias_fits"][name]
+                return f["value"], tuple(f["ci95"])
+        return None
 
     @property
     def repeatable_fraction(self) -> float:
@@ -291,6 +322,8 @@ class DiscrepancyResult:
             "inputs": self.inputs(), "versions": versions(), **warnings,
             "named_effects": [e.to_dict() for e in self.named_effects],
             "unexplained": bool(self.unexplained),
+            "verdict": _thawed(self.verdict),
+            "confounded": _thawed(self.confounded),
             "gap": _thawed(self.gap),
             "nuisance": _thawed(self.nuisance),
             "outliers": _thawed(self.outliers),
@@ -305,6 +338,7 @@ class DiscrepancyResult:
             "invisible": list(self.invisible),
             "structural_aliases": [list(g) for g in self.structural_aliases],
             "not_testable": _thawed(self.not_testable),
+            "linearity": _thawed(self.linearity),
             "model": _thawed(self.model.to_dict()),
             "predicted_accuracy": _thawed(self.accuracy),
             "campaign": {"source": self.campaign.source, "n_measurements": self.campaign.n_measurements,
@@ -321,9 +355,14 @@ def _intervals(result: DiscrepancyResult, level: float) -> list[tuple[float, flo
     """Intervals at ``level`` of ``result``'s named effects, from its fitted model state."""
     keep = np.ones(result.campaign.n_measurements, bool)
     keep[[o["row"] for o in result.outliers]] = False
+    values = {n: effect_value(n, v) for n, v in result.linearity["passes"][-1]["point"].items()}
+    point = None
+    if values:                                       # the point the named effects were fitted about
+        point = linearise(result.geometry, result.budget, result.campaign, values,
+                          candidates(result.geometry, result.budget, result.campaign))
     engine = Engine(result.geometry, result.budget, result.campaign,
                     noise_cov(result.instrument_sigma_mm, result.instrument_sigma_deg),
-                    registration=result.registration, keep=keep)
+                    registration=result.registration, keep=keep, point=point)
     sys = tuple(engine.sys_index(name) for name in result.systematic)
     factors = {e.name: e.value / e.evidence["budget_value"] for e in result.named_effects
                if "budget_value" in e.evidence}

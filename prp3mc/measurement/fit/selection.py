@@ -44,11 +44,12 @@ from .likelihood import Engine, Fit
 from .results import NamedEffect
 from .subsets import Gram
 
-__all__ = ["select", "name_effects", "names_in"]
+__all__ = ["select", "name_effects", "names_in", "STEP_COLUMNS"]
 
 #: Most candidates refitted with r and the spreads re-profiled at each step.
 _JOINT = 3
-_STEP_COLUMNS = ["candidate", "lr", "estimate", "lr_joint", "step", "threshold", "accepted"]
+#: Columns of the selection's ``steps`` table.
+STEP_COLUMNS = ["candidate", "lr", "estimate", "lr_joint", "step", "threshold", "accepted"]
 
 
 def names_in(engine: Engine, fit: Fit) -> list[str]:
@@ -157,8 +158,8 @@ def select(engine: Engine, base: Fit, alpha: float, max_effects: int) -> tuple[F
                     fit, dropped = trial, True
                     break
         accepted = {k: v for k, v in accepted.items() if k in names_in(engine, fit)}
-    steps = pd.concat(step_rows, ignore_index=True) if step_rows else pd.DataFrame(columns=_STEP_COLUMNS)
-    return fit, accepted, steps[_STEP_COLUMNS]
+    steps = pd.concat(step_rows, ignore_index=True) if step_rows else pd.DataFrame(columns=STEP_COLUMNS)
+    return fit, accepted, steps[STEP_COLUMNS]
 
 
 def name_effects(engine: Engine, fit: Fit, accepted: dict) -> tuple[NamedEffect, ...]:

@@ -41,9 +41,9 @@ from ...errors import ParameterError
 from ...kinematics.geometry import Geometry
 from ...progress import Progress
 from ...model.budget import Budget
-from . import outliers as gross
 from ..campaign.data import Campaign, check_error_scale, read_campaign, require_testable
-from .diagnostics import diagnose, gap, gap_value, null_variances
+from .confounds import ambiguities, design_confounds
+from .diagnostics import diagnose, gap, gap_value, null_variances, verdict
 from .signatures import effect
 from ...model.effects import amplitude_phase
 from .holdout import held_out_gap
@@ -51,6 +51,7 @@ from .likelihood import Engine, Fit
 from .nuisance import DRIFT, NUISANCE_NAMES, REGISTRATION
 from .prediction import noise_cov, predict
 from .results import DiscrepancyResult
+from .identify import Named, identify
 from .selection import name_effects, names_in, select
 from .updated import updated_model
 from .accuracy import predicted_accuracy
@@ -59,7 +60,7 @@ from ..campaign.iso9283 import iso9283_figures
 __all__ = ["discrepancy", "detectable_effect", "STAGES"]
 
 #: The stages of :func:`discrepancy`, one progress step each.
-STAGES = ("fit and gross errors", "selection", "diagnoses", "with the gross errors", "ISO 9283")
+STAGES = ("gross errors and names", "diagnoses", "with the gross errors", "ISO 9283")
 
 
 @single_threaded_blas()  # the analysis's products are small: a second BLAS thread only spun (0.2 CPU-s a run)
@@ -122,60 +123,28 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     # GIL) while the rest is diagnosed
     with ThreadPoolExecutor(max_workers=1) as pool:
         noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
-        full = Engine(geometry, budget, campaign, noise, registration=registration)
         bar = progress if isinstance(progress, Progress) else Progress(len(STAGES), "discrepancy", progress)
         stages = iter(STAGES)
 
         def done():
             bar.update(label=f"discrepancy: {next(stages)}")
 
-        def engine_for(keep):
-            return full if keep.all() else Engine(geometry, budget, campaign, noise, registration=registration,
-                                                  keep=keep)
-
-        def base_fit(keep):
-            engine = engine_for(keep)
-            return engine, engine.refit((), {})
-
-        def named_model(keep):
-            engine, base = base_fit(keep)
-            return (engine, base, *select(engine, base, alpha, max_effects))
-
-        keep, _ = gross.flag(full, base_fit, outlier_rate)
-        done()
-        engine, base, fit, accepted, steps = named_model(keep)
-        # every row tested again under the named model: rows set aside only for a missing spread come back
-        limit = gross.threshold(campaign.n_measurements, outlier_rate)
-        d2 = gross.distances(full, keep, engine.values(fit), fit.factors, fit.r)
-        if ((d2 <= limit) != keep).any() and (d2 <= limit).sum() > 3:
-            keep = d2 <= limit
-            engine, base, fit, accepted, steps = named_model(keep)
-            d2 = gross.distances(full, keep, engine.values(fit), fit.factors, fit.r)
-        named = name_effects(engine, fit, accepted)
-        model = updated_model(geometry, budget, named, campaign)
+        named, linearity = identify(
+            geometry, budget, campaign,
+            lambda point: Engine(geometry, budget, campaign, noise, registration=registration, point=point),
+            alpha, max_effects, outlier_rate)
+        engine, fit = named.engine, named.fit
+        effects = name_effects(engine, fit, named.accepted)
+        model = updated_model(geometry, budget, effects, campaign)
         accuracy = pool.submit(predicted_accuracy, geometry, budget, model, campaign, seed)
         done()
-        null_before = null_variances(engine, base, n_bootstrap, rng)
-        before = diagnose(engine, base, null=null_before)
-        null_after = null_variances(engine, fit, n_bootstrap, rng)
-        after = diagnose(engine, fit, null=null_after)
-        gap_doc = gap(before, after, alpha_unexplained)
-        gap_doc["held_out"] = held_out_gap(engine, {"before": (base, null_before), "after": (fit, null_after)}, seed)
+        before, after, gap_doc = _diagnoses(named, n_bootstrap, alpha_unexplained, rng, seed)
         done()
-        outlier_rows = tuple({"row": int(m), "pose_id": str(campaign.pose_id[m]), "z": float(np.sqrt(d2[m]))}
-                             for m in np.flatnonzero(~keep))
-        with_outliers = None
-        if outlier_rows:
-            engine_all, base_all, fit_all, accepted_all, _ = named_model(np.ones(campaign.n_measurements, bool))
-            n_boot = max(n_bootstrap // 4, 50)               # for the comparison only
-            g_before, _ = gap_value(diagnose(engine_all, base_all, n_boot, rng))
-            g_after, _ = gap_value(diagnose(engine_all, fit_all, n_boot, rng))
-            with_outliers = {
-                "named_effects": [_value_entry(n, v) for n, v in _effect_values(engine_all, fit_all).items()],
-                "gap_before": g_before, "gap_after": g_after, "unexplained": bool(g_after > gap_doc["closed_at"]),
-                "repeatable_fraction": fit_all.r}
+        with_outliers = _with_outliers(named, alpha, max_effects, n_bootstrap, gap_doc["closed_at"], rng)
         done()
-        nuisance, drift_test = _nuisance(engine, fit, alpha, named)
+        nuisance, drift_test = _nuisance(engine, fit, alpha, effects)
+        shown, reasons = ambiguities(engine, fit, effects, drift_test, alpha)
+        confounded = tuple(design_confounds(engine) + shown)
         repeatability = {"repeatable_fraction": fit.r, "ci95": list(engine.r_interval(fit))}
         if not engine.repeats:
             repeatability = {"repeatable_fraction": None, "ci95": None, "not_testable": _ONE_VISIT}
@@ -188,31 +157,76 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
         done()
         if bar is not progress:
             bar.close()
-        confounded = tuple(n for n, with_ in engine.confounded.items() if "registration" in with_)
-        not_testable = dict(engine.not_testable)
-        not_testable.update({n: f"confounded with {with_}" for n, with_ in engine.confounded.items()})
-        if engine.time_source != "time_s":
-            not_testable["drift"] = "no time_s column: drift fitted against row order"
-        if not engine.repeats:
-            not_testable["repeatability"] = _ONE_VISIT
         return DiscrepancyResult(
-            named_effects=named, unexplained=not gap_doc["closed"], gap=gap_doc, before=before, after=after,
-            steps=steps, prediction_after=prediction, budget_after=prediction.budget, systematic=systematic,
-            nuisance=nuisance, drift_test=drift_test, registration=registration, outliers=outlier_rows,
-            outlier_rule={"family_wise_rate": outlier_rate,
-                          "per_measurement_level": float(-np.expm1(np.log1p(-outlier_rate) / campaign.n_measurements)),
-                          "z_threshold": float(np.sqrt(limit)),
-                          "statistic": "squared standardised error of each measurement predicted from the other visits "
-                                       "of its pose under the fitted model, chi2(3), Sidak over all rows"},
-            with_outliers=with_outliers,
+            named_effects=effects, unexplained=not gap_doc["closed"] or linearity["guard"] != "ok", gap=gap_doc,
+            verdict=verdict(gap_doc, effects, linearity, reasons, confounded), confounded=confounded,
+            before=before, after=after, steps=named.steps, prediction_after=prediction,
+            budget_after=prediction.budget, systematic=systematic, nuisance=nuisance, drift_test=drift_test,
+            registration=registration, outliers=_outlier_rows(named, campaign),
+            outlier_rule=_outlier_rule(named, outlier_rate), with_outliers=with_outliers,
             repeatability=repeatability,
             iso9283=iso, iso9283_poses=iso_poses, invisible=engine.invisible,
-            confounded_with_registration=confounded,
-            structural_aliases=tuple(tuple(g) for g in engine.structural_aliases()), not_testable=not_testable,
-            model=model, accuracy=accuracy.result(),
+            confounded_with_registration=tuple(n for n, w in engine.confounded.items() if "registration" in w),
+            structural_aliases=tuple(tuple(g) for g in engine.structural_aliases()),
+            not_testable=_not_testable(engine), linearity=linearity, model=model, accuracy=accuracy.result(),
             campaign=campaign, geometry=geometry, budget=budget, seed=seed, n_bootstrap=n_bootstrap, alpha=alpha,
             alpha_unexplained=alpha_unexplained, instrument_sigma_mm=instrument_sigma_mm,
             instrument_sigma_deg=instrument_sigma_deg, wall_time_s=time.perf_counter() - t0)
+
+
+def _diagnoses(named: Named, n_bootstrap: int, alpha_unexplained: float, rng, seed: int) -> tuple:
+    """The diagnoses before and after the named effects, and the gap document with its held-out part."""
+    engine, base, fit = named.engine, named.base, named.fit
+    null_before = null_variances(engine, base, n_bootstrap, rng)
+    before = diagnose(engine, base, null=null_before)
+    null_after = null_variances(engine, fit, n_bootstrap, rng)
+    after = diagnose(engine, fit, null=null_after)
+    gap_doc = gap(before, after, alpha_unexplained)
+    gap_doc["held_out"] = held_out_gap(engine, {"before": (base, null_before), "after": (fit, null_after)}, seed)
+    return before, after, gap_doc
+
+
+def _with_outliers(named: Named, alpha: float, max_effects: int, n_bootstrap: int, closed_at: float,
+                   rng) -> dict | None:
+    """What the analysis names, and its gap, with the gross errors kept (None when none was set aside)."""
+    if named.keep.all():
+        return None
+    engine = named.engine.with_rows(np.ones(named.keep.size, bool))
+    base = engine.refit((), {})
+    fit, _, _ = select(engine, base, alpha, max_effects)
+    n_boot = max(n_bootstrap // 4, 50)               # for the comparison only
+    g_before, _ = gap_value(diagnose(engine, base, n_boot, rng))
+    g_after, _ = gap_value(diagnose(engine, fit, n_boot, rng))
+    return {"named_effects": [_value_entry(n, v) for n, v in _effect_values(engine, fit).items()],
+            "gap_before": g_before, "gap_after": g_after, "unexplained": bool(g_after > closed_at),
+            "repeatable_fraction": fit.r}
+
+
+def _outlier_rows(named: Named, campaign: Campaign) -> tuple:
+    """The ``outliers`` entries: every row set aside, with its pose and its standardised prediction error."""
+    return tuple({"row": int(m), "pose_id": str(campaign.pose_id[m]), "z": float(np.sqrt(named.d2[m]))}
+                 for m in np.flatnonzero(~named.keep))
+
+
+def _outlier_rule(named: Named, outlier_rate: float) -> dict:
+    """The gross-error rule as ``discrepancy.json`` states it."""
+    m = named.keep.size
+    return {"family_wise_rate": outlier_rate,
+            "per_measurement_level": float(-np.expm1(np.log1p(-outlier_rate) / m)),
+            "z_threshold": float(np.sqrt(named.limit)),
+            "statistic": "squared standardised error of each measurement predicted from the other visits "
+                         "of its pose under the fitted model, chi2(3), Sidak over all rows"}
+
+
+def _not_testable(engine: Engine) -> dict:
+    """Effects the campaign cannot test, with the reason (missing columns, confounded, drift without time)."""
+    out = dict(engine.not_testable)
+    out.update({n: f"confounded with {with_}" for n, with_ in engine.confounded.items()})
+    if engine.time_source != "time_s":
+        out["drift"] = "no time_s column: drift fitted against row order"
+    if not engine.repeats:
+        out["repeatability"] = _ONE_VISIT
+    return out
 
 
 #: Why a one-visit campaign tests no dispersion.
