@@ -34,12 +34,12 @@ def _term_map(result: SobolResult, wc: WorstCase) -> tuple[np.ndarray, list]:
     """
     factors = wc.inputs
     needs, shifts = [], []
-    for t, (kind, *args) in enumerate(wc.model._plan):
-        if kind == "shift":
+    for t, tl in enumerate(wc.model.term_laws):
+        if tl.kind == "shift":
             shifts.append(t)
             needs.append(None)
         else:
-            needs.append({factors[i] for i in (args[0] if kind == "clearance" else args[:1])})
+            needs.append({factors[i] for i in tl.factors})
     out = np.zeros((len(result.names) + len(shifts), len(wc.terms)))
     for k, name in enumerate(result.names):
         members = set(result.groups.get(name, (name,)))

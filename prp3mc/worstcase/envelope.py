@@ -191,17 +191,16 @@ class WorstCase(_Maxima):
         signs = self.signs
         for q, t_val in self.term_at.items():
             x = np.empty(self.poses.shape[:-1] + (len(self.inputs),))
-            for t, (kind, *args) in enumerate(self.model._plan):
-                if kind == "clearance":
-                    (k, kz), = args
-                    leg = self.model.legs[t]
+            for t, tl in enumerate(self.model.term_laws):
+                if tl.kind == "clearance":
+                    k, kz = tl.factors
                     _, (rho_lo, z_lo), (rho_hi, z_hi) = _clearance_interval(
-                        self.input_bounds[k], self.input_bounds[kz], omega[..., leg])
+                        self.input_bounds[k], self.input_bounds[kz], omega[..., tl.leg])
                     upper = signs[q][..., t] > 0
                     x[..., k] = np.where(upper, rho_hi, rho_lo)
                     x[..., kz] = np.where(upper, z_hi, z_lo)
-                elif kind == "value":
-                    x[..., args[0]] = t_val[..., t] + args[1]
+                elif tl.kind == "factor":
+                    x[..., tl.factors[0]] = t_val[..., t] + tl.reference
             out[q] = x
         return out
 
@@ -253,15 +252,15 @@ def _clearance_interval(rho_bounds, zeta_bounds_deg, omega: np.ndarray):
 def term_bounds(model: LinearModel, bounds: np.ndarray) -> np.ndarray:
     """Interval of every model term, shape (..., T, 2), mm or deg; ``bounds`` (D, 2) of the factors."""
     tb = np.empty(model.poses.shape[:-1] + (len(model.terms), 2))
-    for t, (kind, *args) in enumerate(model._plan):
-        if kind == "value":
-            tb[..., t, :] = bounds[args[0]] - args[1]
+    for t, tl in enumerate(model.term_laws):
+        if tl.kind == "factor":
+            tb[..., t, :] = bounds[tl.factors[0]] - tl.reference
             continue
-        if kind == "shift":
-            tb[..., t, :] = args[0]
+        if tl.kind == "shift":
+            tb[..., t, :] = tl.value
             continue
-        (k, kz), = args
-        leg = model.legs[t]
+        k, kz = tl.factors
+        leg = tl.leg
         zeta = bounds[kz]
         if zeta[1] - zeta[0] >= 360.0:  # no need for omega itself
             tb[..., t, 0], tb[..., t, 1] = -bounds[k][1], bounds[k][1]
