@@ -26,15 +26,13 @@ from .._result import freeze, short_repr
 from ..units import DEG2RAD, RAD2DEG
 from .budget import Budget, parse_input
 from .laws import Law, angle_moments
-from .effects import EFFECT_NAMES, T_REF_C
+from .effects import ALL_LEGS, effect_terms, slider_factor
 from ..kinematics.geometry import Geometry
 from ..kinematics.chain import as_poses, frame, validated_frame
 from ..kinematics.sensitivity import LENGTH_FAMILIES, h_entries
 
 __all__ = ["LinearModel", "TermLaw", "linear_model", "ALL_LEGS", "FEATURE_VALUE", "FEATURE_COS", "FEATURE_SIN", "FEATURE_ONE"]
 
-#: The leg of a term that acts on all three legs at once (thermal expansion).
-ALL_LEGS = -1
 #: Feature codes of :meth:`LinearModel.feature_ops`: factor a's value less a reference; X_a cos(X_b deg);
 #: X_a sin(X_b deg); the constant 1 of the known shifts.
 FEATURE_VALUE, FEATURE_COS, FEATURE_SIN, FEATURE_ONE = range(4)
@@ -155,6 +153,19 @@ class LinearModel:
         for t in self.shared:
             cols[..., :, t] = np.einsum("...ij,...j->...i", self.Ainv, self.weights[..., :, t])
         return cols
+
+    @property
+    def term_units(self) -> tuple[str, ...]:
+        """Unit of each term's value (:meth:`term_values`): mm or deg for an input (rho_i: mm), the effect
+        kind's term unit for an effect (:attr:`EffectKind.term_unit <prp3mc.model.effects.EffectKind>`; K for
+        thermal, whose term is T - 20), in :attr:`terms` order."""
+        effects = {t.name: t.effect for t in effect_terms(self.budget.effects, self.geometry.lead_mm)}
+
+        def unit(name: str) -> str:
+            if name in effects:
+                return effects[name].kind.term_unit or effects[name].unit
+            return "mm" if parse_input(name)[0] in LENGTH_FAMILIES else "deg"
+        return tuple(unit(name) for name in self.terms)
 
     @property
     def omega(self) -> np.ndarray:
@@ -348,30 +359,18 @@ def linear_model(geometry: Geometry, budget: Budget, poses, *, check: bool = Tru
         else:
             term_laws.append(TermLaw(name, "factor", leg, law=laws[k], factors=(k,)))
     b = fr.b                                                    # nominal slider positions, legs first
-    for name in (n for n in EFFECT_NAMES if n in budget.effects):
-        eff = budget.effects[name]
-        e = eff.effect
-        terms.append(f"offset_{name}" if e.kind == "offset" else name)
-        legs.append(ALL_LEGS if e.kind == "thermal" else e.leg)
-        if e.kind == "offset":
-            weights.append(_one_leg(entries(e.family) * (1.0 if e.family in LENGTH_FAMILIES else DEG2RAD), e.leg))
-            term_laws.append(TermLaw(terms[-1], "shift", legs[-1], value=eff.value))
-        elif e.kind == "scale":
-            weights.append(_one_leg(entries("b") * b, e.leg))
-            term_laws.append(TermLaw(terms[-1], "shift", legs[-1], value=eff.value))
-        elif e.kind == "cyclic":                                # A_i sin(2 pi b_i / p_i + phi_i): per unit of A_i
-            wave = np.zeros_like(b)
-            wave[e.leg] = np.sin(2.0 * np.pi * b[e.leg] / geometry.lead_mm[e.leg] + np.deg2rad(eff.phase_deg))
-            weights.append(_one_leg(entries("b") * wave, e.leg))
-            term_laws.append(TermLaw(terms[-1], "shift", legs[-1], value=eff.value))
-        elif e.kind == "backlash":
-            weights.append(_one_leg(entries("b"), e.leg))
-            k = factors.index(name)
-            term_laws.append(TermLaw(name, "factor", e.leg, law=laws[k], factors=(k,)))
-        else:                                                   # thermal: one temperature, every leg
-            weights.append(eff.value * entries("b") * b)
-            k = factors.index(name)
-            term_laws.append(TermLaw(name, "factor", ALL_LEGS, law=laws[k], reference=T_REF_C, factors=(k,)))
+    for term in effect_terms(budget.effects, geometry.lead_mm):
+        terms.append(term.name)
+        legs.append(term.leg)
+        unit = term.coefficient * (1.0 if term.family in LENGTH_FAMILIES else DEG2RAD)
+        w = entries(term.family) * unit * slider_factor(term, b)
+        weights.append(w if term.leg == ALL_LEGS else _one_leg(w, term.leg))
+        if term.is_shift:
+            term_laws.append(TermLaw(term.name, "shift", term.leg, value=term.value))
+        else:
+            k = factors.index(term.effect.name)
+            term_laws.append(TermLaw(term.name, "factor", term.leg, law=laws[k], reference=term.reference,
+                                     factors=(k,)))
     return LinearModel(geometry=geometry, budget=budget, poses=poses, terms=tuple(terms), legs=tuple(legs),
                        Ainv=np.moveaxis(fr.Ainv, (0, 1), (-2, -1)),
                        weights=np.moveaxis(np.stack(weights, axis=-1), 0, -2),

@@ -133,16 +133,11 @@ def _contributions(c) -> pd.DataFrame:
     return c.worst_case.contributions_frame("position", _worst_index(c))
 
 
-#: Unit of a term's value in a contributions table, by family (the budget's inputs and effects).
-_TERM_UNITS = {**dict.fromkeys(("a", "b", "c", "e", "rho", "backlash"), "mm"),
-               **dict.fromkeys(("alpha", "beta", "gamma", "theta", "psi", "zeta"), "deg"),
-               "thermal": "deg C", "scale": "1"}
-
-
-def _contributions_display(frame: pd.DataFrame) -> pd.DataFrame:
+def _contributions_display(frame: pd.DataFrame, c) -> pd.DataFrame:
     """Worst-case contributions for the report: largest share first, the term's value with its unit, µm and %."""
-    family = frame["term"].str.replace(r"_\d$", "", regex=True)
-    return (frame.assign(**{"value": frame["term_value"], "unit": family.map(_TERM_UNITS).fillna(""),
+    model = c.worst_case.model
+    units = dict(zip(model.terms, model.term_units))
+    return (frame.assign(**{"value": frame["term_value"], "unit": frame["term"].map(units),
                             "contribution (µm)": MM2UM * frame["contribution"], "share (%)": 100 * frame["share"]})
             .sort_values("share (%)", ascending=False, kind="stable")
             [["term", "value", "unit", "contribution (µm)", "share (%)"]])
@@ -414,7 +409,7 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
                           f"φ = {c.configuration.region.phi_deg:g}°",
                 "reference": c.configuration.reference,
                 "worst_pose": _worst_pose(c),
-                "contributions": _html_table(_contributions_display(tables[f"contributions_{c.name}"]))}
+                "contributions": _html_table(_contributions_display(tables[f"contributions_{c.name}"], c))}
                for c in result.configurations]
     summary_table = _summary_display(tables["summary"])
     families = (tables["worstcase_families"].pivot(index="family", columns="configuration", values="share_pct")
