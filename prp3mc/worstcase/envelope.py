@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -46,7 +47,7 @@ from ..model.linear import LinearModel, linear_model
 from ._kernel import (NONFINITE, REASONS, TERM_COLUMNS, envelope_kernel, generator_signs, kernel_tables,
                         zonotope_maxima, zonotope_scratch)
 
-__all__ = ["WorstCase", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "term_bounds", "QUANTITIES",
+__all__ = ["WorstCaseResult", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "term_bounds", "QUANTITIES",
            "CORRELATION_NOTE"]
 
 #: What outputs say of the worst case of a correlated budget: it is unchanged, the box.
@@ -59,7 +60,7 @@ QUANTITIES = ("position", "phi", "x", "y")
 
 
 class _Maxima:
-    """The maxima's accessors shared by :class:`WorstCase` and :class:`WorstCaseMaxima`."""
+    """The maxima's accessors shared by :class:`WorstCaseResult` and :class:`WorstCaseMaxima`."""
 
     __slots__ = ()
 
@@ -76,7 +77,7 @@ class _Maxima:
 
 
 @dataclass(frozen=True, slots=True, repr=False)
-class WorstCase(_Maxima):
+class WorstCaseResult(_Maxima):
     """Exact worst case of the linear model at a batch of poses.
 
     Attributes
@@ -296,7 +297,7 @@ def _maxima(model: LinearModel, tb: np.ndarray):
 
 
 def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | None = None,
-               check: bool = True, workers: int | None = None, chunk: int = 16384) -> WorstCase:
+               check: bool = True, workers: int | None = None, chunk: int = 16384) -> WorstCaseResult:
     """Exact maxima of the linear pose error over the budget's box, batched.
 
     Parameters
@@ -314,7 +315,7 @@ def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | No
 
     Returns
     -------
-    WorstCase
+    WorstCaseResult
 
     Examples
     --------
@@ -353,7 +354,7 @@ def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | No
                                 cos_omega=join(lambda p: p[0].cos_omega, (3,)),
                                 sin_omega=join(lambda p: p[0].sin_omega, (3,)))
     signs = {q: join(lambda p, q=q: p[3][q], (3 + G,)) for q in QUANTITIES}
-    return WorstCase(
+    return WorstCaseResult(
         model=model, term_bounds=join(lambda p: p[1], (T, 2)),
         position_mm=join(lambda p: p[2]["position"]), phi_deg=join(lambda p: p[2]["phi"]) * RAD2DEG,
         x_mm=join(lambda p: p[2]["x"]), y_mm=join(lambda p: p[2]["y"]),
@@ -363,7 +364,7 @@ def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | No
 
 @dataclass(frozen=True, slots=True, repr=False)
 class WorstCaseMaxima(_Maxima):
-    """The maxima of :class:`WorstCase` alone, for grids too large to keep the model (see
+    """The maxima of :class:`WorstCaseResult` alone, for grids too large to keep the model (see
     :func:`worst_case_maxima`): the kernel's two output arrays, read through named views.
 
     Attributes
@@ -401,12 +402,12 @@ class WorstCaseMaxima(_Maxima):
 
     @property
     def leg_signs(self) -> FrozenDict:
-        """As :attr:`WorstCase.leg_signs`: quantity to the legs' ends (..., 3), int8, unpacked on each access."""
+        """As :attr:`WorstCaseResult.leg_signs`: quantity to the legs' ends (..., 3), int8, unpacked on each access."""
         return FrozenDict(zip(QUANTITIES, generator_signs(self.codes, 3 + self.n_shared)[..., :3]))
 
     @property
     def shared_signs(self) -> FrozenDict:
-        """As :attr:`WorstCase.shared_signs`: quantity to the ends (..., G) of the terms of all legs, int8,
+        """As :attr:`WorstCaseResult.shared_signs`: quantity to the ends (..., G) of the terms of all legs, int8,
         unpacked on each access."""
         return FrozenDict(zip(QUANTITIES, generator_signs(self.codes, 3 + self.n_shared)[..., 3:]))
 
@@ -479,3 +480,12 @@ def _first_refusal(geometry: Geometry, poses: np.ndarray, flat: np.ndarray, bad:
     r, p = next((r, hit[0]) for r in range(len(REASONS)) if (hit := np.flatnonzero(bad & (0b111 << 3 * r))).size)
     leg = next(i for i in range(3) if bad[p] >> (3 * r + i) & 1)
     return InfeasiblePoseError(refusal(geometry, flat[p], (int(p),), REASONS[r], leg))  # the flat index, as worst_case
+
+
+def __getattr__(name: str):
+    """``WorstCase``, the former name of :class:`WorstCaseResult`, for one release (with a DeprecationWarning)."""
+    if name == "WorstCase":
+        warnings.warn("WorstCase is now WorstCaseResult (the name WorstCase goes in the next release)",
+                      DeprecationWarning, stacklevel=2)
+        return WorstCaseResult
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
