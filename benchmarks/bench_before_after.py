@@ -38,6 +38,12 @@ RATIOS = ("sensitivity_speedup_vs_loop", "worstcase_speedup_vs_de", "mc_grid_spe
           "mc_pose_fraction_of_uniforms_limit")
 
 
+#: What each figure of the table times.
+LABELS = {"help": "`prp3mc --help`", "parse": "import and `Study.from_toml` of the paper study",
+          "study_warm": "`prp3mc study paper_reproduction`, warm",
+          "study_cold": "the same, cold (the tree's numba caches deleted)"}
+
+
 def run(tree: Path, args: list[str], out: Path | None = None) -> dict:
     """Run ``python ARGS`` on ``tree``'s code; wall and CPU seconds, loads before and after."""
     env = {**os.environ, "PYTHONPATH": str(tree)}
@@ -100,8 +106,8 @@ def main(argv=None) -> int:
                 rec["runs"].setdefault(name, {}).setdefault(label, []).append(m)
                 print(f"{name:14s} {label} {m['wall']:7.2f} s wall {m['cpu']:7.2f} CPU-s load {m['load']:.1f}",
                       file=sys.stderr, flush=True)
-            if args.json:                                      # what is measured so far survives an interruption
-                args.json.write_text(json.dumps(rec, indent=1, default=str))
+                if args.json:                                  # what is measured so far survives an interruption
+                    args.json.write_text(json.dumps(rec, indent=1, default=str))
 
     study = lambda label, r: run(trees[label], ["-m", "prp3mc", "study", "paper_reproduction", "--no-progress",  # noqa: E731
                                                "--force", "--out", str(work / f"{label}_{r}")])
@@ -143,7 +149,7 @@ def table(rec: dict) -> str:
             continue
         old, new = by["old"], by["new"]
         loads = [m["load"] for m in old + new]
-        lines.append(f"| {name} (median of {len(old)}) | {med(old, 'wall'):.2f}; {med(old, 'cpu'):.2f} | "
+        lines.append(f"| {LABELS.get(name, name)} (median of {len(old)}) | {med(old, 'wall'):.2f}; {med(old, 'cpu'):.2f} | "
                      f"{med(new, 'wall'):.2f}; {med(new, 'cpu'):.2f} | {med(new, 'wall') / med(old, 'wall'):.2f} | "
                      f"{min(loads):.1f}-{max(loads):.1f} |")
     if "bench_quick" in rec["runs"]:
