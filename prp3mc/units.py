@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import math
 
-from scipy.special import ndtri, stdtrit
-
 __all__ = ["RAD2DEG", "DEG2RAD", "MM2UM", "DEG2ARCSEC", "POSE_OUTPUTS", "OUTPUTS", "OUTPUT_UNITS",
            "DISPLAY", "z_value", "t_value", "Z95", "probability_text", "quantity_text"]
 
@@ -32,6 +30,7 @@ def z_value(level: float = 0.95) -> float:
     """Two-sided standard-normal quantile for a confidence ``level`` in (0, 1)."""
     if not 0.0 < level < 1.0:
         raise ValueError(f"confidence level must lie in (0, 1), got {level}")
+    from scipy.special import ndtri         # when used: the command line's parsers import no scipy
     return float(ndtri(0.5 + level / 2))  # scipy.stats.norm.ppf's own kernel, without importing scipy.stats
 
 
@@ -39,11 +38,13 @@ def t_value(level: float, df: int) -> float:
     """Two-sided Student t quantile with ``df`` degrees of freedom for a confidence ``level`` in (0, 1)."""
     if not 0.0 < level < 1.0:
         raise ValueError(f"confidence level must lie in (0, 1), got {level}")
+    from scipy.special import stdtrit
     return float(stdtrit(df, 0.5 + level / 2))  # scipy.stats.t.ppf's kernel, without importing scipy.stats
 
 
-#: The 95 % two-sided normal quantile, 1.959964...
-Z95 = z_value(0.95)
+#: The 95 % two-sided normal quantile, ``z_value(0.95)`` written out (tests/test_lazy_imports.py checks it), so
+#: that importing this module imports no scipy.
+Z95 = 1.959963984540054
 
 
 def probability_text(p: float, ci=None, se: float | None = None) -> str:

@@ -196,8 +196,8 @@ def test_discrepancy_records_an_incomplete_budget(tmp_path, capsys):
 
 def test_discrepancy_refuses_what_cannot_finish(tmp_path, capsys, monkeypatch):
     """Stopped at its time limit, or refused by its memory before it starts: one line, exit 1, nothing written."""
-    import prp3mc.cli.discrepancy as command
     import prp3mc.limits as limits
+    import prp3mc.measurement.campaign.data as command      # the command imports read_campaign from here when run
     data, out = _campaign(tmp_path / "campaign.csv"), tmp_path / "out"
     argv = ["discrepancy", "--geometry", "u-shape", "--budget", "paper", "--data", str(data), "--out", str(out)]
     assert main(["--max-hours", "2e-5", *argv]) == 1          # 72 ms: stopped while it runs

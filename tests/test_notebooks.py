@@ -75,3 +75,23 @@ def test_notebook_executes_and_shows_its_figures(path, monkeypatch):
              if not shows_picture(nb.cells[i])]
     assert not blank, f"{path.name}: {len(blank)} of {len(drawing)} drawing cells show no picture:\n  " \
         + "\n  ".join(blank)
+
+
+#: Where a stored output would name this machine's folders (an absolute path), as text.
+ABSOLUTE = re.compile(r"(?<![\w.~])/(?:work|home|Users|tmp|root|private|var|mnt)/[\w.-]")
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+def test_committed_outputs_name_no_folder_of_the_machine_that_ran_them(path):
+    """A stored output shows relative paths only: an absolute one names the folder of whoever executed it."""
+    nb = nbformat.read(path, as_version=4)
+    root = str(Path(__file__).resolve().parent.parent)
+    for i, cell in enumerate(nb.cells):
+        for out in cell.get("outputs", []):
+            text = out.get("text", "") + "".join(v for k, v in out.get("data", {}).items() if k.startswith("text/"))
+            assert root not in text and not ABSOLUTE.search(text), f"{path.name} cell {i}: {text[:200]}"
+
+
+def test_path_check_sees_a_path():
+    assert ABSOLUTE.search("'source': '/work/wt/users/studies/paper_reproduction.toml'")
+    assert not ABSOLUTE.search("'source': '../studies/paper_reproduction.toml', 'rate': '2 µm/s'")

@@ -20,6 +20,7 @@ KINDS = {
     "study": ["study", "paper_reproduction", "--quick", "--seed", "1", "--no-progress"],
     "sweep": ["study", "sweep_example", "--quick", "--seed", "1", "--no-progress", "--formats", "svg,xlsx"],
     "allocation": ["study", "allocation_example", "--quick", "--seed", "1", "--no-progress"],
+    "correlated": ["study", "correlated_example", "--quick", "--seed", "1", "--no-progress"],
     "discrepancy": ["discrepancy", "--geometry", "u-shape", "--budget", "paper", "--data", "example",
                     "--instrument-sigma-mm", "0.002", "--instrument-sigma-deg", "0.0005", "--seed", "1",
                     "--no-progress"],
@@ -52,7 +53,7 @@ def test_report_names_only_files_its_run_wrote(reports, kind):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kind", ["study", "sweep", "allocation"])
+@pytest.mark.parametrize("kind", ["study", "sweep", "allocation", "correlated"])
 def test_sections_are_numbered_one_after_another(reports, kind):
     html = _html(reports, kind)
     numbers = section_numbers(html)

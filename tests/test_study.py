@@ -16,7 +16,7 @@ import pytest
 
 from prp3mc import Budget, Geometry, Region, sensitivity
 from prp3mc.cli import main
-from prp3mc.errors import IncompleteBudgetWarning, StudyError, UnknownPresetError
+from prp3mc.errors import IncompleteBudgetWarning, Prp3mcWarning, StudyError, UnknownPresetError
 from prp3mc.reports import plots
 from prp3mc.reports.study_report import comparison, write_study
 from prp3mc.study.summary import build_summary
@@ -317,6 +317,17 @@ def test_golden_summary_any_seed(name, seed):
     golden = load_summary(GOLDEN / f"{name}.json")
     assert golden["metadata"]["seed"] == regenerate.GOLDEN_SEED != seed
     assert_summary_close(regenerate.golden_summary(name, seed=seed), golden)
+
+
+def test_golden_correlated_summary():
+    """The bundled correlated study: Shapley effects, Monte Carlo of the copula and the realised rank correlations
+    within their standard errors of the pinned run's, every exact figure (worst case, latent correlations) equal."""
+    golden = load_summary(GOLDEN / "correlated_example.json")
+    with pytest.warns(Prp3mcWarning, match="correlates some inputs"):
+        summary = regenerate.golden_summary("correlated_example", seed=3)
+    assert_summary_close(summary, golden)
+    assert golden["correlation"]["analyses"]["shapley"]["respects"] and "Sh" in \
+        golden["configurations"]["u-shape"]["sobol"]["position"]["theta_1"]
 
 
 @pytest.mark.parametrize("name", ["paper_reproduction", "quick"])

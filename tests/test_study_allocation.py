@@ -187,7 +187,7 @@ def test_study_allocation_percentile_spec_some_configurations(tmp_path):
     st = d["statistical"]
     assert st["n_samples"] == 2000 and st["percentile"] == 99.73 and st["percentile_um"]["se"] > 0
     assert st["percentile_um"]["value"] <= st["ci95_high_um"]["value"]
-    assert st["confirmed"] == (st["ci95_high_um"]["value"] <= 80.0) == d["feasible"]
+    assert st["confirmed"] and d["feasible"]        # decided exactly; Monte Carlo does not refute it
     assert result["delta"].allocation.poses.shape == (20, 3)
     assert summary["metadata"]["allocation_samples"] == 2000
 

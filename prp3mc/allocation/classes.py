@@ -103,7 +103,8 @@ class ClassMenu:
     def budget(self, choice: dict, fixed: Budget | None = None) -> Budget:
         """The error budget of a choice ``{input: class name}`` (zeta_i uniform on 0-360 deg).
 
-        ``fixed``: a budget whose ``[effects]`` (and ``fitted_on``) the choice's budget takes.
+        ``fixed``: a budget whose ``[effects]`` (and ``fitted_on``) and ``[correlation]`` table (with the
+        groups it names) the choice's budget takes.
         """
         inputs, sources = {}, {}
         for name in self.inputs:
@@ -116,8 +117,16 @@ class ClassMenu:
             sources[name] = f"class {match[0].name}: {match[0].source}"
             if name.startswith("rho_"):
                 inputs[f"zeta_{name[-1]}"] = _FULL_TURN
-        budget = Budget(inputs, sources=sources, name=f"{self.name} allocation")
-        return budget if fixed is None else budget.with_effects(fixed.effects, fitted_on=fixed.fitted_on)
+        if fixed is None:
+            return Budget(inputs, sources=sources, name=f"{self.name} allocation")
+        named = {n.strip() for key in fixed.correlation for n in key.split(",")}
+        try:
+            return Budget(inputs, groups={g: v for g, v in fixed.groups.items() if g in named}, sources=sources,
+                          name=f"{self.name} allocation", effects=fixed.effects, fitted_on=fixed.fitted_on,
+                          correlation=fixed.correlation)
+        except BudgetError as exc:
+            raise AllocationError(f"the classes' budget cannot take budget {fixed.name!r}'s [correlation]: {exc}"
+                                  ) from None
 
     def to_frame(self):
         """One row per family and class: family, name, law, lo, hi, cost, source."""

@@ -7,15 +7,20 @@ spec at every pose of a region, at the least total cost: proven optimal by
 branch and bound on the monotone envelope
 (:mod:`~prp3mc.allocation.search`). With ``spec_percentile`` the
 position spec bounds that percentile of the position error instead: the
-search screens choices with the closed-form moments (a normal-approximation
-bound, capped by the worst case) and Monte Carlo confirms the choice with a
-confidence interval at every pose. :func:`allocation_front` sweeps the
-cost-accuracy Pareto front.
+exact distribution of the linear model decides whether a choice meets it
+(Monte Carlo with the budget's copula when the budget correlates its
+inputs), the closed-form normal screen proposes the choices, small menus are
+searched to a proof (:mod:`~prp3mc.allocation.percentile`), and Monte Carlo
+confirms the choice with a confidence interval at every pose.
+:func:`allocation_front` sweeps the cost-accuracy Pareto front.
 
 A budget's systematic effects (its ``[effects]`` table: fitted offsets,
 lead scales, backlash, thermal expansion) are properties of the machine, not
 classes to buy: given ``budget=``, they stay fixed in every candidate, every
-bound, the Monte Carlo confirmation and the reported worst case.
+bound, the Monte Carlo confirmation and the reported worst case. Its
+``[correlation]`` table goes with every candidate too: a percentile spec
+is then decided by Monte Carlo; the worst case stays the box's (correlation
+leaves every corner possible).
 """
 
 from __future__ import annotations
@@ -34,17 +39,16 @@ from .._version import __version__
 from ..errors import AllocationError
 from ..kinematics.geometry import Geometry, Region
 from ..kinematics.chain import as_poses
+from ..stackup.result import PPM
 from ..units import DEG2ARCSEC, MM2UM
 from .classes import ClassMenu
+from .percentile import METHODS, PercentileCheck, percentile_least_cost
 from .search import Problem, Search, least_cost
 from ..model.budget import Budget
 from ..montecarlo.propagation import ci_samples, monte_carlo
 from ..worstcase.envelope import worst_case
 
 __all__ = ["AllocationResult", "allocate", "allocation_front", "front_records"]
-
-_CONFIRM_ROUNDS = 3
-
 
 @dataclass(frozen=True, slots=True)
 class AllocationResult:
@@ -57,8 +61,8 @@ class AllocationResult:
     cost : float
         Total cost (the user's unit).
     feasible : bool
-        Whether the choice meets the spec (for a statistical spec: screened
-        and confirmed by Monte Carlo). When False, ``choice`` is the one
+        Whether the choice meets the spec (for a statistical spec: as
+        :class:`~prp3mc.allocation.percentile.PercentileCheck` decides it). When False, ``choice`` is the one
         closest to the spec (smallest largest ratio of value to spec).
     spec : dict
         ``position_mm``, ``phi_deg`` (None when not given), ``percentile``
@@ -72,10 +76,16 @@ class AllocationResult:
         Where it binds: the poses within ``binding_rtol`` of the region maximum
         (worst case), or the pose where the percentile's CI upper bound is largest.
     statistical : dict or None
-        For a statistical spec: ``percentile``, ``screen_mm`` (the screened
-        bound, region max), ``percentile_mm``, ``ci_high_mm`` (Monte Carlo
-        estimate and its 95 % upper bound at the binding pose, region max of
-        the upper bound), ``n_samples``, ``seed``, ``rounds``, ``confirmed``.
+        For a statistical spec: ``percentile``, ``method`` (``exact`` or
+        ``monte_carlo`` for a correlated budget, see
+        :data:`~prp3mc.allocation.percentile.METHODS`), ``exceedance`` (exact:
+        the largest exceedance of S plus its error bound over the poses),
+        ``screen_mm`` (the normal screen, region max), ``percentile_mm``,
+        ``ci_high_mm`` (Monte Carlo estimate and its 95 % upper bound at the
+        binding pose, region max of the upper bound), ``n_samples``, ``seed``,
+        ``checks`` (choices decided), ``proven`` (every cheaper choice was
+        decided, see :func:`~prp3mc.allocation.percentile.percentile_least_cost`),
+        ``confirmed`` (by Monte Carlo).
     nodes : int
         Candidates the branch and bound evaluated (of ``n_choices``).
     n_choices : int
@@ -159,8 +169,11 @@ class AllocationResult:
             doc["statistical"] = {
                 "percentile": st["percentile"], "screen_um": MM2UM * st["screen_mm"],
                 "percentile_um": MM2UM * st["percentile_mm"], "ci95_high_um": MM2UM * st["ci_high_mm"],
-                "screen": "normal approximation |mu| + sqrt(lambda_max chi2_2(q)), capped by the worst case",
-                "n_samples": st["n_samples"], "seed": st["seed"], "rounds": st["rounds"],
+                "method": METHODS[st["method"]],
+                "exceedance_ppm": None if st["exceedance"] is None else PPM * st["exceedance"],
+                "screen": "normal approximation |mu| + sqrt(lambda_max chi2_2(q)), capped by the worst case: "
+                          "proposes choices, decides none",
+                "n_samples": st["n_samples"], "seed": st["seed"], "checks": st["checks"], "proven": st["proven"],
                 "confirmed": st["confirmed"]}
         return doc
 
@@ -242,8 +255,9 @@ def allocate(geometry, classes, region, *, spec_position_um: float | None = None
         Poses within this relative distance of the region maximum are binding.
     budget : Budget or str, optional
         A budget (or preset name or TOML path) whose ``[effects]`` stay fixed
-        in every bound and check (its inputs play no part: the classes
-        choose them). A budget fitted on another geometry is refused.
+        in every bound and check and whose ``[correlation]`` table every
+        candidate takes (its inputs' laws play no part: the classes choose
+        them). A budget fitted on another geometry is refused.
 
     Returns
     -------
@@ -264,25 +278,26 @@ def allocate(geometry, classes, region, *, spec_position_um: float | None = None
     geometry, menu, fixed = Geometry.load(geometry), ClassMenu.load(classes), _fixed(budget)
     poses = region_poses(region, grid, phi_deg)
     problem = Problem(geometry, menu, poses, k_sigma=k_sigma, percentile=spec_percentile, fixed=fixed)
-    idx, nodes = least_cost(problem, limits)
-    feasible, statistical, seed = idx is not None, None, None
-    if spec_percentile is not None and feasible:
+    statistical, seed = None, None
+    if spec_percentile is None:
+        idx, nodes = least_cost(problem, limits)
+    else:
         seed, _ = resolve_rng(rng)
-        idx, feasible, statistical, more = _confirm(geometry, menu, problem, limits, idx, spec_percentile,
-                                                    n_samples, seed)
-        nodes += more
+        check = PercentileCheck(geometry, problem, limits["screen"], spec_percentile, n_samples, seed)
+        idx, nodes, proven = percentile_least_cost(problem, {"phi": limits["phi"]}, check)
+    feasible = idx is not None
     if idx is None:
         nearest = Search(problem, limits)
         idx = nearest.closest()
         nodes += nearest.nodes
+    if spec_percentile is not None:
+        statistical = _confirm(geometry, problem, check, idx, feasible and proven)
     choice = _choice(problem, idx)
     wc = worst_case(geometry, problem.budget(choice), poses, k_sigma=k_sigma)
     values = {"position": wc.position_mm, "phi": wc.phi_deg}
     ratios = {q: float(values[q].max()) / limits[q] for q in ("position", "phi") if limits.get(q)}
     if statistical is not None:
         ratios["percentile"] = statistical["ci_high_mm"] / limits["screen"]
-    elif "screen" in limits:
-        ratios["percentile"] = float(problem.envelopes(idx)["screen"].max()) / limits["screen"]
     binding = max(ratios, key=ratios.get)
     if binding == "percentile" and statistical is not None:
         binding_poses = statistical.pop("pose")[None]
@@ -300,38 +315,37 @@ def allocate(geometry, classes, region, *, spec_position_um: float | None = None
 
 
 def _fixed(budget) -> Budget | None:
-    """The budget whose effects stay fixed, or None (none given, or it has no effects)."""
+    """The budget whose effects and correlations stay fixed, or None (none given, or it has neither)."""
     if budget is None:
         return None
     budget = Budget.load(budget)
-    return budget if budget.effects else None
+    return budget if budget.effects or budget.correlated else None
 
 
-def _confirm(geometry, menu, problem, limits, idx, percentile, n_samples, seed):
-    """Monte Carlo check of a screened choice; tighten the screen and search again if it fails.
+def _confirm(geometry, problem, check: PercentileCheck, idx, proven: bool) -> dict:
+    """The statistical record of the choice (or of the closest one, when none meets the spec), with its
+    Monte Carlo confirmation.
 
-    Returns the final class indices (or None), whether they are confirmed,
-    the statistical record and the candidates the searches evaluated.
+    ``confirmed``: an independent Monte Carlo run agrees with the decision.
+    Exact method, a choice that meets the spec: no pose's 95 % interval of the
+    percentile lies wholly above S (the run does not refute it; the choice is
+    tight, so the interval's upper end may pass S by chance). Monte Carlo
+    method: the upper end is within S at every pose. A choice that fails: some
+    pose's upper end passes S.
     """
-    spec, lim, nodes = limits["screen"], dict(limits), 0
-    for rounds in range(1, _CONFIRM_ROUNDS + 1):
-        mc = monte_carlo(geometry, problem.budget(_choice(problem, idx)), problem.poses, n_samples,
-                         rng=child_seed(seed, rounds), percentiles=(percentile,))
-        high = mc.position_pct_ci[:, 0, 1]
-        worst = int(np.argmax(high))
-        record = {"percentile": float(percentile), "screen_mm": float(problem.envelopes(idx)["screen"].max()),
-                  "percentile_mm": float(mc.position_pct[worst, 0]), "ci_high_mm": float(high[worst]),
-                  "pose": problem.poses[worst], "n_samples": int(n_samples), "seed": int(seed),
-                  "rounds": rounds, "confirmed": bool(high[worst] <= spec)}
-        if record["confirmed"] or rounds == _CONFIRM_ROUNDS:
-            break
-        lim["screen"] *= spec / high[worst]           # the screen was optimistic there: ask it for less
-        nxt, more = least_cost(problem, lim)
-        nodes += more
-        if nxt is None:
-            break
-        idx = nxt
-    return idx, record["confirmed"], record, nodes
+    decided = check.record(idx)
+    mc = monte_carlo(geometry, problem.budget(_choice(problem, idx)), problem.poses, check.n_samples,
+                     rng=child_seed(check.seed, 1), percentiles=(check.q,))
+    low, high = mc.position_pct_ci[:, 0, 0], mc.position_pct_ci[:, 0, 1]
+    worst = int(np.argmax(high))
+    exact = decided["method"] == "exact"
+    agrees = bool(np.all(low <= check.S)) if exact else bool(high[worst] <= check.S)
+    confirmed = agrees if decided["met"] else bool(high[worst] > check.S)
+    return {"percentile": check.q, "method": decided["method"], "exceedance": decided["value"] if exact else None,
+            "screen_mm": float(problem.envelopes(idx)["screen"].max()),
+            "percentile_mm": float(mc.position_pct[worst, 0]), "ci_high_mm": float(high[worst]),
+            "pose": problem.poses[worst], "n_samples": check.n_samples, "seed": check.seed,
+            "checks": check.checks, "proven": bool(proven), "confirmed": confirmed}
 
 
 def allocation_front(geometry, classes, region, *, output: str = "position",

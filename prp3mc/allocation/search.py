@@ -6,8 +6,9 @@ The exact worst case of the linear model (:mod:`~prp3mc.worstcase`) is the large
 norm over the 8 corners of the box the three legs' u_i fill, and that box
 only grows when an interval grows: the envelope over the region is monotone
 under interval inclusion. :class:`Problem` evaluates it for a batch of K
-candidate choices at all N poses at once (two matrix products and the
-8-corner algebra on (K, N) arrays).
+candidate choices at all N poses at once (two matrix products for the
+boxes, then the worst case's own corner maxima,
+:func:`~prp3mc.worstcase._kernel.zonotope_maxima`, over the K x N boxes).
 
 :class:`Search` finds the proven least-cost choice by best-first branch and
 bound over the inputs, one class at a time. A node fixes the classes of the
@@ -55,13 +56,14 @@ from ..kinematics.geometry import Geometry
 from .classes import ClassMenu
 from ..model.budget import Budget
 from ..model.linear import linear_model
+from ..worstcase._kernel import zonotope_maxima, zonotope_scratch
 from ..worstcase.envelope import term_bounds
 
 __all__ = ["Problem", "Search", "least_cost", "QUANTITIES"]
 
 #: Constrained quantities: worst-case position (mm), worst-case ``|dphi|`` (deg), screened position quantile (mm).
 QUANTITIES = ("position", "phi", "screen")
-_CHUNK_ELEMENTS = 1 << 21   # K x N elements per evaluated block
+_CHUNK_ELEMENTS = 1 << 18   # K x N elements per evaluated block
 
 
 #: Bytes a queued node holds (its class indices, key and tuple): the queue is refused past the memory.
@@ -101,8 +103,9 @@ class Problem:
     percentile : float, optional
         q (in %) of the statistical screen.
     fixed : Budget, optional
-        A budget whose ``[effects]`` stay fixed in every candidate (its
-        inputs play no part: the classes choose them).
+        A budget whose ``[effects]`` stay fixed in every candidate and whose
+        ``[correlation]`` every candidate takes (its inputs' laws play no
+        part: the classes choose them).
 
     Attributes
     ----------
@@ -114,17 +117,18 @@ class Problem:
         variance (mm or deg and their squares), cost.
     n_classes : ndarray (J,)
     fixed : dict of str to ndarray
-        The effects' fixed parts at the poses: ``center`` (N, 3) and, for the
-        screen, ``mean`` (N, 3) and ``cov`` (N, 3, 3) of the pose error (mm,
-        mm, rad), ``u_half`` (N, 3) widths of the legs' u_i, ``ext`` (N, G, 3)
-        shared generators of the pose error. All zero without effects (G = 0).
+        The effects' fixed parts at the poses: ``u_mid`` (N, 3) centre and
+        ``u_half`` (N, 3) half-widths of the legs' u_i, ``ext`` (N, G, 3)
+        shared generators of u (terms of all legs), and, for the screen,
+        ``mean`` (N, 3) and ``cov`` (N, 3, 3) of the pose error (mm, mm, rad).
+        All zero without effects (G = 0).
     """
 
     def __init__(self, geometry: Geometry, menu: ClassMenu, poses: np.ndarray, *,
                  k_sigma: float | None = None, percentile: float | None = None, fixed: Budget | None = None):
         self.menu, self.poses = menu, np.asarray(poses, dtype=float).reshape(-1, 3)
         self.inputs = menu.inputs
-        self.fixed_budget = fixed if fixed is not None and fixed.effects else None
+        self.fixed_budget = fixed if fixed is not None and (fixed.effects or fixed.correlated) else None
         first = {name: menu.classes_of(name)[0].name for name in self.inputs}
         model = linear_model(geometry, self.budget(first), self.poses)
         N, J = self.poses.shape[0], len(self.inputs)
@@ -132,8 +136,8 @@ class Problem:
         legs = np.array(model.legs[:J])
         columns = model.columns
         self.P = np.ascontiguousarray(np.moveaxis(columns[..., :J], -1, 0))  # (J, N, 3): mm, mm, rad per term unit
-        self.Ainv = model.Ainv                                                # (N, 3, 3)
-        self._absWu = np.abs(model.scale[:, :J].T[:, :, None] * (legs[:, None] == np.arange(3))[:, None, :])  # (J, N, 3)
+        self._Ai = np.ascontiguousarray(np.moveaxis(model.Ainv, 0, -1))      # (3, 3, N): A^-1, poses last
+        self._Wu = model.scale[:, :J].T[:, :, None] * (legs[:, None] == np.arange(3))[:, None, :]  # (J, N, 3)
         self.fixed = _fixed_parts(model, J, k_sigma)
         from scipy.stats import chi2  # imported when used: parsing a study imports this module
         self.kq = None if percentile is None else float(np.sqrt(chi2.ppf(percentile / 100.0, 2)))
@@ -174,10 +178,10 @@ class Problem:
             ``screen`` (mm): the screened quantile, if the moments are given.
         """
         at = slice(None) if at is None else np.asarray(at)
-        P, absWu, Ainv = self.P[:, at], self._absWu[:, at], self.Ainv[at]
+        P, Wu, Ai = self.P[:, at], self._Wu[:, at], np.ascontiguousarray(self._Ai[..., at])
         fixed = {k: v[at] for k, v in self.fixed.items()}
         step = max(1, _CHUNK_ELEMENTS // P.shape[1])
-        parts = [_envelope(P, absWu, Ainv, self.kq, fixed,
+        parts = [_envelope(P, Wu, Ai, self.kq, fixed,
                            *(None if a is None else a[s:s + step] for a in (mid, half, mean, dmean, var)))
                  for s in range(0, mid.shape[0], step)]
         return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
@@ -194,14 +198,18 @@ class Problem:
 def _fixed_parts(model, J: int, k_sigma) -> dict:
     """The fixed parts (see :attr:`Problem.fixed`) of the model's terms from J on (the effects)."""
     N = model.poses.shape[0]
-    out = {"center": np.zeros((N, 3)), "mean": np.zeros((N, 3)), "cov": np.zeros((N, 3, 3)),
+    out = {"u_mid": np.zeros((N, 3)), "mean": np.zeros((N, 3)), "cov": np.zeros((N, 3, 3)),
            "u_half": np.zeros((N, 3)), "ext": np.zeros((N, 0, 3))}
     if len(model.terms) == J:
         return out
     tb = term_bounds(model, model.budget.bounds(k_sigma))[:, J:]                # (N, E, 2)
-    cols, scale = model.columns[..., J:], model.scale[:, J:]                      # (N, 3, E), (N, E)
+    weights, scale = model.weights[..., J:], model.scale[:, J:]                   # (N, 3, E), (N, E)
     mid, half = tb.mean(-1), 0.5 * (tb[..., 1] - tb[..., 0])
-    out["center"] = np.einsum("noe,ne->no", cols, mid)
+    onehot = (np.array(model.legs[J:])[:, None] == np.arange(3)).astype(float)   # (E, 3); none for all-leg terms
+    shared = [t - J for t in model.shared]
+    out["u_mid"] = (scale * mid) @ onehot + np.einsum("nie,ne->ni", weights[..., shared], mid[:, shared])
+    out["u_half"] = (np.abs(scale) * half) @ onehot
+    out["ext"] = np.moveaxis(weights[..., shared] * half[:, None, shared], -1, -2)  # (N, G, 3)
     fmean, fcov = model.feature_moments()
     coef = model.coef
     F = coef.shape[-1]
@@ -209,10 +217,6 @@ def _fixed_parts(model, J: int, k_sigma) -> dict:
     own[_n_input_features(model, J):] = True
     out["mean"] = np.einsum("nof,f->no", coef[..., own], fmean[own])
     out["cov"] = np.einsum("nof,fg,nqg->noq", coef[..., own], fcov[np.ix_(own, own)], coef[..., own])
-    legs = np.array(model.legs[J:])
-    out["u_half"] = (np.abs(scale) * half) @ (legs[:, None] == np.arange(3)).astype(float)
-    shared = [t - J for t in model.shared]
-    out["ext"] = np.moveaxis(cols[..., shared] * half[:, None, shared], -1, -2)    # (N, G, 3)
     return out
 
 
@@ -221,24 +225,23 @@ def _n_input_features(model, J: int) -> int:
     return sum(2 if tl.kind == "clearance" else 1 for tl in model.term_laws[:J])
 
 
-def _corners(m: int) -> np.ndarray:
-    """The 2^m sign patterns of m generators, (2^m, m)."""
-    return np.array(list(itertools.product((-1.0, 1.0), repeat=m)))
+def _envelope(P, Wu, Ai, kq, fixed, mid, half, mean, dmean, var) -> dict:
+    """The envelopes of :meth:`Problem.evaluate` for one block of K candidates, at n poses.
 
-
-def _envelope(P, absWu, Ainv, kq, fixed, mid, half, mean, dmean, var) -> dict:
-    """The envelopes of :meth:`Problem.evaluate` for one block of candidates, at n poses."""
+    The worst cases are :func:`~prp3mc.worstcase._kernel.zonotope_maxima` (the one definition of the
+    corner maxima) over the K x n boxes of u, each candidate's poses in turn.
+    """
     J, n = P.shape[:2]
     K = mid.shape[0]
-    center = (mid @ P.reshape(J, n * 3)).reshape(K, n, 3) + fixed["center"]
-    legs_g = Ainv[None] * (half @ absWu.reshape(J, n * 3) + fixed["u_half"].reshape(-1)).reshape(K, n, 1, 3)
-    ext = np.broadcast_to(np.moveaxis(fixed["ext"], -1, -2), (K, n, 3, fixed["ext"].shape[1]))
-    G = np.concatenate([legs_g, ext], axis=-1)                              # (K, n, 3 rows, 3 + G generators)
-    corners = _corners(G.shape[-1])
-    vx = center[..., 0, None] + G[..., 0, :] @ corners.T                    # (K, n, 2^(3 + G))
-    vy = center[..., 1, None] + G[..., 1, :] @ corners.T
-    out = {"position": np.sqrt((vx * vx + vy * vy).max(axis=-1)),
-           "phi": (np.abs(center[..., 2]) + np.abs(G[..., 2, :]).sum(-1)) * RAD2DEG}
+    u_mid = (mid @ Wu.reshape(J, n * 3)).reshape(K, n, 3) + fixed["u_mid"]
+    u_half = (half @ np.abs(Wu).reshape(J, n * 3)).reshape(K, n, 3) + fixed["u_half"]
+    G, m = fixed["ext"].shape[1], K * n
+    ext = np.tile(np.moveaxis(fixed["ext"], 0, -1), K)                        # (G, 3, K n)
+    values, codes = np.empty((4, m)), np.empty((4, m), dtype=np.int16)
+    zonotope_maxima(np.tile(Ai, K), np.ascontiguousarray(u_mid.reshape(m, 3).T),
+                    np.ascontiguousarray(u_half.reshape(m, 3).T), ext, values, codes, 0, m,
+                    zonotope_scratch(3 + G, m))
+    out = {"position": values[0].reshape(K, n), "phi": values[1].reshape(K, n) * RAD2DEG}
     if mean is not None:
         px, py = P[..., 0], P[..., 1]
         mu = (mean @ P.reshape(J, n * 3)).reshape(K, n, 3) + fixed["mean"]

@@ -5,8 +5,6 @@ from __future__ import annotations
 from .._version import __version__
 from ..kinematics.geometry import REGION_PRESETS, Region
 from ..provenance import spec_record
-from ..allocation.optimum import allocate, allocation_front, front_records
-from ..model.budget import Budget
 from ..units import DEG2ARCSEC, MM2UM, quantity_text
 from ..limits import allocate_estimate
 from . import (add_geometry, add_json, add_progress, add_seed, command, emit_json, finite_float, positive_float, positive_int,
@@ -32,7 +30,7 @@ class AllocateCommand:
                        help="worst-case |dphi| bound, arcsec")
         p.add_argument("--spec-percentile", type=finite_float, default=None, metavar="Q",
                        help="bound the Q-th percentile of the position error instead of its worst case "
-                            "(screened with closed-form moments, confirmed by Monte Carlo)")
+                            "(decided on the exact distribution, confirmed by Monte Carlo)")
         p.add_argument("--phi-deg", type=finite_float, default=None, metavar="P",
                        help="platform orientation of the region, deg (default: the region's own, 0 for the presets)")
         p.add_argument("--grid", type=positive_int, default=41, metavar="N", help="N x N grid (default 41)")
@@ -49,6 +47,8 @@ class AllocateCommand:
 
     @staticmethod
     def run(args) -> None:
+        from ..model.budget import Budget
+        from ..allocation.optimum import allocate, allocation_front, front_records
         budget = None if args.budget is None else Budget.load(args.budget)
         region = Region.load(args.region)
         if args.phi_deg is None:
@@ -106,7 +106,8 @@ def _text(r, args, front) -> str:
         lines.append(f"p{st['percentile']:g} of the position error: screen {MM2UM * st['screen_mm']:.3f} µm; "
                      f"Monte Carlo {MM2UM * st['percentile_mm']:.3f} µm, 95 % upper bound "
                      f"{MM2UM * st['ci_high_mm']:.3f} µm ({st['n_samples']} samples, seed {st['seed']}): "
-                     + ("confirmed" if st["confirmed"] else "NOT confirmed"))
+                     + ("confirmed" if st["confirmed"] else "NOT confirmed")
+                     + f"; decided by {st['method']}" + (" (proven least cost)" if st["proven"] else ""))
     if front is not None:
         lines += ["", "Pareto front (cost, worst-case position µm, |dphi| arcsec):"]
         wide = front.pivot_table(index=["point", "cost"], columns="output", values="value").reset_index()

@@ -1,15 +1,11 @@
 """``prp3mc montecarlo``: Monte Carlo statistics of the pose error at one pose or over a grid."""
 
-import pandas as pd
+from __future__ import annotations
+
 
 from .._version import __version__
-from ..model.budget import Budget
-from ..kinematics.geometry import Geometry
 from ..limits import montecarlo_estimate
-from ..montecarlo.propagation import monte_carlo
-from ..kinematics.chain import check_poses
 from ..units import probability_text
-from ..model.validity import check_linearity
 from . import (EFFECTS_NOTE, provenance, add_budget, add_geometry, add_json, add_pose_or_region, add_progress,
                add_sampling, command, emit_json, emit_table, grid_poses, nonnegative_float, within_limits)
 
@@ -35,6 +31,11 @@ class MonteCarloCommand:
 
     @staticmethod
     def run(args) -> None:
+        from ..model.validity import check_linearity
+        from ..kinematics.chain import check_poses
+        from ..montecarlo.propagation import monte_carlo
+        from ..kinematics.geometry import Geometry
+        from ..model.budget import Budget
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         poses, where = grid_poses(args)
         if args.region is None:   # a refused pose before any warning about the analysis
@@ -107,6 +108,7 @@ class MonteCarloCommand:
 def _table(r, poses) -> pd.DataFrame:
     """One row per pose: mean and sd of dx, dy, dphi, the percentiles and maximum of the position error and
     |dphi| with their 95 % intervals, and P(position error > T) with its interval when asked (mm, deg)."""
+    import pandas as pd
     cols = {"x_mm": poses[:, 0], "y_mm": poses[:, 1], "phi_deg": poses[:, 2]}
     for k, name in enumerate(("dx_mm", "dy_mm", "dphi_deg")):
         cols[f"mean_{name}"], cols[f"sd_{name}"] = r.mean[:, k], r.std[:, k]

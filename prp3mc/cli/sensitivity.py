@@ -1,11 +1,11 @@
 """``prp3mc sensitivity``: A, B and every J_q at one pose or over a grid."""
 
+from __future__ import annotations
+
 import numpy as np
-import pandas as pd
 
 from .._version import __version__
 from ..kinematics.geometry import Geometry
-from ..kinematics.sensitivity import FAMILIES, sensitivity
 from . import (LEGS, provenance, matrix_table, add_geometry, add_json, add_pose_or_region, command, emit_json, emit_table,
                grid_poses)
 
@@ -20,6 +20,7 @@ class SensitivityCommand:
 
     @staticmethod
     def run(args) -> None:
+        from ..kinematics.sensitivity import FAMILIES, sensitivity
         geometry = Geometry.load(args.geometry)
         poses, where = grid_poses(args)
         if args.region is not None:
@@ -46,6 +47,8 @@ class SensitivityCommand:
 
 def _long_table(s, poses: np.ndarray) -> pd.DataFrame:
     """One row per pose, matrix, row and column (``matrix`` A, B or J_q; units as in the text output)."""
+    from ..kinematics.sensitivity import FAMILIES, sensitivity
+    import pandas as pd
     mats = {"A": (s.A, LEGS, ("x", "y", "phi")), "B": (s.B, LEGS, LEGS)}
     mats.update({f"J_{q}": (s.J[q], ("dx", "dy", "dphi"), LEGS) for q in FAMILIES})
     parts = []

@@ -3,15 +3,9 @@
 import math
 
 from .._version import __version__
-from ..model.budget import Budget
 from ..errors import BudgetError
 from ..kinematics.geometry import Geometry
-from ..sobol.ranking import ranking
-from ..sobol.indices import DEPENDENT_NOTE, sobol_indices
-from ..kinematics.chain import check_poses
-from ..model.validity import check_linearity
 from ..units import DISPLAY, OUTPUTS
-from ..worstcase.envelope import worst_case
 from ..limits import sobol_estimate
 from . import (EFFECTS_NOTE, provenance, add_budget, add_geometry, add_json, add_pose, add_progress, add_sampling, command,
                emit_json, nonnegative_int, positive_float, positive_int, probability, within_limits)
@@ -38,6 +32,7 @@ _UNDEFINED = "undefined (constant input)"
 
 def _indices(r, i: int, k: int, name: str) -> dict:
     """S1, S1_conf, ST, ST_conf (and Sh, Sh_conf) of one output and name; null with a reason where undefined."""
+    from ..sobol.indices import DEPENDENT_NOTE, sobol_indices
     keys = _KEYS + (_SHAPLEY if r.Sh is not None else ())
     if name in r.constant:
         return {**{key: None for key in keys}, "reason": "constant input: no variance to share"}
@@ -87,6 +82,12 @@ class SobolCommand:
 
     @staticmethod
     def run(args) -> None:
+        from ..worstcase.envelope import worst_case
+        from ..model.validity import check_linearity
+        from ..kinematics.chain import check_poses
+        from ..sobol.indices import DEPENDENT_NOTE, sobol_indices
+        from ..sobol.ranking import ranking
+        from ..model.budget import Budget
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         pairs = [_group(text) for text in args.group]
         if len({name for name, _ in pairs}) < len(pairs):

@@ -7,11 +7,8 @@ from ..errors import Prp3mcError
 from ..limits import allocate_estimate, study_estimate
 from ..output import figure_formats, table_formats
 from ..units import MM2UM
-from ..reports.study_report import write_study
 from ..study.distributed import parse_scheduler
-from ..study.reader import Study, bundled_studies
-from ..study.runner import run_study
-from ..model.validity import check_linearity
+from ..study.bundled import bundled_studies
 from . import WARNINGS, add_output, add_progress, add_seed, command, within_limits
 
 #: Configurations named in the closing line; a sweep's best ones beyond that are in the report.
@@ -40,6 +37,9 @@ class StudyCommand:
 
     @staticmethod
     def run(args) -> None:
+        from ..study.reader import Study
+        from ..study.runner import run_study
+        from ..reports.study_report import write_study
         t0 = time.perf_counter()
         if args.scheduler is not None:
             parse_scheduler(args.scheduler)  # a bad spec fails before the study runs

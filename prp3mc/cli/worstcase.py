@@ -1,14 +1,8 @@
 """``prp3mc worstcase``: exact maximum of the linear model over the budget's box, at a pose or over a grid."""
 
-import pandas as pd
 
 from .._version import __version__
-from ..model.budget import Budget
-from ..model.effects import EffectKind
 from ..kinematics.geometry import Geometry
-from ..kinematics.chain import check_poses
-from ..model.validity import check_linearity
-from ..worstcase.envelope import CORRELATION_NOTE, worst_case
 from . import (provenance, add_budget, add_geometry, add_json, add_pose_or_region, command, emit_json, emit_table,
                grid_poses, positive_float)
 
@@ -26,6 +20,12 @@ class WorstCaseCommand:
 
     @staticmethod
     def run(args) -> None:
+        from ..worstcase.envelope import CORRELATION_NOTE, worst_case
+        from ..model.validity import check_linearity
+        from ..kinematics.chain import check_poses
+        from ..model.budget import Budget
+        from ..model.effects import EffectKind
+        import pandas as pd
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         poses, where = grid_poses(args)
         if args.region is None:   # a refused pose before any warning about the analysis

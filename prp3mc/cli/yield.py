@@ -1,16 +1,27 @@
 """``prp3mc yield``: the exact yield of the linear model against a position (and orientation) spec (SPEC §9)."""
 
+import sys
+import warnings
+
 import numpy as np
 
 from .._version import __version__
-from ..kinematics.geometry import Geometry, Region
-from ..stackup import DEFAULT_TARGET, exact_yield
-from ..stackup.result import PPM
-from ..model.budget import Budget
-from ..model.validity import check_linearity
+from ..errors import SpecError
+from ..kinematics.geometry import Geometry
 from ..units import DEG2ARCSEC, MM2UM
-from . import (add_budget, add_geometry, add_json, command, emit_json, finite_float, positive_float, positive_int,
-               probability, provenance)
+from . import (add_budget, add_geometry, add_json, add_pose_or_region, add_seed, command, emit_json, emit_table,
+               grid_poses, positive_float, positive_int, probability, provenance)
+
+#: prp3mc.stackup.DEFAULT_TARGET, written out so that --help imports no numba (tests/test_yield_cli.py checks).
+DEFAULT_TARGET = 1e-9
+PPM = 1e6
+#: A spec this many times below the error's RSS scale is refused (a value in mm typed as µm, or the like).
+_SCALE = 1e-3
+_LEVELS = ("p99.73", "p99.9937", "p99.9999")
+_MC_METHOD = ("Monte Carlo (the budget correlates inputs: the exact series needs independent ones): the streamed "
+              "sampler, error_bound = half-width of the Wilson 95 % interval of the position exceedance (a "
+              "confidence interval, not a bound); quantiles are sample percentiles; P(|dphi| > Z) and P(either) "
+              "are not computed")
 
 
 @command("yield", "exact yield of the linear model against a position (and orientation) spec, without sampling")
@@ -19,51 +30,134 @@ class YieldCommand:
     def add_arguments(p):
         add_geometry(p)
         add_budget(p)
-        where = p.add_mutually_exclusive_group(required=True)
-        where.add_argument("--pose", nargs=3, type=finite_float, metavar=("X", "Y", "PHI"),
-                           help="pose: x mm, y mm, phi deg")
-        where.add_argument("--region", metavar="R", help="every pose of a grid over the test region R (a preset: "
-                                                          "u-shape, delta-shape)")
-        p.add_argument("--grid", type=positive_int, default=41, metavar="N",
-                       help="with --region: an N x N grid (default 41)")
+        add_pose_or_region(p)
         p.add_argument("--spec-position-um", type=positive_float, required=True, metavar="S",
                        help="the position error |(dx, dy)| must stay within S µm")
         p.add_argument("--spec-phi-arcsec", type=positive_float, default=None, metavar="Z",
                        help="|dphi| must stay within Z arcsec")
         p.add_argument("--target", type=probability, default=DEFAULT_TARGET, metavar="E",
                        help=f"bound of every probability's absolute error (default {DEFAULT_TARGET:g})")
+        p.add_argument("--samples", type=positive_int, default=10_000_000, metavar="N",
+                       help="samples of the Monte Carlo fallback for a budget with [correlation] (default 1e7)")
+        add_seed(p, help="seed of the Monte Carlo fallback (default: fresh, recorded in the output)")
         add_json(p)
 
     @staticmethod
     def run(args) -> None:
+        from ..kinematics.chain import check_poses
+        from ..model.budget import Budget
+        from ..model.validity import check_linearity
+        from ..stackup import exact_yield
+
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
+        poses, where = grid_poses(args)
+        if args.region is None:
+            check_poses(geometry, poses)
+        check_linearity(geometry, budget, poses)
         specs = {"spec_position_um": args.spec_position_um, "spec_phi_arcsec": args.spec_phi_arcsec}
-        region = None
-        if args.region is not None:
-            if args.grid < 2:
-                from ..errors import GeometryError
-                raise GeometryError(f"--grid must be at least 2 (an N x N grid of the region), got {args.grid}")
-            grid = Region.from_preset(args.region).grid(args.grid)
-            check_linearity(geometry, budget, grid)
-            over = exact_yield(geometry, budget, grid, quantiles=False, target=args.target, **specs)
-            region = over.region_summary()
-            region["max_error_bound_ppm"] = PPM * float(over.error_bound.max())
-            region["n_poses"] = int(over.exceed_position.size)
-            pose = region["argmax_pose"]
-        else:
-            pose = list(args.pose)
-            check_linearity(geometry, budget, pose)
-        r = exact_yield(geometry, budget, pose, target=args.target, **specs)
-        record = r.pose_record()
-        if args.json:
-            doc = {**record, "target": args.target}
-            if region is not None:
-                doc["region"] = region
-                doc["at_pose"] = dict(zip(("x_mm", "y_mm", "phi_deg"), pose))
-            extra = {"region": args.region, "grid": args.grid} if region is not None else {}
-            emit_json({**doc, **provenance(args, geometry, budget, **specs, target=args.target, **extra)})
+        if budget.correlated:
+            _correlated(args, geometry, budget, poses, where)
             return
-        print("\n".join(_text(args, geometry, budget, pose, r, record, region)))
+        with warnings.catch_warnings(record=True) as caught:    # a spec in the wrong unit: one line, not two
+            warnings.simplefilter("always")
+            over = exact_yield(geometry, budget, poses, quantiles=args.region is None, target=args.target, **specs)
+        _check_scale(args, over)
+        for w in caught:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        inputs = dict(**specs, target=args.target, **where)
+        if args.region is not None:
+            region = over.region_summary()
+            k = int(np.argmax(over.exceed_position))
+            at = exact_yield(geometry, budget, poses[k], target=args.target, **specs)
+            doc = {**at.pose_record(), "region": region, "max_error_bound_ppm": PPM * float(over.error_bound.max()),
+                   **provenance(args, geometry, budget, **inputs)}
+            if not args.json:      # the summary on stderr, the table (one row per pose) on stdout or --out
+                print("\n".join(_text(args, geometry, budget, poses[k], at, at.pose_record(), region)),
+                      file=sys.stderr)
+            emit_table(args, _pose_frame(over), doc)
+            return
+        record = over.pose_record(0)
+        if args.json:
+            emit_json({**record, **provenance(args, geometry, budget, **inputs)})
+            return
+        print("\n".join(_text(args, geometry, budget, poses[0], over, record, None)))
+
+
+def _check_scale(args, r) -> None:
+    """Refuse a spec far below the error's scale (its RSS): a value in the wrong unit, said in one line."""
+    for name, spec, rss, unit in (("--spec-position-um", args.spec_position_um, MM2UM * r.rss_position_mm, "µm"),
+                                  ("--spec-phi-arcsec", args.spec_phi_arcsec, DEG2ARCSEC * r.rss_phi_deg, "arcsec")):
+        if spec is None:
+            continue
+        scale = float(np.min(rss))
+        if spec < _SCALE * scale:
+            raise SpecError(f"{name} {spec:g} {unit} is below {_SCALE:g} x the error's RSS ({scale:.3g} {unit}): every "
+                            f"pose is out of spec; a value in another unit (mm, deg)?")
+
+
+def _pose_frame(r) -> "pd.DataFrame":
+    """One row per pose: the exceedances (ppm) and their bound, the position's Ppk, worst case and RSS."""
+    import pandas as pd
+
+    poses = r.poses.reshape(-1, 3)
+    frame = pd.DataFrame({"x_mm": poses[:, 0], "y_mm": poses[:, 1], "phi_deg": poses[:, 2],
+                          "exceed_position_ppm": PPM * r.exceed_position.reshape(-1)})
+    if r.exceed_phi is not None:
+        frame["exceed_phi_ppm"] = PPM * r.exceed_phi.reshape(-1)
+        frame["exceed_any_ppm"] = PPM * r.exceed_any.reshape(-1)
+    frame["error_bound_ppm"] = PPM * r.error_bound.reshape(-1)
+    ppk_pos = r.ppk("position").reshape(-1)
+    frame["ppk_position"] = pd.Series(ppk_pos, dtype=object).where(np.isfinite(ppk_pos), None)   # P = 0: none
+    frame["worst_case_position_um"] = MM2UM * r.worst_position_mm.reshape(-1)
+    frame["rss_position_um"] = MM2UM * r.rss_position_mm.reshape(-1)
+    return frame
+
+
+def _correlated(args, geometry, budget, poses, where) -> None:
+    """A budget with [correlation]: the streamed Monte Carlo, its Wilson interval as the error (said in method)."""
+    import pandas as pd
+
+    from ..montecarlo.propagation import monte_carlo
+    from ..stackup.result import ppk
+
+    S = args.spec_position_um / MM2UM
+    mc = monte_carlo(geometry, budget, poses, args.samples, rng=args.seed, tolerance_mm=S,
+                     percentiles=(99.73, 99.9937, 99.9999))
+    p = mc.exceed_prob.reshape(-1)
+    half = 0.5 * (mc.exceed_ci[..., 1] - mc.exceed_ci[..., 0]).reshape(-1)
+    half = np.maximum(half, np.abs(mc.exceed_ci[..., :].reshape(-1, 2) - p[:, None]).max(axis=1))
+    k = int(np.argmax(p))
+    record = {"exceed_position_ppm": PPM * float(p[k]), "exceed_phi_ppm": None, "exceed_any_ppm": None,
+              "error_bound_ppm": PPM * float(half[k]),
+              "quantiles_position_um": dict(zip(_LEVELS, (MM2UM * mc.position_pct.reshape(-1, 3)[k]).tolist())),
+              "quantiles_phi_arcsec": dict(zip(_LEVELS, (DEG2ARCSEC * mc.phi_pct.reshape(-1, 3)[k]).tolist())),
+              "ppk_position": float(ppk(p[k])) if p[k] > 0 else None, "method": _MC_METHOD}
+    inputs = dict(spec_position_um=args.spec_position_um, spec_phi_arcsec=args.spec_phi_arcsec, seed=mc.seed,
+                  samples=mc.n_samples, **where)
+    doc = {**record, **provenance(args, geometry, budget, **inputs)}
+    if args.region is not None:
+        doc["region"] = {"max_exceed_position_ppm": PPM * float(p.max()),
+                         "mean_exceed_position_ppm": PPM * float(p.mean()),
+                         "area_fraction_above_1ppm": float(np.mean(p > 1e-6)),
+                         "argmax_pose": [float(v) for v in poses[k]]}
+        frame = pd.DataFrame({"x_mm": poses[:, 0], "y_mm": poses[:, 1], "phi_deg": poses[:, 2],
+                              "exceed_position_ppm": PPM * p, "ci95_halfwidth_ppm": PPM * half})
+        emit_table(args, frame, doc)
+        return
+    if args.json:
+        emit_json(doc)
+        return
+    x, y, phi = poses[k]
+    q = record["quantiles_position_um"]
+    print("\n".join([
+        f"prp3mc {__version__}  geometry {geometry.name}  budget {budget.name}",
+        f"pose x={x:g} mm  y={y:g} mm  phi={phi:g} deg",
+        f"The budget correlates inputs: Monte Carlo with {mc.n_samples:g} samples (seed {mc.seed}), not the exact "
+        "series.",
+        f"  position > {args.spec_position_um:g} µm  {100 * p[k]:.4g} %  {PPM * p[k]:.4g} ppm "
+        f"(95 % interval ± {PPM * half[k]:.2g} ppm)",
+        "  position quantiles (µm): " + "  ".join(f"{lv} {v:.3f}" for lv, v in q.items()),
+        "P(|dphi| > Z) and P(either) are not computed for a correlated budget."]))
 
 
 def _text(args, geometry, budget, pose, r, record, region) -> list[str]:
@@ -71,10 +165,10 @@ def _text(args, geometry, budget, pose, r, record, region) -> list[str]:
     x, y, phi = pose
     lines = [f"prp3mc {__version__}  geometry {geometry.name}  budget {budget.name}"]
     if region is not None:
-        lines += [f"Region {args.region}, {args.grid} x {args.grid} poses: P(position > {args.spec_position_um:g} µm) "
-                  f"at most {region['max_exceed_position_ppm']:.4g} ppm, mean {region['mean_exceed_position_ppm']:.4g} ppm; "
-                  f"{100 * region['area_fraction_above_1ppm']:.1f} % of the poses above 1 ppm.",
-                  "The worst pose:"]
+        lines += [f"Region {args.region}, {args.grid or 21} x {args.grid or 21} poses: P(position > "
+                  f"{args.spec_position_um:g} µm) at most {region['max_exceed_position_ppm']:.4g} ppm, mean "
+                  f"{region['mean_exceed_position_ppm']:.4g} ppm; {100 * region['area_fraction_above_1ppm']:.1f} % "
+                  "of the poses above 1 ppm.", "The worst pose:"]
     lines += [f"pose x={x:g} mm  y={y:g} mm  phi={phi:g} deg",
               f"Exact distribution of the linear model (no sampling): every probability within "
               f"{record['error_bound_ppm']:.2g} ppm.", "",
@@ -83,26 +177,29 @@ def _text(args, geometry, budget, pose, r, record, region) -> list[str]:
     if r.exceed_phi is not None:
         rows += [(f"|dphi| > {args.spec_phi_arcsec:g} arcsec", r.exceed_phi, "phi"), ("either", r.exceed_any, "any")]
     for label, value, output in rows:
-        p = float(value)
-        k = float(r.ppk(output))
+        p = float(np.ravel(value)[0])
+        k = float(np.ravel(r.ppk(output))[0])
         lines.append(f"  {label:24s}{100 * p:11.4g} %{PPM * p:14.4f}{k:8.2f}" if np.isfinite(k) else
                      f"  {label:24s}{100 * p:11.4g} %{PPM * p:14.4f}{'> 6':>8s}")
-    lines += ["", f"{'':18s}{'worst case':>12s}{'RSS':>10s}" + "".join(f"{'p' + format(v, 'g'):>11s}" for v in r.levels)]
+    lines += ["", f"{'':18s}{'worst case':>12s}{'RSS':>10s}"
+              + "".join(f"{'p' + format(v, 'g'):>11s}" for v in r.levels)]
     for label, worst, rss, q, scale in (("position (µm)", r.worst_position_mm, r.rss_position_mm,
                                          r.quantile_position_mm, MM2UM),
                                         ("|dphi| (arcsec)", r.worst_phi_deg, r.rss_phi_deg, r.quantile_phi_deg,
                                          DEG2ARCSEC)):
-        w = float(worst)
+        w = float(np.ravel(worst)[0])
         lines.append(f"  {label:16s}{scale * w:12.3f}" if np.isfinite(w) else f"  {label:16s}{'unbounded':>12s}")
-        lines[-1] += f"{scale * float(rss):10.3f}" + "".join(f"{scale * float(v):11.3f}" for v in np.ravel(q))
+        lines[-1] += (f"{scale * float(np.ravel(rss)[0]):10.3f}"
+                      + "".join(f"{scale * float(v):11.3f}" for v in np.ravel(q)))
     qerr_pos = max(record["quantile_error_bounds_position_um"].values())
     qerr_phi = max(record["quantile_error_bounds_phi_arcsec"].values())
     lines += [f"Quantiles exact within {qerr_pos:.2g} µm and {qerr_phi:.2g} arcsec. RSS: |centre| + root sum of "
-              "squares of the terms' half-widths (normal laws at 3 sd); worst case: the linear model's exact maximum."]
-    if r.exceed_phi is not None and bool(np.asarray(r.bracketed_any)):
-        lines.append("'either' lies between max and sum of the two (the joint series needs too many terms here): "
-                     "its bound holds that bracket.")
+              "squares of the terms' half-widths (normal laws at 3 sd); worst case: the linear model's exact maximum.",
+              "Ppk = Phi^-1(1 - P) / 3 (one-sided)."]
+    if r.exceed_phi is not None and bool(np.ravel(r.bracketed_any)[0]):
+        lines.append("'either' lies between the larger and the sum of the two (the joint series does not converge "
+                     "in time for this budget): its bound covers that bracket.")
     if budget.effects:
         lines.append("Effects: backlash_i ±h_i/2 with probability 1/2 each, one temperature uniform over "
-                     "temp_range_C; offsets and lead scales are known shifts.")
+                     "temp_range_C; offsets, lead scales and cyclic errors are known shifts.")
     return lines

@@ -25,7 +25,7 @@ from ._layout import (ROUND_STEPS, fix_layout, grid, lighten, number_inches, set
 
 __all__ = ["is_constant", "within_noise", "noise_range", "shared_levels", "region_map", "worst_case_map", "montecarlo_map", "compare_maps_figure",
            "error_histogram", "histograms_figure", "ecdf_steps", "error_ecdf", "ecdf_figure", "sobol_ranking",
-           "worst_case_shares", "ranking_figure", "contributors_pareto"]
+           "worst_case_shares", "ranking_figure", "contributors_pareto", "correlation_heatmap"]
 
 _LABEL = {"position": "position error", "phi": "|δφ|"}
 _QUANTITY = {q: (label, DISPLAY[q][1], DISPLAY[q][0]) for q, label in _LABEL.items()}  # (label, unit, scale)
@@ -588,3 +588,58 @@ def contributors_pareto(contributions, *, ax=None, title: str = ""):
     ax.set_title(f"{title}: contributors to the worst-case position error" if title else
                  "contributors to the worst-case position error", fontsize=10, y=1.0)
     return ax.figure
+
+
+#: Side of one cell of :func:`correlation_heatmap`, inches.
+_CELL = 0.42
+
+
+def correlation_heatmap(names, matrix, title: str = "", *, fig=None):
+    """Rank correlations between inputs as a heat-map: a diverging colour map centred at 0, each cell labelled.
+
+    Parameters
+    ----------
+    names : sequence of str
+        The inputs, in the order of ``matrix`` (groups expanded into their members).
+    matrix : ndarray, shape (k, k)
+        Rank (Spearman) correlations, 1 on the diagonal.
+    title : str
+    fig : Figure, optional
+        An empty figure to draw into (a new pyplot figure when None).
+
+    Returns
+    -------
+    Figure
+        Blue for negative, red for positive correlations, white for none; the
+        colour scale spans [-1, 1] so that 0 is its centre whatever the values.
+    """
+    matrix = np.asarray(matrix, dtype=float)
+    k = len(names)
+    label = max(text_inches(n, 9)[0] for n in names) + 0.15
+    bar = 0.15 + 0.12 + 0.1 + number_inches(-0.5, 8) + 0.45       # gap, colour bar, ticks, its label
+    title, top = title_lines(title, label + k * _CELL + bar) if title else ("", 0.0)
+    side = max(k * _CELL, 1.2)
+    fig = _figure(fig, *grid((side, side), (1, 1), label, bar, label, top + 0.15))
+    ax = fig.subplots()
+    image = ax.imshow(matrix, cmap="RdBu_r", vmin=-1.0, vmax=1.0, interpolation="nearest")
+    ax.set_xticks(np.arange(k), names, rotation=90, fontsize=9)
+    ax.set_yticks(np.arange(k), names, fontsize=9)
+    ax.tick_params(length=0)
+    for i in range(k):
+        for j in range(k):
+            v = matrix[i, j]
+            if v != 0.0:
+                ax.text(j, i, "1" if i == j else f"{v:.2f}".replace("-", "\u2212"), ha="center", va="center",
+                        fontsize=7 if k > 12 else 8, color="white" if abs(v) > 0.6 else "#222")
+    ax.set_xticks(np.arange(k + 1) - 0.5, minor=True)
+    ax.set_yticks(np.arange(k + 1) - 0.5, minor=True)
+    ax.grid(which="minor", color="white", lw=1)
+    ax.tick_params(which="minor", length=0)
+    place = ax.get_position()
+    w, h = fig.get_size_inches()
+    cax = fig.add_axes((place.x1 + 0.15 / w, place.y0, 0.12 / w, place.height))
+    cb = fig.colorbar(image, cax=cax, ticks=[-1, -0.5, 0, 0.5, 1])
+    cb.ax.tick_params(labelsize=8)
+    cb.set_label("rank correlation (Spearman)", fontsize=8)
+    set_title(fig, title)
+    return fig

@@ -263,7 +263,39 @@ def _figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
                          f"{r.name}, output {output}: {left} and each input's share of the exact worst case "
                          f"(right, ranked by share); both the {basis} of the Sobol grid.{undefined}",
                          _draw(plots.ranking_figure, frame, f"{r.name}: {output}")))
-    return figs + _allocation_figures(result)
+    return figs + _allocation_figures(result) + _correlation_figures(result)
+
+
+def correlation_order(budget) -> list[str]:
+    """The correlated inputs of ``budget`` in the order a heat-map shows them: the members of each user group
+    together (groups in the budget's order), then the other correlated inputs in the budget's order."""
+    names = budget.copula.names
+    order = [m for members in budget.groups.values() for m in members if m in names]
+    order = list(dict.fromkeys(order))
+    return order + [n for n in names if n not in order]
+
+
+def _correlation_figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
+    """The heat-map of a correlated budget's rank correlations (none for an independent budget)."""
+    from .plots import correlation_heatmap
+    budget = result.study.budget
+    if not budget.correlated:
+        return []
+    cop = budget.copula
+    order = correlation_order(budget)
+    at = [cop.names.index(n) for n in order]
+    groups = [f"{g} = {', '.join(m)}" for g, m in budget.groups.items() if not g.startswith("clearance_")]
+    others = [n for n in budget.factors if n not in cop.names]
+    caption = (f"Budget {budget.name}: the Spearman (rank) correlation between its inputs, as its "
+               "[correlation] table asks and as a Gaussian copula realises it over each input's own "
+               "law (latent normal correlation 2 sin(π ρ/6), the marginal laws unchanged)"
+               + (f"; groups expanded into their members ({'; '.join(groups)})" if groups else "")
+               + ". Red: positive, blue: negative, white: none; the colour scale spans −1 to 1, centred at 0."
+               + (f" Not shown, independent of every other input: {', '.join(others)}." if others else "")
+               + " The correlations realised in the Monte Carlo draws are in the table below.")
+    return [("correlation", caption,
+             _draw(correlation_heatmap, order, cop.spearman[np.ix_(at, at)],
+                   f"{budget.name}: rank correlations of the inputs"))]
 
 
 #: Size and margins (inches) of a Pareto chart of contributors.
@@ -318,12 +350,27 @@ def _summary_frame(result: StudyResult) -> pd.DataFrame:
     return pd.concat([frame, pd.DataFrame(rows, columns=frame.columns)], ignore_index=True) if rows else frame
 
 
-def _tables(result: StudyResult) -> dict[str, pd.DataFrame]:
+def _correlation_frame(correlation: dict, order: list[str]) -> pd.DataFrame:
+    """One row per correlated pair of ``summary.json``'s ``correlation`` (asked, latent, realised and its se), in
+    the heat-map's ``order`` (:func:`correlation_order`)."""
+    rank = {n: k for k, n in enumerate(order)}
+    rows = []
+    for p in sorted(correlation["pairs"], key=lambda p: sorted(rank[n] for n in p["inputs"])):
+        a, b = sorted(p["inputs"], key=rank.get)
+        rows.append({"input_a": a, "input_b": b, "spearman": p["spearman"], "latent": p["latent"],
+                     "realised": p["realised"]["value"], "realised_se": p["realised"]["se"]})
+    return pd.DataFrame(rows)
+
+
+def _tables(result: StudyResult, summary: dict | None = None) -> dict[str, pd.DataFrame]:
+    """Every table of the report, by name; ``summary`` (:func:`build_summary`'s) gives the correlation table."""
     contributions = {c.name: _contributions(c) for c in result.configurations}
     tables = {"summary": _summary_frame(result), "worstcase_families": _family_shares(result, contributions),
               "budget": result.study.budget.to_frame()}
     if result.study.budget.effects:
         tables["effects"] = result.study.budget.effects_frame()
+    if summary is not None and "correlation" in summary:
+        tables["correlation"] = _correlation_frame(summary["correlation"], correlation_order(result.study.budget))
     if result.study.sweep:
         tables["design_space"] = design_frame(result, _MC_PERCENTILE)
     for c in result.configurations:
@@ -422,7 +469,7 @@ def render_report(result: StudyResult, figures: list[tuple[str, str, str]], tabl
         effects_table=_html_table(tables["effects"].drop(columns=["campaign_sha256"])) if "effects" in tables else None,
         summary=summary, mc_percentile=f"p{_MC_PERCENTILE:g}", tables=sorted(tables),
         inputs=summary["inputs"], versions=summary["versions"], allocations=_allocations(result, tables),
-        glance=_glance(result, summary),
+        glance=_glance(result, summary), dependence=_dependence(summary, tables),
         formats=tuple(formats), extras=[ext for ext in formats if ext != "png"],
         written=_written(figures, tables, formats, table_types))
 
@@ -459,8 +506,9 @@ def _design(result: StudyResult, tables: dict) -> dict | None:
 
 def _glance(result: StudyResult, summary: dict) -> list[dict]:
     """The answer first, per configuration shown: the worst case, the Monte Carlo p99.73, P(> tolerance) and the
-    dominant input by Sobol total index and by worst-case share (sorted contributions at the worst pose below)."""
-    from .plots import ranking_basis
+    dominant input by Sobol total index (by Shapley effect for a correlated budget) and by worst-case share
+    (sorted contributions at the worst pose below). ``st`` is (name, value, index: ``"ST"`` or ``"Sh"``)."""
+    from .plots import ranking_basis, shapley_only
     key = f"p{_MC_PERCENTILE:g}"
     rows = []
     for c in _shown(result):
@@ -477,14 +525,30 @@ def _glance(result: StudyResult, summary: dict) -> list[dict]:
         frame = c.ranking.get("position") if c.ranking else None
         if frame is not None and len(frame):
             basis, share = ranking_basis(frame)
-            st = frame.dropna(subset=["ST"]).sort_values("ST", ascending=False)
+            index = "Sh" if shapley_only(frame) else "ST"
+            st = frame.dropna(subset=[index]).sort_values(index, ascending=False)
             wc = frame.sort_values(share, ascending=False)
             if len(st):
-                row["st"] = (st["name"].iloc[0], float(st["ST"].iloc[0]))
+                row["st"] = (st["name"].iloc[0], float(st[index].iloc[0]), index)
             row["share"] = (wc["name"].iloc[0], float(wc[share].iloc[0]))
             row["basis"] = basis
         rows.append(row)
     return rows
+
+
+def _dependence(summary: dict, tables: dict) -> dict | None:
+    """The section on a correlated budget (None for an independent one): its table, which analyses respected it,
+    and the pairs asked and realised (the draws' size and seed)."""
+    correlation = summary.get("correlation")
+    if correlation is None:
+        return None
+    names = {"worst_case": "exact worst case", "montecarlo": "Monte Carlo", "shapley": "Shapley effects",
+             "sobol": "Sobol indices (S1, ST)", "allocation": "tolerance allocation"}
+    pairs = tables["correlation"].rename(columns={"input_a": "input", "input_b": "with", "spearman": "asked",
+                                                  "latent": "latent normal r", "realised_se": "se"})
+    return {"analyses": [{"name": names[k], **v} for k, v in correlation["analyses"].items()],
+            "pairs": _html_table(pairs, 3), "n": correlation["realised_from"]["samples"],
+            "seed": summary["inputs"]["montecarlo_seed"], "table": correlation["table"]}
 
 
 def _merit_name(analysis: str, output: str, statistic: str) -> str:
@@ -522,7 +586,7 @@ def write_study(result: StudyResult, out: str | os.PathLike, *, force: bool = Fa
         (tmp / "figures").mkdir()
         (tmp / "tables").mkdir()
         with rendering([(name, draw) for name, _, draw in figures], tmp / "figures", formats, workers) as pngs:
-            tables = _tables(result)                # while the figures are drawn
+            tables = _tables(result, summary)       # while the figures are drawn
             for name, frame in tables.items():
                 write_csv(frame, tmp / "tables" / f"{name}.csv")
             if "xlsx" in table_types:

@@ -7,7 +7,7 @@ terms' characteristic functions, which are closed forms for every law prp3mc
 has; this package inverts them with a guaranteed error bound:
 
 - :mod:`~prp3mc.stackup.exceedance` — :func:`exact_yield`, the public entry:
-  P(position > S), P(|dphi| > Z), P(either) and the quantiles, per pose;
+  P(position > S), P(``|dphi|`` > Z), P(either) and the quantiles, per pose;
 - :mod:`~prp3mc.stackup.result` — :class:`YieldResult`, and the Ppk of an exceedance;
 - :mod:`~prp3mc.stackup.characteristic` — each law's characteristic function and
   a decreasing bound of its modulus;

@@ -29,8 +29,8 @@ uniform over whole turns, so that ``E exp(i x rho cos(zeta - omega)) =
 E J0(x rho)`` whatever omega; other contact-angle laws are refused.
 
 Every term also has an *envelope* (:func:`envelope`, its coefficients in
-:attr:`TermTable.env`): a non-increasing function of |x| bounding |phi_t(x)|,
-from the total variation of the density (|phi| <= V(f) / |x|, and V(f') / x²
+:attr:`TermTable.env`): a non-increasing function of ``|x|`` bounding ``|phi_t(x)|``,
+from the total variation of the density (``|phi|`` <= V(f) / ``|x|``, and V(f') / x²
 when f is continuous; for a clearance, integrating J0 by parts), from
 ``|J0(y)| <= min(1, sqrt(2 / (pi y)))``, ``|int_0^y J0| <= I_MAX`` and
 ``sqrt(u) |J1(u)| <= C_J1`` (:mod:`._special`); and a *power*
@@ -125,7 +125,7 @@ def _full_turns(law) -> bool:
 
 def _truncnormal_par(law: TruncNormal) -> list[float]:
     """center, half-width L, beta, normaliser N0 = int_{-1}^{1} exp(-beta² s²/2) ds, and the envelope's
-    V = 2 f_max, 2 f(edge), W = 2 |f'(edge)| + TV(f') (densities in the law's unit)."""
+    V = 2 f_max, 2 f(edge), W = 2 ``|f'(edge)|`` + TV(f') (densities in the law's unit)."""
     beta = 3.0 * law.cpk
     L = law.tol
     n0 = math.sqrt(2 * math.pi) / beta * math.erf(beta / math.sqrt(2))
@@ -293,7 +293,7 @@ def _sinc(u):
 
 @njit(cache=True, nogil=True)
 def _h(z):
-    """(e^z (z - 1) + 1) / z², entire: a series for |z| < 1 (24 terms: error below 1e-25)."""
+    """(e^z (z - 1) + 1) / z², entire: a series for ``|z|`` < 1 (24 terms: error below 1e-25)."""
     if abs(z) < 1.0:
         out = 0j
         fact = 2.0
@@ -309,8 +309,8 @@ def _h(z):
 @njit(cache=True, nogil=True)
 def _gl_size(y, beta, n0, gl_sizes):
     """Index of the smallest Gauss-Legendre rule whose error on int_{-1}^{1} exp(-beta² s²/2) g(y s) ds,
-    with |g(z)| <= exp(|Im z|) (cos, and J0 of a real affine argument), is below 1e-16 N0 by the
-    Bernstein-ellipse bound (64/15) M rho^-2n / (rho² - 1), M = exp(beta² b²/2 + |y| b), b = (rho - 1/rho)/2;
+    with ``|g(z)|`` <= exp(``|Im z|``) (cos, and J0 of a real affine argument), is below 1e-16 N0 by the
+    Bernstein-ellipse bound (64/15) M rho^-2n / (rho² - 1), M = exp(beta² b²/2 + ``|y|`` b), b = (rho - 1/rho)/2;
     -1 if none is."""
     best = 1e300
     for rho in (1.2, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0):
@@ -450,7 +450,7 @@ def term_cf(k, par, t, tab, sp, buf, x):
 
 @njit(cache=True, nogil=True)
 def envelope(a1, a2, a15, w0, bh, f2, w, sd, x):
-    """A non-increasing bound of |phi_t| at |x| = x from a row of :attr:`TermTable.env` (scalars, so
+    """A non-increasing bound of ``|phi_t|`` at ``|x|`` = x from a row of :attr:`TermTable.env` (scalars, so
     that it inlines): ``min(1, a1/x, a2/x², a15/x^1.5, w0 + bh/sqrt(x), f2/x + w/x²) exp(-sd² x²/2)``,
     each form present when its coefficients are."""
     if x <= 0.0:

@@ -1,7 +1,7 @@
 """The alias-free lattice of each channel of the pose error, at a batch of poses (numpy).
 
 A channel is dphi (d = 1), the position (dx, dy) (d = 2) or both (d = 3),
-with the region D: |dphi| <= z, the disc |(dx, dy)| <= z, or their cylinder.
+with the region D: ``|dphi|`` <= z, the disc ``|(dx, dy)|`` <= z, or their cylinder.
 Its lattice (:mod:`.series`) is rectangular in ``nu_j = m_j . w`` over a
 basis of d directions m_j: the single direction 1 for dphi; two legs'
 directions (the position rows of A^-1's columns) for the position, the pair
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Channel", "channel", "LEVELS", "MIXED_LEG"]
+__all__ = ["Channel", "channel", "leg_powers", "LEVELS", "MIXED_LEG"]
 
 #: Probabilities of the reported quantiles: p99.73 and p99.9937 (3 and 4 sd of a normal law, two-sided:
 #: Cpk 1 and 1.33) and p99.9999 (1 ppm).
@@ -54,7 +54,7 @@ class Channel:
     alias: np.ndarray       # (N,) mass of the normal laws beyond their cut that acts on the channel
 
 
-def _leg_powers(table, c, legs, share: float) -> np.ndarray:
+def leg_powers(table, c, legs, share: float) -> np.ndarray:
     """Asymptotic decay power of each leg's envelope product with the transform's share, (N, 3)."""
     present = table.random[None, :] & (np.abs(c).max(axis=1) > 0)               # (N, T)
     out = np.zeros((c.shape[0], 3))
@@ -65,7 +65,7 @@ def _leg_powers(table, c, legs, share: float) -> np.ndarray:
 
 
 def _segments_max(s, dirs, lo, hi) -> np.ndarray:
-    """Largest |s + sum_g dirs_g x_g| over x_g in [lo_g, hi_g]: at a corner. s (N, k), dirs (N, G, k), lo/hi (N, G)."""
+    """Largest ``|s + sum_g dirs_g x_g|`` over x_g in [lo_g, hi_g]: at a corner. s (N, k), dirs (N, G, k), lo/hi (N, G)."""
     G = dirs.shape[1]
     best = np.zeros(s.shape[0])
     for corner in itertools.product((0, 1), repeat=G):
@@ -111,7 +111,7 @@ def channel(which: str, columns: np.ndarray, Ainv: np.ndarray, legs, table, z1, 
         grp[nonzero] = 0
     elif d == 2:
         m = np.moveaxis(Ainv[:, :2, :], 1, 2)                          # (N, leg, 2): each leg's direction
-        valid = _leg_powers(table, c, legs, 0.75) > 1.0 + 1e-9
+        valid = leg_powers(table, c, legs, 0.75) > 1.0 + 1e-9
         pairs = ((0, 1), (0, 2), (1, 2))
         score = np.zeros((N, 3))
         for k, (a, b) in enumerate(pairs):
@@ -131,7 +131,7 @@ def channel(which: str, columns: np.ndarray, Ainv: np.ndarray, legs, table, z1, 
             on = nonzero & (legs[None, :] == pair[:, j, None])
             grp[on] = j
     else:
-        valid = _leg_powers(table, c, legs, 1.0 / 3.0) > 1.0 + 1e-9
+        valid = leg_powers(table, c, legs, 1.0 / 3.0) > 1.0 + 1e-9
         ok = valid.all(axis=1)
         V[:] = np.swapaxes(Ainv, 1, 2)                                 # rows: the legs' directions
         grp[nonzero] = -1
@@ -171,7 +171,7 @@ def channel(which: str, columns: np.ndarray, Ainv: np.ndarray, legs, table, z1, 
 
 
 def _zmax(d: int, c: np.ndarray, s: np.ndarray, legs: np.ndarray, table, random: np.ndarray) -> np.ndarray:
-    """Largest |Y| over the support (normal laws cut): the terms of a leg are parallel, so their sum is
+    """Largest ``|Y|`` over the support (normal laws cut): the terms of a leg are parallel, so their sum is
     one segment; with the terms of all legs (thermal) the maximum is at one of a few corners."""
     if d == 3:
         return np.full(c.shape[0], np.nan)

@@ -37,25 +37,25 @@ class YieldResult:
     poses : ndarray (..., 3)
         ``[x_mm, y_mm, phi_deg]``.
     spec_position_mm : float
-        S: the position spec, |(dx, dy)| <= S.
+        S: the position spec, ``|(dx, dy)|`` <= S.
     spec_phi_deg : float or None
-        Z: the orientation spec, |dphi| <= Z.
+        Z: the orientation spec, ``|dphi|`` <= Z.
     exceed_position, bound_position : ndarray (...)
-        P(|(dx, dy)| > S) and the bound of its error.
+        P(``|(dx, dy)|`` > S) and the bound of its error.
     exceed_phi, bound_phi : ndarray (...) or None
-        P(|dphi| > Z) and its bound (None without an orientation spec).
+        P(``|dphi|`` > Z) and its bound (None without an orientation spec).
     exceed_any, bound_any : ndarray (...)
-        P(position > S or |dphi| > Z) and its bound (the position's without an orientation spec).
+        P(position > S or ``|dphi|`` > Z) and its bound (the position's without an orientation spec).
     levels : tuple of float
         The quantiles' probabilities, in % (99.73, 99.9937, 99.9999).
     quantile_position_mm, quantile_position_err_mm : ndarray (..., Q) or None
         Quantiles of the position error's norm and bounds of their errors.
     quantile_phi_deg, quantile_phi_err_deg : ndarray (..., Q) or None
-        Quantiles of |dphi| and bounds of their errors.
+        Quantiles of ``|dphi|`` and bounds of their errors.
     worst_position_mm, worst_phi_deg : ndarray (...)
         The exact worst case of the linear model (NaN when a law is unbounded: normal).
     rss_position_mm, rss_phi_deg : ndarray (...)
-        Root-sum-square stack: |centre| + sqrt(sum_t (|c_t| h_t)²), h_t the half-width of term t's
+        Root-sum-square stack: ``|centre|`` + sqrt(sum_t (``|c_t|`` h_t)²), h_t the half-width of term t's
         interval (3 sd for a normal law), c_t its column: the tolerance engineer's RSS.
     bracketed_any : ndarray (...) bool
         Poses whose ``exceed_any`` is the midpoint of [max(P_pos, P_phi), P_pos + P_phi] (the joint
@@ -133,7 +133,7 @@ class YieldResult:
         """Tidy table: x_mm, y_mm, phi_deg, output, statistic, value, unit, error_bound, method.
 
         Statistics: ``exceed`` (outputs position, phi, any; unit 1), the quantiles ``p99.73``...
-        (position in mm, phi of |dphi| in deg), ``worst_case`` and ``rss``.
+        (position in mm, phi of ``|dphi|`` in deg), ``worst_case`` and ``rss``.
         """
         cols = pose_columns(self.poses)
         n = cols["x_mm"].size

@@ -2,16 +2,16 @@
 
 Let Y (dimension d = 1, 2 or 3) be a channel of the pose error: dphi, (dx, dy)
 or (dx, dy, dphi), ``Y = s + sum_t c_t X_t`` with independent X_t of bounded
-support, and D the region whose probability is wanted: |dphi| <= z, a disc
-|(dx, dy)| <= z, or the cylinder of both. Periodising Y over a lattice L
+support, and D the region whose probability is wanted: ``|dphi|`` <= z, a disc
+``|(dx, dy)|`` <= z, or the cylinder of both. Periodising Y over a lattice L
 whose shifts move Y's support off D (no aliasing) leaves the probability of
 D unchanged, and the periodised density is a Fourier series whose
 coefficients are Y's characteristic function on the dual lattice:
 
-    P(Y in D) = (1 / |L|) sum_{w in L*} phi_Y(w) T_D(w),
+    P(Y in D) = (1 / ``|L|``) sum_{w in L*} phi_Y(w) T_D(w),
 
 with T_D the Fourier transform of D's indicator (real and even):
-2 sin(w z) / w, 2 pi z J1(z |w|) / |w|, and their product for the cylinder.
+2 sin(w z) / w, 2 pi z J1(z ``|w|``) / ``|w|``, and their product for the cylinder.
 ``phi_Y(w) = exp(i w.s) prod_t phi_t(c_t . w)`` (:mod:`.characteristic`).
 
 **The lattice.** Every term of leg i acts along one direction m_i (the
@@ -23,13 +23,13 @@ once per n_j) and the lattice's y-space shifts are Q_j m_j. The periods Q_j
 are the smallest for which the support, shifted by any lattice vector, misses
 D (their bounding boxes in the coordinates w of y = sum_j w_j m_j).
 
-**The certified truncation.** Each term's |phi_t| is below a non-increasing
-envelope (:func:`~.characteristic.term_env`), and |T_D(w)| below a bound
-tau(|w|) that falls with |w| (for every z up to the largest used, so one
-lattice serves every quantile). Since |nu_j| <= |m_j| |w|, every summand
+**The certified truncation.** Each term's ``|phi_t|`` is below a non-increasing
+envelope (:func:`~.characteristic.term_env`), and ``|T_D(w)|`` below a bound
+tau(``|w|``) that falls with ``|w|`` (for every z up to the largest used, so one
+lattice serves every quantile). Since ``|nu_j|`` <= ``|m_j|`` ``|w|``, every summand
 is below a *separable* product ``prod_j g_j(|n_j|)`` with
 
-    g_j(n) = prod_{t in basis leg j} env_t(|kappa_t| nu_j) * (tau(nu_j / |m_j|) / |L|)^(1/d)
+    g_j(n) = prod_{t in basis leg j} env_t(``|kappa_t|`` nu_j) * (tau(nu_j / ``|m_j|``) / ``|L|``)^(1/d)
 
 (the other terms' envelopes are dropped, being <= 1). The series keeps the
 lattice points of the *cross* ``prod_j g_j(|n_j|) >= eta``; what it leaves
@@ -97,7 +97,7 @@ def _prob(d, lam, re, a, b, n, z1, z2, j1):
 
 @njit(cache=True, nogil=True)
 def _density(d, lam, re, a, n, z, j0):
-    """d/dz of the series' P(|Y| <= z), d = 1 or 2."""
+    """d/dz of the series' P(``|Y|`` <= z), d = 1 or 2."""
     s = 0.0
     if d == 1:
         for k in range(n):
@@ -162,7 +162,7 @@ def pose_series(d, kind, par, ev, tab, sp, grp, mu, snu, Q, Vinv, mnorm, ab, lam
     Parameters
     ----------
     d : int
-        The channel's dimension (1: |dphi|, 2: position, 3: both).
+        The channel's dimension (1: ``|dphi|``, 2: position, 3: both).
     kind, par, tab, sp
         The term table (:class:`~.characteristic.TermTable`), its arrays and the special functions.
     grp : (T,) int
@@ -173,11 +173,11 @@ def pose_series(d, kind, par, ev, tab, sp, grp, mu, snu, Q, Vinv, mnorm, ab, lam
     snu : (3,)
         The known shift in nu (phase exp(i snu . nu)).
     Q, mnorm : (3,)
-        Periods and |m_j| (1 past d).
+        Periods and ``|m_j|`` (1 past d).
     Vinv : (3, 3)
         w = Vinv nu (the channel's frequency from nu; zero past d).
     lam : float
-        The lattice's cell volume |L|.
+        The lattice's cell volume ``|L|``.
     z1, z2 : float
         The largest radius (or half-width) of D the series serves (the periods and bounds hold
         up to it), and the cylinder's half-height.
@@ -189,7 +189,7 @@ def pose_series(d, kind, par, ev, tab, sp, grp, mu, snu, Q, Vinv, mnorm, ab, lam
         Mass of the normal laws beyond their cut (added to the bound).
     levels : (K,)
         Probabilities of the quantiles (d <= 2; empty for none); ``z0`` (K,) their starting guesses,
-        ``zmax`` the largest value of |Y| (a quantile lies below).
+        ``zmax`` the largest value of ``|Y|`` (a quantile lies below).
     out_q, out_qerr : (K,)
         Written: the quantiles and bounds of their errors.
 

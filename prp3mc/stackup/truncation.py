@@ -3,10 +3,10 @@
 The summand at a lattice point n is ``phi_Y(w) T_D(w) / |L|`` (:mod:`.series`).
 Its modulus is below the *envelope*
 
-    F(n) = prod_t env_t(|c_t . w|) * Tb(w) / |L|,
+    F(n) = prod_t env_t(``|c_t . w|``) * Tb(w) / ``|L|``,
 
 with env_t the terms' decreasing bounds (:func:`~.characteristic.envelope`)
-and Tb a bound of |T_D| valid for every radius up to the largest served.
+and Tb a bound of ``|T_D|`` valid for every radius up to the largest served.
 Both are symmetric under n -> -n, so half of the lattice is enumerated and
 every point stands for two.
 
@@ -15,21 +15,21 @@ fixed (n_2, n_3). Along a row, beyond the peaks of its factors (n_1 = 0 for
 the basis legs; where nu_3 = 0 for the position's third, "mixed" leg), the
 row's majorant
 
-    h(n_1) = E_1(nu_1) E_2(nu_2) E_3(nu_3) G_m(nu_m) tau(r) / |L|
+    h(n_1) = E_1(nu_1) E_2(nu_2) E_3(nu_3) G_m(nu_m) tau(r) / ``|L|``
 
 (E_j: the product of basis leg j's envelopes; G_m: the mixed leg's; tau: a
-radial bound of |T_D|; r = max_j |nu_j| / |m_j| <= |w|) falls, and past a point
+radial bound of ``|T_D|``; r = max_j ``|nu_j|`` / ``|m_j|`` <= ``|w|``) falls, and past a point
 U it falls at least as fast as (U / n_1)^p, p the sum of its factors' local
 powers (:func:`~.characteristic.envelope_power`), so ``sum_{n_1 > U} h <= h(U) kappa U / (p - 1)``
 (kappa >= 1 corrects for a peak on the other side). Each row is walked
 outward until both of its tails are within the row's share of the target.
 
 Which rows: all of them but a set whose whole sum is bounded at once. In 1-D
-there is one row. For the position, the rows with |n_2| > K_2: there the
+there is one row. For the position, the rows with ``|n_2|`` > K_2: there the
 separable majorant ``g_1(n_1) g_2(n_2) G_m(nu_m)`` (g_j: E_j times the share
-(tau / |L|)^(1/d)) sums along a row to at most ``min(S_1, G_m(|beta nu_2| / 2) S_1
+(tau / ``|L|``)^(1/d)) sums along a row to at most ``min(S_1, G_m(|beta nu_2| / 2) S_1
 + g_1(|beta nu_2| / (2 |alpha|)) C_m)`` (nu_m = alpha nu_1 + beta nu_2, so one of
-|nu_1|, |nu_m| is large where |nu_2| is; S_1 = sum of g_1; C_m bounds the sum of
+``|nu_1|``, ``|nu_m|`` is large where ``|nu_2|`` is; S_1 = sum of g_1; C_m bounds the sum of
 G_m along a row by its integral), and K_2 is the smallest that leaves out
 at most a quarter of the target. For both channels (d = 3), every basis leg
 is separable: the rows are the points (n_2, n_3) of the cross
@@ -60,14 +60,14 @@ _SQRT2 = math.sqrt(2.0)
 _N_CAP = 1 << 20            # longest 1-D envelope array of a basis leg
 _BINS = 1400                # log2 bins of the envelope, from 2^-1300 up
 _WALK_CAP = 1 << 22         # farthest point of a row walk
-_MAX_POINTS = (1 << 23, 1 << 23, 1 << 21)   # most points walked at one pose, per dimension (beyond: status 3)
+_MAX_POINTS = (1 << 23, 1 << 23, 1 << 18)   # most points walked at one pose, per dimension (beyond: status 3)
 
 
 # ------------------------------------------------------------------ bounds of the transform of D
 
 @njit(cache=True, nogil=True)
 def _disc_bound(S, u):
-    """Bound of |2 pi S' J1(S' u) / u| over S' <= S (|J1(v)| <= v / 2 and <= C_J1 / sqrt(v))."""
+    """Bound of ``|2 pi S' J1(S' u) / u|`` over S' <= S (``|J1(v)|`` <= v / 2 and <= C_J1 / sqrt(v))."""
     if u <= 0.0:
         return math.pi * S * S
     return min(math.pi * S * S, 2.0 * math.pi * C_J1 * math.sqrt(S) / (u * math.sqrt(u)))
@@ -75,7 +75,7 @@ def _disc_bound(S, u):
 
 @njit(cache=True, nogil=True)
 def _interval_bound(Z, u):
-    """Bound of |2 sin(Z' u) / u| over Z' <= Z."""
+    """Bound of ``|2 sin(Z' u) / u|`` over Z' <= Z."""
     if u <= 0.0:
         return 2.0 * Z
     return min(2.0 * Z, 2.0 / u)
@@ -83,7 +83,7 @@ def _interval_bound(Z, u):
 
 @njit(cache=True, nogil=True)
 def _tau(d, z1, z2, r):
-    """Bound of |T_D(w)| over |w| >= r (every radius up to z1; the cylinder's half-height z2), non-increasing."""
+    """Bound of ``|T_D(w)|`` over ``|w|`` >= r (every radius up to z1; the cylinder's half-height z2), non-increasing."""
     if d == 1:
         return _interval_bound(z1, r)
     if d == 2:
@@ -107,7 +107,7 @@ def _tau_pow(d, z1, z2, r0):
 
 @njit(cache=True, nogil=True)
 def transform_bound(d, z1, z2, a, b):
-    """Bound of |T_D| at a point: a = |nu| (d = 1), |w| (d = 2), |w_xy| (d = 3); b = |w_z| (d = 3)."""
+    """Bound of ``|T_D|`` at a point: a = ``|nu|`` (d = 1), ``|w|`` (d = 2), ``|w_xy|`` (d = 3); b = ``|w_z|`` (d = 3)."""
     if d == 1:
         return _interval_bound(z1, a)
     if d == 2:
@@ -119,7 +119,7 @@ def transform_bound(d, z1, z2, a, b):
 
 @njit(cache=True, nogil=True)
 def _leg_at(j, m, d, ev, grp, mu, Q, mnorm, lam, z1, z2):
-    """Basis leg j at n_j = m: its envelope product E_j, its share g_j = E_j (tau(nu_j / |m_j|) / |L|)^(1/d),
+    """Basis leg j at n_j = m: its envelope product E_j, its share g_j = E_j (tau(nu_j / ``|m_j|``) / ``|L|``)^(1/d),
     and the decay powers of g_j and of E_j there (0 at m = 0)."""
     nu = _TWO_PI * m / Q[j]
     e = 1.0
@@ -140,7 +140,7 @@ def leg_envelope(j, d, ev, grp, mu, Q, mnorm, lam, z1, z2, g0, eta_lo):
     """Leg j's E_j and g_j (:func:`_leg_at`) at n = 0..N, and ``Rs[m + 1] = sum_{|n| > m} g_j(|n|)``
     (Rs[0]: the whole sum), the tail past N analytic: ``2 g(N) N / (p - 1)``. N: where g_j times the other
     legs' g(0) is below ``eta_lo`` with a decay power above 1 (past it, :func:`_leg_at` gives E_j on demand).
-    Returns (g, E, Rs, SE, ok): SE = sum_{n in Z} E_j(|n|) (inf when E_j's power stays at or below 1); not
+    Returns (g, E, Rs, SE, ok): SE = sum_{n in Z} E_j(``|n|``) (inf when E_j's power stays at or below 1); not
     ok when g_j's does (no finite sum)."""
     cap = 256
     g = np.empty(cap)
@@ -188,7 +188,7 @@ def _at(g, x):
 
 @njit(cache=True, nogil=True)
 def _mixed(ev, grp, mu, ab, ax3):
-    """The mixed leg's envelope product G_m at |nu_m| = ax3 and its decay power there (0 at ax3 = 0)."""
+    """The mixed leg's envelope product G_m at ``|nu_m|`` = ax3 and its decay power there (0 at ax3 = 0)."""
     e = 1.0
     p = 0.0
     norm = math.sqrt(ab[0] * ab[0] + ab[1] * ab[1])
@@ -204,7 +204,7 @@ def _mixed(ev, grp, mu, ab, ax3):
 @njit(cache=True, nogil=True)
 def _mixed_row_sum(ev, grp, mu, ab, delta):
     """Bound of sum_k G_m(x0 + k delta) over k in Z, any x0: max G_m + (2 / delta) int_0^inf G_m
-    (G_m even and non-increasing in |x|); the integral by left sums on a geometric grid (ratio 1.02,
+    (G_m even and non-increasing in ``|x|``); the integral by left sums on a geometric grid (ratio 1.02,
     from x0 with G_m <= 1 below it), then its analytic tail. inf when there is no mixed leg or G_m
     does not decay faster than 1/x."""
     kmax = 0.0
@@ -227,9 +227,9 @@ def _mixed_row_sum(ev, grp, mu, ab, delta):
 
 @njit(cache=True, nogil=True)
 def _row_bound(nu2, S1, cm, g1, Q0, ev, grp, mu, ab):
-    """Bound of a position row's sum of g_1(n_1) G_m(nu_m) at |nu_2| = nu2 (g_1 non-increasing, S1 its sum over
-    the row): at most S1 (G_m <= 1), and, as one of |nu_1| >= |beta| nu2 / (2 |alpha|), |nu_m| >= |beta| nu2 / 2
-    holds at every point, G_m(|beta| nu2 / 2) S1 + g_1(|beta| nu2 / (2 |alpha|)) C_m."""
+    """Bound of a position row's sum of g_1(n_1) G_m(nu_m) at ``|nu_2|`` = nu2 (g_1 non-increasing, S1 its sum over
+    the row): at most S1 (G_m <= 1), and, as one of ``|nu_1|`` >= ``|beta|`` nu2 / (2 ``|alpha|``), ``|nu_m|`` >= ``|beta|`` nu2 / 2
+    holds at every point, G_m(``|beta|`` nu2 / 2) S1 + g_1(``|beta|`` nu2 / (2 ``|alpha|``)) C_m."""
     alpha, beta = ab[0], ab[1]
     b = S1
     if beta != 0.0 and cm < np.inf:
@@ -283,7 +283,7 @@ def _factor_tail(value, c, U, p, acc):
 @njit(cache=True, nogil=True)
 def _row_tail(d, s, U, f, n2, n3, ev, grp, mu, Q, Vinv, lam, z1, z2):
     """Bound of F summed over the row's points beyond U on side s (n_1 = s U, s U + s, ...), from F's value
-    f there: every factor of F is an envelope of |an affine function of n_1| (the transform's of the
+    f there: every factor of F is an envelope of ``|an affine function of n_1|`` (the transform's of the
     norm of one), non-increasing past its peak (see :func:`_factor_tail`), so
     ``sum_{n > U} F <= int_U^inf f / dropped ((U - c_min) / (x - c_min))^P dx = f / dropped (U - c_min) / (P - 1)``."""
     acc = np.array([1.0, 0.0, float(U)])      # dropped factors' product, total power, smallest peak
@@ -363,7 +363,7 @@ def _walk_row(d, n2, n3, origin, budget, E1, E2, E3, ev, grp, mu, Q, Vinv, mnorm
 
 @njit(cache=True, nogil=True)
 def _leg_value(j, m, E, d, ev, grp, mu, Q, mnorm, lam, z1, z2):
-    """E_j at |n_j| = m: from the array, or on demand past its end."""
+    """E_j at ``|n_j|`` = m: from the array, or on demand past its end."""
     if m < E.size:
         return E[m]
     return _leg_at(j, m, d, ev, grp, mu, Q, mnorm, lam, z1, z2)[0]
@@ -373,11 +373,11 @@ def _leg_value(j, m, E, d, ev, grp, mu, Q, mnorm, lam, z1, z2):
 def _rows_3d(E2, E3, SE, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2, e_part):
     """The rows (n2, n3) of the 3-D channel (half-plane, the origin's first), each with a bound of its whole
     sum, and the bound of what they leave out (outer rows, tails of the row walks). A row's points lie on
-    a line in w, w(n_1) = n_1 v + w_0: |T_D| <= D(d_xy) 2Z along it, d_xy = |a_2 nu_2 + a_3 nu_3| its closest
-    approach to 0 in xy; so the row sums to at most E_2 E_3 D(d_xy) S_1 2Z / |L| (S_j: sum of E_j). For
-    |n_3| > K_3 the sum over n_2 of E_2 D(|a_2 nu_2 + a_3 nu_3|) is at most S_2 D(|a_3 nu_3| / 2)
-    + E_2(|a_3 nu_3| / (2 |a_2|)) C_D (one of the two arguments is that large; C_D bounds D's sum along
-    n_2 by its integral); for each |n_3| <= K_3, n_2 is walked from its peaks until the tail is within budget.
+    a line in w, w(n_1) = n_1 v + w_0: ``|T_D|`` <= D(d_xy) 2Z along it, d_xy = ``|a_2 nu_2 + a_3 nu_3|`` its closest
+    approach to 0 in xy; so the row sums to at most E_2 E_3 D(d_xy) S_1 2Z / ``|L|`` (S_j: sum of E_j). For
+    ``|n_3|`` > K_3 the sum over n_2 of E_2 D(``|a_2 nu_2 + a_3 nu_3|``) is at most S_2 D(``|a_3 nu_3|`` / 2)
+    + E_2(``|a_3 nu_3|`` / (2 ``|a_2|``)) C_D (one of the two arguments is that large; C_D bounds D's sum along
+    n_2 by its integral); for each ``|n_3|`` <= K_3, n_2 is walked from its peaks until the tail is within budget.
     Returns (rows, row_sum, outer, tails, status)."""
     d = 3
     S1E, S2E = SE[0], SE[1]
@@ -455,7 +455,7 @@ def _rows_3d(E2, E3, SE, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2, e_part):
                     if tail <= 0.5 * budget:
                         tails += tail
                         break
-                if U > _WALK_CAP:
+                if U > _WALK_CAP or count > _MAX_POINTS[2]:
                     return rows[:count], row_sum[:count], np.inf, np.inf, 3
                 U += 1
     return rows[:count], row_sum[:count], outer, 2.0 * tails, status
@@ -475,7 +475,8 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
         Points walked (before dropping).
     status : int
         0; 1 when the bound could not be brought within 0.9 eps; 2 when there is none (a basis leg's
-        envelope sums to infinity); 3 when the points needed exceed 2^23 (2^21 for d = 3).
+        envelope sums to infinity); 3 when the points needed exceed 2^23 (2^18 for d = 3, whose caller
+        then falls back on a bracket).
     """
     empty = np.zeros((0, 3), np.int64)
     g_origin = (_tau(d, z1, z2, 0.0) / lam) ** (1.0 / d)

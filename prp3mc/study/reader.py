@@ -89,20 +89,12 @@ from ..model.budget import Budget
 from ..montecarlo.propagation import MIN_SAMPLES as MIN_MC_SAMPLES, PERCENTILES
 from ..units import OUTPUTS
 from .allocation import AllocationSpec, read_allocation
+from .bundled import STUDIES_DIR, bundled_studies
 from .sweep import is_number, read_sweep
 
 __all__ = ["Study", "StudyConfiguration", "bundled_studies", "STUDIES_DIR", "ANALYSES"]
 
 
-def _studies_dir() -> Path:
-    """The bundled studies: ``studies/`` of the source tree, installed as ``prp3mc/studies``."""
-    package = Path(__file__).resolve().parent.parent          # prp3mc/
-    installed = package / "studies"
-    return installed if installed.is_dir() else package.parent / "studies"
-
-
-#: Folder of the bundled studies.
-STUDIES_DIR = _studies_dir()
 #: Analyses a study can ask for besides the exact worst case (which always runs).
 ANALYSES = ("montecarlo", "sobol")
 _DEFAULT = {"worstcase_grid": (101, 101), "mc_samples": 1 << 16, "mc_grid": (11, 11), "sobol_samples": 1 << 12,
@@ -249,11 +241,6 @@ class Study:
         if self.allocation is not None:
             out.update(self.allocation.sizes(self.worstcase_grid))
         return out
-
-
-def bundled_studies() -> tuple[str, ...]:
-    """Names of the bundled studies."""
-    return tuple(sorted(p.stem for p in STUDIES_DIR.glob("*.toml"))) if STUDIES_DIR.is_dir() else ()
 
 
 class _Reader:

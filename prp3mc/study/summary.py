@@ -34,8 +34,17 @@ Layout (µm and arcsec)::
                 "seed": 7, "montecarlo_seed": ..., "sobol_seed": ..., "worstcase_grid": [41, 41],
                 "montecarlo_samples": 32768, ...},
      "versions": {"prp3mc": ..., "python": ..., "numpy": ..., "scipy": ..., "pandas": ..., "SALib": ...},
-     "warnings": ["budget 'b': no law for theta_3 (other legs have one): taken as exact; ..."]}
+     "warnings": ["budget 'b': no law for theta_3 (other legs have one): taken as exact; ..."],
                                             # only when there are any: the budget's, or those a command gave
+     "correlation": {                       # only for a budget with a [correlation] table (SPEC §10)
+        "table": {"bearings": 0.8, "theta_1,theta_2": 0.5},     # as written (also in inputs.budget)
+        "copula": "Gaussian",
+        "pairs": [{"inputs": ["rho_1", "rho_2"], "spearman": 0.8, "latent": 0.813,
+                   "realised": {"value": 0.799, "se": 0.002}}, ...],   # every correlated pair, groups expanded
+        "realised_from": {"samples": 32768},    # the Monte Carlo draws of the budget (inputs.montecarlo_seed)
+        "analyses": {"montecarlo": {"respects": true, "how": "..."}, "shapley": {...},
+                     "sobol": {"respects": false, "how": "not defined: ..."},
+                     "worst_case": {"respects": false, "how": "a box: ..."}, ...}}}
 
 A study with a ``[sweep]`` table (SPEC §8) names its expanded configurations
 ``base.k``; each entry also carries ``"parameters": {key: value}`` with the
@@ -59,7 +68,9 @@ pose-wise standard errors (an upper bound under the common random numbers
 all poses share); a Sobol index's (and a Shapley effect's) is its half-width over the Student t
 quantile of its replicates (``conf / t(0.95, R - 1)``, the standard error of the mean of R replicates).
 A correlated budget has no Sobol indices (S1 and ST null, with the ``reason``); its Shapley effects ``Sh``
-share the variance.
+share the variance. Its ``correlation`` entry records the table, every pair it correlates with the rank
+correlation asked for and the one realised in the Monte Carlo draws (standard error from Fieller's
+var(atanh rho_S) = 1.06 / (n - 3)), and which analyses of the study respected it.
 A Sobol entry's ``worst_case_share`` is taken at the grid pose where the
 worst case is largest (the report's figures use the mean over the grid, as
 for the indices). ``inputs`` and ``versions`` say what the run was made
@@ -83,10 +94,11 @@ from ..provenance import file_record, spec_record, versions
 from ..model.budget import Budget
 from ..units import DEG2ARCSEC, MM2UM, t_value
 from ..sobol.indices import DEPENDENT_NOTE
+from ..worstcase.envelope import CORRELATION_NOTE
 from .allocation import allocation_summary
 from .results import ConfigurationResult, StudyResult, over_grid, pct_se
 
-__all__ = ["build_summary", "study_inputs"]
+__all__ = ["build_summary", "study_inputs", "correlation_summary"]
 
 
 def _undefined(name: str, kind: str, constant: set, correlated: bool) -> str:
@@ -204,6 +216,8 @@ def study_inputs(result: StudyResult) -> dict:
     budget = _record(study.budget, budgets, base, Budget.load) | study.budget.effects_record()
     if study.budget.missing_inputs:
         budget["missing_inputs"] = list(study.budget.missing_inputs)
+    if study.budget.correlated:
+        budget["correlation"] = dict(study.budget.correlation)
     out = {"study": record, "budget": budget,
            "configurations": configs, "seed": result.seed, "montecarlo_seed": result.montecarlo_seed,
            "sobol_seed": result.sobol_seed, **study.sizes()}
@@ -214,6 +228,57 @@ def study_inputs(result: StudyResult) -> dict:
         if getattr(result, "allocation_seed", None) is not None:
             out["allocation_seed"] = result.allocation_seed
     return out
+
+
+#: Draws of the budget the realised rank correlations are measured on when the study runs no Monte Carlo.
+REALISED_SAMPLES = 1 << 15
+
+
+def _analyses_under_correlation(study) -> dict:
+    """Which analyses of ``study`` respected its budget's correlation, and how (``respects``, ``how``)."""
+    out = {"worst_case": {"respects": False, "how": "unchanged, a box. " + CORRELATION_NOTE}}
+    if "montecarlo" in study.outputs:
+        out["montecarlo"] = {"respects": True, "how": "each draw of the correlated inputs passes through the "
+                             "Gaussian copula; every percentile, mean and probability is of the dependent inputs"}
+    if "sobol" in study.outputs:
+        out["shapley"] = {"respects": True, "how": "Shapley effects Sh are defined for dependent inputs: each "
+                          "input's share of the output variance averaged over the orders of the inputs, the "
+                          "conditional draws taken from the copula"}
+        out["sobol"] = {"respects": False, "how": f"not defined: {DEPENDENT_NOTE}"}
+    if getattr(study, "allocation", None) is not None:
+        out["allocation"] = {"respects": False, "how": "not applied: the allocation's budget is the classes "
+                             "menu's laws, taken independent"}
+    return out
+
+
+def correlation_summary(result: StudyResult) -> dict | None:
+    """The ``correlation`` entry of ``summary.json`` (layout in the module docstring); None for an independent budget.
+
+    The realised rank correlations are those of the Monte Carlo draws
+    (``budget.sample(montecarlo_samples, montecarlo_seed)``; without a
+    Monte Carlo, :data:`REALISED_SAMPLES` draws of that seed). The seed is
+    in ``inputs`` (``montecarlo_seed``), so that two runs' summaries compare.
+    """
+    from scipy import stats
+    budget, study = result.study.budget, result.study
+    cop = budget.copula
+    if cop is None:
+        return None
+    n = study.mc_samples if "montecarlo" in study.outputs else REALISED_SAMPLES
+    X = budget.sample(n, result.montecarlo_seed)[:, list(cop.index)]
+    realised = np.atleast_2d(stats.spearmanr(X).statistic)
+    z_se = float(np.sqrt(1.06 / (n - 3)))
+    pairs = []
+    for a in range(len(cop.names)):
+        for b in range(a):
+            if cop.spearman[a, b] != 0.0:
+                r = float(realised[a, b])
+                pairs.append({"inputs": [cop.names[b], cop.names[a]], "spearman": float(cop.spearman[a, b]),
+                              "latent": float(cop.latent[a, b]),
+                              "realised": {"value": r, "se": (1.0 - r * r) * z_se}})
+    return {"table": dict(budget.correlation), "copula": "Gaussian", "pairs": pairs,
+            "realised_from": {"samples": int(n)},
+            "analyses": _analyses_under_correlation(study)}
 
 
 def build_summary(result: StudyResult) -> dict:
@@ -245,5 +310,7 @@ def build_summary(result: StudyResult) -> dict:
                         **{kind: [s.to_dict() for s in result.skipped if s.kind == kind]
                            for kind in ("infeasible", "failed")}}
     notes = result.study.budget.warnings
+    correlation = correlation_summary(result)
     return out | {"metadata": result.metadata(), "inputs": study_inputs(result), "versions": versions(),
-                  **({"warnings": list(notes)} if notes else {})}
+                  **({"warnings": list(notes)} if notes else {}),
+                  **({"correlation": correlation} if correlation is not None else {})}

@@ -22,10 +22,13 @@ GOLDEN_SEED = 12345
 
 
 def golden_summary(name: str, seed: int = GOLDEN_SEED, budget=None) -> dict:
-    """Summary of the reduced bundled study ``name`` (wall times dropped)."""
+    """Summary of the reduced bundled study ``name`` (wall times dropped, and ``inputs`` and ``versions``: the
+    comparisons skip them, and they name the folder and the machine that wrote the file)."""
     summary = build_summary(run_study(Study.load(name).reduced(), rng=seed, progress=False, budget=budget))
     for key in ("wall_time_s", "timings_s", "source"):
         summary["metadata"].pop(key)
+    for key in ("inputs", "versions"):
+        summary.pop(key)
     return summary
 
 

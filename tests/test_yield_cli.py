@@ -1,0 +1,114 @@
+"""``prp3mc yield`` (SPEC §9): the JSON contract, the region table, the readable report and bad input."""
+
+import json
+
+import numpy as np
+import pytest
+
+from prp3mc import exact_yield
+from prp3mc.cli import main
+from prp3mc.model.budget import Budget
+
+POSE = ("--pose", "10", "120", "0")
+SPEC = ("--spec-position-um", "150", "--spec-phi-arcsec", "100")
+LEVELS = {"p99.73", "p99.9937", "p99.9999"}
+
+
+def run(capsys, *argv):
+    code = main(["yield", "--geometry", "u-shape", "--budget", "paper", *argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_pose_json_is_the_spec_contract(capsys):
+    code, out, err = run(capsys, *POSE, *SPEC, "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert {"exceed_position_ppm", "exceed_phi_ppm", "exceed_any_ppm", "error_bound_ppm", "quantiles_position_um",
+            "quantiles_phi_arcsec", "method", "inputs", "versions"} <= set(doc)
+    assert set(doc["quantiles_position_um"]) == LEVELS and set(doc["quantiles_phi_arcsec"]) == LEVELS
+    r = exact_yield("u-shape", "paper", [10.0, 120.0, 0.0], spec_position_um=150.0, spec_phi_arcsec=100.0)
+    assert doc["exceed_position_ppm"] == pytest.approx(1e6 * float(r.exceed_position), rel=1e-12)
+    assert doc["exceed_phi_ppm"] == pytest.approx(1e6 * float(r.exceed_phi), rel=1e-12)
+    assert doc["quantiles_position_um"]["p99.73"] == pytest.approx(1e3 * float(r.quantile_position_mm[0]))
+    assert doc["inputs"]["spec_position_um"] == 150.0 and doc["inputs"]["pose"]["y_mm"] == 120.0
+    assert "characteristic function" in doc["method"]
+
+
+def test_without_a_phi_spec_exceed_phi_is_null(capsys):
+    code, out, _ = run(capsys, *POSE, "--spec-position-um", "150", "--json")
+    doc = json.loads(out)
+    assert code == 0 and doc["exceed_phi_ppm"] is None
+    assert doc["exceed_any_ppm"] == doc["exceed_position_ppm"]
+
+
+def test_region_json_carries_the_region_summary_and_one_row_per_pose(capsys):
+    code, out, err = run(capsys, "--region", "u-shape", "--grid", "3", "--spec-position-um", "150", "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert set(doc["region"]) == {"max_exceed_position_ppm", "mean_exceed_position_ppm", "area_fraction_above_1ppm",
+                                  "argmax_pose"}
+    rows = doc["rows"]
+    assert len(rows) == 9
+    values = np.array([row["exceed_position_ppm"] for row in rows])
+    assert doc["region"]["max_exceed_position_ppm"] == pytest.approx(values.max())
+    assert doc["region"]["mean_exceed_position_ppm"] == pytest.approx(values.mean())
+    best = rows[int(values.argmax())]
+    assert doc["region"]["argmax_pose"] == [best["x_mm"], best["y_mm"], best["phi_deg"]]
+    assert doc["exceed_position_ppm"] == pytest.approx(values.max(), rel=1e-9, abs=1e-6)
+    assert doc["inputs"]["grid"] == 3
+
+
+def test_region_table_goes_to_stdout_and_the_summary_to_stderr(capsys):
+    code, out, err = run(capsys, "--region", "u-shape", "--grid", "2", "--spec-position-um", "150")
+    assert code == 0
+    assert out.splitlines()[0].startswith("x_mm,y_mm,phi_deg,exceed_position_ppm")
+    assert len(out.splitlines()) == 5
+    assert "The worst pose" in err
+
+
+def test_readable_report_sets_worst_case_rss_and_quantiles_side_by_side(capsys):
+    code, out, _ = run(capsys, *POSE, *SPEC)
+    assert code == 0
+    for text in ("ppm", " %", "Ppk", "worst case", "RSS", "p99.73", "p99.9999", "either"):
+        assert text in out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (("--spec-position-um", "0"), "> 0"),
+    (("--spec-position-um", "0.0025"), "RSS"),
+    (("--spec-position-um", "150", "--spec-phi-arcsec", "-3"), "> 0"),
+])
+def test_bad_specs_are_one_line(capsys, argv, message):
+    code, out, err = run(capsys, *POSE, *argv)
+    assert code != 0 and out == ""
+    assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_pose_out_of_reach_is_one_line(capsys):
+    code, out, err = run(capsys, "--pose", "0", "900", "0", "--spec-position-um", "150")
+    assert code != 0 and out == "" and len(err.strip().splitlines()) == 1
+
+
+def test_a_correlated_budget_falls_back_on_monte_carlo_and_says_so(capsys, tmp_path):
+    doc = Budget.load("paper").to_dict() | {"correlation": {"theta_1,theta_2": 0.6}}
+    path = tmp_path / "corr.toml"
+    Budget.from_dict(doc).to_toml(path)
+    code = main(["yield", "--geometry", "u-shape", "--budget", str(path), *POSE, "--spec-position-um", "150",
+                 "--samples", "200000", "--seed", "3", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    rec = json.loads(out)
+    assert rec["method"].startswith("Monte Carlo")
+    assert rec["inputs"]["seed"] == 3 and rec["inputs"]["samples"] == 200000
+    assert rec["error_bound_ppm"] > 0 and rec["exceed_phi_ppm"] is None
+    with pytest.raises(Exception, match="correlates"):
+        exact_yield("u-shape", Budget.from_dict(doc), [10.0, 120.0, 0.0], spec_position_um=150.0)
+
+
+def test_the_command_default_target_is_the_engine_s():
+    import importlib
+
+    from prp3mc.stackup import DEFAULT_TARGET
+
+    assert importlib.import_module("prp3mc.cli.yield").DEFAULT_TARGET == DEFAULT_TARGET
