@@ -19,7 +19,8 @@ from bench_sobol import bench_sobol, bench_sobol_pose
 from bench_study import bench_study
 
 import prp3mc
-from prp3mc import Budget, Geometry, Region, sensitivity, worst_case, worst_case_maxima
+from prp3mc import Budget, Geometry, Region, sensitivity, worst_case
+from prp3mc.worstcase.envelope import worst_case_maxima
 from prp3mc.worstcase._kernel import envelope_kernel, kernel_tables
 from prp3mc.worstcase.crosscheck import optimizer_worst_case
 

@@ -23,6 +23,7 @@ linear model), the methods side by side (:mod:`prp3mc.montecarlo`,
 from __future__ import annotations
 
 import importlib
+import warnings
 
 from ._version import __version__
 from .errors import Prp3mcError
@@ -39,7 +40,7 @@ _API = {
     **dict.fromkeys(("Disc", "Discrete", "Normal", "Triangular", "TruncNormal", "Uniform"), "model.laws"),
     "LinearModel": "model.linear", "linear_model": "model.linear",
     "MonteCarloResult": "montecarlo.propagation", "monte_carlo": "montecarlo.propagation",
-    **dict.fromkeys(("WorstCase", "WorstCaseMaxima", "worst_case", "worst_case_maxima"), "worstcase.envelope"),
+    "WorstCaseResult": "worstcase.envelope", "worst_case": "worstcase.envelope",
     "AllocationResult": "allocation.optimum", "allocate": "allocation.optimum",
     "SobolResult": "sobol.indices", "sobol_indices": "sobol.indices",
     "ShapleyResult": "sobol.shapley", "shapley_effects": "sobol.shapley",
@@ -52,6 +53,15 @@ _API = {
     "detectable_effect": "measurement.fit.workflow", "discrepancy": "measurement.fit.workflow",
     "CampaignPlan": "measurement.campaign.plan", "plan_campaign": "measurement.campaign.plan",
 }
+#: Names that left the everyday API, still served for one release with a DeprecationWarning:
+#: ``name -> ("module:attribute", where to find it now)``.
+_DEPRECATED = {
+    "WorstCase": ("worstcase.envelope:WorstCaseResult", "prp3mc.WorstCase is now prp3mc.WorstCaseResult"),
+    "worst_case_maxima": ("worstcase.envelope:worst_case_maxima",
+                          "prp3mc.worst_case_maxima is now imported from prp3mc.worstcase.envelope"),
+    "WorstCaseMaxima": ("worstcase.envelope:WorstCaseMaxima",
+                        "prp3mc.WorstCaseMaxima is now imported from prp3mc.worstcase.envelope"),
+}
 #: The wings, importable as attributes too (``prp3mc.measurement`` after ``import prp3mc``).
 _WINGS = ("kinematics", "model", "montecarlo", "worstcase", "stackup", "sobol", "allocation", "measurement", "study",
           "reports", "cli", "errors", "testing")
@@ -63,7 +73,7 @@ __all__ = [
     "sensitivity", "Sensitivity", "exact_pose_error",
     # budgets and their propagation
     "Budget", "Catalogue", "Uniform", "Normal", "TruncNormal", "Triangular", "Disc", "Discrete",
-    "linear_model", "LinearModel", "monte_carlo", "MonteCarloResult", "worst_case", "WorstCase", "worst_case_maxima", "WorstCaseMaxima",
+    "linear_model", "LinearModel", "monte_carlo", "MonteCarloResult", "worst_case", "WorstCaseResult",
     "allocate", "AllocationResult",
     "sobol_indices", "SobolResult", "sobol_ranking", "shapley_effects", "ShapleyResult",
     "exact_yield", "YieldResult",
@@ -82,6 +92,11 @@ def __getattr__(name: str):
         value = getattr(importlib.import_module(f"{__name__}.{module}"), attribute or name)
     elif name in _WINGS:
         value = importlib.import_module(f"{__name__}.{name}")
+    elif name in _DEPRECATED:
+        where, text = _DEPRECATED[name]
+        module, _, attribute = where.partition(":")
+        warnings.warn(f"{text} (the old name goes in the next release)", DeprecationWarning, stacklevel=2)
+        return getattr(importlib.import_module(f"{__name__}.{module}"), attribute)
     else:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
     globals()[name] = value

@@ -6,7 +6,7 @@ import itertools
 import numpy as np
 import pytest
 
-from prp3mc import Budget, Geometry, Uniform, exact_pose_error, linear_model, monte_carlo, worst_case
+from prp3mc import Budget, Geometry, Region, Uniform, exact_pose_error, linear_model, monte_carlo, worst_case
 from prp3mc.cli import main
 from prp3mc.errors import BudgetError
 from prp3mc.kinematics.chain import inverse_kinematics
@@ -329,3 +329,26 @@ def test_cli_json_records_and_uses_the_effects(tmp_path, capsys):
     assert {row["name"] for row in shifts} == {"offset_a_1", "offset_beta_2", "offset_psi_3", "offset_b_3",
                                                 "offset_theta_1", "scale_2"}
     assert all(row["ST"] is None for row in shifts)
+
+
+def test_the_registry_says_how_the_linear_model_takes_each_kind():
+    """Every library effect parses to an ``EffectKind``; in the linear model a kind's effects are the terms its
+    registry entry says (a known shift or a factor, of one leg or all), in its term unit, and the budget's
+    effects table takes its words from the registry."""
+    from prp3mc.model.effects import EFFECT_NAMES, ALL_LEGS, EffectKind, effect
+    assert {effect(name).kind for name in EFFECT_NAMES} == set(EffectKind)
+    g = Geometry.from_preset("u-shape").replace(lead=(5.0, 10.0, 4.0))
+    effects = {"beta_2": SystematicEffect("beta_2", 0.01), "scale_1": SystematicEffect("scale_1", 1e-4),
+               "backlash_3": SystematicEffect("backlash_3", 0.02),
+               "thermal": SystematicEffect("thermal", 1.2e-5, temp_range_C=(15.0, 30.0)),
+               "cyclic_2": SystematicEffect("cyclic_2", 0.01, phase_deg=30.0)}
+    budget = Budget.from_preset("paper").with_effects(effects, fitted_on=g)
+    model = linear_model(g, budget, Region.from_preset("u-shape").grid(1))
+    terms = dict(zip(model.terms, zip(model.term_laws, model.term_units)))
+    for name, eff in effects.items():
+        kind = eff.effect.kind
+        law, unit = terms[eff.effect.term]
+        assert law.kind == kind.at_pose and (law.leg == ALL_LEGS) == (not kind.per_leg)
+        assert unit == (kind.term_unit or eff.unit) and law.reference == kind.reference
+    assert list(budget.effects_frame()["enters"]) == [effects[n].effect.kind.enters for n in budget.effects]
+    assert EffectKind.THERMAL.term_unit == "K" and EffectKind.CYCLIC.dof == 2 and EffectKind.SPREAD.at_pose == "law"

@@ -222,7 +222,7 @@ def _fixed_parts(model, J: int, k_sigma) -> dict:
 
 def _n_input_features(model, J: int) -> int:
     """Features of the first J terms (a clearance has two)."""
-    return sum(2 if kind == "clearance" else 1 for kind, *_ in model._plan[:J])
+    return sum(2 if tl.kind == "clearance" else 1 for tl in model.term_laws[:J])
 
 
 def _envelope(P, Wu, Ai, kq, fixed, mid, half, mean, dmean, var) -> dict:

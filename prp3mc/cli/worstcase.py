@@ -25,6 +25,7 @@ class WorstCaseCommand:
         from ..model.validity import check_linearity
         from ..kinematics.chain import check_poses
         from ..model.budget import Budget
+        from ..model.effects import EffectKind
         import pandas as pd
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         poses, where = grid_poses(args, lambda n: worstcase_estimate(n, len(budget)))
@@ -61,14 +62,18 @@ class WorstCaseCommand:
                  f"  |dphi|          {3600 * float(wc.phi_deg):10.3f} arcsec ({float(wc.phi_deg):.6g} deg)",
                  "", "Inputs at the position maximum, and each term's contribution:"]
         at = wc.maximizer("position")
+        laws = dict(zip(wc.model.terms, wc.model.term_laws))
+        units = dict(zip(wc.model.terms, wc.model.term_units))
         for _, row in frame.sort_values("contribution", ascending=False).iterrows():
-            term = row["term"]
-            if term.startswith("rho_"):
+            term, tl = row["term"], laws[row["term"]]
+            if tl.kind == "clearance":
                 value = f"rho={at[term]:.4g} mm at zeta={at['zeta_' + term[-1]]:.1f} deg"
-            elif term == "thermal":
+            elif tl.kind == "shift":
+                value = f"{row['term_value']:.4g} {units[term]} (known shift)"
+            elif term == EffectKind.THERMAL:                      # the factor is the temperature
                 value = f"T={at[term]:.4g} deg C"
             else:
-                value = f"{at[term]:.4g}" if term in at else f"{row['term_value']:.4g} (known shift)"
+                value = f"{at[term]:.4g} {units[term]}"
             lines.append(f"  {term:15s} {value:34s} {1e3 * row['contribution']:9.3f} µm  "
                          f"({100 * row['share']:5.1f} %)")
         if args.k_sigma is not None:

@@ -37,8 +37,8 @@ def formula(fn):
     """Register ``fn`` with numba so that compiled code calls the same source; returns ``fn``.
 
     Numba compiles it once per signature and LLVM inlines it into the caller (inlining
-    at numba's level instead, ``inline="always"``, took the envelope kernel's cold
-    compilation from 85 s to 780 s on a loaded machine, for the same speed).
+    at numba's level instead, ``inline="always"``, made cold compilation far slower for
+    the same speed: benchmarks/README.md).
     """
     @functools.wraps(fn)
     def typer(*args):

@@ -25,8 +25,8 @@ from ..errors import BudgetError, IncompleteBudgetWarning, ParameterError, Unkno
 from .catalogue import Catalogue
 from .copula import GaussianCopula, parse_correlation
 from .laws import Law, law_from_dict
-from .effects import (T_REF_C, FittedOn, SystematicEffect, check_leads, effect_factors, effects_from_dict,
-                      slider_error)
+from .effects import (ALL_LEGS, WEIGHT_ONE, FittedOn, SystematicEffect, check_leads, effect_factors, effect_terms,
+                      effects_from_dict, slider_factor)
 from ..kinematics.geometry import Geometry
 from ..kinematics.sensitivity import LENGTH_FAMILIES
 
@@ -261,14 +261,12 @@ class Budget:
         """One row per effect: effect, kind, value, unit, ci95_low, ci95_high, temp_lo_C, temp_hi_C,
         campaign, campaign_sha256, source, phase_deg (cyclic), and how the analyses take it (``enters``)."""
         import pandas as pd
-        enters = {"offset": "known shift", "scale": "known shift", "backlash": "±h/2, approach unknown",
-                  "thermal": "temperature over temp_range_C", "cyclic": "known shift"}
         rows = [{"effect": k, "kind": e.effect.kind, "value": e.value, "unit": e.unit,
                  "ci95_low": (e.ci95 or (np.nan,) * 2)[0], "ci95_high": (e.ci95 or (np.nan,) * 2)[1],
                  "temp_lo_C": (e.temp_range_C or (np.nan,) * 2)[0], "temp_hi_C": (e.temp_range_C or (np.nan,) * 2)[1],
                  "campaign": e.campaign or "", "campaign_sha256": e.campaign_sha256 or "", "source": e.source or "",
                  "phase_deg": np.nan if e.phase_deg is None else e.phase_deg,
-                 "enters": enters[e.effect.kind]} for k, e in self.effects.items()]
+                 "enters": e.effect.kind.enters} for k, e in self.effects.items()]
         return pd.DataFrame(rows)
 
     def effects_record(self) -> dict:
@@ -377,32 +375,18 @@ class Budget:
             errors.setdefault(family, np.zeros((X.shape[0], 3)))[:, leg] = X[:, k]
         if not self.effects:
             return errors
-        factors = self.factors
-        slider = np.zeros((X.shape[0], 3))
-        kinds = {eff.effect.kind for eff in self.effects.values()}
-        for name, eff in self.effects.items():
-            e = eff.effect
-            if e.kind == "offset":
-                errors.setdefault(e.family, np.zeros((X.shape[0], 3)))[:, e.leg] += eff.value
-            elif e.kind == "backlash":
-                slider[:, e.leg] += X[:, factors.index(name)]
-        if kinds & {"scale", "thermal", "cyclic"}:
-            if b is None:
+        factors, n = self.factors, X.shape[0]
+        for term in effect_terms(self.effects, lead_mm):            # coefficient g(b) X on its family
+            x = term.value if term.is_shift else X[:, factors.index(term.effect.name)] - term.reference
+            x = term.coefficient * np.broadcast_to(x, (n,))[:, None]                  # (n, 1)
+            if term.weight == WEIGHT_ONE:
+                g = np.ones(3)
+            elif b is None:
                 raise ParameterError("lead scale, thermal and cyclic effects need the nominal slider positions b")
-            b = np.asarray(b, dtype=float)
-            strain = np.zeros((X.shape[0], 3))
-            cyclic = np.zeros(b.shape)
-            for name, eff in self.effects.items():
-                if eff.effect.kind == "scale":
-                    strain[:, eff.effect.leg] += eff.value
-                elif eff.effect.kind == "thermal":
-                    strain += eff.value * (X[:, factors.index(name), None] - T_REF_C)
-                elif eff.effect.kind == "cyclic":
-                    cyclic += slider_error({name: eff.model_value}, b.reshape(-1, 3),
-                                           lead_mm=lead_mm).reshape(b.shape)
-            slider = slider + strain * b[..., None, :] + cyclic[..., None, :]
-        if kinds & {"backlash", "scale", "thermal", "cyclic"}:
-            errors["b"] = errors.get("b", 0.0) + slider
+            else:
+                g = slider_factor(term, np.asarray(b, dtype=float))[..., None, :]      # (..., 1, 3)
+            on_legs = np.full(3, True) if term.leg == ALL_LEGS else np.arange(3) == term.leg
+            errors[term.family] = errors.get(term.family, np.zeros((n, 3))) + np.where(on_legs, x * g, 0.0)
         return errors
 
     def means(self) -> np.ndarray:

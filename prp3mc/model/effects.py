@@ -53,6 +53,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -63,10 +64,10 @@ from ..kinematics.sensitivity import LENGTH_FAMILIES
 from .._result import FrozenDict
 from .laws import Discrete, Law, Uniform
 
-__all__ = ["Effect", "EFFECT_NAMES", "OFFSET_FAMILIES", "SPREAD_FAMILIES", "T_REF_C", "effect",
+__all__ = ["EffectKind", "WEIGHT_ONE", "WEIGHT_B", "WEIGHT_WAVE", "Effect", "EFFECT_NAMES", "OFFSET_FAMILIES", "SPREAD_FAMILIES", "T_REF_C", "effect",
            "slider_error", "offset_errors", "SystematicEffect", "effects_from_dict", "EFFECT_LIMITS",
            "effect_factors", "FittedOn", "FIT_TOLERANCE", "phasor", "amplitude_phase", "components",
-           "check_leads", "effect_value"]
+           "check_leads", "effect_value", "ALL_LEGS", "EffectTerm", "effect_terms", "slider_factor"]
 
 #: Parameters whose constant offset is a library effect (``b``: encoder zero offset).
 OFFSET_FAMILIES = ("a", "alpha", "beta", "gamma", "theta", "c", "e", "psi", "b")
@@ -84,6 +85,82 @@ EFFECT_NAMES = (tuple(f"{q}_{i}" for q in OFFSET_FAMILIES for i in _LEGS)
 
 _PATTERN = re.compile(r"^(?:(spread)_)?([a-z]+)_([123])$")
 
+#: The leg of a term that acts on all three legs at once (thermal expansion).
+ALL_LEGS = -1
+#: How an effect's pose error per unit of its value depends on the nominal slider position b_i
+#: (:attr:`EffectKind.weight`): not at all; proportional to b_i; as sin(2 pi b_i / p_i + phi_i).
+WEIGHT_ONE, WEIGHT_B, WEIGHT_WAVE = range(3)
+
+
+class EffectKind(StrEnum):
+    """The kinds of effect of the library, and what every analysis needs to know of each: the one registry.
+
+    A member is its name as a string (``EffectKind.BACKLASH == "backlash"``);
+    its attributes say how the analyses take it:
+
+    Attributes
+    ----------
+    at_pose : str
+        How it enters the linear model at an analysis pose
+        (:class:`~prp3mc.model.linear.TermLaw`): ``"shift"``, a known constant
+        term (offsets, lead scales, cyclic errors); ``"factor"``, a bounded random
+        factor whose driver is unknown at a pose (backlash: the approach
+        direction; thermal: the temperature); ``"law"``, a new law of a budget
+        input, not a term (spreads).
+    per_leg : bool
+        One effect per leg; False for thermal (one temperature, every leg).
+    weight : int
+        :data:`WEIGHT_ONE`, :data:`WEIGHT_B` or :data:`WEIGHT_WAVE`: how its
+        pose error per unit of value depends on the nominal slider position.
+    dof : int
+        Real parameters of its pose error: 2 for a cyclic error (its phasor), else 1.
+    unit : str or None
+        Unit of its value; None where it is the family's (mm or deg).
+    term_unit : str or None
+        Unit of its term's value X_t (None: :attr:`unit`); thermal's term is T - 20, K.
+    reference : float
+        Subtracted from its factor to make the term (:data:`T_REF_C` for thermal, else 0).
+    needs : str or None
+        The campaign column its fit needs, ``{leg}`` standing for the 1-based leg.
+    nonnegative : bool
+        Its value is >= 0 (a backlash width, a cyclic error's amplitude).
+    enters : str
+        How the analyses take it, in words (tables).
+    """
+
+    def __new__(cls, value, at_pose, per_leg, weight, dof, unit, term_unit, reference, needs, nonnegative, enters):
+        member = str.__new__(cls, value)
+        member._value_ = value
+        member.at_pose, member.per_leg, member.weight, member.dof = at_pose, per_leg, weight, dof
+        member.unit, member.term_unit, member.reference, member.needs = unit, term_unit or unit, reference, needs
+        member.nonnegative, member.enters = nonnegative, enters
+        return member
+
+    #          at_pose   per_leg weight       dof unit   term_unit ref      needs       >= 0   enters
+    OFFSET = ("offset", "shift", True, WEIGHT_ONE, 1, None, None, 0.0, None, False, "known shift")
+    SCALE = ("scale", "shift", True, WEIGHT_B, 1, "1", None, 0.0, None, False, "known shift")
+    BACKLASH = ("backlash", "factor", True, WEIGHT_ONE, 1, "mm", None, 0.0, "dir_{leg}", True,
+                "±h/2, approach unknown")
+    THERMAL = ("thermal", "factor", False, WEIGHT_B, 1, "1/K", "K", T_REF_C, "temp_C", False,
+               "temperature over temp_range_C")
+    CYCLIC = ("cyclic", "shift", True, WEIGHT_WAVE, 2, "mm", None, 0.0, None, True, "known shift")
+    SPREAD = ("spread", "law", True, WEIGHT_ONE, 1, None, None, 0.0, None, True, "the input's new law")
+
+    @property
+    def systematic(self) -> bool:
+        """Adds a deterministic pose error (all but spreads)."""
+        return self.at_pose != "law"
+
+    @property
+    def is_shift(self) -> bool:
+        """A known constant term at an analysis pose."""
+        return self.at_pose == "shift"
+
+    @property
+    def is_factor(self) -> bool:
+        """A bounded random factor at an analysis pose (its driver is unknown there)."""
+        return self.at_pose == "factor"
+
 
 @dataclass(frozen=True, slots=True)
 class Effect:
@@ -93,8 +170,9 @@ class Effect:
     ----------
     name : str
         Library name, e.g. ``beta_2``, ``backlash_1``, ``spread_b_3``.
-    kind : str
-        ``offset``, ``scale``, ``backlash``, ``thermal``, ``cyclic`` or ``spread``.
+    kind : EffectKind
+        ``offset``, ``scale``, ``backlash``, ``thermal``, ``cyclic`` or ``spread``
+        (a string; its attributes say how the analyses take it).
     family : str or None
         Parameter family (``b`` for the slider effects, the input family of a
         spread; None for ``thermal``).
@@ -105,7 +183,7 @@ class Effect:
     """
 
     name: str
-    kind: str
+    kind: EffectKind
     family: str | None
     leg: int | None
     unit: str
@@ -113,41 +191,49 @@ class Effect:
     @property
     def systematic(self) -> bool:
         """True for effects that add a deterministic pose error (all but spreads)."""
-        return self.kind != "spread"
+        return self.kind.systematic
 
     @property
     def dof(self) -> int:
         """Parameters of the effect's pose error: 2 for a cyclic error (its phasor), else 1."""
-        return 2 if self.kind == "cyclic" else 1
+        return self.kind.dof
 
     @property
     def needs(self) -> tuple[str, ...]:
         """Optional campaign columns the effect needs."""
-        if self.kind == "backlash":
-            return (f"dir_{self.leg + 1}",)
-        if self.kind == "thermal":
-            return ("temp_C",)
-        return ()
+        if self.kind.needs is None:
+            return ()
+        return (self.kind.needs.format(leg=None if self.leg is None else self.leg + 1),)
 
     @property
     def budget_input(self) -> str | None:
         """The budget input a spread changes (None for systematic effects)."""
-        return f"{self.family}_{self.leg + 1}" if self.kind == "spread" else None
+        return None if self.kind.systematic else f"{self.family}_{self.leg + 1}"
+
+    @property
+    def term(self) -> str:
+        """Its term's name in a :class:`~prp3mc.model.linear.LinearModel` (``offset_`` before an offset's name)."""
+        return f"offset_{self.name}" if self.kind is EffectKind.OFFSET else self.name
+
+
+#: The kinds whose effects are named ``kind_i`` and act on slider i's position.
+_SLIDER_KINDS = (EffectKind.SCALE, EffectKind.BACKLASH, EffectKind.CYCLIC)
 
 
 def effect(name: str) -> Effect:
     """Parse an effect name of the library; :class:`BudgetError` names the known ones otherwise."""
-    if name == "thermal":
-        return Effect("thermal", "thermal", None, None, "1/K")
+    if name == EffectKind.THERMAL:
+        return Effect(name, EffectKind.THERMAL, None, None, EffectKind.THERMAL.unit)
     m = _PATTERN.match(str(name))
     if m and name in EFFECT_NAMES:
         spread, family, leg = m.group(1), m.group(2), int(m.group(3)) - 1
+        own = "mm" if family in LENGTH_FAMILIES else "deg"
         if spread:
-            unit = "mm" if family in LENGTH_FAMILIES else "deg"
-            return Effect(name, "spread", family, leg, unit)
-        if family in ("scale", "backlash", "cyclic"):
-            return Effect(name, family, "b", leg, "1" if family == "scale" else "mm")
-        return Effect(name, "offset", family, leg, "mm" if family in LENGTH_FAMILIES else "deg")
+            return Effect(name, EffectKind.SPREAD, family, leg, own)
+        if family in _SLIDER_KINDS:
+            kind = EffectKind(family)
+            return Effect(name, kind, "b", leg, kind.unit)
+        return Effect(name, EffectKind.OFFSET, family, leg, own)
     raise BudgetError(f"unknown effect {name!r}: the library has "
                       "q_i for q in a, alpha, beta, gamma, theta, c, e, psi, b; scale_i; backlash_i; "
                       "thermal; cyclic_i; spread_rho_i, spread_theta_i, spread_b_i (i = 1, 2, 3)")
@@ -180,13 +266,13 @@ def effect_value(name: str, value) -> float | complex:
     """
     eff = effect(name)
     try:
-        if eff.kind == "cyclic" and isinstance(value, (tuple, list)):
+        if eff.kind is EffectKind.CYCLIC and isinstance(value, (tuple, list)):
             amplitude, phase = (float(v) for v in value)
             out = phasor(amplitude, phase)
         else:
-            out = complex(value) if eff.kind == "cyclic" else float(value)
+            out = complex(value) if eff.kind is EffectKind.CYCLIC else float(value)
     except (TypeError, ValueError):
-        form = "a phasor, an amplitude or (amplitude_mm, phase_deg)" if eff.kind == "cyclic" else "a number"
+        form = "a phasor, an amplitude or (amplitude_mm, phase_deg)" if eff.kind is EffectKind.CYCLIC else "a number"
         raise BudgetError(f"effect {name!r} takes {form}, got {value!r}") from None
     if not np.isfinite(out):
         raise BudgetError(f"effect {name!r}: value must be finite, got {value!r}")
@@ -216,7 +302,7 @@ def components(effects, values) -> np.ndarray:
 def check_leads(names, geometry: Geometry, where: str = "") -> None:
     """Refuse cyclic effects among ``names`` whose leg has no ``lead_mm`` in ``geometry`` (one line)."""
     for eff in _as_effects(names):
-        if eff.kind == "cyclic" and not np.isfinite(geometry.lead_mm[eff.leg]):
+        if eff.kind is EffectKind.CYCLIC and not np.isfinite(geometry.lead_mm[eff.leg]):
             raise BudgetError(f"{where}{eff.name}: a cyclic screw error repeats with the lead of slider "
                               f"{eff.leg + 1}'s screw, and geometry {geometry.name!r} has no lead_mm for leg "
                               f"{eff.leg + 1}: add lead_mm to its [[leg]] table")
@@ -248,19 +334,19 @@ def slider_error(values: dict, b: np.ndarray, direction: np.ndarray | None = Non
     """
     out = np.zeros(np.shape(b))
     for eff, value in zip(_as_effects(values), values.values()):
-        if eff.kind == "offset" and eff.family == "b":
+        if eff.kind is EffectKind.OFFSET and eff.family == "b":
             out[:, eff.leg] += value
-        elif eff.kind == "scale":
+        elif eff.kind is EffectKind.SCALE:
             out[:, eff.leg] += value * b[:, eff.leg]
-        elif eff.kind == "backlash":
+        elif eff.kind is EffectKind.BACKLASH:
             if direction is None:
                 raise ParameterError(f"{eff.name} needs approach directions dir_{eff.leg + 1}")
             out[:, eff.leg] += 0.5 * value * direction[:, eff.leg]
-        elif eff.kind == "thermal":
+        elif eff.kind is EffectKind.THERMAL:
             if temp_C is None:
                 raise ParameterError("thermal needs temperatures temp_C")
             out += value * (np.asarray(temp_C)[:, None] - T_REF_C) * b
-        elif eff.kind == "cyclic":
+        elif eff.kind is EffectKind.CYCLIC:
             lead = np.nan if lead_mm is None else lead_mm[eff.leg]
             if not np.isfinite(lead):
                 raise BudgetError(f"{eff.name} needs the lead lead_mm of slider {eff.leg + 1}'s screw")
@@ -272,7 +358,7 @@ def offset_errors(values: dict) -> dict[str, np.ndarray]:
     """Constant geometric offsets of ``values`` (except ``b_i``) as ``exact_pose_error`` errors (3,) per family."""
     out: dict[str, np.ndarray] = {}
     for eff, value in zip(_as_effects(values), values.values()):
-        if eff.kind == "offset" and eff.family != "b":
+        if eff.kind is EffectKind.OFFSET and eff.family != "b":
             out.setdefault(eff.family, np.zeros(3))[eff.leg] += value
     return out
 
@@ -346,19 +432,19 @@ class SystematicEffect:
         if abs(value) > limit:
             raise BudgetError(f"{where}: value {value:g} {eff.unit} is beyond any such effect of this "
                               f"machine (limit ±{limit:g} {eff.unit}); a unit slip?")
-        if eff.kind == "backlash" and value < 0:
+        if eff.kind is EffectKind.BACKLASH and value < 0:
             raise BudgetError(f"{where}: a backlash width h must be >= 0 mm, got {value:g}")
-        if eff.kind == "cyclic" and value < 0:
+        if eff.kind is EffectKind.CYCLIC and value < 0:
             raise BudgetError(f"{where}: a cyclic error's amplitude must be >= 0 mm, got {value:g} "
                               "(a negative one is the phase turned by 180 deg)")
-        if eff.kind == "cyclic" and self.phase_deg is None:
+        if eff.kind is EffectKind.CYCLIC and self.phase_deg is None:
             raise BudgetError(f"{where} needs phase_deg, the phase (degrees) of delta b = A sin(2 pi b / lead + phase)")
-        if eff.kind != "cyclic" and self.phase_deg is not None:
+        if eff.kind is not EffectKind.CYCLIC and self.phase_deg is not None:
             raise BudgetError(f"{where}: phase_deg applies to cyclic_i only")
         phase = None if self.phase_deg is None else _number(self.phase_deg, f"{where}: phase_deg")
         ci = _pair(self.ci95, f"{where}: ci95")
         temps = _pair(self.temp_range_C, f"{where}: temp_range_C")
-        if eff.kind == "thermal":
+        if eff.kind is EffectKind.THERMAL:
             if temps is None:
                 raise BudgetError(f"{where} needs temp_range_C = [lo, hi], the operating temperatures "
                                   "(degrees C) to bound it over")
@@ -387,7 +473,7 @@ class SystematicEffect:
     @property
     def model_value(self) -> float | complex:
         """The value as ``{name: value}`` tables take it: the value, a cyclic error's phasor (:func:`phasor`)."""
-        return phasor(self.value, self.phase_deg) if self.effect.kind == "cyclic" else self.value
+        return phasor(self.value, self.phase_deg) if self.effect.kind is EffectKind.CYCLIC else self.value
 
     def to_dict(self) -> dict[str, Any]:
         """The TOML table of the effect (keys left out when unset)."""
@@ -433,6 +519,84 @@ def effects_from_dict(doc, source: str) -> FrozenDict:
     return FrozenDict(out)
 
 
+@dataclass(frozen=True, slots=True)
+class EffectTerm:
+    """How one systematic effect of a budget enters the pose error: the one description every analysis reads.
+
+    The effect adds ``coefficient * g(b_i) * X`` to parameter ``family`` of
+    leg ``leg`` (of every leg for :data:`ALL_LEGS`), in that family's unit
+    (mm or deg), where X is the term's value and g(b_i) is 1, the nominal
+    slider position b_i (mm), or ``sin(wavenumber b_i + phase)`` as
+    ``weight`` says (:func:`slider_factor`).
+
+    Attributes
+    ----------
+    name : str
+        The term's name (:attr:`Effect.term`).
+    effect : Effect
+    family : str
+        The parameter it changes: the offset's family, ``b`` for the slider effects.
+    leg : int
+        0-based leg or :data:`ALL_LEGS`.
+    coefficient : float
+        alpha_T (1/K) for thermal expansion, else 1.
+    weight : int
+        :data:`WEIGHT_ONE`, :data:`WEIGHT_B` or :data:`WEIGHT_WAVE`.
+    wavenumber, phase : float
+        2 pi / p_i (rad per mm) and phi_i (rad) of a cyclic error, else 0.
+    value : float
+        X of a known shift (the effect's value: a cyclic error's amplitude, mm); 0 for a factor.
+    reference : float
+        For a factor, X is the factor less this (T - 20 for thermal).
+    """
+
+    name: str
+    effect: Effect
+    family: str
+    leg: int
+    coefficient: float
+    weight: int
+    wavenumber: float
+    phase: float
+    value: float
+    reference: float
+
+    @property
+    def is_shift(self) -> bool:
+        """X is known (a shift), not a random factor of the budget."""
+        return self.effect.kind.is_shift
+
+
+def effect_terms(effects: dict, lead_mm=None) -> tuple[EffectTerm, ...]:
+    """The terms of a budget's systematic ``effects`` (name -> :class:`SystematicEffect`), in library order.
+
+    ``lead_mm`` (3,), mm: the screws' leads (:attr:`Geometry.lead_mm`), needed by cyclic errors.
+    """
+    out = []
+    for name in (n for n in EFFECT_NAMES if n in effects):
+        eff = effects[name]
+        e, kind = eff.effect, eff.effect.kind
+        wave = (0.0, 0.0)
+        if kind.weight == WEIGHT_WAVE:
+            lead = np.nan if lead_mm is None else lead_mm[e.leg]
+            if not np.isfinite(lead):
+                raise BudgetError(f"{name} needs the lead lead_mm of slider {e.leg + 1}'s screw")
+            wave = (2.0 * math.pi / lead, math.radians(eff.phase_deg))
+        out.append(EffectTerm(e.term, e, e.family or "b", e.leg if kind.per_leg else ALL_LEGS,
+                              eff.value if kind is EffectKind.THERMAL else 1.0, kind.weight, *wave,   # alpha_T (T - 20)
+                              eff.value if kind.is_shift else 0.0, kind.reference))
+    return tuple(out)
+
+
+def slider_factor(term: EffectTerm, b: np.ndarray) -> np.ndarray | float:
+    """g(b) of ``term``: 1, ``b`` or ``sin(wavenumber b + phase)``, shaped like the slider positions ``b`` (mm)."""
+    if term.weight == WEIGHT_B:
+        return b
+    if term.weight == WEIGHT_WAVE:
+        return np.sin(term.wavenumber * b + term.phase)
+    return 1.0
+
+
 def effect_factors(effects: dict) -> dict[str, Law]:
     """The random factors of a budget's effects, in library order: name -> law.
 
@@ -445,9 +609,9 @@ def effect_factors(effects: dict) -> dict[str, Law]:
         eff = effects.get(name)
         if eff is None:
             continue
-        if eff.effect.kind == "backlash":
+        if eff.effect.kind is EffectKind.BACKLASH:
             out[name] = Discrete((-0.5 * eff.value, 0.5 * eff.value), (0.5, 0.5))
-        elif eff.effect.kind == "thermal":
+        elif eff.effect.kind is EffectKind.THERMAL:
             out[name] = Uniform(*eff.temp_range_C)
     return out
 

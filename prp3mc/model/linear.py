@@ -26,15 +26,13 @@ from .._result import freeze, short_repr
 from ..units import DEG2RAD, RAD2DEG
 from .budget import Budget, parse_input
 from .laws import Law, angle_moments
-from .effects import EFFECT_NAMES, T_REF_C
+from .effects import ALL_LEGS, effect_terms, slider_factor
 from ..kinematics.geometry import Geometry
 from ..kinematics.chain import as_poses, frame, validated_frame
 from ..kinematics.sensitivity import LENGTH_FAMILIES, h_entries
 
 __all__ = ["LinearModel", "TermLaw", "linear_model", "ALL_LEGS", "FEATURE_VALUE", "FEATURE_COS", "FEATURE_SIN", "FEATURE_ONE"]
 
-#: The leg of a term that acts on all three legs at once (thermal expansion).
-ALL_LEGS = -1
 #: Feature codes of :meth:`LinearModel.feature_ops`: factor a's value less a reference; X_a cos(X_b deg);
 #: X_a sin(X_b deg); the constant 1 of the known shifts.
 FEATURE_VALUE, FEATURE_COS, FEATURE_SIN, FEATURE_ONE = range(4)
@@ -70,6 +68,10 @@ class TermLaw:
         The contact angle's law (clearance only).
     value : float
         The shift's value (mm, deg or 1), 0 for the other kinds.
+    factors : tuple of int
+        Indices into :attr:`Budget.factors <prp3mc.model.budget.Budget.factors>`
+        of the factors X_t is made of: ``(k,)`` for a factor, ``(k_rho, k_zeta)``
+        for a clearance, ``()`` for a shift.
     """
 
     name: str
@@ -79,6 +81,7 @@ class TermLaw:
     reference: float = 0.0
     zeta: Law | None = None
     value: float = 0.0
+    factors: tuple = ()
 
 
 @dataclass(frozen=True, slots=True, repr=False)
@@ -110,6 +113,8 @@ class LinearModel:
         h_q,i; thermal has alpha_T h_b,i b_i in every leg).
     cos_omega, sin_omega : ndarray, shape (..., 3)
         Worst contact direction omega_i of each leg's clearance (that of E l_i).
+    term_laws : tuple of TermLaw
+        What each term's scalar X_t is, its law and its factors, in :attr:`terms` order.
     """
 
     geometry: Geometry
@@ -121,7 +126,7 @@ class LinearModel:
     weights: np.ndarray
     cos_omega: np.ndarray
     sin_omega: np.ndarray
-    _plan: tuple
+    term_laws: tuple
 
     def __post_init__(self):
         freeze(self)
@@ -150,19 +155,17 @@ class LinearModel:
         return cols
 
     @property
-    def term_laws(self) -> tuple[TermLaw, ...]:
-        """What each term's scalar X_t is and its law, in :attr:`terms` order (see :class:`TermLaw`)."""
-        laws = list(self.budget.factor_laws.values())
-        out = []
-        for name, leg, (kind, *args) in zip(self.terms, self.legs, self._plan):
-            if kind == "value":
-                out.append(TermLaw(name, "factor", leg, law=laws[args[0]], reference=args[1]))
-            elif kind == "clearance":
-                (k, kz), = args
-                out.append(TermLaw(name, "clearance", leg, law=laws[k], zeta=laws[kz]))
-            else:
-                out.append(TermLaw(name, "shift", leg, value=args[0]))
-        return tuple(out)
+    def term_units(self) -> tuple[str, ...]:
+        """Unit of each term's value (:meth:`term_values`): mm or deg for an input (rho_i: mm), the effect
+        kind's term unit for an effect (:attr:`EffectKind.term_unit <prp3mc.model.effects.EffectKind>`; K for
+        thermal, whose term is T - 20), in :attr:`terms` order."""
+        effects = {t.name: t.effect for t in effect_terms(self.budget.effects, self.geometry.lead_mm)}
+
+        def unit(name: str) -> str:
+            if name in effects:
+                return effects[name].kind.term_unit or effects[name].unit
+            return "mm" if parse_input(name)[0] in LENGTH_FAMILIES else "deg"
+        return tuple(unit(name) for name in self.terms)
 
     @property
     def omega(self) -> np.ndarray:
@@ -172,7 +175,7 @@ class LinearModel:
     @property
     def has_shift(self) -> bool:
         """Whether the budget has known shifts (offsets, scales): the last feature is then the constant 1."""
-        return any(kind == "shift" for kind, *_ in self._plan)
+        return any(tl.kind == "shift" for tl in self.term_laws)
 
     @property
     def coef(self) -> np.ndarray:
@@ -180,15 +183,14 @@ class LinearModel:
         cols = []
         columns = self.columns
         shift = 0.0
-        for t, (kind, *args) in enumerate(self._plan):
+        for t, tl in enumerate(self.term_laws):
             col = columns[..., t]
-            if kind == "value":
+            if tl.kind == "factor":
                 cols.append(col)
-            elif kind == "shift":
-                shift = shift + col * args[0]
+            elif tl.kind == "shift":
+                shift = shift + col * tl.value
             else:
-                _, leg = parse_input(self.terms[t])
-                cols += [col * self.cos_omega[..., leg, None], col * self.sin_omega[..., leg, None]]
+                cols += [col * self.cos_omega[..., tl.leg, None], col * self.sin_omega[..., tl.leg, None]]
         if self.has_shift:
             cols.append(shift)
         return np.stack(cols, axis=-1)
@@ -202,12 +204,12 @@ class LinearModel:
         """
         X = np.asarray(X, dtype=float)
         cols = []
-        for kind, *args in self._plan:
-            if kind == "value":
-                k, ref = args
-                cols.append(X[:, k] - ref if ref else X[:, k])
-            elif kind == "clearance":
-                (k, kz), = args
+        for tl in self.term_laws:
+            if tl.kind == "factor":
+                k, = tl.factors
+                cols.append(X[:, k] - tl.reference if tl.reference else X[:, k])
+            elif tl.kind == "clearance":
+                k, kz = tl.factors
                 rho, zeta = X[:, k], np.deg2rad(X[:, kz])
                 cols.extend([rho * np.cos(zeta), rho * np.sin(zeta)])
         if self.has_shift:
@@ -228,12 +230,12 @@ class LinearModel:
             The reference subtracted from a value (20 degrees C for thermal, else 0).
         """
         rows, refs = [], []
-        for kind, *args in self._plan:
-            if kind == "value":
-                rows.append((FEATURE_VALUE, args[0], args[0]))
-                refs.append(args[1])
-            elif kind == "clearance":
-                (k, kz), = args
+        for tl in self.term_laws:
+            if tl.kind == "factor":
+                rows.append((FEATURE_VALUE, tl.factors[0], tl.factors[0]))
+                refs.append(tl.reference)
+            elif tl.kind == "clearance":
+                k, kz = tl.factors
                 rows += [(FEATURE_COS, k, kz), (FEATURE_SIN, k, kz)]
                 refs += [0.0, 0.0]
         if self.has_shift:
@@ -258,18 +260,16 @@ class LinearModel:
         covariance (:meth:`Budget.covariance`) times E[cos zeta] or E[sin zeta]
         for a clearance's features.
         """
-        laws = list(self.budget.factor_laws.values())
         fmean, blocks, factor, loading = [], [], [], []
-        for kind, *args in self._plan:
-            if kind == "value":
-                k, ref = args
-                fmean.append(laws[k].mean - ref)
-                blocks.append(np.array([[laws[k].var]]))
-                factor.append(k)
+        for tl in self.term_laws:
+            if tl.kind == "factor":
+                fmean.append(tl.law.mean - tl.reference)
+                blocks.append(np.array([[tl.law.var]]))
+                factor.append(tl.factors[0])
                 loading.append(1.0)
-            elif kind == "clearance":
-                (k, kz), = args
-                rho, zeta = laws[k], laws[kz]
+            elif tl.kind == "clearance":
+                k = tl.factors[0]
+                rho, zeta = tl.law, tl.zeta
                 ec, es, ecc, ess, ecs = angle_moments(zeta)
                 r1, r2 = rho.mean, rho.var + rho.mean**2
                 m = np.array([r1 * ec, r1 * es])
@@ -305,17 +305,16 @@ class LinearModel:
         """Value of every term per pose and sample, shape (..., n, T), boundary units (K for thermal)."""
         X = np.asarray(X, dtype=float)
         out = np.empty(self.poses.shape[:-1] + (X.shape[0], len(self.terms)))
-        for t, (kind, *args) in enumerate(self._plan):
-            if kind == "value":
-                out[..., t] = X[:, args[0]] - args[1]
-            elif kind == "shift":
-                out[..., t] = args[0]
+        for t, tl in enumerate(self.term_laws):
+            if tl.kind == "factor":
+                out[..., t] = X[:, tl.factors[0]] - tl.reference
+            elif tl.kind == "shift":
+                out[..., t] = tl.value
             else:
-                (k, kz), = args
-                _, leg = parse_input(self.terms[t])
+                k, kz = tl.factors
                 zeta = np.deg2rad(X[:, kz])
-                out[..., t] = X[:, k] * (np.cos(zeta) * self.cos_omega[..., leg, None]
-                                         + np.sin(zeta) * self.sin_omega[..., leg, None])
+                out[..., t] = X[:, k] * (np.cos(zeta) * self.cos_omega[..., tl.leg, None]
+                                         + np.sin(zeta) * self.sin_omega[..., tl.leg, None])
         return out
 
 
@@ -338,7 +337,8 @@ def linear_model(geometry: Geometry, budget: Budget, poses, *, check: bool = Tru
     poses = as_poses(poses)
     fr = validated_frame(geometry, poses) if check else frame(geometry, poses)
     names, factors = budget.names, budget.factors
-    terms, legs, weights, plan = [], [], [], []
+    laws = list(budget.factor_laws.values())
+    terms, legs, weights, term_laws = [], [], [], []
     h = {}
 
     def entries(family):
@@ -353,32 +353,26 @@ def linear_model(geometry: Geometry, budget: Budget, poses, *, check: bool = Tru
         terms.append(name)
         legs.append(leg)
         weights.append(_one_leg(entries(family) * (1.0 if family in LENGTH_FAMILIES else DEG2RAD), leg))
-        plan.append(("clearance", (k, names.index(f"zeta_{leg + 1}"))) if family == "rho" else ("value", k, 0.0))
+        if family == "rho":
+            kz = names.index(f"zeta_{leg + 1}")
+            term_laws.append(TermLaw(name, "clearance", leg, law=laws[k], zeta=laws[kz], factors=(k, kz)))
+        else:
+            term_laws.append(TermLaw(name, "factor", leg, law=laws[k], factors=(k,)))
     b = fr.b                                                    # nominal slider positions, legs first
-    for name in (n for n in EFFECT_NAMES if n in budget.effects):
-        eff = budget.effects[name]
-        e = eff.effect
-        terms.append(f"offset_{name}" if e.kind == "offset" else name)
-        legs.append(ALL_LEGS if e.kind == "thermal" else e.leg)
-        if e.kind == "offset":
-            weights.append(_one_leg(entries(e.family) * (1.0 if e.family in LENGTH_FAMILIES else DEG2RAD), e.leg))
-            plan.append(("shift", eff.value))
-        elif e.kind == "scale":
-            weights.append(_one_leg(entries("b") * b, e.leg))
-            plan.append(("shift", eff.value))
-        elif e.kind == "cyclic":                                # A_i sin(2 pi b_i / p_i + phi_i): per unit of A_i
-            wave = np.zeros_like(b)
-            wave[e.leg] = np.sin(2.0 * np.pi * b[e.leg] / geometry.lead_mm[e.leg] + np.deg2rad(eff.phase_deg))
-            weights.append(_one_leg(entries("b") * wave, e.leg))
-            plan.append(("shift", eff.value))
-        elif e.kind == "backlash":
-            weights.append(_one_leg(entries("b"), e.leg))
-            plan.append(("value", factors.index(name), 0.0))
-        else:                                                   # thermal: one temperature, every leg
-            weights.append(eff.value * entries("b") * b)
-            plan.append(("value", factors.index(name), T_REF_C))
+    for term in effect_terms(budget.effects, geometry.lead_mm):
+        terms.append(term.name)
+        legs.append(term.leg)
+        unit = term.coefficient * (1.0 if term.family in LENGTH_FAMILIES else DEG2RAD)
+        w = entries(term.family) * unit * slider_factor(term, b)
+        weights.append(w if term.leg == ALL_LEGS else _one_leg(w, term.leg))
+        if term.is_shift:
+            term_laws.append(TermLaw(term.name, "shift", term.leg, value=term.value))
+        else:
+            k = factors.index(term.effect.name)
+            term_laws.append(TermLaw(term.name, "factor", term.leg, law=laws[k], reference=term.reference,
+                                     factors=(k,)))
     return LinearModel(geometry=geometry, budget=budget, poses=poses, terms=tuple(terms), legs=tuple(legs),
                        Ainv=np.moveaxis(fr.Ainv, (0, 1), (-2, -1)),
                        weights=np.moveaxis(np.stack(weights, axis=-1), 0, -2),
                        cos_omega=np.moveaxis(-fr.tr.sl, 0, -1), sin_omega=np.moveaxis(fr.tr.cl, 0, -1),
-                       _plan=tuple(plan))
+                       term_laws=tuple(term_laws))

@@ -567,7 +567,7 @@ def contributors_pareto(contributions, *, ax=None, title: str = ""):
     Parameters
     ----------
     contributions : DataFrame
-        :meth:`~prp3mc.worstcase.envelope.WorstCase.contributions_frame` at one pose (``term``, ``share``).
+        :meth:`~prp3mc.worstcase.envelope.WorstCaseResult.contributions_frame` at one pose (``term``, ``share``).
     ax : matplotlib Axes, optional
     title : str
 

@@ -144,7 +144,8 @@ def _contributions(c) -> pd.DataFrame:
     ``share`` (of the worst case, 0-1).
     """
     frame = c.worst_case.contributions_frame("position", _worst_index(c))
-    unit = frame["term"].str.replace(r"_\d$", "", regex=True).map(_TERM_UNITS).fillna("")
+    model = c.worst_case.model
+    unit = frame["term"].map(dict(zip(model.terms, model.term_units))).fillna("")
     value = frame["term_value"]
     other = ~unit.isin(["mm", "deg"])
     out = frame.drop(columns=["term_value", "contribution", "share"]).assign(
@@ -153,12 +154,6 @@ def _contributions(c) -> pd.DataFrame:
         out = out.assign(term_value_other=value.where(other), term_unit_other=unit.where(other, ""))
     out = out.assign(contribution_mm=frame["contribution"], share=frame["share"])
     return out.sort_values("share", ascending=False, kind="stable").reset_index(drop=True)
-
-
-#: Unit of a term's value in a contributions table, by family (the budget's inputs and effects).
-_TERM_UNITS = {**dict.fromkeys(("a", "b", "c", "e", "rho", "backlash"), "mm"),
-               **dict.fromkeys(("alpha", "beta", "gamma", "theta", "psi", "zeta"), "deg"),
-               "thermal": "deg C", "scale": "1"}
 
 
 def _contributions_display(frame: pd.DataFrame) -> pd.DataFrame:

@@ -48,17 +48,16 @@ def _term_parts(model: LinearModel, t: int, inputs: tuple):
     two: Var(rho) E[c]^2 (s = {rho}), E[rho]^2 Var(c) (s = {zeta}), Var(rho c) (both).
     """
     laws = model.budget.factor_laws
-    kind, *args = model._plan[t]
-    if kind == "clearance":
-        (k, kz), = args
-        term, zeta = inputs[k], inputs[kz]
+    tl = model.term_laws[t]
+    if tl.kind == "clearance":
+        term, zeta = (inputs[k] for k in tl.factors)
         rho_law = laws[term]
         ec, ecc = _cos_moments(laws[zeta], model.omega[..., model.legs[t]])     # (...)
         r1, r2 = rho_law.mean, rho_law.var + rho_law.mean**2
         return frozenset([term, zeta]), {frozenset(): 0.0, frozenset([term]): rho_law.var * ec**2,
                                          frozenset([zeta]): r1**2 * (ecc - ec**2),
                                          frozenset([term, zeta]): r2 * ecc - r1**2 * ec**2}
-    term = inputs[args[0]]
+    term = inputs[tl.factors[0]]
     return frozenset([term]), {frozenset(): 0.0, frozenset([term]): laws[term].var}
 
 
@@ -77,8 +76,8 @@ def _analytic_arrays(model: LinearModel, factors: Factors) -> tuple[np.ndarray, 
     total = np.zeros_like(first)
     V = np.zeros(shape + (3,))
     columns = model.columns
-    for t, (kind, *_) in enumerate(model._plan):
-        if kind == "shift":
+    for t, tl in enumerate(model.term_laws):
+        if tl.kind == "shift":
             continue
         col2 = columns[..., :, t] ** 2                                      # (..., 3)
         members, parts = _term_parts(model, t, inputs)
@@ -137,12 +136,12 @@ def _shapley_arrays(model: LinearModel, factors: Factors) -> np.ndarray:
     V = np.zeros(shape + (3,))
     columns = model.columns
     normal_cols = {}
-    for t, (kind, *args) in enumerate(model._plan):
-        if kind == "shift":
+    for t, tl in enumerate(model.term_laws):
+        if tl.kind == "shift":
             continue
         col = columns[..., :, t]
-        if kind == "value" and inputs[args[0]] in joint:
-            normal_cols[args[0]] = col
+        if tl.kind == "factor" and inputs[tl.factors[0]] in joint:
+            normal_cols[tl.factors[0]] = col
             continue
         members, parts = _term_parts(model, t, inputs)
         col2 = col**2

@@ -291,7 +291,7 @@ def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     model = linear_model(geometry, budget, poses)                  # validates every pose
     shape = model.poses.shape[:-1]
     n_poses = int(np.prod(shape, dtype=int))
-    if method == "auto":   # the vectorised estimators, at one pose too: 10 times faster than SALib's analyze
+    if method == "auto":   # the vectorised estimators, at one pose too (faster: benchmarks/README.md)
         method = "vectorised"
     K, O = len(factors.names), len(outputs)
     res = np.full((4, n_poses, O, K), np.nan)

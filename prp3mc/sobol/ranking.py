@@ -2,7 +2,7 @@
 
 Two views of the same budget at the same poses: the variance share
 (:class:`~prp3mc.sobol.indices.SobolResult`) and the part of the maximum
-error at the maximising vertex (:class:`~prp3mc.worstcase.envelope.WorstCase`).
+error at the maximising vertex (:class:`~prp3mc.worstcase.envelope.WorstCaseResult`).
 The ranking frame uses the result vocabulary of :mod:`prp3mc._result`
 (``output``, ``name``, ``kind``, the indices ``S1``, ``ST``, the Shapley
 effects ``Sh`` when computed, and their half-widths ``S1_conf``, ``ST_conf``,
@@ -19,12 +19,12 @@ import pandas as pd
 from ..errors import ParameterError
 from ..units import OUTPUT_UNITS
 from .indices import SobolResult
-from ..worstcase.envelope import WorstCase
+from ..worstcase.envelope import WorstCaseResult
 
 __all__ = ["ranking"]
 
 
-def _term_map(result: SobolResult, wc: WorstCase) -> tuple[np.ndarray, list]:
+def _term_map(result: SobolResult, wc: WorstCaseResult) -> tuple[np.ndarray, list]:
     """(K + S, T) map of worst-case terms to names, and the S known shifts' terms (rows K onwards).
 
     A clearance term rho_i cos(zeta_i - omega_i) belongs to a name holding both
@@ -34,12 +34,12 @@ def _term_map(result: SobolResult, wc: WorstCase) -> tuple[np.ndarray, list]:
     """
     factors = wc.inputs
     needs, shifts = [], []
-    for t, (kind, *args) in enumerate(wc.model._plan):
-        if kind == "shift":
+    for t, tl in enumerate(wc.model.term_laws):
+        if tl.kind == "shift":
             shifts.append(t)
             needs.append(None)
         else:
-            needs.append({factors[i] for i in (args[0] if kind == "clearance" else args[:1])})
+            needs.append({factors[i] for i in tl.factors})
     out = np.zeros((len(result.names) + len(shifts), len(wc.terms)))
     for k, name in enumerate(result.names):
         members = set(result.groups.get(name, (name,)))
@@ -56,14 +56,14 @@ def _term_map(result: SobolResult, wc: WorstCase) -> tuple[np.ndarray, list]:
     return out, [wc.terms[t] for t in shifts]
 
 
-def ranking(sobol_result: SobolResult, worst_case_result: WorstCase, output: str = "position",
+def ranking(sobol_result: SobolResult, worst_case_result: WorstCaseResult, output: str = "position",
             index=None) -> pd.DataFrame:
     """Sobol indices of every input and group next to its share of the worst case.
 
     Parameters
     ----------
     sobol_result : SobolResult
-    worst_case_result : WorstCase
+    worst_case_result : WorstCaseResult
         At the same poses and for the same budget.
     output : {"position", "x", "y", "phi"}
         The Sobol output, and the worst-case quantity it is ranked against.

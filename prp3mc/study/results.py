@@ -19,7 +19,7 @@ from ..units import OUTPUT_UNITS, Z95
 from ..allocation.optimum import AllocationResult
 from ..montecarlo.propagation import MonteCarloResult
 from ..stackup import YieldResult
-from ..worstcase.envelope import WorstCase
+from ..worstcase.envelope import WorstCaseResult
 from .reader import Study, StudyConfiguration
 
 __all__ = ["PoseSamples", "ConfigurationResult", "SkippedConfiguration", "StudyResult", "pct_se", "over_grid"]
@@ -110,7 +110,7 @@ class ConfigurationResult:
     Attributes
     ----------
     configuration : StudyConfiguration
-    worst_case : WorstCase
+    worst_case : WorstCaseResult
         On the worst-case grid, shape (ny, nx).
     montecarlo : MonteCarloResult or None
         On the Monte Carlo grid.
@@ -131,7 +131,7 @@ class ConfigurationResult:
     """
 
     configuration: StudyConfiguration
-    worst_case: WorstCase
+    worst_case: WorstCaseResult
     montecarlo: MonteCarloResult | None = None
     samples: PoseSamples | None = None
     sobol: Any = None
@@ -311,6 +311,16 @@ class StudyResult:
                 **self.study.sizes(),
                 "wall_time_s": round(self.wall_time_s, 3),
                 "timings_s": {k: round(v, 3) for k, v in self.timings_s.items()}}
+
+    def to_dict(self) -> dict:
+        """The content of ``summary.json``: :func:`~prp3mc.study.summary.build_summary` of this result.
+
+        A plain dict of JSON values (the study's document, as :meth:`AllocationResult.to_dict
+        <prp3mc.allocation.optimum.AllocationResult.to_dict>` is the allocation's), so it is
+        written, compared (:func:`prp3mc.testing.assert_summary_close`) and read back as it is.
+        """
+        from .summary import build_summary          # summary formats these results: it imports this module
+        return build_summary(self)
 
     def to_frame(self) -> pd.DataFrame:
         """Summary table of every configuration (:meth:`ConfigurationResult.to_frame`, stacked)."""

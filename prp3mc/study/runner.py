@@ -40,7 +40,7 @@ from ..model.linear import linear_model
 from ..montecarlo.propagation import monte_carlo
 from ..sobol.ranking import ranking
 from ..sobol.indices import sobol_indices
-from ..worstcase.envelope import WorstCase, worst_case
+from ..worstcase.envelope import WorstCaseResult, worst_case
 from ..units import RAD2DEG
 from .allocation import ALLOCATION_STREAM, run_allocation
 from .reader import Study, StudyConfiguration
@@ -51,7 +51,7 @@ from .sweep import Variant, expand
 __all__ = ["run_study", "run_configuration", "Plan", "Outcome", "SerialExecutor"]
 
 
-def _histogram_poses(config: StudyConfiguration, wc: WorstCase) -> tuple[np.ndarray, tuple]:
+def _histogram_poses(config: StudyConfiguration, wc: WorstCaseResult) -> tuple[np.ndarray, tuple]:
     """Poses of the histograms: the configuration's, or centre, worst-case max and min."""
     if config.poses is not None:
         return np.asarray(config.poses), tuple(f"({x:g}, {y:g}, {p:g})" for x, y, p in config.poses)
@@ -63,7 +63,7 @@ def _histogram_poses(config: StudyConfiguration, wc: WorstCase) -> tuple[np.ndar
             ("centre", "worst-case max", "worst-case min"))
 
 
-def _pose_samples(config: StudyConfiguration, budget: Budget, wc: WorstCase, n: int, seed: int,
+def _pose_samples(config: StudyConfiguration, budget: Budget, wc: WorstCaseResult, n: int, seed: int,
                   k_sigma: float | None) -> PoseSamples:
     poses, labels = _histogram_poses(config, wc)
     X = budget.sample(n, seed)  # the Monte Carlo run's samples (same seed)

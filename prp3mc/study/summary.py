@@ -297,7 +297,13 @@ def correlation_summary(result: StudyResult) -> dict | None:
 
 
 def build_summary(result: StudyResult) -> dict:
-    """The summary of a study run as a JSON-ready dict (layout in the module docstring)."""
+    """The summary of a study run as a JSON-ready dict (layout in the module docstring); also
+    :meth:`StudyResult.to_dict() <prp3mc.study.results.StudyResult.to_dict>`.
+
+    A plain dict, not a result object: it is the ``summary.json`` document itself, which is
+    written, compared with :func:`prp3mc.testing.assert_summary_close` and read back as is;
+    the result it summarises is the :class:`~prp3mc.study.results.StudyResult`.
+    """
     configs = {}
     for c in result.configurations:
         wc = c.worst_case

@@ -39,7 +39,7 @@ from ..kinematics.formulas import (
 )
 from ..units import DEG2RAD, RAD2DEG
 from ..model.budget import Budget, parse_input
-from ..model.effects import EFFECT_NAMES, T_REF_C
+from ..model.effects import WEIGHT_B, WEIGHT_WAVE, effect_terms
 
 __all__ = ["REASONS", "NONFINITE", "leg_constants", "TERM_COLUMNS", "term_table", "kernel_tables", "envelope_kernel",
            "zonotope_maxima", "zonotope_scratch", "generator_signs"]
@@ -112,10 +112,11 @@ def term_table(budget: Budget, bounds: np.ndarray, lead_mm: np.ndarray | None = 
 
     ``family``: index in FAMILIES; ``leg``: 0-2, or -1 for a term of every leg;
     ``unit``: 1 for lengths, rad per deg for angles, alpha_T for thermal;
-    ``mode``: 1 when the term's u_i is also multiplied by the nominal slider
-    position b_i, 2 when by ``sin(zeta_lo b_i + zeta_hi)`` (a cyclic screw
+    ``mode``: the term's :attr:`EffectTerm.weight <prp3mc.model.effects.EffectTerm.weight>`,
+    ``WEIGHT_B`` when its u_i is also multiplied by the nominal slider
+    position b_i, ``WEIGHT_WAVE`` when by ``sin(zeta_lo b_i + zeta_hi)`` (a cyclic screw
     error: ``zeta_lo`` = 2 pi / p_i, rad per mm, ``zeta_hi`` = phi_i, rad),
-    else 0; ``lo``, ``hi``: the term's interval, or a clearance's
+    else ``WEIGHT_ONE`` (0); ``lo``, ``hi``: the term's interval, or a clearance's
     rho interval with its contact angles ``zeta_lo``, ``zeta_hi`` (rad;
     zeta_hi = inf for a full circle, both 0 for other terms). ``bounds`` (D, 2)
     are the factors' intervals; ``lead_mm`` (3,) the screws' leads (cyclic errors need them).
@@ -132,21 +133,13 @@ def term_table(budget: Budget, bounds: np.ndarray, lead_mm: np.ndarray | None = 
             zlo, zhi = bounds[names.index(f"zeta_{leg + 1}")]
             zeta = (np.deg2rad(zlo), math.inf if zhi - zlo >= 360.0 else np.deg2rad(zhi))
         rows.append((FAMILIES.index(family), leg, unit, 0, *bounds[k], *zeta))
-    for name in (n for n in EFFECT_NAMES if n in budget.effects):
-        eff = budget.effects[name]
-        e = eff.effect
-        if e.kind == "offset":
-            unit = 1.0 if e.family in LENGTH_FAMILIES else DEG2RAD
+    for term in effect_terms(budget.effects, lead_mm):
+        unit = term.coefficient * (1.0 if term.family in LENGTH_FAMILIES else DEG2RAD)
+        if term.is_shift:
+            lo = hi = term.value
         else:
-            unit = eff.value if e.kind == "thermal" else 1.0
-        if e.kind in ("offset", "scale", "cyclic"):
-            lo = hi = eff.value
-        else:
-            lo, hi = bounds[factors.index(name)] - (T_REF_C if e.kind == "thermal" else 0.0)
-        mode = {"scale": 1, "thermal": 1, "cyclic": 2}.get(e.kind, 0)
-        wave = (2.0 * math.pi / lead_mm[e.leg], math.radians(eff.phase_deg)) if e.kind == "cyclic" else (0.0, 0.0)
-        rows.append((FAMILIES.index(e.family if e.kind == "offset" else "b"), -1 if e.kind == "thermal" else e.leg,
-                     unit, mode, lo, hi, *wave))
+            lo, hi = bounds[factors.index(term.effect.name)] - term.reference
+        rows.append((FAMILIES.index(term.family), term.leg, unit, term.weight, lo, hi, term.wavenumber, term.phase))
     return np.array(rows, dtype=float).reshape(-1, len(TERM_COLUMNS))
 
 
@@ -267,10 +260,11 @@ def _nonfinite(cs, j):
 
 @njit(inline="always")
 def _slider_factor(mode, b, wavenumber, phase):
-    """What a term's u_i is multiplied by (:func:`term_table`'s ``mode``): 1, b_i, or sin(wavenumber b_i + phase)."""
-    if mode == 1.0:
+    """What a term's u_i is multiplied by (:func:`term_table`'s ``mode``): 1, b_i, or sin(wavenumber b_i + phase)
+    (compiled :func:`~prp3mc.model.effects.slider_factor`)."""
+    if mode == WEIGHT_B:
         return b
-    if mode == 2.0:
+    if mode == WEIGHT_WAVE:
         return math.sin(wavenumber * b + phase)
     return 1.0
 

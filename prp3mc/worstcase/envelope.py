@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -46,7 +47,7 @@ from ..model.linear import LinearModel, linear_model
 from ._kernel import (NONFINITE, REASONS, TERM_COLUMNS, envelope_kernel, generator_signs, kernel_tables,
                         zonotope_maxima, zonotope_scratch)
 
-__all__ = ["WorstCase", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "term_bounds", "QUANTITIES",
+__all__ = ["WorstCaseResult", "worst_case", "WorstCaseMaxima", "worst_case_maxima", "term_bounds", "QUANTITIES",
            "CORRELATION_NOTE"]
 
 #: What outputs say of the worst case of a correlated budget: it is unchanged, the box.
@@ -59,7 +60,7 @@ QUANTITIES = ("position", "phi", "x", "y")
 
 
 class _Maxima:
-    """The maxima's accessors shared by :class:`WorstCase` and :class:`WorstCaseMaxima`."""
+    """The maxima's accessors shared by :class:`WorstCaseResult` and :class:`WorstCaseMaxima`."""
 
     __slots__ = ()
 
@@ -76,7 +77,7 @@ class _Maxima:
 
 
 @dataclass(frozen=True, slots=True, repr=False)
-class WorstCase(_Maxima):
+class WorstCaseResult(_Maxima):
     """Exact worst case of the linear model at a batch of poses.
 
     Attributes
@@ -191,17 +192,16 @@ class WorstCase(_Maxima):
         signs = self.signs
         for q, t_val in self.term_at.items():
             x = np.empty(self.poses.shape[:-1] + (len(self.inputs),))
-            for t, (kind, *args) in enumerate(self.model._plan):
-                if kind == "clearance":
-                    (k, kz), = args
-                    leg = self.model.legs[t]
+            for t, tl in enumerate(self.model.term_laws):
+                if tl.kind == "clearance":
+                    k, kz = tl.factors
                     _, (rho_lo, z_lo), (rho_hi, z_hi) = _clearance_interval(
-                        self.input_bounds[k], self.input_bounds[kz], omega[..., leg])
+                        self.input_bounds[k], self.input_bounds[kz], omega[..., tl.leg])
                     upper = signs[q][..., t] > 0
                     x[..., k] = np.where(upper, rho_hi, rho_lo)
                     x[..., kz] = np.where(upper, z_hi, z_lo)
-                elif kind == "value":
-                    x[..., args[0]] = t_val[..., t] + args[1]
+                elif tl.kind == "factor":
+                    x[..., tl.factors[0]] = t_val[..., t] + tl.reference
             out[q] = x
         return out
 
@@ -253,15 +253,15 @@ def _clearance_interval(rho_bounds, zeta_bounds_deg, omega: np.ndarray):
 def term_bounds(model: LinearModel, bounds: np.ndarray) -> np.ndarray:
     """Interval of every model term, shape (..., T, 2), mm or deg; ``bounds`` (D, 2) of the factors."""
     tb = np.empty(model.poses.shape[:-1] + (len(model.terms), 2))
-    for t, (kind, *args) in enumerate(model._plan):
-        if kind == "value":
-            tb[..., t, :] = bounds[args[0]] - args[1]
+    for t, tl in enumerate(model.term_laws):
+        if tl.kind == "factor":
+            tb[..., t, :] = bounds[tl.factors[0]] - tl.reference
             continue
-        if kind == "shift":
-            tb[..., t, :] = args[0]
+        if tl.kind == "shift":
+            tb[..., t, :] = tl.value
             continue
-        (k, kz), = args
-        leg = model.legs[t]
+        k, kz = tl.factors
+        leg = tl.leg
         zeta = bounds[kz]
         if zeta[1] - zeta[0] >= 360.0:  # no need for omega itself
             tb[..., t, 0], tb[..., t, 1] = -bounds[k][1], bounds[k][1]
@@ -297,7 +297,7 @@ def _maxima(model: LinearModel, tb: np.ndarray):
 
 
 def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | None = None,
-               check: bool = True, workers: int | None = None, chunk: int = 16384) -> WorstCase:
+               check: bool = True, workers: int | None = None, chunk: int = 16384) -> WorstCaseResult:
     """Exact maxima of the linear pose error over the budget's box, batched.
 
     Parameters
@@ -315,7 +315,7 @@ def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | No
 
     Returns
     -------
-    WorstCase
+    WorstCaseResult
 
     Examples
     --------
@@ -354,7 +354,7 @@ def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | No
                                 cos_omega=join(lambda p: p[0].cos_omega, (3,)),
                                 sin_omega=join(lambda p: p[0].sin_omega, (3,)))
     signs = {q: join(lambda p, q=q: p[3][q], (3 + G,)) for q in QUANTITIES}
-    return WorstCase(
+    return WorstCaseResult(
         model=model, term_bounds=join(lambda p: p[1], (T, 2)),
         position_mm=join(lambda p: p[2]["position"]), phi_deg=join(lambda p: p[2]["phi"]) * RAD2DEG,
         x_mm=join(lambda p: p[2]["x"]), y_mm=join(lambda p: p[2]["y"]),
@@ -364,7 +364,7 @@ def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | No
 
 @dataclass(frozen=True, slots=True, repr=False)
 class WorstCaseMaxima(_Maxima):
-    """The maxima of :class:`WorstCase` alone, for grids too large to keep the model (see
+    """The maxima of :class:`WorstCaseResult` alone, for grids too large to keep the model (see
     :func:`worst_case_maxima`): the kernel's two output arrays, read through named views.
 
     Attributes
@@ -402,12 +402,12 @@ class WorstCaseMaxima(_Maxima):
 
     @property
     def leg_signs(self) -> FrozenDict:
-        """As :attr:`WorstCase.leg_signs`: quantity to the legs' ends (..., 3), int8, unpacked on each access."""
+        """As :attr:`WorstCaseResult.leg_signs`: quantity to the legs' ends (..., 3), int8, unpacked on each access."""
         return FrozenDict(zip(QUANTITIES, generator_signs(self.codes, 3 + self.n_shared)[..., :3]))
 
     @property
     def shared_signs(self) -> FrozenDict:
-        """As :attr:`WorstCase.shared_signs`: quantity to the ends (..., G) of the terms of all legs, int8,
+        """As :attr:`WorstCaseResult.shared_signs`: quantity to the ends (..., G) of the terms of all legs, int8,
         unpacked on each access."""
         return FrozenDict(zip(QUANTITIES, generator_signs(self.codes, 3 + self.n_shared)[..., 3:]))
 
@@ -480,3 +480,12 @@ def _first_refusal(geometry: Geometry, poses: np.ndarray, flat: np.ndarray, bad:
     r, p = next((r, hit[0]) for r in range(len(REASONS)) if (hit := np.flatnonzero(bad & (0b111 << 3 * r))).size)
     leg = next(i for i in range(3) if bad[p] >> (3 * r + i) & 1)
     return InfeasiblePoseError(refusal(geometry, flat[p], (int(p),), REASONS[r], leg))  # the flat index, as worst_case
+
+
+def __getattr__(name: str):
+    """``WorstCase``, the former name of :class:`WorstCaseResult`, for one release (with a DeprecationWarning)."""
+    if name == "WorstCase":
+        warnings.warn("WorstCase is now WorstCaseResult (the name WorstCase goes in the next release)",
+                      DeprecationWarning, stacklevel=2)
+        return WorstCaseResult
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
