@@ -60,7 +60,7 @@ from ...model.budget import Budget
 from ...model.linear import linear_model
 from .data import CMD_COLUMNS, DIR_COLUMNS, MEAS_COLUMNS, MIN_POSES, Campaign
 from ..fit.confounds import design_confounds
-from ...model.effects import check_leads
+from ...model.effects import EffectKind, check_leads
 from ..fit.signatures import effect, signatures
 from ..fit.likelihood import Engine
 from ..fit.nuisance import DRIFT, NUISANCE_NAMES, REGISTRATION, nuisance_signatures
@@ -399,7 +399,7 @@ def plan_campaign(geometry: Geometry, budget: Budget, effects, n_poses: int, n_v
         raise CampaignError(f"plan: {n_poses} poses asked, the region has {len(candidates)} candidates")
     noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
     info = _Information(geometry, budget, effects, noise, registration, temperature_C)
-    dir_legs = tuple(sorted({effect(n).leg for n in effects if effect(n).kind == "backlash"}))
+    dir_legs = tuple(sorted({effect(n).leg for n in effects if effect(n).kind == EffectKind.BACKLASH}))
     C = len(candidates)
     direction = _balanced(n_visits, (C, 3), rng)                      # (C, 3, V)
     s_visit = (np.arange(n_visits) + 0.5) / n_visits                  # interleaved rounds: spread through time

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...model.effects import EffectKind
 from .signatures import effect
 from .likelihood import Engine, Fit, chi2_equivalent
 from .nuisance import DRIFT, NUISANCE_NAMES, REGISTRATION
@@ -122,7 +123,7 @@ def design_confounds(engine: Engine, effects=None) -> list[dict]:
             continue
         alone = [b for b in blocks if r2[b][j] >= limit]
         with_ = tuple([max(alone, key=lambda b: r2[b][j])] if alone else blocks)
-        groups.setdefault((with_, e.kind == "thermal"), []).append((e.name, float(r2_all[j])))
+        groups.setdefault((with_, e.kind == EffectKind.THERMAL), []).append((e.name, float(r2_all[j])))
     out = []
     for (with_, thermal), members in groups.items():
         names, shares = [m[0] for m in members], np.array([m[1] for m in members])
@@ -264,7 +265,7 @@ def ambiguities(engine: Engine, fit: Fit, named, drift_test: dict, alpha: float)
             "why": f"{name} = {size:.4g} {unit} explains the data without a drift (likelihood ratio {lr:.3g}) "
                    f"as well as the drift fitted ({drift}; {shown}) does: twice the log-likelihood "
                    f"{as_drift:.3g} below, within {_Q:.3g}",
-            "advice": ADVICE["thermal"] if effect(name).kind == "thermal" else ADVICE["drift"],
+            "advice": ADVICE["thermal"] if effect(name).kind == EffectKind.THERMAL else ADVICE["drift"],
             "value": float(size), "unit": unit, "lr": lr, "lr_as_drift": as_drift, "source": "data"})
         reasons.append(f"the drift fitted may be {name} = {size:.4g} {unit}: the campaign cannot tell them apart")
     return confounds, reasons

@@ -44,7 +44,7 @@ from ...kinematics.exact import exact_pose_error
 from ...kinematics.geometry import Geometry
 from ...model.budget import Budget
 from ..campaign.data import Campaign
-from ...model.effects import components
+from ...model.effects import EffectKind, components
 from .signatures import effect, library, offset_errors, slider_error
 
 __all__ = ["Point", "linearise", "exact_errors", "candidates", "controller_geometry"]
@@ -205,7 +205,7 @@ def linearise(geometry: Geometry, budget: Budget, campaign: Campaign, values: di
     reached = np.zeros((campaign.n_poses, 3))
     np.add.at(reached, campaign.pose_index, campaign.commanded + E[0])
     reached /= campaign.repeats[:, None]
-    offsets = offset_errors({n: v for n, v in values.items() if effect(n).kind == "offset"})
+    offsets = offset_errors({n: v for n, v in values.items() if effect(n).kind == EffectKind.OFFSET})
     machine = geometry.replace(name=geometry.name,
                                **{f: np.add(getattr(geometry, f), d) for f, d in offsets.items()})
     return Point(values=dict(values), geometry=machine, poses=reached, known=E[0] - G @ theta, names=names,
