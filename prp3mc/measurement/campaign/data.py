@@ -352,7 +352,7 @@ def check_instrument_noise(campaign: "Campaign", sigma_mm: float, sigma_deg: flo
             continue
         s2 = float(np.sum((e - e.mean(axis=0)) ** 2)) / nu
         least = float(chi2.ppf(INSTRUMENT_NOISE_LEVEL, nu))
-        if nu * s2 < least * sigma ** 2:
+        if sigma > np.sqrt(nu * s2 / least):                 # sigma ** 2 would overflow for a huge sigma
             raise CampaignError(f"{option} {sigma:g}: the campaign's measured errors scatter by {s2 ** 0.5:.3g} {unit} "
                                 f"(sd over {e.shape[0]} rows) and instrument noise only adds to that, so its sd is at "
                                 f"most {(nu * s2 / least) ** 0.5:.3g} {unit}: give it in {unit} (if {sigma:g} is in "
