@@ -627,6 +627,21 @@ def second_cases() -> list[Case]:
              check=lambda root: None if list((root / "f4").rglob("*.xlsx")) else "no workbook written"))
     add(Case(M, ["study", "{s_formats}", "--out", "{tmp}/f5", "--formats", "PNG, svg"], expect="accept", slow=True,
              check=lambda root: None if list((root / "f5").rglob("*.svg")) else "no svg written"))
+    # ------------------------------------------------------------------ yield and plan (the newest commands)
+    y = ["yield", *G, *B]
+    add(Case(M, [*y, *P, "--spec-position-um", "0"], status=(2,), message="> 0"))
+    add(Case(M, [*y, *P, "--spec-position-um", "nan"], status=(2,), message="finite"))
+    add(Case(S, [*y, *P, "--spec-position-um", "0.06"], message="another unit"))
+    add(Case(M, [*y, "--pose", "0", "1000", "0", "--spec-position-um", "100"], message="stroke"))
+    add(Case(M, [*y, *P, "--spec-position-um", "100", "--spec-phi-arcsec", "-1"], status=(2,), message="> 0"))
+    add(Case(H, [*y, "--region", "u-shape", "--grid", "100000", "--spec-position-um", "100"], message="memory"))
+    add(Case(T, ["yield", "--geometry", "{g_parallel}", *B, *P, "--spec-position-um", "100"], message="singular"))
+    pl = ["plan", *G, *B, "--poses", "9", "--visits", "2", "--out", "{tmp}/p.csv"]
+    add(Case(M, [*pl, "--effects", "nonsense_1"], message="unknown effect"))
+    add(Case(M, [*pl, "--effects", ","], message="at least one effect"))
+    add(Case(M, [*pl, "--effects", "cyclic_1"], message="lead_mm"))
+    add(Case(M, ["plan", *G, *B, "--effects", "scale_2", "--poses", "0", "--visits", "2", "--out", "{tmp}/p.csv"],
+             status=(2,), message="positive integer"))
     return out
 
 
