@@ -60,7 +60,7 @@ optional; paths are relative to the study file)::
     "leg.*.e_mm" = [10, 20, 30]       # file, legs 1-3 or * for all; see prp3mc.study.sweep)
 
 With a spec (and ``yield`` among the outputs, as by default), every configuration gets its exact yield (P(position > S),
-P(|δφ| > Z), P(either), Ppk, the exact quantiles; :mod:`prp3mc.study.spec`) at
+P(``|δφ|`` > Z), P(either), Ppk, the exact quantiles; :mod:`prp3mc.study.spec`) at
 every pose of its Monte Carlo grid. One spec, not two: ``[montecarlo]
 tolerance_mm`` is the same position spec in mm; without ``[spec]`` it is
 taken as ``position_um = 1000 * tolerance_mm``, with ``[spec]`` it may be

@@ -163,7 +163,7 @@ class ConfigurationResult:
 
         Columns: ``configuration``, ``analysis`` (``worstcase``, ``montecarlo``,
         ``exact_yield``), ``output`` (``position``, ``phi``: ``|δφ|``, and ``any``
-        for the yield: position or |δφ| beyond spec), ``statistic``
+        for the yield: position or ``|δφ|`` beyond spec), ``statistic``
         (``worst_case``, ``p50`` ...), ``aggregate`` (``min``, ``max``, ``mean``
         over the grid), ``value``, ``se`` (0 where exact; see :func:`over_grid`),
         ``unit`` (mm, deg).

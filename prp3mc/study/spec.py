@@ -9,7 +9,7 @@ The table (layout in :mod:`prp3mc.study.reader`)::
 For every configuration the study computes, without sampling,
 :func:`prp3mc.exact_yield` at every pose of its Monte Carlo grid (the same
 poses as the Monte Carlo percentiles, so the report compares them pose by
-pose): P(position > S), P(|dphi| > Z), P(either), their error bounds, the
+pose): P(position > S), P(``|dphi|`` > Z), P(either), their error bounds, the
 one-sided Ppk = Phi^-1(1 - P) / 3 and the exact quantiles p99.73, p99.9937,
 p99.9999; and, at the pose where P(position > S) is largest, the exceedance
 curve P(position > s) over s (the report's log-axis figure).
