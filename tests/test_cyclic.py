@@ -233,12 +233,29 @@ def test_signatures_are_the_two_parts_of_the_phasor():
 
 
 # ------------------------------------------------------------ the amplitude's interval
+def _rice_edge(level: float) -> float:
+    """Upper end (in standard errors) of the amplitude interval at a zero estimate, from scipy.stats.rice.
+
+    With the estimate c ~ N(A u, I) the profile LR at the truth is (|c| - A)^2, |c| ~ Rice(A): its
+    ``level`` quantile q(A) solves F(A + sqrt q) - F(A - sqrt q) = level; at c = 0, LR(A) = A^2, so the
+    interval ends where A^2 = q(A).
+    """
+    from scipy.optimize import brentq
+    from scipy.stats import rice
+
+    def q(a):
+        cover = lambda x: rice.cdf(a + np.sqrt(x), a) - rice.cdf(max(a - np.sqrt(x), 0.0), a) - level
+        return brentq(cover, 1e-12, 100.0, xtol=1e-14)
+
+    return brentq(lambda a: a * a - q(a), 0.5, 5.0, xtol=1e-12)
+
+
 def test_amplitude_interval_limits():
     s = 0.002
     V = s * s * np.eye(2)
     lo, hi = amplitude_interval([0.0, 0.0], V)                 # at 0: LR(A) = (A / s)^2 meets the belt q(A / s)
     assert lo == 0.0 and (hi / s) ** 2 == pytest.approx(float(_critical(hi, s, s, 0.95)), rel=1e-6)
-    assert 1.8 * s < hi < 1.9 * s                              # q = 3.4 there (5.99 at 0, 3.84 far out)
+    assert hi / s == pytest.approx(_rice_edge(0.95), rel=1e-3)   # the belt from scipy's Rice law, not ours
     lo, hi = amplitude_interval([0.1, 0.0], V)                 # far from 0: Wald's 1.96 se either side
     assert lo == pytest.approx(0.1 - 1.96 * s, rel=1e-3) and hi == pytest.approx(0.1 + 1.96 * s, rel=1e-3)
     c = np.array([0.003, 0.004])
