@@ -54,7 +54,7 @@ import numpy as np
 import prp3mc
 from prp3mc import Budget, Geometry, Region
 from prp3mc.measurement.campaign.simulate import simulate_campaign
-from prp3mc.measurement.fit.workflow import discrepancy
+from prp3mc.measurement.discrepancy.workflow import discrepancy
 
 SIGMA = {"instrument_sigma_mm": 0.002, "instrument_sigma_deg": 0.0005}
 #: The registration error of issue 10: 20 µm and 0.005 deg, carried by every case but the last.
@@ -185,7 +185,7 @@ t0 = time.perf_counter()
 from prp3mc.cli import build_parser
 build_parser("discrepancy")                       # what the command line imports
 from prp3mc import Budget, Geometry
-from prp3mc.measurement.fit.workflow import discrepancy
+from prp3mc.measurement.discrepancy.workflow import discrepancy
 from prp3mc.reports.discrepancy_report import write_report
 t1 = time.perf_counter()
 r = discrepancy(Geometry.load("u-shape"), Budget.load("paper"), sys.argv[1], instrument_sigma_mm=0.002,

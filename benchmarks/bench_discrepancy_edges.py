@@ -42,7 +42,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # the campaign ma
 from prp3mc import Budget, Geometry  # noqa: E402
 from prp3mc.kinematics.chain import inverse_kinematics  # noqa: E402
 from prp3mc.measurement.campaign.simulate import simulate_campaign  # noqa: E402
-from prp3mc.measurement.fit.workflow import discrepancy  # noqa: E402
+from prp3mc.measurement.discrepancy.workflow import discrepancy  # noqa: E402
 from bench_discrepancy import rates_parser, run_cases, wilson  # noqa: E402
 from tests.realities import (bowed_rail, campaign_poses, cyclic_error, sagging_guide, saturated,  # noqa: E402
                              sweep_poses, thermal_error, with_leads)

@@ -43,7 +43,7 @@ import prp3mc
 from prp3mc import Budget, Geometry
 from prp3mc.measurement.campaign import data as campaign_module
 from prp3mc.measurement.campaign.simulate import simulate_campaign
-from prp3mc.measurement.fit.workflow import discrepancy
+from prp3mc.measurement.discrepancy.workflow import discrepancy
 
 #: The effect of each family hidden on each geometry (the delta's leg 1 has a = 0: alpha_1 = beta_1 there).
 HIDDEN = {("u-shape", "beta"): "beta_1", ("u-shape", "alpha"): "alpha_2", ("u-shape", "gamma"): "gamma_3",

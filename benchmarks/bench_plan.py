@@ -48,12 +48,12 @@ from tests.realities import cycled, rising, thermal_campaign  # noqa: E402  the 
 
 import prp3mc
 from prp3mc import Budget, Geometry
-from prp3mc.measurement.fit.confounds import design_confounds
-from prp3mc.measurement.fit.likelihood import Engine
+from prp3mc.measurement.naming.confounds import design_confounds
+from prp3mc.measurement.estimation.likelihood import Engine
 from prp3mc.measurement.campaign.plan import plan_campaign
-from prp3mc.measurement.fit.prediction import noise_cov
+from prp3mc.measurement.forward.prediction import noise_cov
 from prp3mc.measurement.campaign.simulate import simulate_campaign
-from prp3mc.measurement.fit.workflow import detectable_effect, discrepancy
+from prp3mc.measurement.discrepancy.workflow import detectable_effect, discrepancy
 
 #: The effects planned for on each geometry (each is then hidden alone).
 PLANNED = {"u-shape": ("scale_2", "backlash_1", "beta_1", "thermal"),

@@ -49,8 +49,8 @@ _API = {
     "Study": "study.reader", "StudyResult": "study.results", "run_study": "study.runner",
     "build_summary": "study.summary",
     "Campaign": "measurement.campaign.data", "read_campaign": "measurement.campaign.data",
-    "DiscrepancyResult": "measurement.fit.results", "simulate_campaign": "measurement.campaign.simulate",
-    "detectable_effect": "measurement.fit.workflow", "discrepancy": "measurement.fit.workflow",
+    "DiscrepancyResult": "measurement.discrepancy.results", "simulate_campaign": "measurement.campaign.simulate",
+    "detectable_effect": "measurement.discrepancy.workflow", "discrepancy": "measurement.discrepancy.workflow",
     "CampaignPlan": "measurement.campaign.plan", "plan_campaign": "measurement.campaign.plan",
 }
 #: Names that left the everyday API, still served for one release with a DeprecationWarning:

@@ -83,6 +83,15 @@ def freeze(obj) -> None:
 _IMMUTABLE = frozenset({str, int, float, bool, type(None), FrozenDict})
 
 
+def thawed(value):
+    """A frozen value as plain JSON-ready Python: mappings to dicts, tuples to lists (:func:`freeze` undone)."""
+    if isinstance(value, (dict, MappingProxyType)):
+        return {k: thawed(v) for k, v in value.items()}
+    if isinstance(value, (tuple, list)):
+        return [thawed(v) for v in value]
+    return value
+
+
 @functools.cache
 def _field_names(cls) -> tuple[str, ...]:
     """The field names of dataclass ``cls``, read once (a small result's whole freeze costs less than

@@ -215,7 +215,7 @@ def simulate_estimate(n_measurements: int) -> Estimate:
 
 def discrepancy_estimate(n_measurements: int, n_poses: int | None = None, max_visits: int | None = None,
                          n_inputs: int = 12, n_bootstrap: int = 400, n_mc: int = 4000) -> Estimate:
-    """Memory of :func:`prp3mc.measurement.fit.workflow.discrepancy` and its report.
+    """Memory of :func:`prp3mc.measurement.discrepancy.workflow.discrepancy` and its report.
 
     Parameters
     ----------

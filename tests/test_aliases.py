@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 from prp3mc import Budget, Geometry, Triangular, Uniform
-from prp3mc.measurement.fit.signatures import spread_budget
-from prp3mc.measurement.fit.results import NamedEffect
+from prp3mc.measurement.forward.signatures import spread_budget
+from prp3mc.measurement.naming.named import NamedEffect
 from prp3mc.measurement.campaign.simulate import simulate_campaign
-from prp3mc.measurement.fit.updated import updated_model
-from prp3mc.measurement.fit.workflow import discrepancy
+from prp3mc.measurement.discrepancy.updated import updated_model
+from prp3mc.measurement.discrepancy.workflow import discrepancy
 
 from .realities import BUDGET, SIGMA, campaign_poses
 

@@ -60,6 +60,22 @@ def test_imports_run_one_way(path):
         assert LEVEL[other] < LEVEL[own], f"{path} imports {'.'.join(target)} (upwards)"
 
 
+#: The discrepancy workflow's steps inside measurement/, one package per step, from the bottom.
+FIT_STEP = {"forward": 1, "estimation": 2, "naming": 3, "verdict": 3, "discrepancy": 4}
+FIT_MODULES = [p for p in MODULES if p.relative_to(PACKAGE).parts[:2] in {("measurement", k) for k in FIT_STEP}]
+
+
+@pytest.mark.parametrize("path", FIT_MODULES, ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_the_workflow_steps_import_downwards(path):
+    """forward → estimation → naming, verdict (side by side) → discrepancy: a step imports only the steps below."""
+    own = FIT_STEP[path.relative_to(PACKAGE).parts[1]]
+    for target in imports(path):
+        if target[:1] == ("measurement",) and len(target) > 1 and target[1] in FIT_STEP:
+            other = FIT_STEP[target[1]]
+            assert other < own or target[1] == path.relative_to(PACKAGE).parts[1], \
+                f"{path.relative_to(PACKAGE)} imports {'.'.join(target)}"
+
+
 @pytest.mark.parametrize("path", MODULES, ids=lambda p: str(p.relative_to(PACKAGE)))
 def test_only_reports_import_matplotlib_and_nobody_switches_backend(path):
     text = path.read_text(encoding="utf-8")
@@ -140,8 +156,8 @@ def test_the_private_read_check_sees_one():
 EFFECT_KINDS = {"offset", "scale", "backlash", "thermal", "cyclic", "spread"}
 #: Modules that still compare effect kinds with strings: the fitting pipeline and the campaign simulator, which
 #: another branch is rewriting; they adopt :class:`~prp3mc.model.effects.EffectKind` after it lands.
-KIND_STRINGS_PENDING = {"measurement/campaign/simulate.py", "measurement/fit/signatures.py",
-                        "measurement/fit/selection.py", "measurement/fit/likelihood.py", "measurement/fit/updated.py"}
+KIND_STRINGS_PENDING = {"measurement/campaign/simulate.py", "measurement/forward/signatures.py",
+                        "measurement/naming/selection.py", "measurement/estimation/likelihood.py", "measurement/discrepancy/updated.py"}
 
 
 def kind_string_compares(tree: ast.AST) -> list[str]:

@@ -9,9 +9,9 @@ import pytest
 from prp3mc import Budget, Geometry, Region
 from prp3mc.errors import CampaignError
 from prp3mc.measurement.campaign.data import Campaign, count_rows, read_campaign
-from prp3mc.measurement.fit.prediction import predict
+from prp3mc.measurement.forward.prediction import predict
 from prp3mc.measurement.campaign.simulate import SETTLE_S, SLIDER_SPEED_MM_S, simulate_campaign
-from prp3mc.measurement.fit.signatures import EFFECT_NAMES, effect, library
+from prp3mc.measurement.forward.signatures import EFFECT_NAMES, effect, library
 from prp3mc.errors import BudgetError, InputFileError, Prp3mcWarning
 
 

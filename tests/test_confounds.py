@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from prp3mc import Geometry
-from prp3mc.measurement.fit.confounds import VIF_LIMIT, design_confounds
-from prp3mc.measurement.fit.likelihood import Engine
-from prp3mc.measurement.fit.prediction import noise_cov
+from prp3mc.measurement.naming.confounds import VIF_LIMIT, design_confounds
+from prp3mc.measurement.estimation.likelihood import Engine
+from prp3mc.measurement.forward.prediction import noise_cov
 from prp3mc.measurement.campaign.simulate import simulate_campaign
-from prp3mc.measurement.fit.workflow import discrepancy
+from prp3mc.measurement.discrepancy.workflow import discrepancy
 from prp3mc.reports import discrepancy_report
 
 from .realities import BUDGET, SIGMA, campaign_poses, cycled, rising, thermal_campaign
@@ -93,7 +93,7 @@ def test_warming_and_cycled_rates_over_seeds():
 def test_the_verdict_takes_the_first_state_that_holds():
     from types import SimpleNamespace
 
-    from prp3mc.measurement.fit.diagnostics import VERDICTS, verdict
+    from prp3mc.measurement.verdict.diagnostics import VERDICTS, verdict
     closed, open_ = {"closed": True, "deciding_channel": "library"}, {"closed": False, "deciding_channel": "spatial"}
     ok, tripped = {"guard": "ok"}, {"guard": "tripped", "why": "no closure", "advice": "apply the offsets"}
     e = SimpleNamespace(name="scale_2")

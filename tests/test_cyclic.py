@@ -13,10 +13,10 @@ from prp3mc.cli import main
 from prp3mc.errors import BudgetError, GeometryError
 from prp3mc.kinematics.chain import inverse_kinematics
 from prp3mc.kinematics.sensitivity import sensitivity
-from prp3mc.measurement.fit.cyclic import ISOTROPY_LIMIT, _critical, amplitude_interval, profile_lr
-from prp3mc.measurement.fit.signatures import signatures
+from prp3mc.measurement.estimation.cyclic import ISOTROPY_LIMIT, _critical, amplitude_interval, profile_lr
+from prp3mc.measurement.forward.signatures import signatures
 from prp3mc.measurement.campaign.simulate import simulate_campaign
-from prp3mc.measurement.fit.workflow import discrepancy
+from prp3mc.measurement.discrepancy.workflow import discrepancy
 from prp3mc.model.effects import (SystematicEffect, amplitude_phase, components, effect_value, phasor,
                                            slider_error)
 from prp3mc.worstcase.envelope import worst_case_maxima

@@ -15,7 +15,7 @@ import pytest
 from prp3mc import Geometry, Region
 from prp3mc.measurement.campaign.simulate import simulate_campaign
 from prp3mc.cli import main
-from prp3mc.measurement.fit.workflow import detectable_effect, discrepancy
+from prp3mc.measurement.discrepancy.workflow import detectable_effect, discrepancy
 from prp3mc.reports import discrepancy_report as rep
 from prp3mc.reports.discrepancy_report import write_report
 from prp3mc.units import Z95, z_value

@@ -8,7 +8,7 @@ from prp3mc import Budget, Geometry, Region
 from prp3mc.errors import CampaignError
 from prp3mc.measurement.campaign.data import read_campaign
 from prp3mc.measurement.campaign.iso9283 import iso9283_figures, pose_means
-from prp3mc.measurement.fit.prediction import noise_cov, predict
+from prp3mc.measurement.forward.prediction import noise_cov, predict
 from prp3mc.measurement.campaign.simulate import simulate_campaign
 
 
@@ -104,7 +104,7 @@ def test_report_removes_nuisances_sets_outliers_aside_and_shows_them(tmp_path):
     """The analysis's ISO figures are those of the campaign without registration and gross errors; the report shows them."""
     import json
 
-    from prp3mc.measurement.fit.workflow import discrepancy
+    from prp3mc.measurement.discrepancy.workflow import discrepancy
     from prp3mc.reports.discrepancy_report import write_report
     g, b = Geometry.from_preset("u-shape"), Budget.from_preset("paper")
     poses = Region.from_preset("u-shape").grid(5).reshape(-1, 3)

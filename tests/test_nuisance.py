@@ -14,11 +14,11 @@ from scipy import stats
 from prp3mc import Geometry
 from prp3mc.cli import main
 from prp3mc.cli.discrepancy import headline
-from prp3mc.measurement.fit.likelihood import Engine
-from prp3mc.measurement.fit.outliers import distances, threshold
-from prp3mc.measurement.fit.prediction import noise_cov
+from prp3mc.measurement.estimation.likelihood import Engine
+from prp3mc.measurement.estimation.outliers import distances, threshold
+from prp3mc.measurement.forward.prediction import noise_cov
 from prp3mc.measurement.campaign.simulate import simulate_campaign
-from prp3mc.measurement.fit.workflow import STAGES, discrepancy
+from prp3mc.measurement.discrepancy.workflow import STAGES, discrepancy
 from prp3mc.progress import Progress
 
 from .realities import BUDGET, SIGMA, campaign_poses

@@ -10,7 +10,7 @@ import pytest
 from prp3mc import Geometry
 from prp3mc.cli import main
 from prp3mc.measurement.campaign.simulate import simulate_campaign
-from prp3mc.measurement.fit.workflow import discrepancy
+from prp3mc.measurement.discrepancy.workflow import discrepancy
 
 from .realities import BUDGET, SIGMA, sweep_poses
 

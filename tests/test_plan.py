@@ -13,7 +13,7 @@ from prp3mc.errors import CampaignError, ParameterError
 from prp3mc.kinematics.chain import feasible
 from prp3mc.measurement.campaign import plan as planning
 from prp3mc.measurement.campaign.simulate import simulate_campaign
-from prp3mc.measurement.fit.workflow import detectable_effect, discrepancy
+from prp3mc.measurement.discrepancy.workflow import detectable_effect, discrepancy
 
 from .realities import BUDGET, SIGMA, campaign_poses
 

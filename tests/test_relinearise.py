@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 
 from prp3mc import Geometry, Region
-from prp3mc.measurement.fit import identify
-from prp3mc.measurement.fit.signatures import signatures
-from prp3mc.measurement.fit.relinearise import candidates, controller_geometry, exact_errors, linearise
+from prp3mc.measurement.naming import identify
+from prp3mc.measurement.forward.signatures import signatures
+from prp3mc.measurement.estimation.relinearise import candidates, controller_geometry, exact_errors, linearise
 from prp3mc.measurement.campaign.simulate import simulate_campaign
-from prp3mc.measurement.fit.workflow import discrepancy
+from prp3mc.measurement.discrepancy.workflow import discrepancy
 from prp3mc.model.effects import SystematicEffect
 from prp3mc.reports import discrepancy_report
 

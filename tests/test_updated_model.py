@@ -10,12 +10,12 @@ import pytest
 from prp3mc import Geometry
 from prp3mc.cli import main
 from prp3mc.errors import BudgetError, CampaignError
-from prp3mc.measurement.fit.holdout import N_FOLDS, _folds, held_out_fits
-from prp3mc.measurement.fit.likelihood import Engine
-from prp3mc.measurement.fit.prediction import noise_cov, predict
+from prp3mc.measurement.verdict.holdout import N_FOLDS, _folds, held_out_fits
+from prp3mc.measurement.estimation.likelihood import Engine
+from prp3mc.measurement.forward.prediction import noise_cov, predict
 from prp3mc.measurement.campaign.simulate import simulate_campaign
-from prp3mc.measurement.fit.updated import updated_model
-from prp3mc.measurement.fit.workflow import discrepancy
+from prp3mc.measurement.discrepancy.updated import updated_model
+from prp3mc.measurement.discrepancy.workflow import discrepancy
 from prp3mc.provenance import sha256_file
 from prp3mc.reports.discrepancy_report import write_report
 from prp3mc.model.budget import Budget

@@ -39,7 +39,7 @@ class DiscrepancyCommand:
     def run(args) -> None:
         from ..model.budget import Budget
         from ..reports.discrepancy_report import report_document, write_report
-        from ..measurement.fit.workflow import STAGES, discrepancy
+        from ..measurement.discrepancy.workflow import STAGES, discrepancy
         from ..measurement.campaign.data import check_instrument_noise, count_rows, read_campaign
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         d = len(budget)
@@ -92,7 +92,7 @@ def correlation_warning(geometry, budget, poses) -> str:
 
 def headline(result) -> list[str]:
     """The lines printed after an analysis: what was named, the nuisances, the gap and the one verdict."""
-    from ..measurement.fit.accuracy import MODELS
+    from ..measurement.discrepancy.accuracy import MODELS
     g = result.gap
     lines = [f"{result.campaign.n_measurements} measurements of {result.campaign.n_poses} poses; "
              f"seed {result.seed}; {result.wall_time_s:.1f} s"]

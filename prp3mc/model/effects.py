@@ -291,7 +291,7 @@ def components(effects, values) -> np.ndarray:
     Returns
     -------
     ndarray, shape (sum of the effects' :attr:`Effect.dof`,)
-        The coefficients of the effects' signature columns (:func:`~prp3mc.measurement.fit.signatures.signatures`).
+        The coefficients of the effects' signature columns (:func:`~prp3mc.measurement.forward.signatures.signatures`).
     """
     out = []
     for eff, value in zip(_as_effects(effects), values):

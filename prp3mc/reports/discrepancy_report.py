@@ -1,13 +1,13 @@
 """Figures and the self-contained HTML report of a discrepancy analysis.
 
 Every plotting function takes a
-:class:`~prp3mc.measurement.fit.results.DiscrepancyResult` and ``fig=`` (each
+:class:`~prp3mc.measurement.discrepancy.results.DiscrepancyResult` and ``fig=`` (each
 figure has several panels; a new pyplot figure when None) and returns the
 Figure; none changes the matplotlib backend. :func:`write_report` writes
 ``discrepancy.json``, ``report.html`` with the figures embedded,
 the figures as PNG (SVG too on request), per-pose / per-measurement
 tables as CSV and the updated model in ``model/``
-(:mod:`~prp3mc.measurement.fit.updated`); it draws on its own Agg canvases, outside pyplot, and renders
+(:mod:`~prp3mc.measurement.discrepancy.updated`); it draws on its own Agg canvases, outside pyplot, and renders
 each figure once (fixed margins, no layout engine, no tight bounding box),
 here or on worker processes on request (:mod:`~prp3mc.reports._render`),
 and writes the JSON, tables and model files meanwhile.
@@ -29,9 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..measurement.fit.diagnostics import Diagnosis
+from ..measurement.verdict.diagnostics import Diagnosis
 from ..measurement.campaign.iso9283 import ISO_STATISTICS, N_MC
-from ..measurement.fit.results import DiscrepancyResult
+from ..measurement.discrepancy.results import DiscrepancyResult
 from ..output import output_folder, png_data_uri, write_json, write_text
 from ..units import DEG2ARCSEC, MM2UM
 from ._layout import agg_figure, lighten

@@ -2,7 +2,7 @@
 
 :func:`plan_campaign` chooses ``N`` poses of the workspace to visit ``V``
 times each and the order and approach directions of the visits, so that
-the discrepancy workflow (:mod:`~prp3mc.measurement.fit.workflow`) can see and
+the discrepancy workflow (:mod:`~prp3mc.measurement.discrepancy.workflow`) can see and
 tell apart the listed candidate effects:
 
 1. **Candidates.** A grid over the geometry's test region (its preset
@@ -59,14 +59,14 @@ from ...provenance import versions
 from ...model.budget import Budget
 from ...model.linear import linear_model
 from .data import CMD_COLUMNS, DIR_COLUMNS, MEAS_COLUMNS, MIN_POSES, Campaign
-from ..fit.confounds import design_confounds
+from ..naming.confounds import design_confounds
 from ...model.effects import EffectKind, check_leads
-from ..fit.signatures import effect, signatures
-from ..fit.likelihood import Engine
-from ..fit.nuisance import DRIFT, NUISANCE_NAMES, REGISTRATION, nuisance_signatures
-from ..fit.prediction import noise_cov
+from ..forward.signatures import effect, signatures
+from ..estimation.likelihood import Engine
+from ..estimation.nuisance import DRIFT, NUISANCE_NAMES, REGISTRATION, nuisance_signatures
+from ..forward.prediction import noise_cov
 from .simulate import visit_times
-from ..fit.updated import base_name
+from ..discrepancy.updated import base_name
 
 __all__ = ["CampaignPlan", "plan_campaign", "PHI_CANDIDATES_DEG", "N_ORDERS"]
 
@@ -378,7 +378,7 @@ def plan_campaign(geometry: Geometry, budget: Budget, effects, n_poses: int, n_v
     CampaignError
         Too few poses or visits, or more poses than the region has candidates.
     """
-    from ..fit.workflow import detectable_effect                    # the workflow imports the engine this uses
+    from ..discrepancy.workflow import detectable_effect                    # the workflow imports the engine this uses
     seed, rng = resolve_rng(rng)
     effects = tuple(dict.fromkeys(effects))
     if not effects:

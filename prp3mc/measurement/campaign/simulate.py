@@ -5,7 +5,7 @@ the realities a metrology campaign carries: budget errors that are drawn
 afresh at every visit or partly repeat per pose, approach directions, a
 temperature drift, the instrument's registration to the machine and its
 drift in time, instrument noise, gross outliers (a lost tracker beam), and
-hidden effects of the library (:mod:`prp3mc.measurement.fit.signatures`), several at
+hidden effects of the library (:mod:`prp3mc.measurement.forward.signatures`), several at
 once if wanted.
 
 Randomness (one seed, recorded in ``metadata["seed"]``): the root generator
@@ -32,7 +32,7 @@ from ...model.budget import Budget, parse_input
 from ...model.effects import check_leads, effect_value
 from ...units import DEG2RAD
 from .data import CMD_COLUMNS, DIR_COLUMNS, MAX_ERROR, MEAS_COLUMNS, Campaign
-from ..fit.signatures import effect, offset_errors, slider_error, spread_budget
+from ..forward.signatures import effect, offset_errors, slider_error, spread_budget
 
 __all__ = ["simulate_campaign", "visit_times", "frame_transform", "SETTLE_S", "SLIDER_SPEED_MM_S"]
 
@@ -211,7 +211,7 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     n_repeats : int
         Measurements per pose (1: a one-visit campaign, as a laser tracker's sweep; ignored with ``plan``).
     effects : dict of str to float, optional
-        Hidden effects of the library (:data:`~prp3mc.measurement.fit.signatures.EFFECT_NAMES`, in their units); any number
+        Hidden effects of the library (:data:`~prp3mc.measurement.forward.signatures.EFFECT_NAMES`, in their units); any number
         at once, their pose errors add up through the exact chain (a hidden effect the budget's
         ``[effects]`` also holds adds to its value). A cyclic screw error ``cyclic_i`` is its phasor,
         its amplitude (phase 0) or ``(amplitude_mm, phase_deg)``, and needs ``lead_mm`` of leg i in the geometry.

@@ -12,7 +12,7 @@ acceptance:
 
 - **exchange**: the systematic set is replaced by the best set of its size
   (every set of up to three effects is compared, larger sets by exchange
-  moves, :mod:`~prp3mc.measurement.fit.subsets`), so an early wrong pick is
+  moves, :mod:`~prp3mc.measurement.naming.subsets`), so an early wrong pick is
   replaced once a later effect explains what misled it;
 - **backward**: an effect whose removal LR falls below the chi2(1) quantile
   at ``alpha`` is dropped.
@@ -28,9 +28,9 @@ neither is ever named.
 
 A cyclic screw error has two parameters (its phasor): its likelihood ratios
 are put on the chi2(1) scale at their p-values
-(:func:`~prp3mc.measurement.fit.likelihood.chi2_equivalent`), so every threshold above
+(:func:`~prp3mc.measurement.estimation.likelihood.chi2_equivalent`), so every threshold above
 holds for it as it stands; its value is its amplitude, with the phase beside
-it and an interval that covers near zero (:mod:`~prp3mc.measurement.fit.cyclic`).
+it and an interval that covers near zero (:mod:`~prp3mc.measurement.estimation.cyclic`).
 """
 
 from __future__ import annotations
@@ -38,10 +38,10 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from .likelihood import chi2_equivalent
-from .signatures import effect
-from .likelihood import Engine, Fit
-from .results import NamedEffect
+from ..estimation.likelihood import chi2_equivalent
+from ..forward.signatures import effect
+from ..estimation.likelihood import Engine, Fit
+from .named import NamedEffect
 from .subsets import Gram
 
 __all__ = ["select", "name_effects", "names_in", "STEP_COLUMNS"]

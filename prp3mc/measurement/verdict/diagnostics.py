@@ -2,7 +2,7 @@
 
 Channels and tests
 ------------------
-Whitening (:mod:`~prp3mc.measurement.fit.likelihood`) gives, when the model is
+Whitening (:mod:`~prp3mc.measurement.estimation.likelihood`) gives, when the model is
 right, standardised pose means ``zb_p`` (covariance I) and visit deviations
 ``zw`` (covariance I within each pose), with the fitted repeatable fraction,
 the nuisances profiled out and gross errors set aside. Per pose, the
@@ -41,8 +41,8 @@ import pandas as pd
 from ..._result import POSE_COLUMNS, freeze
 from ...model.linear import linear_model
 from ...units import DISPLAY, MM2UM, OUTPUT_UNITS, POSE_OUTPUTS
-from .signatures import ROW_TO_DEG, spread_budget
-from .likelihood import Engine, Fit
+from ..forward.signatures import ROW_TO_DEG, spread_budget
+from ..estimation.likelihood import Engine, Fit
 
 __all__ = ["Diagnosis", "diagnose", "null_variances", "gap", "gap_value", "verdict", "CHANNELS", "VERDICTS"]
 
@@ -396,7 +396,7 @@ def verdict(gap_doc: dict, named, linearity: dict, ambiguities: list, confounded
     """The analysis's one verdict: ``{"state", "text"}``, the first of :data:`VERDICTS` that holds.
 
     ``beyond the linear model``: the linearity guard refused to name
-    (:mod:`~prp3mc.measurement.fit.identify`); ``unexplained``: the gap is not
+    (:mod:`~prp3mc.measurement.naming.identify`); ``unexplained``: the gap is not
     closed; ``ambiguous``: it is closed, but by a cause the campaign cannot
     tell from another or from the instrument's drift (``ambiguities``,
     :func:`~prp3mc.measurement.confounds.ambiguities`); ``explained``: named

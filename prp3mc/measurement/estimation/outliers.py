@@ -2,7 +2,7 @@
 
 Each measurement is compared with what the fitted model predicts for it
 *from the other measurements*: with ``W`` the visit-to-visit covariance and
-``B = r Sigma`` the repeatable one (:mod:`~prp3mc.measurement.fit.likelihood`),
+``B = r Sigma`` the repeatable one (:mod:`~prp3mc.measurement.estimation.likelihood`),
 the other ``n'`` kept visits of its pose predict its repeatable part by
 ``K ybar'`` with ``K = B (B + W / n')^-1``, leaving a prediction error of
 covariance ``V = W + B - K B``. Its squared Mahalanobis length
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .signatures import components
+from ..forward.signatures import components
 from .likelihood import Engine
 from .nuisance import NUISANCE_NAMES
 

@@ -1,6 +1,6 @@
 """The model linearised about an estimate of the machine, on the exact perturbed chain (Gauss-Newton).
 
-The likelihood engine (:mod:`~prp3mc.measurement.fit.likelihood`) is linear in
+The likelihood engine (:mod:`~prp3mc.measurement.estimation.likelihood`) is linear in
 the systematic effects: a measurement's pose error is ``known + G theta``.
 At the nominal geometry ``known`` is the budget's ``[effects]`` through
 their signatures and ``G`` the signatures ``J_q``: right to first order,
@@ -45,7 +45,7 @@ from ...kinematics.geometry import Geometry
 from ...model.budget import Budget
 from ..campaign.data import Campaign
 from ...model.effects import EffectKind, components
-from .signatures import effect, library, offset_errors, slider_error
+from ..forward.signatures import effect, library, offset_errors, slider_error
 
 __all__ = ["Point", "linearise", "exact_errors", "candidates", "controller_geometry"]
 

@@ -4,108 +4,30 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from types import MappingProxyType
 
 import numpy as np
 import pandas as pd
 
 from ...provenance import file_record, versions
-from ..._result import freeze, interval_frame
+from ..._result import freeze, interval_frame, thawed
 from ..._version import __version__
 from ...kinematics.geometry import Geometry
 from ...model.budget import Budget
 from ...units import z_value
 from ..campaign.data import Campaign
-from .diagnostics import Diagnosis
-from .likelihood import Engine
+from ..verdict.diagnostics import Diagnosis
+from ..estimation.likelihood import Engine
 from ...model.effects import effect_value
-from .prediction import Prediction, noise_cov
-from .relinearise import candidates, linearise
+from ..forward.prediction import Prediction, noise_cov
+from ..estimation.relinearise import candidates, linearise
 from .updated import UpdatedModel
+from ..naming.named import EFFECT_COLUMNS, LEVEL, NamedEffect
 
-__all__ = ["NamedEffect", "DiscrepancyResult", "LEVEL"]
-
-#: Level of the intervals the workflow computes (``ci95``).
-LEVEL = 0.95
-_EFFECT_COLUMNS = ["name", "value", "unit", "ci_low", "ci_high", "level", "aliases", "identified", "lr"]
-
-
-def _thawed(value):
-    """A frozen value as plain JSON-ready Python: mappings to dicts, tuples to lists."""
-    if isinstance(value, (dict, MappingProxyType)):
-        return {k: _thawed(v) for k, v in value.items()}
-    if isinstance(value, (tuple, list)):
-        return [_thawed(v) for v in value]
-    return value
-
-
-@dataclass(frozen=True, slots=True)
-class NamedEffect:
-    """An effect the workflow added to the model.
-
-    Attributes
-    ----------
-    name : str
-    value : float
-        In ``unit``.
-    unit : str
-    ci95 : (float, float)
-    aliases : tuple of str
-        Effects the campaign cannot tell apart from this one; if any, the
-        effect is *not* identified (one of the set is missing).
-    evidence : mapping
-        ``lr`` (of removing it from the final model), ``threshold``,
-        ``p_bonferroni``, ``n_candidates``, ``step``, ``delta_bic``,
-        ``identified``, ``alias_fits`` (value and ci95 of each alias),
-        ``alternative_sets`` (other sets of the same size that fit as well)
-        and, for spreads, ``budget_value`` and ``direction``; for an effect
-        the budget's ``[effects]`` already holds, ``value`` is the correction
-        to it and the evidence has ``budget_effect`` (the budget's value)
-        and ``total`` (a cyclic error: the corrections add as phasors, and
-        ``total_phase_deg`` and ``total_ci95`` come with it). A cyclic error
-        has ``phasor_mm`` (real and imaginary parts of A exp(i phi)) and
-        ``phasor_cov_mm2``, and ``lr_df2``, its likelihood ratio before it
-        is put on the chi2(1) scale of ``lr``.
-    phase_deg : float or None
-        A cyclic error's phase phi_i, degrees (its value is the amplitude A_i).
-    """
-
-    name: str
-    value: float
-    unit: str
-    ci95: tuple
-    aliases: tuple
-    evidence: dict
-    phase_deg: float | None = None
-
-    def __post_init__(self):
-        freeze(self)
-
-    def __repr__(self) -> str:
-        lo, hi = self.ci95
-        return (f"NamedEffect(name={self.name!r}, value={self.value:.6g}, unit={self.unit!r}, "
-                f"ci95=[{lo:.6g}, {hi:.6g}], identified={self.evidence['identified']})")
-
-    def _row(self) -> dict:
-        return {"name": self.name, "value": self.value, "unit": self.unit, "ci_low": self.ci95[0],
-                "ci_high": self.ci95[1], "level": LEVEL, "aliases": ", ".join(self.aliases),
-                "identified": self.evidence["identified"], "lr": self.evidence["lr"]}
-
-    def to_frame(self) -> pd.DataFrame:
-        """One row: ``name, value, unit, ci_low, ci_high, level, aliases, identified, lr``."""
-        return pd.DataFrame([self._row()], columns=_EFFECT_COLUMNS)
-
-    def to_dict(self) -> dict:
-        """The effect's entry in ``discrepancy.json``."""
-        doc = {"name": self.name, "value": self.value, "unit": self.unit, "ci95": list(self.ci95)}
-        if self.phase_deg is not None:
-            doc["phase_deg"] = self.phase_deg
-        return doc | {"aliases": list(self.aliases), "evidence": _thawed(self.evidence)}
-
+__all__ = ["DiscrepancyResult"]
 
 @dataclass(frozen=True, slots=True)
 class DiscrepancyResult:
-    """Outcome of :func:`~prp3mc.measurement.fit.workflow.discrepancy`.
+    """Outcome of :func:`~prp3mc.measurement.discrepancy.workflow.discrepancy`.
 
     Attributes
     ----------
@@ -118,16 +40,16 @@ class DiscrepancyResult:
         ``beyond the linear model``, ``unexplained``, ``ambiguous``,
         ``explained``, ``nothing missing``) and a one-line ``text``.
     confounded : tuple of mapping
-        What the campaign cannot tell apart (:mod:`~prp3mc.measurement.fit.confounds`):
+        What the campaign cannot tell apart (:mod:`~prp3mc.measurement.naming.confounds`):
         ``{effects, with, why, advice, source}``, ``source`` ``design`` (from
         the signatures, with ``vif`` or ``r``) or ``data`` (an effect that
         explains the drift the data show as well).
     gap : mapping
         ``metric, before, after, null_level, closed_at, closed,
         deciding_channel`` and every channel's evidence (see
-        :mod:`~prp3mc.measurement.fit.diagnostics`), and ``held_out``: the gap
+        :mod:`~prp3mc.measurement.verdict.diagnostics`), and ``held_out``: the gap
         before and after on poses left out of the fit
-        (:mod:`~prp3mc.measurement.fit.holdout`), the one to trust.
+        (:mod:`~prp3mc.measurement.verdict.holdout`), the one to trust.
     before, after : Diagnosis
         Disagreement under the budget alone and with the named effects
         (nuisances in both, gross errors set aside).
@@ -182,7 +104,7 @@ class DiscrepancyResult:
         budgets, the compensable and non-compensable effects.
     accuracy : mapping
         Predicted accuracy over the region, original, updated and
-        compensated (:func:`~prp3mc.measurement.fit.accuracy.predicted_accuracy`).
+        compensated (:func:`~prp3mc.measurement.discrepancy.accuracy.predicted_accuracy`).
     campaign : Campaign
         The validated campaign (every row).
     geometry, budget
@@ -265,7 +187,7 @@ class DiscrepancyResult:
 
         The interval is the 95 % one (``ci95``); :meth:`conf_int` gives others.
         """
-        return pd.DataFrame([e._row() for e in self.named_effects], columns=_EFFECT_COLUMNS)
+        return pd.DataFrame([e.row() for e in self.named_effects], columns=EFFECT_COLUMNS)
 
     def conf_int(self, level: float = 0.95) -> pd.DataFrame:
         """Confidence intervals of the named effects at ``level``.
@@ -322,25 +244,25 @@ class DiscrepancyResult:
             "inputs": self.inputs(), "versions": versions(), **warnings,
             "named_effects": [e.to_dict() for e in self.named_effects],
             "unexplained": bool(self.unexplained),
-            "verdict": _thawed(self.verdict),
-            "confounded": _thawed(self.confounded),
-            "gap": _thawed(self.gap),
-            "nuisance": _thawed(self.nuisance),
-            "outliers": _thawed(self.outliers),
-            "repeatability": _thawed(self.repeatability),
-            "iso9283": _thawed(self.iso9283),
+            "verdict": thawed(self.verdict),
+            "confounded": thawed(self.confounded),
+            "gap": thawed(self.gap),
+            "nuisance": thawed(self.nuisance),
+            "outliers": thawed(self.outliers),
+            "repeatability": thawed(self.repeatability),
+            "iso9283": thawed(self.iso9283),
             "confounded_with_registration": list(self.confounded_with_registration),
             "registration_fitted": bool(self.registration),
-            "drift_test": _thawed(self.drift_test),
-            "outlier_rule": _thawed(self.outlier_rule),
-            "with_outliers": _thawed(self.with_outliers),
-            "tests": {"before": _thawed(self.before.summary), "after": _thawed(self.after.summary)},
+            "drift_test": thawed(self.drift_test),
+            "outlier_rule": thawed(self.outlier_rule),
+            "with_outliers": thawed(self.with_outliers),
+            "tests": {"before": thawed(self.before.summary), "after": thawed(self.after.summary)},
             "invisible": list(self.invisible),
             "structural_aliases": [list(g) for g in self.structural_aliases],
-            "not_testable": _thawed(self.not_testable),
-            "linearity": _thawed(self.linearity),
-            "model": _thawed(self.model.to_dict()),
-            "predicted_accuracy": _thawed(self.accuracy),
+            "not_testable": thawed(self.not_testable),
+            "linearity": thawed(self.linearity),
+            "model": thawed(self.model.to_dict()),
+            "predicted_accuracy": thawed(self.accuracy),
             "campaign": {"source": self.campaign.source, "n_measurements": self.campaign.n_measurements,
                          "n_poses": self.campaign.n_poses},
             "geometry": self.geometry.name, "budget": self.budget.name,

@@ -9,7 +9,7 @@ refitting: every set of up to :data:`EXHAUSTIVE` effects exhaustively, larger
 sets by exchange moves (swap one member for one outsider while that
 improves the fit). A cyclic screw error has two columns: a set's gain has as
 many degrees of freedom as it has columns, and is put on the scale of one
-per effect (:func:`~prp3mc.measurement.fit.likelihood.chi2_equivalent`), so sets of as
+per effect (:func:`~prp3mc.measurement.estimation.likelihood.chi2_equivalent`), so sets of as
 many effects compare at their p-values.
 """
 
@@ -19,7 +19,7 @@ from itertools import combinations
 
 import numpy as np
 
-from .likelihood import Engine, Fit, chi2_equivalent
+from ..estimation.likelihood import Engine, Fit, chi2_equivalent
 
 __all__ = ["Gram", "EXHAUSTIVE"]
 

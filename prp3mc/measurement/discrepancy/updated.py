@@ -41,7 +41,7 @@ from ...provenance import sha256_file
 from ...model.budget import Budget
 from ...model.effects import SystematicEffect
 from ..campaign.data import Campaign
-from .signatures import effect, spread_budget
+from ..forward.signatures import effect, spread_budget
 
 __all__ = ["UpdatedModel", "updated_model", "base_name", "MODEL_FILES", "COMPENSATION"]
 

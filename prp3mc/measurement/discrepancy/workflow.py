@@ -1,12 +1,12 @@
 """The discrepancy workflow: where model and measurement disagree, which effect is missing, the gap.
 
 :func:`discrepancy` fits the instrument's registration and drift as
-nuisances (:mod:`~prp3mc.measurement.fit.nuisance`) and the repeatable fraction
-of the budget's errors in every model (:mod:`~prp3mc.measurement.fit.likelihood`),
-sets gross errors aside (:mod:`~prp3mc.measurement.fit.outliers`), names missing
-effects (:mod:`~prp3mc.measurement.fit.selection`), and diagnoses the
+nuisances (:mod:`~prp3mc.measurement.estimation.nuisance`) and the repeatable fraction
+of the budget's errors in every model (:mod:`~prp3mc.measurement.estimation.likelihood`),
+sets gross errors aside (:mod:`~prp3mc.measurement.estimation.outliers`), names missing
+effects (:mod:`~prp3mc.measurement.naming.selection`), and diagnoses the
 disagreement before and after and measures the gap
-(:mod:`~prp3mc.measurement.fit.diagnostics`). :func:`detectable_effect` plans a
+(:mod:`~prp3mc.measurement.verdict.diagnostics`). :func:`detectable_effect` plans a
 campaign: how large an effect its layout can name.
 
 Drift is fitted in every model and *listed* under ``nuisance`` only when a
@@ -42,17 +42,17 @@ from ...kinematics.geometry import Geometry
 from ...progress import Progress
 from ...model.budget import Budget
 from ..campaign.data import Campaign, check_error_scale, read_campaign, require_testable
-from .confounds import ambiguities, design_confounds
-from .diagnostics import diagnose, gap, gap_value, null_variances, verdict
-from .signatures import effect
+from ..naming.confounds import ambiguities, design_confounds
+from ..verdict.diagnostics import diagnose, gap, gap_value, null_variances, verdict
+from ..forward.signatures import effect
 from ...model.effects import amplitude_phase
-from .holdout import held_out_gap
-from .likelihood import Engine, Fit
-from .nuisance import DRIFT, NUISANCE_NAMES, REGISTRATION
-from .prediction import noise_cov, predict
+from ..verdict.holdout import held_out_gap
+from ..estimation.likelihood import Engine, Fit
+from ..estimation.nuisance import DRIFT, NUISANCE_NAMES, REGISTRATION
+from ..forward.prediction import noise_cov, predict
 from .results import DiscrepancyResult
-from .identify import Named, identify
-from .selection import name_effects, names_in, select
+from ..naming.identify import Named, identify
+from ..naming.selection import name_effects, names_in, select
 from .updated import updated_model
 from .accuracy import predicted_accuracy
 from ..campaign.iso9283 import iso9283_figures
@@ -91,7 +91,7 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
         and of the drift test.
     alpha_unexplained : float
         Family-wise level (Bonferroni over the seven channels of
-        :mod:`~prp3mc.measurement.fit.diagnostics`) of the verdict that
+        :mod:`~prp3mc.measurement.verdict.diagnostics`) of the verdict that
         disagreement remains unexplained; the gap closes at ``-ln`` of it.
     outlier_rate : float
         Family-wise false-alarm rate of the gross-error test over all rows.

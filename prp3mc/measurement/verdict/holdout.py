@@ -11,7 +11,7 @@ poses of the fold are *predicted*:
 their residuals under those fitted values, whitened by the covariance the
 training fit implies plus the uncertainty of its estimates (so that they are
 standard normal when the model is right). The seven channels of the verdict
-(:mod:`~prp3mc.measurement.fit.diagnostics`) are then computed on the held-out
+(:mod:`~prp3mc.measurement.verdict.diagnostics`) are then computed on the held-out
 residuals of all poses, with no degree of freedom taken off, and give the
 held-out gap, before (budget and nuisances only) and after (the named
 effects too).
@@ -29,7 +29,7 @@ import numpy as np
 
 from ..._rng import child_seed
 from .diagnostics import diagnose, gap_value
-from .likelihood import Engine, Fit
+from ..estimation.likelihood import Engine, Fit
 
 __all__ = ["held_out_gap", "held_out_fits", "N_FOLDS"]
 
@@ -101,7 +101,7 @@ def held_out_fits(engine: Engine, states: dict, seed: int) -> tuple[dict, int]:
     engine : Engine
         The campaign's kept rows (gross errors set aside).
     states : dict
-        Label -> the model state (:class:`~prp3mc.measurement.fit.likelihood.Fit`)
+        Label -> the model state (:class:`~prp3mc.measurement.estimation.likelihood.Fit`)
         fitted on the whole campaign.
     seed : int
         The analysis seed (the folds are dealt from a child stream of it).
@@ -109,7 +109,7 @@ def held_out_fits(engine: Engine, states: dict, seed: int) -> tuple[dict, int]:
     Returns
     -------
     fits : dict
-        Label -> a :class:`~prp3mc.measurement.fit.likelihood.Fit` whose ``z``
+        Label -> a :class:`~prp3mc.measurement.estimation.likelihood.Fit` whose ``z``
         are the whitened held-out residuals of every pose (standard normal
         when the model is right), ``resid`` the residuals, ``Lw, Lb`` each
         pose's whitening; its spread factors and ``r`` are the whole
@@ -146,7 +146,7 @@ def held_out_gap(engine: Engine, states: dict, seed: int) -> dict:
     states : dict
         Label (``before``, ``after``) -> ``(fit, null)``: the model state
         fitted on the whole campaign and its null variances
-        (:func:`~prp3mc.measurement.fit.diagnostics.null_variances`).
+        (:func:`~prp3mc.measurement.verdict.diagnostics.null_variances`).
     seed : int
         The analysis seed (the folds are dealt from a child stream of it).
 

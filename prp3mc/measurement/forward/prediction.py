@@ -12,7 +12,7 @@ Measurement m of commanded pose p is ``measured = commanded + e_m + s_m + n_m``:
   Sigma_p``, is drawn afresh at each visit.
 - ``s_m = sum_k theta_k g_k(m)`` are systematic effects of the library, each
   linear in its value through its signature
-  (:func:`prp3mc.measurement.fit.signatures.signatures`): those of the budget's
+  (:func:`prp3mc.measurement.forward.signatures.signatures`): those of the budget's
   ``[effects]`` table, with their drivers (approach directions, temperature,
   slider positions) from the campaign, and any added to the model.
 - ``n_m`` is instrument noise, N(0, diag(s_mm^2, s_mm^2, s_deg^2)).

@@ -1,8 +1,8 @@
 """The likelihood engine: fits of the model with and without library effects.
 
 Measurement j of pose p is ``y = commanded + mu_p + H theta_n + G theta + u_p + w_j + n_j``
-(:mod:`~prp3mc.measurement.fit.prediction`): the budget's mean ``mu_p``, the
-nuisances (registration and drift, :mod:`~prp3mc.measurement.fit.nuisance`),
+(:mod:`~prp3mc.measurement.forward.prediction`): the budget's mean ``mu_p``, the
+nuisances (registration and drift, :mod:`~prp3mc.measurement.estimation.nuisance`),
 systematic effects, and random errors whose budget covariance ``Sigma_p``
 splits into a part ``u_p`` that repeats at every visit of the pose (``r
 Sigma_p``) and a part ``w_j`` drawn afresh at each visit (``(1 - r)
@@ -36,7 +36,7 @@ from ...model.linear import linear_model
 from ...units import z_value
 from ..campaign.data import Campaign
 from .cyclic import amplitude_interval
-from .signatures import EFFECT_NAMES, ROW_TO_DEG, budget_effect_errors, effect, library, signatures, spread_reference
+from ..forward.signatures import EFFECT_NAMES, ROW_TO_DEG, budget_effect_errors, effect, library, signatures, spread_reference
 from .nuisance import DRIFT, NUISANCE_NAMES, NUISANCE_UNITS, REGISTRATION, campaign_time, nuisance_signatures
 from .relinearise import Point
 
@@ -136,7 +136,7 @@ class Engine:
     Systematic candidates (:attr:`systematic`) have one signature column
     each in :attr:`G`, but a cyclic screw error two (its phasor's parts):
     :attr:`blocks` maps each candidate to its columns. Likelihood ratios of
-    candidates are put on the chi2(1) scale (:func:`~prp3mc.measurement.fit.likelihood.chi2_equivalent`),
+    candidates are put on the chi2(1) scale (:func:`~prp3mc.measurement.estimation.likelihood.chi2_equivalent`),
     so that every test compares them with one threshold at their own p-value.
 
     Parameters
@@ -150,7 +150,7 @@ class Engine:
         Rows used (outliers set aside); time and row numbers stay those of the whole campaign.
     point : Point, optional
         The exact chain linearised about an estimate of the systematic
-        effects (:mod:`~prp3mc.measurement.fit.relinearise`): the model's known
+        effects (:mod:`~prp3mc.measurement.estimation.relinearise`): the model's known
         pose error, the candidates' signatures and the budget's moments are
         taken there. By default the model is linear about the nominal geometry.
     """
@@ -545,7 +545,7 @@ class Engine:
 
     def phasor(self, fit: Fit, name: str, offset: complex = 0j, level: float = 0.95) -> dict:
         """A cyclic error of ``fit``: its phasor (with ``offset`` added: a budget's value it corrects),
-        amplitude and phase, the amplitude's interval (:func:`~prp3mc.measurement.fit.cyclic.amplitude_interval`)
+        amplitude and phase, the amplitude's interval (:func:`~prp3mc.measurement.estimation.cyclic.amplitude_interval`)
         and the phasor's covariance (mm^2)."""
         k = self._theta_of(fit, name)
         c = fit.theta[k] + np.array([offset.real, offset.imag])

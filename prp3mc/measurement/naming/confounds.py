@@ -2,7 +2,7 @@
 
 From the design
 ---------------
-Whitened by the budget's covariance (:mod:`~prp3mc.measurement.fit.likelihood`),
+Whitened by the budget's covariance (:mod:`~prp3mc.measurement.estimation.likelihood`),
 each candidate's signature is a vector ``g``; the nuisances fitted in every
 model (registration, drift) span ``X``. The share of ``g`` that ``X``
 takes is ``R^2 = 1 - |P g|^2 / |g|^2`` (``P`` projects out ``X``), and
@@ -35,9 +35,9 @@ from __future__ import annotations
 import numpy as np
 
 from ...model.effects import EffectKind
-from .signatures import effect
-from .likelihood import Engine, Fit, chi2_equivalent
-from .nuisance import DRIFT, NUISANCE_NAMES, REGISTRATION
+from ..forward.signatures import effect
+from ..estimation.likelihood import Engine, Fit, chi2_equivalent
+from ..estimation.nuisance import DRIFT, NUISANCE_NAMES, REGISTRATION
 
 __all__ = ["design_confounds", "drift_alternatives", "ambiguities", "VIF_LIMIT", "ADVICE"]
 

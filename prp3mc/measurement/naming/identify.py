@@ -1,9 +1,9 @@
 """The named model: gross errors set aside, effects named, the exact chain relinearised until stable.
 
 One *pass* (:func:`name_pass`) works on the model linearised about one
-point (:mod:`~prp3mc.measurement.fit.relinearise`; the first is the nominal
-geometry): it sets gross errors aside (:mod:`~prp3mc.measurement.fit.outliers`),
-names effects (:mod:`~prp3mc.measurement.fit.selection`) and tests every row
+point (:mod:`~prp3mc.measurement.estimation.relinearise`; the first is the nominal
+geometry): it sets gross errors aside (:mod:`~prp3mc.measurement.estimation.outliers`),
+names effects (:mod:`~prp3mc.measurement.naming.selection`) and tests every row
 again under the named model.
 
 :func:`identify` iterates passes (Gauss-Newton on the exact chain): after a
@@ -43,12 +43,12 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from . import outliers as gross
+from ..estimation import outliers as gross
 from ...model.effects import amplitude_phase, components
-from .signatures import effect
-from .likelihood import Engine, Fit
+from ..forward.signatures import effect
+from ..estimation.likelihood import Engine, Fit
 from ...errors import NonlinearityError
-from .relinearise import candidates, exact_errors, linearise
+from ..estimation.relinearise import candidates, exact_errors, linearise
 from .selection import STEP_COLUMNS, name_effects, select
 
 __all__ = ["Named", "identify", "name_pass", "MAX_PASSES", "MAX_RESTARTS", "REMAINDER", "CURVATURE"]
@@ -233,7 +233,7 @@ class _Passes:
 
         Far from the nominal geometry Gauss-Newton can settle on a first-order alias set (``alpha_1`` with
         a 30 deg ``psi_1``, for a guide angle error ``beta_1`` of 2 deg on the U-shape). Each alias of a
-        named effect (from :func:`~prp3mc.measurement.fit.selection.name_effects`; those with the named
+        named effect (from :func:`~prp3mc.measurement.naming.selection.name_effects`; those with the named
         effect's own signature left out, :data:`MAX_RESTARTS` at most) is a new start; a model
         with fewer effects on the same rows replaces the named one unless the named one beats it by the
         naming threshold for each effect more (a model of the same size, when it fits better).
@@ -273,7 +273,7 @@ def identify(geometry, budget, campaign, make_engine, alpha: float, max_effects:
     make_engine : callable
         ``make_engine(point) -> Engine`` on the whole campaign, linearised about ``point`` (None: nominal).
     alpha, max_effects, outlier_rate
-        As :func:`~prp3mc.measurement.fit.workflow.discrepancy`.
+        As :func:`~prp3mc.measurement.discrepancy.workflow.discrepancy`.
 
     Returns
     -------
