@@ -8,13 +8,12 @@ import numpy as np
 from .._version import __version__
 from ..errors import SpecError
 from ..kinematics.geometry import Geometry
-from ..units import DEG2ARCSEC, MM2UM
+from ..units import DEG2ARCSEC, MM2UM, PPM
 from . import (add_budget, add_geometry, add_json, add_pose_or_region, add_seed, command, emit_json, emit_table,
                grid_poses, positive_float, positive_int, probability, provenance)
 
 #: prp3mc.stackup.DEFAULT_TARGET, written out so that --help imports no numba (tests/test_yield_cli.py checks).
 DEFAULT_TARGET = 1e-9
-PPM = 1e6
 #: A spec this many times below the error's RSS scale is refused (a value in mm typed as µm, or the like).
 _SCALE = 1e-3
 _LEVELS = ("p99.73", "p99.9937", "p99.9999")

@@ -10,11 +10,9 @@ from scipy import special
 
 from .._result import freeze, pose_columns, short_repr
 from .._version import __version__
-from ..units import DEG2ARCSEC, MM2UM
+from ..units import DEG2ARCSEC, MM2UM, PPM
 
 __all__ = ["YieldResult", "ppk", "PPM"]
-
-PPM = 1e6
 
 
 def ppk(exceed) -> np.ndarray:
