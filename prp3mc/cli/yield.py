@@ -117,7 +117,7 @@ def _correlated(args, geometry, budget, poses, where) -> None:
     import pandas as pd
 
     from ..montecarlo.propagation import monte_carlo
-    from ..stackup.result import ppk
+    from ..stackup.result import ppk, region_summary
 
     S = args.spec_position_um / MM2UM
     mc = monte_carlo(geometry, budget, poses, args.samples, rng=args.seed, tolerance_mm=S,
@@ -135,10 +135,7 @@ def _correlated(args, geometry, budget, poses, where) -> None:
                   samples=mc.n_samples, **where)
     doc = {**record, **provenance(args, geometry, budget, **inputs)}
     if args.region is not None:
-        doc["region"] = {"max_exceed_position_ppm": PPM * float(p.max()),
-                         "mean_exceed_position_ppm": PPM * float(p.mean()),
-                         "area_fraction_above_1ppm": float(np.mean(p > 1e-6)),
-                         "argmax_pose": [float(v) for v in poses[k]]}
+        doc["region"] = region_summary(p, poses)
         frame = pd.DataFrame({"x_mm": poses[:, 0], "y_mm": poses[:, 1], "phi_deg": poses[:, 2],
                               "exceed_position_ppm": PPM * p, "ci95_halfwidth_ppm": PPM * half})
         emit_table(args, frame, doc)
