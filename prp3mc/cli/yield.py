@@ -98,9 +98,9 @@ def _pose_frame(r) -> "pd.DataFrame":
     """One row per pose: the exceedances (ppm) and their bound, the position's Ppk, worst case and RSS."""
     import pandas as pd
 
-    poses = r.poses.reshape(-1, 3)
-    frame = pd.DataFrame({"x_mm": poses[:, 0], "y_mm": poses[:, 1], "phi_deg": poses[:, 2],
-                          "exceed_position_ppm": PPM * r.exceed_position.reshape(-1)})
+    from .._result import pose_columns
+
+    frame = pd.DataFrame({**pose_columns(r.poses), "exceed_position_ppm": PPM * r.exceed_position.reshape(-1)})
     if r.exceed_phi is not None:
         frame["exceed_phi_ppm"] = PPM * r.exceed_phi.reshape(-1)
         frame["exceed_any_ppm"] = PPM * r.exceed_any.reshape(-1)
@@ -116,6 +116,7 @@ def _correlated(args, geometry, budget, poses, where) -> None:
     """A budget with [correlation]: the streamed Monte Carlo, its Wilson interval as the error (said in method)."""
     import pandas as pd
 
+    from .._result import pose_columns
     from ..montecarlo.propagation import monte_carlo
     from ..stackup.result import ppk, region_summary
 
@@ -136,8 +137,7 @@ def _correlated(args, geometry, budget, poses, where) -> None:
     doc = {**record, **provenance(args, geometry, budget, **inputs)}
     if args.region is not None:
         doc["region"] = region_summary(p, poses)
-        frame = pd.DataFrame({"x_mm": poses[:, 0], "y_mm": poses[:, 1], "phi_deg": poses[:, 2],
-                              "exceed_position_ppm": PPM * p, "ci95_halfwidth_ppm": PPM * half})
+        frame = pd.DataFrame({**pose_columns(poses), "exceed_position_ppm": PPM * p, "ci95_halfwidth_ppm": PPM * half})
         emit_table(args, frame, doc)
         return
     if args.json:
