@@ -124,8 +124,7 @@ def _correlated(args, geometry, budget, poses, where) -> None:
     mc = monte_carlo(geometry, budget, poses, args.samples, rng=args.seed, tolerance_mm=S,
                      percentiles=(99.73, 99.9937, 99.9999))
     p = mc.exceed_prob.reshape(-1)
-    half = 0.5 * (mc.exceed_ci[..., 1] - mc.exceed_ci[..., 0]).reshape(-1)
-    half = np.maximum(half, np.abs(mc.exceed_ci[..., :].reshape(-1, 2) - p[:, None]).max(axis=1))
+    half = np.abs(mc.exceed_ci.reshape(-1, 2) - p[:, None]).max(axis=1)    # the interval's farther end from P
     k = int(np.argmax(p))
     record = {"exceed_position_ppm": PPM * float(p[k]), "exceed_phi_ppm": None, "exceed_any_ppm": None,
               "error_bound_ppm": PPM * float(half[k]),
