@@ -8,13 +8,15 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["RAD2DEG", "DEG2RAD", "MM2UM", "DEG2ARCSEC", "POSE_OUTPUTS", "OUTPUTS", "OUTPUT_UNITS",
+__all__ = ["RAD2DEG", "DEG2RAD", "MM2UM", "DEG2ARCSEC", "PPM", "POSE_OUTPUTS", "OUTPUTS", "OUTPUT_UNITS",
            "DISPLAY", "z_value", "t_value", "Z95", "probability_text", "quantity_text"]
 
 RAD2DEG = 180.0 / math.pi
 DEG2RAD = math.pi / 180.0
 MM2UM = 1e3
 DEG2ARCSEC = 3600.0
+#: Parts per million per unit of probability (exceedances in reports).
+PPM = 1e6
 
 #: Components of the pose error, in order: rows of every J_q.
 POSE_OUTPUTS = ("x", "y", "phi")
@@ -58,7 +60,7 @@ def probability_text(p: float, ci=None, se: float | None = None) -> str:
     >>> probability_text(0.0528, se=0.0018)
     '5.28 ± 0.18 %'
     """
-    scale, unit = (1e6, "ppm") if p < 0.01 else (100.0, "%")
+    scale, unit = (PPM, "ppm") if p < 0.01 else (100.0, "%")
 
     def number(v: float) -> str:  # three significant digits, never an exponent
         return f"{v:.0f}" if abs(v) >= 100 else f"{v:.3g}"
@@ -83,4 +85,4 @@ def quantity_text(value: float, unit: str, fmt: str = ".4g") -> str:
         return f"{value:{fmt}} {unit}"
     if value == 0 or abs(value) >= 0.01:
         return f"{value:{fmt}}"
-    return f"{value:.3e} ({1e6 * value:{fmt}} ppm)"
+    return f"{value:.3e} ({PPM * value:{fmt}} ppm)"

@@ -8,13 +8,12 @@ import numpy as np
 from .._version import __version__
 from ..errors import SpecError
 from ..kinematics.geometry import Geometry
-from ..units import DEG2ARCSEC, MM2UM
+from ..units import DEG2ARCSEC, MM2UM, PPM
 from . import (add_budget, add_geometry, add_json, add_pose_or_region, add_seed, command, emit_json, emit_table,
                grid_poses, positive_float, positive_int, probability, provenance)
 
 #: prp3mc.stackup.DEFAULT_TARGET, written out so that --help imports no numba (tests/test_yield_cli.py checks).
 DEFAULT_TARGET = 1e-9
-PPM = 1e6
 #: A spec this many times below the error's RSS scale is refused (a value in mm typed as µm, or the like).
 _SCALE = 1e-3
 _LEVELS = ("p99.73", "p99.9937", "p99.9999")
@@ -99,9 +98,9 @@ def _pose_frame(r) -> "pd.DataFrame":
     """One row per pose: the exceedances (ppm) and their bound, the position's Ppk, worst case and RSS."""
     import pandas as pd
 
-    poses = r.poses.reshape(-1, 3)
-    frame = pd.DataFrame({"x_mm": poses[:, 0], "y_mm": poses[:, 1], "phi_deg": poses[:, 2],
-                          "exceed_position_ppm": PPM * r.exceed_position.reshape(-1)})
+    from .._result import pose_columns
+
+    frame = pd.DataFrame({**pose_columns(r.poses), "exceed_position_ppm": PPM * r.exceed_position.reshape(-1)})
     if r.exceed_phi is not None:
         frame["exceed_phi_ppm"] = PPM * r.exceed_phi.reshape(-1)
         frame["exceed_any_ppm"] = PPM * r.exceed_any.reshape(-1)
@@ -117,15 +116,15 @@ def _correlated(args, geometry, budget, poses, where) -> None:
     """A budget with [correlation]: the streamed Monte Carlo, its Wilson interval as the error (said in method)."""
     import pandas as pd
 
+    from .._result import pose_columns
     from ..montecarlo.propagation import monte_carlo
-    from ..stackup.result import ppk
+    from ..stackup.result import ppk, region_summary
 
     S = args.spec_position_um / MM2UM
     mc = monte_carlo(geometry, budget, poses, args.samples, rng=args.seed, tolerance_mm=S,
                      percentiles=(99.73, 99.9937, 99.9999))
     p = mc.exceed_prob.reshape(-1)
-    half = 0.5 * (mc.exceed_ci[..., 1] - mc.exceed_ci[..., 0]).reshape(-1)
-    half = np.maximum(half, np.abs(mc.exceed_ci[..., :].reshape(-1, 2) - p[:, None]).max(axis=1))
+    half = np.abs(mc.exceed_ci.reshape(-1, 2) - p[:, None]).max(axis=1)    # the interval's farther end from P
     k = int(np.argmax(p))
     record = {"exceed_position_ppm": PPM * float(p[k]), "exceed_phi_ppm": None, "exceed_any_ppm": None,
               "error_bound_ppm": PPM * float(half[k]),
@@ -136,12 +135,8 @@ def _correlated(args, geometry, budget, poses, where) -> None:
                   samples=mc.n_samples, **where)
     doc = {**record, **provenance(args, geometry, budget, **inputs)}
     if args.region is not None:
-        doc["region"] = {"max_exceed_position_ppm": PPM * float(p.max()),
-                         "mean_exceed_position_ppm": PPM * float(p.mean()),
-                         "area_fraction_above_1ppm": float(np.mean(p > 1e-6)),
-                         "argmax_pose": [float(v) for v in poses[k]]}
-        frame = pd.DataFrame({"x_mm": poses[:, 0], "y_mm": poses[:, 1], "phi_deg": poses[:, 2],
-                              "exceed_position_ppm": PPM * p, "ci95_halfwidth_ppm": PPM * half})
+        doc["region"] = region_summary(p, poses)
+        frame = pd.DataFrame({**pose_columns(poses), "exceed_position_ppm": PPM * p, "ci95_halfwidth_ppm": PPM * half})
         emit_table(args, frame, doc)
         return
     if args.json:

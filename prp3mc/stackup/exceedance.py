@@ -18,7 +18,7 @@ from ..model.linear import linear_model
 from ..units import DEG2ARCSEC, DEG2RAD, MM2UM, RAD2DEG
 from ._special import special_args
 from .characteristic import term_table
-from .lattice import LEVELS, leg_powers, channel
+from .lattice import LEVELS, channel, leg_powers, support_max
 from .result import YieldResult
 from .series import batch_series
 
@@ -185,7 +185,7 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
             f"{int(loose.sum())} of {N} pose(s) (bound up to {float(b_any.max()):.3g}; the joint series does not "
             "converge in time when a leg has few continuous laws); each channel's own exceedance keeps its "
             "bound"), stacklevel=2)
-    worst_pos, worst_phi = _worst(pos, phi, C, table)
+    worst_pos, worst_phi = _worst(pos, phi, C, legs, table)
     rss_pos, rss_phi = _rss(C, table)
 
     def shaped(a, tail=()):
@@ -289,18 +289,13 @@ def _moments(C: np.ndarray, table) -> tuple[np.ndarray, np.ndarray]:
     return mean, cov
 
 
-def _worst(pos, phi, C, table) -> tuple[np.ndarray, np.ndarray]:
+def _worst(pos, phi, C, legs, table) -> tuple[np.ndarray, np.ndarray]:
     """The exact worst case of the position (mm) and ``|dphi|`` (rad); NaN where a normal law acts."""
     normal_xy = (np.abs(C[:, :2, :]).max(axis=1) > 0) & table.normal[None, :]
     normal_phi = (np.abs(C[:, 2, :]) > 0) & table.normal[None, :]
     worst_pos = np.where(normal_xy.any(axis=1), np.nan, pos.zmax)
-    if phi is None:
-        lo, hi = np.where(table.random, table.lo, 0.0), np.where(table.random, table.hi, 0.0)
-        a, b = C[:, 2, :] * lo, C[:, 2, :] * hi
-        s = C[:, 2, :] @ table.constant
-        zmax = np.maximum(np.abs(s + np.minimum(a, b).sum(-1)), np.abs(s + np.maximum(a, b).sum(-1)))
-    else:
-        zmax = phi.zmax
+    zmax = (support_max(1, C[:, 2:, :], (C[:, 2, :] @ table.constant)[:, None], legs, table) if phi is None
+            else phi.zmax)
     return worst_pos, np.where(normal_phi.any(axis=1), np.nan, zmax)
 
 

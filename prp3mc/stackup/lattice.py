@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Channel", "channel", "leg_powers", "LEVELS", "MIXED_LEG"]
+__all__ = ["Channel", "channel", "leg_powers", "support_max", "LEVELS", "MIXED_LEG"]
 
 #: Probabilities of the reported quantiles: p99.73 and p99.9937 (3 and 4 sd of a normal law, two-sided:
 #: Cpk 1 and 1.33) and p99.9999 (1 ppm).
@@ -165,14 +165,16 @@ def channel(which: str, columns: np.ndarray, Ainv: np.ndarray, legs, table, z1, 
     mnorm = np.ones((N, 3))
     mnorm[:, :d] = np.linalg.norm(V[:, :d, :d], axis=-1)
     lam = np.prod(Q[:, :d], axis=1) * np.abs(np.linalg.det(V[:, :d, :d]))
-    zmax = _zmax(d, c, s, legs, table, random)
+    zmax = support_max(d, c, s, legs, table)
     return Channel(d=d, ok=ok, grp=grp, mu=mu, snu=snu, Q=Q, Vinv=Vinv, mnorm=mnorm, ab=ab, lam=lam, zmax=zmax,
                    alias=alias)
 
 
-def _zmax(d: int, c: np.ndarray, s: np.ndarray, legs: np.ndarray, table, random: np.ndarray) -> np.ndarray:
-    """Largest ``|Y|`` over the support (normal laws cut): the terms of a leg are parallel, so their sum is
-    one segment; with the terms of all legs (thermal) the maximum is at one of a few corners."""
+def support_max(d: int, c: np.ndarray, s: np.ndarray, legs: np.ndarray, table) -> np.ndarray:
+    """Largest ``|Y|`` over the support (normal laws cut), (N,), of the channel ``Y = s + c X`` (c (N, d, T),
+    s (N, d); NaN for d = 3): the terms of a leg are parallel, so their sum is one segment; with the terms of
+    all legs (thermal) the maximum is at one of a few corners."""
+    random = table.random
     if d == 3:
         return np.full(c.shape[0], np.nan)
     lo, hi = np.where(random, table.lo, 0.0), np.where(random, table.hi, 0.0)

@@ -10,11 +10,9 @@ from scipy import special
 
 from .._result import freeze, pose_columns, short_repr
 from .._version import __version__
-from ..units import DEG2ARCSEC, MM2UM
+from ..units import DEG2ARCSEC, MM2UM, PPM
 
-__all__ = ["YieldResult", "ppk", "PPM"]
-
-PPM = 1e6
+__all__ = ["YieldResult", "ppk", "region_summary", "PPM"]
 
 
 def ppk(exceed) -> np.ndarray:
@@ -22,6 +20,18 @@ def ppk(exceed) -> np.ndarray:
     p = np.clip(np.asarray(exceed, dtype=float), 0.0, 1.0)
     with np.errstate(divide="ignore"):
         return special.ndtri(1.0 - p) / 3.0
+
+
+def region_summary(exceed, poses, threshold: float = 1e-6) -> dict:
+    """A position exceedance (...) over its poses (..., 3): ``max_exceed_position_ppm``,
+    ``mean_exceed_position_ppm``, ``area_fraction_above_1ppm`` (the share of poses above ``threshold``) and
+    ``argmax_pose`` (x mm, y mm, phi deg)."""
+    flat = np.asarray(exceed, dtype=float).reshape(-1)
+    k = int(np.argmax(flat))
+    return {"max_exceed_position_ppm": PPM * float(flat[k]),
+            "mean_exceed_position_ppm": PPM * float(flat.mean()),
+            "area_fraction_above_1ppm": float(np.mean(flat > threshold)),
+            "argmax_pose": [float(v) for v in np.reshape(poses, (-1, 3))[k]]}
 
 
 @dataclass(frozen=True, slots=True, repr=False)
@@ -120,14 +130,8 @@ class YieldResult:
         return values[output]
 
     def region_summary(self, threshold: float = 1e-6) -> dict:
-        """The position exceedance over the poses: ``max_exceed_position_ppm``, ``mean_exceed_position_ppm``,
-        ``area_fraction_above_1ppm`` (the share of poses above ``threshold``) and ``argmax_pose``."""
-        flat = self.exceed_position.reshape(-1)
-        k = int(np.argmax(flat))
-        return {"max_exceed_position_ppm": PPM * float(flat[k]),
-                "mean_exceed_position_ppm": PPM * float(flat.mean()),
-                "area_fraction_above_1ppm": float(np.mean(flat > threshold)),
-                "argmax_pose": [float(v) for v in self.poses.reshape(-1, 3)[k]]}
+        """The position exceedance over the poses (:func:`region_summary`)."""
+        return region_summary(self.exceed_position, self.poses, threshold)
 
     def to_frame(self) -> pd.DataFrame:
         """Tidy table: x_mm, y_mm, phi_deg, output, statistic, value, unit, error_bound, method.

@@ -24,7 +24,7 @@ are the smallest for which the support, shifted by any lattice vector, misses
 D (their bounding boxes in the coordinates w of y = sum_j w_j m_j).
 
 **The certified truncation.** Each term's ``|phi_t|`` is below a non-increasing
-envelope (:func:`~.characteristic.term_env`), and ``|T_D(w)|`` below a bound
+envelope (:func:`~.characteristic.envelope`), and ``|T_D(w)|`` below a bound
 tau(``|w|``) that falls with ``|w|`` (for every z up to the largest used, so one
 lattice serves every quantile). Since ``|nu_j|`` <= ``|m_j|`` ``|w|``, every summand
 is below a *separable* product ``prod_j g_j(|n_j|)`` with
@@ -36,7 +36,7 @@ lattice points of the *cross* ``prod_j g_j(|n_j|) >= eta``; what it leaves
 out is below ``B(eta) = sum over the rest of prod_j g_j``, computed exactly
 from the 1-D sums of the g_j: explicit up to N_j, then the analytic tail
 ``sum_{n > N} g(n) <= g(N) N / (p - 1)``, where p is the decay power of g
-past N (:func:`~.characteristic.term_pow`; it must exceed 1). eta is the
+past N (:func:`~.characteristic.envelope_power`; it must exceed 1). eta is the
 largest value with B(eta) within half the target. Inside the cross a point
 is dropped when its full envelope (every term, the exact transform bound)
 is below a threshold whose dropped points add up to at most 0.4 of the
@@ -75,7 +75,7 @@ _TWO_PI = 2.0 * math.pi
 
 @njit(cache=True, nogil=True)
 def _transform(d, z1, z2, a, b, j1):
-    """T_D at a point (a, b as in :func:`_tb`)."""
+    """T_D at a point (a, b as in :func:`~.truncation.transform_bound`)."""
     if d == 1:
         return 2.0 * z1 if a == 0.0 else 2.0 * math.sin(a * z1) / a
     disc = math.pi * z1 * z1 if a == 0.0 else 2.0 * math.pi * z1 * j1(z1 * a, 0) / a

@@ -370,6 +370,17 @@ def _leg_value(j, m, E, d, ev, grp, mu, Q, mnorm, lam, z1, z2):
 
 
 @njit(cache=True, nogil=True)
+def _first_within(suffix, e):
+    """The fewest rows to keep: the least K with ``suffix[K + 1]`` <= e, or N when none is. ``suffix[k]`` bounds
+    the rows ``|n|`` >= k (k = 1..N), ``suffix[N + 1]`` their analytic tail past N."""
+    N = suffix.size - 2
+    for k in range(N + 1):
+        if suffix[k + 1] <= e:
+            return k
+    return N
+
+
+@njit(cache=True, nogil=True)
 def _rows_3d(E2, E3, SE, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2, e_part):
     """The rows (n2, n3) of the 3-D channel (half-plane, the origin's first), each with a bound of its whole
     sum, and the bound of what they leave out (outer rows, tails of the row walks). A row's points lie on
@@ -407,11 +418,7 @@ def _rows_3d(E2, E3, SE, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2, e_part):
     suffix[N3 + 1] = 2.0 * E3[N3] * N3 / (pe3 - 1.0) * b3(N3) * head if pe3 > 1.0 else np.inf
     for k in range(N3, 0, -1):
         suffix[k] = suffix[k + 1] + 2.0 * E3[k] * b3(k) * head
-    K3 = N3
-    for k in range(N3 + 1):
-        if suffix[k + 1] <= e_part:
-            K3 = k
-            break
+    K3 = _first_within(suffix, e_part)
     outer = suffix[K3 + 1]
     status = 1 if outer > e_part else 0
     budget = e_part / (2.0 * (K3 + 1))
@@ -521,11 +528,7 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
         suffix[N2 + 1] = R2[N2 + 1] * _row_bound(_TWO_PI * N2 / Q[1], S1, cm, g1, Q[0], ev, grp, mu, ab)
         for k in range(N2, 0, -1):
             suffix[k] = suffix[k + 1] + 2.0 * RB[k]
-        K2 = N2
-        for k in range(N2 + 1):
-            if suffix[k + 1] <= e_outer:
-                K2 = k
-                break
+        K2 = _first_within(suffix, e_outer)
         outer = suffix[K2 + 1]
         if outer > e_outer:
             status = 1
