@@ -40,12 +40,12 @@ from ..stackup.result import PPM
 from ..units import DEG2ARCSEC, MM2UM, RAD2DEG
 
 __all__ = ["YieldSpec", "ExceedanceCurve", "read_spec", "run_yield", "exceedance_curve", "yield_summary",
-           "CURVE_POINTS", "CURVE_FLOOR"]
+           "CURVE_POINTS"]
 
 _KEYS = {"position_um", "phi_arcsec"}
-#: Spec values of an exceedance curve, and the smallest probability it shows.
+#: Spec values of an exceedance curve (the smallest probability it shows is the figure's,
+#: :data:`prp3mc.reports.yield_plots.EXCEEDANCE_FLOOR`).
 CURVE_POINTS = 20
-CURVE_FLOOR = 1e-9
 
 
 @dataclass(frozen=True, slots=True)
