@@ -193,6 +193,8 @@ def exceedance_curve(config, budget, result: YieldResult, output: str, samples: 
 
 
 def _exact(values: np.ndarray, scale: float = 1.0) -> dict:
+    """``{"min", "max", "mean"}`` over a grid of an exact statistic (no standard error), times ``scale``
+    (also the worst case's in :mod:`prp3mc.study.summary`)."""
     v = scale * np.asarray(values, dtype=float)
     return {"min": float(v.min()), "max": float(v.max()), "mean": float(v.mean())}
 
