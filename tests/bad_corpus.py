@@ -583,10 +583,10 @@ def second_cases() -> list[Case]:
     add(Case(M, [*sim, "--plan", "{tmp}/nowhere.csv", "--out", "{tmp}/c.csv"], message="does not exist"))
     add(Case(M, [*sim, "--plan", "{c_plan_far}", "--out", "{tmp}/c.csv"], message="stroke"))
     add(Case(M, [*sim, "--plan", "{c_plan}", "--out", "{tmp}/c_plan.csv"], expect="accept",
-             check=lambda root: None if (root / "c_plan.csv").is_file() else "c_plan.csv was not written"))
+             check=_wrote(".", "c_plan.csv")))
     add(Case(M, [*sim, "--poses", "9", "--region", "{r_far}", "--out", "{tmp}/c.csv"], message="stroke"))
     add(Case(M, ["simulate", *G, *B, "--poses", "4", "--out", "{tmp}/deep/er/c.csv", "--seed", "1"],
-             expect="accept", check=lambda root: None if (root / "deep/er/c.csv").is_file() else "not written"))
+             expect="accept", check=_wrote("deep/er", "c.csv")))
     # values in the wrong unit: refused where they cannot be, warned where they are legal but unlikely
     add(Case(S, [*sim, "--poses", "9", "--temperature", "293,301", "--out", "{tmp}/c.csv"], message="kelvin"))
     add(Case(S, [*sim, "--poses", "9", "--instrument-sigma-mm", "2", "--out", "{tmp}/c.csv"], message="units"))

@@ -196,12 +196,12 @@ def _summary_display(frame: pd.DataFrame) -> pd.DataFrame:
                 continue
             factor, unit = (1.0, "ppm") if key[3] == "exceed_ppm" else DISPLAY[key[2]]
             statistic = _YIELD_SHOWN[key[3]]
+        elif key[3].startswith("exceed_"):      # a Monte Carlo probability: % from 1 %, else ppm
+            factor, unit = (100.0, "%") if by["value"].max() >= 0.01 else (1e6, "ppm")
+            statistic = f"P(> {key[3][len('exceed_'):-2]} mm)"
         else:
             factor, unit = DISPLAY[key[2]]
             statistic = key[3].replace("_", " ")
-        if key[1] != "exact_yield" and key[3].startswith("exceed_"):    # a probability: % from 1 %, else ppm
-            factor, unit = (100.0, "%") if by["value"].max() >= 0.01 else (1e6, "ppm")
-            statistic = f"P(> {key[3][len('exceed_'):-2]} mm)"
         rows.append({"configuration": key[0], "analysis": key[1].replace("_", " "),
                      "output": {"phi": "|δφ|", "any": "position or |δφ|"}.get(key[2], key[2]),
                      "statistic": statistic, "unit": unit,

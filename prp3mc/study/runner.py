@@ -63,10 +63,12 @@ def _histogram_poses(config: StudyConfiguration, wc: WorstCaseResult) -> tuple[n
             ("centre", "worst-case max", "worst-case min"))
 
 
-def _pose_samples(config: StudyConfiguration, budget: Budget, wc: WorstCaseResult, n: int, seed: int,
+def _pose_samples(config: StudyConfiguration, budget: Budget, wc: WorstCaseResult, X: np.ndarray, seed: int,
                   k_sigma: float | None) -> PoseSamples:
+    """The pose errors of the Monte Carlo run's draws ``X`` (n, inputs) (``budget.sample(n, seed)``) at the
+    histograms' poses."""
     poses, labels = _histogram_poses(config, wc)
-    X = budget.sample(n, seed)  # the Monte Carlo run's samples (same seed)
+    n = X.shape[0]
     err = linear_model(config.geometry, budget, poses).evaluate(X)      # (P, n, 3) mm, mm, rad
     at = worst_case(config.geometry, budget, poses, k_sigma=k_sigma)
     return PoseSamples(poses=poses, labels=labels, position_mm=np.hypot(err[..., 0], err[..., 1]),
@@ -164,6 +166,8 @@ def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple
     wc = worst_case(g, b, config.region.grid(study.worstcase_grid), k_sigma=study.k_sigma)
     timings["worstcase"] += time.perf_counter() - t
     kw: dict[str, Any] = {}
+    draws = None        # the Monte Carlo run's budget draws (its seed): the histograms' and the exceedance curves'
+    run_exact_yield = study.spec is not None and "yield" in study.outputs and not b.correlated
     if "montecarlo" in study.outputs:
         nx, ny = study.mc_grid
         stage(f"Monte Carlo, {study.mc_samples} samples on {nx} x {ny} poses")
@@ -171,7 +175,10 @@ def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple
         kw["montecarlo"] = monte_carlo(g, b, config.region.grid(study.mc_grid), study.mc_samples,
                                        rng=mc_seed, percentiles=study.percentiles,
                                        tolerance_mm=study.tolerance_mm, progress=progress)
-        kw["samples"] = _pose_samples(config, b, wc, study.mc_samples, mc_seed, study.k_sigma)
+        draws = b.sample(study.mc_samples, mc_seed)
+        kw["samples"] = _pose_samples(config, b, wc, draws, mc_seed, study.k_sigma)
+        if not run_exact_yield:
+            draws = None                          # not held through the Sobol run
         timings["montecarlo"] += time.perf_counter() - t
     if "sobol" in study.outputs:
         nx, ny = study.sobol_grid
@@ -189,12 +196,11 @@ def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple
         warnings.warn(Prp3mcWarning(f"study {study.name}: no exact yield for {config.name}: the budget correlates "
                                     "inputs ([correlation]) and the exact series needs independent ones; the Monte "
                                     "Carlo run counts P(position > spec) instead"), stacklevel=2)
-    elif study.spec is not None and "yield" in study.outputs:
+    elif run_exact_yield:
         nx, ny = study.mc_grid
         stage(f"exact yield against the spec on {nx} x {ny} poses")
         t = time.perf_counter()
         y = kw["yield_"] = run_yield(config, b, study.spec, study.mc_grid)
-        draws = b.sample(study.mc_samples, mc_seed) if "montecarlo" in study.outputs else None
         kw["curves"] = tuple(exceedance_curve(config, b, y, o, draws)
                              for o in ("position",) + (("phi",) if study.spec.phi_arcsec is not None else ()))
         timings["yield"] += time.perf_counter() - t

@@ -40,12 +40,12 @@ from ..stackup.result import PPM
 from ..units import DEG2ARCSEC, MM2UM, RAD2DEG
 
 __all__ = ["YieldSpec", "ExceedanceCurve", "read_spec", "run_yield", "exceedance_curve", "yield_summary",
-           "CURVE_POINTS", "CURVE_FLOOR"]
+           "CURVE_POINTS"]
 
 _KEYS = {"position_um", "phi_arcsec"}
-#: Spec values of an exceedance curve, and the smallest probability it shows.
+#: Spec values of an exceedance curve (the smallest probability it shows is the figure's,
+#: :data:`prp3mc.reports.yield_plots.EXCEEDANCE_FLOOR`).
 CURVE_POINTS = 20
-CURVE_FLOOR = 1e-9
 
 
 @dataclass(frozen=True, slots=True)
@@ -193,6 +193,8 @@ def exceedance_curve(config, budget, result: YieldResult, output: str, samples: 
 
 
 def _exact(values: np.ndarray, scale: float = 1.0) -> dict:
+    """``{"min", "max", "mean"}`` over a grid of an exact statistic (no standard error), times ``scale``
+    (also the worst case's in :mod:`prp3mc.study.summary`)."""
     v = scale * np.asarray(values, dtype=float)
     return {"min": float(v.min()), "max": float(v.max()), "mean": float(v.mean())}
 

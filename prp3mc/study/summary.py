@@ -110,7 +110,7 @@ from ..units import DEG2ARCSEC, MM2UM, t_value
 from ..sobol.indices import DEPENDENT_NOTE
 from ..worstcase.envelope import CORRELATION_NOTE
 from .allocation import allocation_summary
-from .spec import yield_summary
+from .spec import _exact, yield_summary
 from .results import ConfigurationResult, StudyResult, over_grid, pct_se
 
 __all__ = ["build_summary", "study_inputs", "correlation_summary"]
@@ -140,10 +140,6 @@ def _over_grid(values: np.ndarray, se: np.ndarray) -> dict:
 def _exact_or_none(value) -> float | None:
     """An exact number, or None (JSON null) where it is undefined (NaN)."""
     return None if np.isnan(value) else float(value)
-
-
-def _exact(values: np.ndarray) -> dict:
-    return {"min": float(values.min()), "max": float(values.max()), "mean": float(values.mean())}
 
 
 def _montecarlo(c: ConfigurationResult) -> dict:
