@@ -18,8 +18,8 @@ DEFAULT_TARGET = 1e-9
 _SCALE = 1e-3
 _LEVELS = ("p99.73", "p99.9937", "p99.9999")
 _MC_METHOD = ("Monte Carlo (the budget correlates inputs: the exact series needs independent ones): the streamed "
-              "sampler, error_bound = half-width of the Wilson 95 % interval of the position exceedance (a "
-              "confidence interval, not a bound); quantiles are sample percentiles; P(|dphi| > Z) and P(either) "
+              "sampler, error_bound = distance from the position exceedance to the farther end of its Wilson 95 % "
+              "interval (a confidence statement, not a bound); quantiles are sample percentiles; P(|dphi| > Z) and P(either) "
               "are not computed")
 
 
@@ -136,7 +136,7 @@ def _correlated(args, geometry, budget, poses, where) -> None:
     doc = {**record, **provenance(args, geometry, budget, **inputs)}
     if args.region is not None:
         doc["region"] = region_summary(p, poses)
-        frame = pd.DataFrame({**pose_columns(poses), "exceed_position_ppm": PPM * p, "ci95_halfwidth_ppm": PPM * half})
+        frame = pd.DataFrame({**pose_columns(poses), "exceed_position_ppm": PPM * p, "ci95_farther_end_ppm": PPM * half})
         emit_table(args, frame, doc)
         return
     if args.json:
