@@ -59,7 +59,7 @@ from .updated import updated_model
 from .accuracy import predicted_accuracy
 from ..campaign.iso9283 import iso9283_figures
 
-__all__ = ["discrepancy", "detectable_effect", "correlation_warning", "STAGES"]
+__all__ = ["discrepancy", "detectable_effect", "detectable_in", "correlation_warning", "STAGES"]
 
 #: The stages of :func:`discrepancy`, one progress step each.
 STAGES = ("gross errors and names", "diagnoses", "with the gross errors", "ISO 9283")
@@ -358,11 +358,23 @@ def detectable_effect(geometry: Geometry, budget: Budget, campaign: Campaign, na
     float
         In the effect's unit; inf if the campaign cannot see it.
     """
-    eff = effect(name)
-    if not eff.systematic:
+    if not effect(name).systematic:
         raise ParameterError(f"{name}: detectable_effect handles systematic effects; simulate spreads instead")
     engine = Engine(geometry, budget, read_campaign(campaign, geometry),
                     noise_cov(instrument_sigma_mm, instrument_sigma_deg), registration=registration)
+    return detectable_in(engine, name, power=power, alpha=alpha)
+
+
+def detectable_in(engine: Engine, name: str, *, power: float = 0.9, alpha: float = 0.01) -> float:
+    """:func:`detectable_effect` of systematic effect ``name`` on the campaign, noise and registration of an
+    engine at the nominal geometry (one engine serves every effect of a plan).
+
+    Returns
+    -------
+    float
+        In the effect's unit; inf if the campaign cannot see it.
+    """
+    eff = effect(name)
     if name not in [e.name for e in engine.systematic] or name in engine.confounded:
         return float("inf")
     K = len(engine.systematic) - len(engine.confounded) + len(engine.spreads)
