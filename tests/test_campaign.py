@@ -246,6 +246,11 @@ def test_repeatable_fraction_splits_the_variance(r):
     ({"outliers": (1.5, 0.5)}, "outliers: fraction must lie in"),
     ({"outliers": 0.01}, "outliers must be"),
     ({"repeatable_fraction": -0.1}, "repeatable_fraction must lie in"),
+    ({"effects": {"backlash_1": 20.0}}, r"effects backlash_1=20: larger than any mm value .* check units"),
+    ({"effects": {"cyclic_1": (20.0, 30.0)}}, r"effects cyclic_1=.*larger than any mm value"),
+    ({"effects": {"scale_2": 500.0}}, r"effects scale_2=500: larger than any 1 value"),
+    ({"instrument_sigma_mm": 2.0}, r"instrument_sigma_mm 2: an instrument noise sd above 0.5 mm; check units"),
+    ({"instrument_sigma_deg": 5.0}, r"instrument_sigma_deg 5: an instrument noise sd above 0.5 deg"),
 ])
 def test_bad_reality_settings(setup, kwargs, message):
     g, b, poses = setup

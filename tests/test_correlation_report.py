@@ -111,7 +111,7 @@ def test_discrepancy_warning_measures_what_the_fit_leaves_out(seed):
     those of Monte Carlo draws of the correlated and of the independent budget, within their sampling error."""
     import re
 
-    from prp3mc.cli.discrepancy import correlation_warning
+    from prp3mc.measurement.discrepancy.workflow import correlation_warning
     from prp3mc.kinematics.geometry import Geometry
     from prp3mc.model.linear import linear_model
     geometry, budget = Geometry.from_preset("u-shape"), EXAMPLE.budget
@@ -127,6 +127,34 @@ def test_discrepancy_warning_measures_what_the_fit_leaves_out(seed):
         change = 100 * np.max(np.abs(sds[0][k] / sds[1][k] - 1))
         assert abs(change - shown) <= 0.5 + 100 * 6 * np.sqrt(2 / n) * (1 + change / 100), (k, change, shown)
     assert "takes them as independent" in message and "one-batch" in message
+
+
+def test_python_discrepancy_warns_of_a_correlated_budget(monkeypatch):
+    """``prp3mc.discrepancy`` itself warns (not only the CLI), before the fit, and only for a correlated budget;
+    the fit is stopped at its first step (the warning is what is tested)."""
+    import warnings
+
+    from prp3mc.kinematics.geometry import Geometry
+    from prp3mc.measurement.discrepancy import workflow
+    from prp3mc.study.reader import STUDIES_DIR
+
+    class Stop(Exception):
+        pass
+
+    def stop(*args, **kwargs):
+        raise Stop
+
+    monkeypatch.setattr(workflow, "identify", stop)
+    geometry = Geometry.from_preset("u-shape")
+    correlated = Budget.load(str(STUDIES_DIR / "budgets" / "one_batch.toml"))
+    with pytest.warns(Prp3mcWarning, match="one-batch.*the discrepancy fit takes them as independent"), \
+            pytest.raises(Stop):
+        workflow.discrepancy(geometry, correlated, "example", instrument_sigma_mm=0.002, instrument_sigma_deg=0.0005)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", Prp3mcWarning)
+        with pytest.raises(Stop):
+            workflow.discrepancy(geometry, Budget(correlated.inputs), "example", instrument_sigma_mm=0.002,
+                                 instrument_sigma_deg=0.0005)
 
 
 @pytest.mark.slow

@@ -1,13 +1,8 @@
 """``prp3mc discrepancy``: name what the model misses in a measurement campaign."""
 
-import warnings
-
-import numpy as np
-
 from ..kinematics.geometry import Geometry
 from ..limits import discrepancy_estimate
 from ..progress import Progress
-from ..errors import Prp3mcWarning
 from ..units import MM2UM, quantity_text
 from . import (WARNINGS, add_budget, add_geometry, add_instrument_noise, add_json, add_output, add_progress, add_seed,
                command, emit_json, probability, provenance, within_limits)
@@ -46,8 +41,6 @@ class DiscrepancyCommand:
         within_limits(args, discrepancy_estimate(count_rows(args.data), n_inputs=d))  # before reading the file
         campaign = read_campaign(args.data, geometry)
         check_instrument_noise(campaign, args.instrument_sigma_mm, args.instrument_sigma_deg)
-        if budget.correlated:
-            warnings.warn(Prp3mcWarning(correlation_warning(geometry, budget, campaign.poses)), stacklevel=1)
         within_limits(args, discrepancy_estimate(campaign.n_measurements, campaign.n_poses,
                                                  int(campaign.repeats.max()), n_inputs=d))
         with Progress(len(STAGES) + 1, "discrepancy", args.progress) as bar:
@@ -65,29 +58,6 @@ class DiscrepancyCommand:
         print("\n".join(headline(result) + [f"report: {folder / 'report.html'}",
                                              f"updated model: {folder / 'model'} (geometry.toml, budget.toml, "
                                              "budget_compensated.toml)"]))
-
-
-def correlation_warning(geometry, budget, poses) -> str:
-    """What the discrepancy fit's independent inputs make of a correlated budget, measured at the campaign's poses.
-
-    The fit's likelihood sums each input's own covariance (it ignores
-    ``[correlation]``; docs, *The discrepancy workflow*, Dependent inputs);
-    the message says by how much the budget's standard deviation of the
-    position error (the root of the x, y variances' sum) and of φ differ
-    from the independent one's at some pose (the largest relative difference).
-    """
-    from ..model.linear import linear_model
-    from ..model.budget import Budget
-    budget = budget.without_effects()
-    cov = [linear_model(geometry, b, poses, check=False).moments()[1] for b in (budget, Budget(budget.inputs))]
-    sd = [(np.sqrt(c[..., 0, 0] + c[..., 1, 1]), np.sqrt(c[..., 2, 2])) for c in cov]
-    change = [100 * float(np.max(np.abs(np.divide(a, b, out=np.ones_like(a), where=b > 0) - 1)))
-              for a, b in zip(*sd)]
-    return (f"budget {budget.name!r} correlates inputs ([correlation]); the discrepancy fit takes them as "
-            f"independent: at the campaign's poses the correlation changes the budget's sd of the position error "
-            f"by up to {change[0]:.0f} % and of phi by up to {change[1]:.0f} %, so the dispersion tests and the "
-            "repeatable fraction are judged against the independent budget (the predicted accuracy respects the "
-            "correlation; docs: The discrepancy workflow, Dependent inputs)")
 
 
 def headline(result) -> list[str]:

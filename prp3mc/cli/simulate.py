@@ -33,33 +33,6 @@ def _pairs(text: str) -> dict[str, float]:
     return out
 
 
-#: Largest plausible hidden value per unit of an effect (mm, deg, 1, 1/K), and of the instrument's noise sd
-#: (mm, deg): a larger one is a value typed in another unit (20 for a 20 µm backlash, 2 for a 2 µm noise).
-#: A misassembled machine's few degrees or millimetres stay below them (issue 24's large errors).
-PLAUSIBLE = {"mm": 10.0, "deg": 10.0, "1": 0.05, "1/K": 1e-3}
-PLAUSIBLE_NOISE = {"mm": 0.5, "deg": 0.5}
-
-
-def _check_units(effects: dict[str, float], sigma_mm: float, sigma_deg: float) -> None:
-    """Refuse, in one line, a hidden effect or an instrument noise too large for its unit (a value in µm or
-    arcsec given where mm or deg are meant)."""
-    from ..model.effects import effect
-    from ..errors import BudgetError
-
-    for name, value in effects.items():
-        try:
-            unit = effect(name).unit
-        except (BudgetError, KeyError, ValueError):
-            continue                        # an unknown name: the simulation names it
-        if abs(value) > PLAUSIBLE.get(unit, math.inf):
-            raise CampaignError(f"--effects {name}={value:g}: larger than any {unit} value a machine shows "
-                                f"({PLAUSIBLE[unit]:g}); check units (mm, deg, 1, 1/K: 20 µm is 0.02)")
-    for option, sigma, unit in (("--instrument-sigma-mm", sigma_mm, "mm"), ("--instrument-sigma-deg", sigma_deg, "deg")):
-        if sigma > PLAUSIBLE_NOISE[unit]:
-            raise CampaignError(f"{option} {sigma:g}: an instrument noise sd above {PLAUSIBLE_NOISE[unit]:g} {unit}; "
-                                f"check units ({unit}: 2 µm is 0.002 mm, 2 arcsec is 0.00056 deg)")
-
-
 def _numbers(text: str, option: str, count: tuple[int, ...], what: str) -> tuple[float, ...]:
     """``'a,b,c'`` as finite floats, as many as ``count`` allows."""
     try:
@@ -147,13 +120,14 @@ class SimulateCommand:
     @staticmethod
     def run(args) -> None:
         from ..kinematics.geometry import GEOMETRY_PRESETS, Geometry, Region
-        from ..measurement.campaign.simulate import simulate_campaign
+        from ..measurement.campaign.simulate import check_plausible, simulate_campaign
         from ..model.budget import Budget
 
         if not args.out_file.strip():
             raise CampaignError("--out is empty: name the campaign file to write (or '-' for stdout)")
         out = None if args.out_file == "-" else Path(args.out_file)
-        _check_units(args.effects, args.instrument_sigma_mm, args.instrument_sigma_deg)
+        check_plausible(args.effects, args.instrument_sigma_mm, args.instrument_sigma_deg,
+                        labels=("--effects", "--instrument-sigma-mm", "--instrument-sigma-deg"))
         if out is None and args.json:
             raise CampaignError("--json prints to stdout: write the campaign to a file (--out CAMPAIGN.csv)")
         if out is not None and out.exists() and not args.force:

@@ -25,7 +25,7 @@ tell apart the listed candidate effects:
    (so the drift is separable from every effect: each pose is measured
    early and late); of :data:`N_ORDERS` random orders the one with the
    largest criterion is kept, with the measurement times it implies (the
-   simulator's moves, :func:`~prp3mc.measurement.simulate.visit_times`, or
+   simulator's moves, :func:`~prp3mc.measurement.campaign.simulate.visit_times`, or
    spread evenly over the minutes given).
 
 The temperature cannot be planned: thermal expansion is evaluated with an
@@ -35,8 +35,8 @@ drift); the plan's part is the order and the revisits.
 
 The reported smallest detectable value of each effect and the confounds
 are computed by the analysis's own engine on the planned campaign
-(:func:`~prp3mc.measurement.workflow.detectable_effect`,
-:func:`~prp3mc.measurement.confounds.design_confounds`), next to those of
+(:func:`~prp3mc.measurement.discrepancy.workflow.detectable_in`,
+:func:`~prp3mc.measurement.naming.confounds.design_confounds`), next to those of
 a grid of the same size for comparison.
 """
 
@@ -251,13 +251,19 @@ class _Information:
         self.noise = noise
         self.nuis = [j for j, n in enumerate(NUISANCE_NAMES) if n in DRIFT or (registration and n in REGISTRATION)]
 
-    def whitened(self, poses: np.ndarray, index: np.ndarray, direction: np.ndarray, s: np.ndarray) -> np.ndarray:
-        """Whitened columns ``[effects, nuisances]`` of measurements (M, 3, K + n) at poses[index]."""
+    def whitening(self, poses: np.ndarray) -> np.ndarray:
+        """Per pose ``L`` (P, 3, 3) with ``L W_p L' = I``: the visits' whitening, the same for every order."""
+        _, cov = linear_model(self.geometry, self.budget, poses, check=False).moments()
+        return np.linalg.inv(np.linalg.cholesky(cov + self.noise + 1e-12 * np.eye(3)))
+
+    def whitened(self, poses: np.ndarray, index: np.ndarray, direction: np.ndarray, s: np.ndarray,
+                 L: np.ndarray | None = None) -> np.ndarray:
+        """Whitened columns ``[effects, nuisances]`` of measurements (M, 3, K + n) at poses[index]
+        (``L``: :meth:`whitening` of ``poses``, computed when not given)."""
         temp = self.temperature[0] + (self.temperature[1] - self.temperature[0]) * s
         G = signatures(self.geometry, poses, index, self.effects, direction, temp)
         H = nuisance_signatures(poses[index], s)[:, :, self.nuis]
-        _, cov = linear_model(self.geometry, self.budget, poses, check=False).moments()
-        L = np.linalg.inv(np.linalg.cholesky(cov + self.noise + 1e-12 * np.eye(3)))     # L W L' = I
+        L = self.whitening(poses) if L is None else L
         return np.einsum("mij,mjk->mik", L[index], np.concatenate([G, H], axis=2))
 
     def criterion(self, info: np.ndarray) -> np.ndarray:
@@ -296,18 +302,24 @@ def _choose(per_pose: np.ndarray, n: int, crit) -> np.ndarray:
     return np.array(sorted(chosen))
 
 
+def _elapsed(b: np.ndarray) -> np.ndarray:
+    """Seconds since the first measurement of visits at slider positions ``b`` (M, 3) mm (the simulator's moves)."""
+    t = visit_times(b)
+    return t - t[0]
+
+
 def _schedule(info: _Information, geometry, poses, n_visits, direction, minutes, rng):
     """The best of N_ORDERS random interleaved orders: order (M,), directions (M, 3), times (M,), criterion."""
     P = poses.shape[0]
     b, _ = inverse_kinematics(geometry, poses, check=False)
+    L = info.whitening(poses)
     best = None
     for _ in range(N_ORDERS):
         order = np.concatenate([rng.permutation(P) for _ in range(n_visits)])
         dirs = direction[order, :, np.arange(order.size) // P]       # a pose's k-th visit is in round k
-        t = (np.linspace(0.0, 60.0 * minutes, order.size) if minutes is not None else
-             visit_times(b[order]) - visit_times(b[order])[0])
+        t = np.linspace(0.0, 60.0 * minutes, order.size) if minutes is not None else _elapsed(b[order])
         s = (t - t[0]) / max(t[-1] - t[0], 1e-12)
-        Z = info.whitened(poses, order, dirs, s)
+        Z = info.whitened(poses, order, dirs, s, L)
         value = float(info.criterion(np.einsum("mik,mil->kl", Z, Z)))
         if best is None or value > best[-1]:
             best = (order, dirs, t, s, value)
@@ -325,7 +337,7 @@ def _reference(info: _Information, geometry, region: Region, n_poses: int, n_vis
     order = np.concatenate([rng.permutation(len(poses)) for _ in range(n_visits)])
     dirs = rng.choice([-1.0, 1.0], size=(order.size, 3))
     b, _ = inverse_kinematics(geometry, poses[order], check=False)
-    t = np.linspace(0.0, 60.0 * minutes, order.size) if minutes is not None else visit_times(b) - visit_times(b)[0]
+    t = np.linspace(0.0, 60.0 * minutes, order.size) if minutes is not None else _elapsed(b)
     s = (t - t[0]) / max(t[-1] - t[0], 1e-12)
     Z = info.whitened(poses, order, dirs, s)
     value = float(info.criterion(np.einsum("mik,mil->kl", Z, Z)))
@@ -378,7 +390,7 @@ def plan_campaign(geometry: Geometry, budget: Budget, effects, n_poses: int, n_v
     CampaignError
         Too few poses or visits, or more poses than the region has candidates.
     """
-    from ..discrepancy.workflow import detectable_effect                    # the workflow imports the engine this uses
+    from ..discrepancy.workflow import detectable_in                        # the workflow imports the engine this uses
     seed, rng = resolve_rng(rng)
     effects = tuple(dict.fromkeys(effects))
     if not effects:
@@ -414,12 +426,10 @@ def plan_campaign(geometry: Geometry, budget: Budget, effects, n_poses: int, n_v
     planned = _as_campaign(geometry, _template(poses, order, dirs, dir_legs, t), temps)
     ref_campaign, ref_value, layout = _reference(info, geometry, region, n_poses, n_visits, dir_legs, minutes,
                                                  temperature_C, rng)
-    sigma = {"instrument_sigma_mm": instrument_sigma_mm, "instrument_sigma_deg": instrument_sigma_deg,
-             "registration": registration}
-    detect = {n: detectable_effect(geometry, budget, planned, n, power=power, alpha=alpha, **sigma) for n in effects}
-    ref = {n: detectable_effect(geometry, budget, ref_campaign, n, power=power, alpha=alpha, **sigma)
-           for n in effects}
-    engine = Engine(geometry, budget, planned, noise, registration=registration)
+    engine, ref_engine = (Engine(geometry, budget, c, noise, registration=registration)
+                          for c in (planned, ref_campaign))
+    detect = {n: detectable_in(engine, n, power=power, alpha=alpha) for n in effects}
+    ref = {n: detectable_in(ref_engine, n, power=power, alpha=alpha) for n in effects}
     confounded = design_confounds(engine, effects)
     return CampaignPlan(
         geometry=geometry, budget=budget, effects=effects, poses=poses, order=order, direction=dirs,

@@ -24,7 +24,7 @@ import pandas as pd
 
 from ..._rng import child_seed, resolve_rng
 from ..._version import __version__
-from ...errors import CampaignError
+from ...errors import BudgetError, CampaignError
 from ...kinematics.chain import as_poses, check_poses, inverse_kinematics
 from ...kinematics.exact import exact_pose_error
 from ...kinematics.geometry import Geometry
@@ -34,7 +34,8 @@ from ...units import DEG2RAD
 from .data import CMD_COLUMNS, DIR_COLUMNS, MAX_ERROR, MEAS_COLUMNS, Campaign
 from ..forward.signatures import effect, offset_errors, slider_error, spread_budget
 
-__all__ = ["simulate_campaign", "visit_times", "frame_transform", "SETTLE_S", "SLIDER_SPEED_MM_S"]
+__all__ = ["simulate_campaign", "check_plausible", "visit_times", "frame_transform", "SETTLE_S", "SLIDER_SPEED_MM_S",
+           "PLAUSIBLE", "PLAUSIBLE_NOISE"]
 
 #: Seconds from arriving at a pose to the measurement (settling plus the instrument's averaging).
 SETTLE_S = 4.0
@@ -42,6 +43,11 @@ SETTLE_S = 4.0
 SLIDER_SPEED_MM_S = 20.0
 #: Sub-streams under the root seed (see the module notes).
 _STREAM_REPEATS, _STREAM_OUTLIERS = 1, 2
+#: Largest plausible hidden value per unit of an effect (mm, deg, 1, 1/K), and of the instrument's noise sd
+#: (mm, deg): a larger one is a value typed in another unit (20 for a 20 µm backlash, 2 for a 2 µm noise).
+#: A misassembled machine's few degrees or millimetres stay below them (issue 24's large errors).
+PLAUSIBLE = {"mm": 10.0, "deg": 10.0, "1": 0.05, "1/K": 1e-3}
+PLAUSIBLE_NOISE = {"mm": 0.5, "deg": 0.5}
 
 
 def visit_times(b: np.ndarray) -> np.ndarray:
@@ -154,6 +160,40 @@ def _repeat_errors(budget: Budget, X: np.ndarray, pose_of_visit: np.ndarray, n_p
         out[:, k] = np.hypot(v[:, 0], v[:, 1])
         out[:, z] = np.mod(np.arctan2(v[:, 1], v[:, 0]) / DEG2RAD, 360.0)
     return out
+
+
+def check_plausible(effects: dict, instrument_sigma_mm: float, instrument_sigma_deg: float, *,
+                    labels: tuple[str, str, str] = ("effects", "instrument_sigma_mm", "instrument_sigma_deg")) -> None:
+    """Refuse, in one line, a hidden effect or an instrument noise too large for its unit (a value in µm or
+    arcsec given where mm or deg are meant): above :data:`PLAUSIBLE` or :data:`PLAUSIBLE_NOISE`.
+
+    Parameters
+    ----------
+    effects : dict of str to float or complex
+        Hidden effects in their units (a cyclic error's phasor: its amplitude is judged); unknown names are
+        skipped (:func:`simulate_campaign` names them).
+    instrument_sigma_mm, instrument_sigma_deg : float
+        Standard deviations of the instrument noise, mm and deg.
+    labels : (str, str, str)
+        How the message names the effects and the two noise settings (the CLI gives its options).
+
+    Raises
+    ------
+    CampaignError
+        A value above its unit's plausible bound.
+    """
+    for name, value in effects.items():
+        try:
+            unit = effect(name).unit
+        except (BudgetError, KeyError, ValueError):
+            continue                        # an unknown name: the simulation names it
+        if abs(value) > PLAUSIBLE.get(unit, np.inf):
+            raise CampaignError(f"{labels[0]} {name}={value:g}: larger than any {unit} value a machine shows "
+                                f"({PLAUSIBLE[unit]:g}); check units (mm, deg, 1, 1/K: 20 µm is 0.02)")
+    for option, sigma, unit in ((labels[1], instrument_sigma_mm, "mm"), (labels[2], instrument_sigma_deg, "deg")):
+        if sigma > PLAUSIBLE_NOISE[unit]:
+            raise CampaignError(f"{option} {sigma:g}: an instrument noise sd above {PLAUSIBLE_NOISE[unit]:g} {unit}; "
+                                f"check units ({unit}: 2 µm is 0.002 mm, 2 arcsec is 0.00056 deg)")
 
 
 def _template(plan, geometry: Geometry) -> Campaign:
@@ -279,7 +319,7 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     Raises
     ------
     CampaignError
-        A setting out of range.
+        A setting out of range, or a hidden effect or noise too large for its unit (:func:`check_plausible`).
     """
     seed_used, rng = resolve_rng(rng)
     template = None if plan is None else _template(plan, geometry)
@@ -302,6 +342,7 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     for e, v in zip(parsed, effects.values()):
         if e.kind == "backlash" and v < 0:
             raise CampaignError(f"{e.name}: backlash h must be >= 0, got {v}")
+    check_plausible(effects, instrument_sigma_mm, instrument_sigma_deg)
     budget.check_geometry(geometry)
     check_leads(effects, geometry, "hidden effect ")
     machine = {name: eff.model_value for name, eff in budget.effects.items()}   # the budget's effects, then the hidden

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -37,10 +38,11 @@ from scipy import optimize
 
 from ..._rng import child_seed, resolve_rng
 from ..._threads import single_threaded_blas
-from ...errors import ParameterError
+from ...errors import ParameterError, Prp3mcWarning
 from ...kinematics.geometry import Geometry
 from ...progress import Progress
 from ...model.budget import Budget
+from ...model.linear import linear_model
 from ..campaign.data import Campaign, check_error_scale, read_campaign, require_testable
 from ..naming.confounds import ambiguities, design_confounds
 from ..verdict.diagnostics import diagnose, gap, gap_value, null_variances, verdict
@@ -57,7 +59,7 @@ from .updated import updated_model
 from .accuracy import predicted_accuracy
 from ..campaign.iso9283 import iso9283_figures
 
-__all__ = ["discrepancy", "detectable_effect", "STAGES"]
+__all__ = ["discrepancy", "detectable_effect", "detectable_in", "correlation_warning", "STAGES"]
 
 #: The stages of :func:`discrepancy`, one progress step each.
 STAGES = ("gross errors and names", "diagnoses", "with the gross errors", "ISO 9283")
@@ -110,6 +112,13 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     Returns
     -------
     DiscrepancyResult
+
+    Warns
+    -----
+    Prp3mcWarning
+        A budget with ``[correlation]``: the fit takes its inputs as
+        independent (:func:`correlation_warning` says by how much that
+        changes the budget's spread at the campaign's poses).
     """
     t0 = time.perf_counter()
     seed, rng = resolve_rng(rng)
@@ -118,6 +127,8 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
             raise ParameterError(f"{name} must lie in (0, 1), got {value}")
     budget.check_geometry(geometry)
     campaign = require_testable(read_campaign(campaign, geometry))
+    if budget.correlated:
+        warnings.warn(Prp3mcWarning(correlation_warning(geometry, budget, campaign.poses)), stacklevel=3)
     check_error_scale(campaign, geometry, budget, instrument_sigma_mm)
     # the predicted accuracy needs the named effects only: on a thread of its own (its kernels release the
     # GIL) while the rest is diagnosed
@@ -172,6 +183,40 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
             campaign=campaign, geometry=geometry, budget=budget, seed=seed, n_bootstrap=n_bootstrap, alpha=alpha,
             alpha_unexplained=alpha_unexplained, instrument_sigma_mm=instrument_sigma_mm,
             instrument_sigma_deg=instrument_sigma_deg, wall_time_s=time.perf_counter() - t0)
+
+
+def correlation_warning(geometry: Geometry, budget: Budget, poses: np.ndarray) -> str:
+    """What the discrepancy fit's independent inputs make of a correlated budget, measured at the campaign's poses.
+
+    The fit's likelihood sums each input's own covariance (it ignores
+    ``[correlation]``; docs, *The discrepancy workflow*, Dependent inputs);
+    the message says by how much the budget's standard deviation of the
+    position error (the root of the x, y variances' sum) and of φ differ
+    from the independent one's at some pose (the largest relative difference).
+
+    Parameters
+    ----------
+    geometry : Geometry
+    budget : Budget
+        With ``[correlation]``.
+    poses : ndarray, shape (P, 3)
+        ``[x_mm, y_mm, phi_deg]``.
+
+    Returns
+    -------
+    str
+        The one-line warning :func:`discrepancy` gives.
+    """
+    budget = budget.without_effects()
+    cov = [linear_model(geometry, b, poses, check=False).moments()[1] for b in (budget, Budget(budget.inputs))]
+    sd = [(np.sqrt(c[..., 0, 0] + c[..., 1, 1]), np.sqrt(c[..., 2, 2])) for c in cov]
+    change = [100 * float(np.max(np.abs(np.divide(a, b, out=np.ones_like(a), where=b > 0) - 1)))
+              for a, b in zip(*sd)]
+    return (f"budget {budget.name!r} correlates inputs ([correlation]); the discrepancy fit takes them as "
+            f"independent: at the campaign's poses the correlation changes the budget's sd of the position error "
+            f"by up to {change[0]:.0f} % and of phi by up to {change[1]:.0f} %, so the dispersion tests and the "
+            "repeatable fraction are judged against the independent budget (the predicted accuracy respects the "
+            "correlation; docs: The discrepancy workflow, Dependent inputs)")
 
 
 def _diagnoses(named: Named, n_bootstrap: int, alpha_unexplained: float, rng, seed: int) -> tuple:
@@ -313,11 +358,23 @@ def detectable_effect(geometry: Geometry, budget: Budget, campaign: Campaign, na
     float
         In the effect's unit; inf if the campaign cannot see it.
     """
-    eff = effect(name)
-    if not eff.systematic:
+    if not effect(name).systematic:
         raise ParameterError(f"{name}: detectable_effect handles systematic effects; simulate spreads instead")
     engine = Engine(geometry, budget, read_campaign(campaign, geometry),
                     noise_cov(instrument_sigma_mm, instrument_sigma_deg), registration=registration)
+    return detectable_in(engine, name, power=power, alpha=alpha)
+
+
+def detectable_in(engine: Engine, name: str, *, power: float = 0.9, alpha: float = 0.01) -> float:
+    """:func:`detectable_effect` of systematic effect ``name`` on the campaign, noise and registration of an
+    engine at the nominal geometry (one engine serves every effect of a plan).
+
+    Returns
+    -------
+    float
+        In the effect's unit; inf if the campaign cannot see it.
+    """
+    eff = effect(name)
     if name not in [e.name for e in engine.systematic] or name in engine.confounded:
         return float("inf")
     K = len(engine.systematic) - len(engine.confounded) + len(engine.spreads)

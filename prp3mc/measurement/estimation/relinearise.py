@@ -19,7 +19,7 @@ at ``theta_0``, by central differences of the exact chain (every candidate
 at once, one batched Newton solve). The budget's moments are taken at the
 machine the point describes (its geometry, the poses it reaches). Refitting
 at the new estimate and linearising again is Gauss-Newton on the exact
-chain (:func:`~prp3mc.measurement.workflow.discrepancy` iterates it).
+chain (:func:`~prp3mc.measurement.discrepancy.workflow.discrepancy` iterates it).
 
 The controller commands the sliders by nominal inverse kinematics of *its*
 geometry: the analysis geometry less the budget's geometric offsets (a
@@ -44,6 +44,7 @@ from ...kinematics.exact import exact_pose_error
 from ...kinematics.geometry import Geometry
 from ...model.budget import Budget
 from ..campaign.data import Campaign
+from ..campaign.iso9283 import pose_means
 from ...model.effects import EffectKind, components
 from ..forward.signatures import effect, library, offset_errors, slider_error
 
@@ -202,9 +203,7 @@ def linearise(geometry: Geometry, budget: Budget, campaign: Campaign, values: di
     E = chain(np.concatenate([c0[None], c0 + np.diag(steps), c0 - np.diag(steps)]))
     G = np.moveaxis((E[1:C + 1] - E[C + 1:]) / (2.0 * steps[:, None, None]), 0, 2)    # (M, 3, C)
     theta = components(names, [values.get(n, 0.0) for n in names])
-    reached = np.zeros((campaign.n_poses, 3))
-    np.add.at(reached, campaign.pose_index, campaign.commanded + E[0])
-    reached /= campaign.repeats[:, None]
+    reached = pose_means(campaign.commanded + E[0], campaign.pose_index, campaign.n_poses)
     offsets = offset_errors({n: v for n, v in values.items() if effect(n).kind == EffectKind.OFFSET})
     machine = geometry.replace(name=geometry.name,
                                **{f: np.add(getattr(geometry, f), d) for f, d in offsets.items()})
