@@ -8,9 +8,10 @@ import numpy as np
 from .._version import __version__
 from ..errors import SpecError
 from ..kinematics.geometry import Geometry
+from ..limits import montecarlo_estimate, yield_estimate
 from ..units import DEG2ARCSEC, MM2UM, PPM
 from . import (add_budget, add_geometry, add_json, add_pose_or_region, add_seed, command, emit_json, emit_table,
-               grid_poses, positive_float, positive_int, probability, provenance)
+               grid_poses, positive_float, positive_int, probability, provenance, within_limits)
 
 #: prp3mc.stackup.DEFAULT_TARGET, written out so that --help imports no numba (tests/test_yield_cli.py checks).
 DEFAULT_TARGET = 1e-9
@@ -49,9 +50,14 @@ class YieldCommand:
         from ..stackup import exact_yield
 
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
-        poses, where = grid_poses(args)
+        if budget.correlated:      # the Monte Carlo fallback (see _correlated)
+            estimate = lambda n: montecarlo_estimate(args.samples, n, len(budget.factors) + 1)  # noqa: E731
+        else:
+            estimate = yield_estimate
+        poses, where = grid_poses(args, estimate)
         if args.region is None:
             check_poses(geometry, poses)
+            within_limits(args, estimate(1))
         check_linearity(geometry, budget, poses)
         specs = {"spec_position_um": args.spec_position_um, "spec_phi_arcsec": args.spec_phi_arcsec}
         if budget.correlated:
