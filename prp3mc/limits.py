@@ -27,7 +27,7 @@ from .errors import ResourceError
 __all__ = ["Estimate", "available_memory", "check", "montecarlo_estimate", "sobol_estimate",
            "worstcase_estimate", "allocate_estimate", "study_estimate", "discrepancy_estimate", "simulate_estimate",
            "sensitivity_estimate",
-           "yield_estimate", "format_bytes",
+           "yield_estimate", "plan_estimate", "format_bytes",
            "format_seconds", "MEMORY_MARGIN"]
 
 #: Share of the available memory a request may use.
@@ -64,6 +64,10 @@ _DISC_BYTES_FIXED = 64 << 20
 # Simulated campaign: per measurement its drawn inputs, the exact chain's pose, the table's row and its
 # CSV text (180000 rows held 1.3 KiB each at the peak).
 _SIM_BYTES_PER_MEASUREMENT = 2048
+# Campaign plan: per candidate pose and visit its approach directions, the effects' signatures and their
+# information, the planned and reference campaigns (0.63 KiB with one effect, 1.7 KiB with seven, traced at
+# 405 candidates x 100 visits).
+_PLAN_BYTES_PER_CANDIDATE_VISIT = lambda n_effects: 512 + 192 * n_effects  # noqa: E731
 # Sensitivity over a grid: every matrix entry of every pose as a row of the long table and its CSV text
 # (3600 poses held 27 KiB each).
 _SENS_BYTES_PER_POSE = 32 << 10
@@ -230,6 +234,12 @@ def simulate_estimate(n_measurements: int) -> Estimate:
     """Memory of :func:`prp3mc.measurement.campaign.simulate.simulate_campaign` and its CSV (``n_measurements`` rows)."""
     return Estimate(f"a simulated campaign of {n_measurements} measurements",
                     float(n_measurements) * _SIM_BYTES_PER_MEASUREMENT, "use fewer poses or visits")
+
+
+def plan_estimate(n_candidates: int, n_visits: int, n_effects: int) -> Estimate:
+    """Memory of :func:`prp3mc.measurement.campaign.plan.plan_campaign` (``n_candidates`` poses to choose from)."""
+    return Estimate(f"a campaign plan of {n_visits} visits of {n_candidates} candidate poses",
+                    float(n_candidates) * n_visits * _PLAN_BYTES_PER_CANDIDATE_VISIT(n_effects), "use fewer visits")
 
 
 def discrepancy_estimate(n_measurements: int, n_poses: int | None = None, max_visits: int | None = None,

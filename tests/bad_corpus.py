@@ -653,6 +653,8 @@ def second_cases() -> list[Case]:
              message="draws at 3000 histogram poses) needs ~45 GiB"))
     add(Case(T, ["yield", "--geometry", "{g_parallel}", *B, *P, "--spec-position-um", "100"], message="singular"))
     pl = ["plan", *G, *B, "--poses", "9", "--visits", "2", "--out", "{tmp}/p.csv"]
+    add(Case(H, ["plan", *G, *B, "--effects", "backlash_1", "--poses", "9", "--visits", "1000000000", "--out",
+                 "{tmp}/p.csv"], message="a campaign plan of 1000000000 visits of 405 candidate poses needs"))
     add(Case(M, [*pl, "--effects", "nonsense_1"], message="unknown effect"))
     add(Case(M, [*pl, "--effects", ","], message="at least one effect"))
     add(Case(M, [*pl, "--effects", "cyclic_1"], message="lead_mm"))
