@@ -10,7 +10,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from scipy import special
 
-from .._threads import cores
+from .._threads import check_stop, cores
 from ..errors import BudgetError, Prp3mcWarning, SpecError
 from ..kinematics.geometry import Geometry
 from ..model.budget import Budget
@@ -236,7 +236,7 @@ class _Runner:
             batch_series(0, N, *args)
         else:
             with ThreadPoolExecutor(max_workers=self.workers) as pool:
-                list(pool.map(lambda s: batch_series(s, min(N, s + _CHUNK), *args), starts))
+                list(pool.map(lambda s: check_stop() or batch_series(s, min(N, s + _CHUNK), *args), starts))
         p, b, n, status = out[:4]
         p[sure], b[sure], n[sure], status[sure] = 1.0, 0.0, 0, 0
         for code, why in ((2, "fewer legs with a continuous law, whose terms decay, than it has dimensions: it "
