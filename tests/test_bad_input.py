@@ -620,11 +620,14 @@ def test_the_time_limit_as_the_folder_lands(tmp_path, monkeypatch):
     import signal as _signal
     import time
 
-    from prp3mc import cli, output
+    import threading
+
+    from prp3mc import _threads, cli, output
     from prp3mc.cli import _stopping_after, _TimeUp
     move = output._move_into_place
     monkeypatch.setitem(cli._SIGNALLED, "decided", False)   # as at the start of a run (an earlier one ended)
     monkeypatch.setitem(output.COMMITTED, "value", False)
+    monkeypatch.setattr(_threads, "_STOP", threading.Event())   # the alarm's stop request stays in this test
 
     def ring_while_moving(tmp, path, force):
         _signal.setitimer(_signal.ITIMER_REAL, 0.01)

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .._rng import check_seed
-from .._threads import clear_stop, request_stop, stop_requested
+from .._threads import clear_stop, request_stop
 from .._version import __version__
 from ..errors import OutputExistsError, Prp3mcError, Prp3mcWarning, ResourceError
 from ..limits import Estimate, check, format_bytes, format_seconds
@@ -424,7 +424,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt as exc:  # the signal came as the run's end was being decided: it wrote nothing
         status = _stopped(f"prp3mc {_command_named(sys.argv[1:]) or ''}".strip(), _signum(exc))
     _quiet_exit()
-    if stop_requested():
+    if _SIGNALLED["stopped"]:
         _end_now(status)
     return status
 
@@ -466,14 +466,15 @@ def _terminated(signum, frame):
     """
     if COMMITTED["value"] or _SIGNALLED["decided"]:
         return
-    _SIGNALLED["signum"] = signum
+    _SIGNALLED["signum"], _SIGNALLED["stopped"] = signum, True
     request_stop()      # the worker threads the run waits for as it unwinds end at their next step
     raise _Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
 
 #: The signal that interrupted the current run, if one did: an error raised on the interrupt's way out
-#: (a figure half drawn, a file half written) is reported as the interruption, not as an error of its own.
-_SIGNALLED = {"signum": None, "decided": False}
+#: (a figure half drawn, a file half written) is reported as the interruption, not as an error of its own;
+#: ``stopped``: a signal or the time limit interrupted it (its worker threads were asked to stop).
+_SIGNALLED = {"signum": None, "decided": False, "stopped": False}
 
 
 def _signum(exc: KeyboardInterrupt) -> int:
@@ -509,6 +510,7 @@ def _time_up(signum, frame):
     """The ``--max-hours`` alarm: interrupt the run, unless its output is being installed (see :func:`_terminated`)."""
     if COMMITTED["value"] or _SIGNALLED["decided"]:
         return
+    _SIGNALLED["stopped"] = True
     request_stop()
     raise _TimeUp()
 
@@ -568,8 +570,7 @@ def _run(argv: list[str], own_process: bool = False) -> int:
         sys.stdout.reconfigure(errors="surrogateescape")  # a file name that is not UTF-8 prints as its own bytes
     name = f"prp3mc {args.command}"
     WARNINGS.clear()
-    COMMITTED["value"], _SIGNALLED["signum"], _SIGNALLED["decided"] = False, None, False
-    clear_stop()
+    COMMITTED["value"], _SIGNALLED["signum"], _SIGNALLED["decided"], _SIGNALLED["stopped"] = False, None, False, False
     show = warnings.showwarning
 
     def one_line_warning(message, category, filename, lineno, file=None, line=None):
@@ -593,6 +594,8 @@ def _run(argv: list[str], own_process: bool = False) -> int:
     except BaseException as exc:
         _SIGNALLED["decided"] = True  # from here a signal is let pass (see _terminated)
         return _ended_by(exc, name, args)
+    finally:
+        clear_stop()   # the run's pools have emptied: a caller's next analysis (in process) runs whole
     _SIGNALLED["decided"] = True
     return 0
 
