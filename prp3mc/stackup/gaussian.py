@@ -70,9 +70,9 @@ def exact_refusal(budget) -> str | None:
     other = [(name, laws[k].kind) for name, k in zip(copula.names, copula.index) if not isinstance(laws[k], Normal)]
     if not other:
         return None
-    name, kind = other[0]
-    return (f"budget {budget.name!r} correlates {name} ({kind} law; {len(other)} correlated input(s) not normal): "
-            "the exact series takes correlated inputs only when all of them are normal (jointly normal then)")
+    listed = ", ".join(f"{name} ({kind})" for name, kind in other)
+    return (f"budget {budget.name!r} correlates inputs whose law is not normal: {listed}; the exact series takes "
+            "correlated inputs only when all of them are normal (then jointly normal)")
 
 
 def gaussian_terms(budget, term_laws: tuple, legs: tuple, columns: np.ndarray) -> tuple[tuple, tuple, np.ndarray]:
