@@ -37,7 +37,8 @@ class YieldCommand:
         p.add_argument("--target", type=probability, default=DEFAULT_TARGET, metavar="E",
                        help=f"bound of every probability's absolute error (default {DEFAULT_TARGET:g})")
         p.add_argument("--samples", type=positive_int, default=10_000_000, metavar="N",
-                       help="samples of the Monte Carlo fallback for a budget with [correlation] (default 1e7)")
+                       help="samples of the Monte Carlo fallback for a budget that correlates inputs not all normal "
+                            "(default 1e7)")
         add_seed(p, help="seed of the Monte Carlo fallback (default: fresh, recorded in the output)")
         add_json(p)
 
@@ -206,6 +207,9 @@ def _text(args, geometry, budget, pose, r, record, region) -> list[str]:
     if r.exceed_phi is not None and bool(np.ravel(r.bracketed_any)[0]):
         lines.append("'either' lies between the larger and the sum of the two (the joint series does not converge "
                      "in time for this budget): its bound covers that bracket.")
+    if budget.correlated:
+        lines.append("Correlated inputs, all normal (so jointly normal): exact, as independent normal terms with the "
+                     "same joint law.")
     if budget.effects:
         lines.append("Effects: backlash_i ±h_i/2 with probability 1/2 each, one temperature uniform over "
                      "temp_range_C; offsets, lead scales and cyclic errors are known shifts.")

@@ -9,6 +9,8 @@ has; this package inverts them with a guaranteed error bound:
 - :mod:`~prp3mc.stackup.exceedance` — :func:`exact_yield`, the public entry:
   P(position > S), P(``|dphi|`` > Z), P(either) and the quantiles, per pose;
 - :mod:`~prp3mc.stackup.result` — :class:`YieldResult`, and the Ppk of an exceedance;
+- :mod:`~prp3mc.stackup.gaussian` — correlated normal inputs made independent terms of the same joint
+  law (and why other correlated laws are refused);
 - :mod:`~prp3mc.stackup.characteristic` — each law's characteristic function and
   a decreasing bound of its modulus;
 - :mod:`~prp3mc.stackup.lattice` — the alias-free lattice of each channel (dphi,

@@ -60,12 +60,14 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     For each pose: P(``|(dx, dy)|`` > S), P(``|dphi|`` > Z), P(either), and the
     quantiles p99.73, p99.9937, p99.9999 of the position error and of ``|dphi|``,
     each with a guaranteed bound of its error; no sampling. The budget's
-    inputs are independent; its ``[effects]`` enter as in the other
-    analyses (known shifts, backlash ±h/2 with probability 1/2 each, one
-    temperature uniform over its range). Every law prp3mc has is exact:
-    uniform, normal, truncated normal, triangular, discrete classes, and the
-    clearance rho cos(zeta - omega) with any radius law (the contact angle
-    uniform over whole turns).
+    inputs are independent, or correlated (``[correlation]``) between normal
+    laws only (then jointly normal: :mod:`prp3mc.stackup.gaussian` makes them
+    independent terms of the same joint law); its ``[effects]`` enter as in
+    the other analyses (known shifts, backlash ±h/2 with probability 1/2
+    each, one temperature uniform over its range). Every law prp3mc has is
+    exact: uniform, normal, truncated normal, triangular, discrete classes,
+    and the clearance rho cos(zeta - omega) with any radius law (the contact
+    angle uniform over whole turns).
 
     Method (:mod:`prp3mc.stackup`): P(Y in D) for a channel Y of the pose
     error (dphi, the position, or both) and its spec region D (an interval, a
@@ -108,8 +110,9 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     SpecError
         A spec or target out of range.
     BudgetError
-        A budget with ``[correlation]`` (the series needs independent inputs: use Monte Carlo), or whose
-        position has no 2-D density (one leg random).
+        A budget with ``[correlation]`` between inputs not all normal (the message names the Monte Carlo
+        fallback, :func:`prp3mc.monte_carlo` with ``tolerance_phi_deg``), or whose position has no 2-D
+        density (one leg random).
 
     Returns
     -------
