@@ -239,7 +239,8 @@ def test_correlated_normal_budget_gets_the_exact_yield(tmp_path):
                                         + "".join(f'b_{i} = {{ law = "normal", mu = 0, sd = 0.006 }}\n'
                                                   for i in (1, 2, 3))
                                         + '[correlation]\n"b_1,b_2" = 0.5\n')
-    text = _text("[spec]\nposition_um = 20\n").replace('budget = "paper"', 'budget = "corr.toml"').replace("grid = 5", "grid = 5\nk_sigma = 3")
+    text = (_text("[spec]\nposition_um = 20\n").replace('budget = "paper"', 'budget = "corr.toml"')
+            .replace("grid = 5", "grid = 5\nk_sigma = 3"))           # normal laws: the worst case needs k_sigma
     study = Study.from_text(text, source=str(tmp_path / "s.toml"), base=tmp_path)
     with warnings.catch_warnings():
         warnings.simplefilter("error")

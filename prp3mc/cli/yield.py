@@ -16,7 +16,6 @@ from . import (add_budget, add_geometry, add_json, add_pose_or_region, add_seed,
 DEFAULT_TARGET = 1e-9
 #: A spec this many times below the error's RSS scale is refused (a value in mm typed as µm, or the like).
 _SCALE = 1e-3
-_LEVELS = ("p99.73", "p99.9937", "p99.9999")
 _MC_METHOD = ("Monte Carlo of the linear model with the budget's Gaussian copula (the streamed sampler): every "
               "exceedance with its Wilson 95 % interval (ci95_ppm); error_bound = the largest distance from an "
               "exceedance to the farther end of its interval (a confidence statement, not a bound); quantiles are "
@@ -103,10 +102,9 @@ def _pose_frame(r) -> "pd.DataFrame":
 
     from .._result import pose_columns
 
-    frame = pd.DataFrame({**pose_columns(r.poses), "exceed_position_ppm": PPM * r.exceed_position.reshape(-1)})
-    if r.exceed_phi is not None:
-        frame["exceed_phi_ppm"] = PPM * r.exceed_phi.reshape(-1)
-        frame["exceed_any_ppm"] = PPM * r.exceed_any.reshape(-1)
+    frame = pd.DataFrame(pose_columns(r.poses))
+    for output in ("position",) if r.exceed_phi is None else r.outputs:    # any = position alone
+        frame[f"exceed_{output}_ppm"] = PPM * r.exceedance(output).reshape(-1)
     frame["error_bound_ppm"] = PPM * r.error_bound.reshape(-1)
     ppk_pos = r.ppk("position").reshape(-1)
     frame["ppk_position"] = pd.Series(ppk_pos, dtype=object).where(np.isfinite(ppk_pos), None)   # P = 0: none
@@ -123,12 +121,14 @@ def _correlated(args, geometry, budget, poses, where, why: str) -> None:
 
     from .._result import pose_columns
     from ..montecarlo.propagation import monte_carlo
-    from ..stackup.result import ppk, region_summary
+    from ..stackup.result import OUTPUTS, QUANTILE_LEVELS, ppk, region_summary
 
     S = args.spec_position_um / MM2UM
     Z = None if args.spec_phi_arcsec is None else args.spec_phi_arcsec / DEG2ARCSEC
     mc = monte_carlo(geometry, budget, poses, args.samples, rng=args.seed, tolerance_mm=S, tolerance_phi_deg=Z,
-                     percentiles=(99.73, 99.9937, 99.9999))
+                     percentiles=QUANTILE_LEVELS)
+    names = [f"p{level:g}" for level in QUANTILE_LEVELS]
+    position, phi = mc.position_pct.reshape(-1, len(names)), mc.phi_pct.reshape(-1, len(names))
     figures = {"position": (mc.exceed_prob, mc.exceed_ci), "phi": (mc.exceed_phi_prob, mc.exceed_phi_ci),
                "any": (mc.exceed_prob, mc.exceed_ci) if Z is None else (mc.exceed_any_prob, mc.exceed_any_ci)}
     figures = {o: (p.reshape(-1), ci.reshape(-1, 2)) for o, (p, ci) in figures.items() if p is not None}
@@ -137,11 +137,11 @@ def _correlated(args, geometry, budget, poses, where, why: str) -> None:
     p = figures["position"][0]
     k = int(np.argmax(p))
     record = {f"exceed_{o}_ppm": PPM * float(figures[o][0][k]) if o in figures else None
-              for o in ("position", "phi", "any")}
+              for o in OUTPUTS}
     record |= {"error_bound_ppm": PPM * float(half[k]),
                "ci95_ppm": {o: (PPM * ci[k]).tolist() for o, (_, ci) in figures.items()},
-               "quantiles_position_um": dict(zip(_LEVELS, (MM2UM * mc.position_pct.reshape(-1, 3)[k]).tolist())),
-               "quantiles_phi_arcsec": dict(zip(_LEVELS, (DEG2ARCSEC * mc.phi_pct.reshape(-1, 3)[k]).tolist())),
+               "quantiles_position_um": dict(zip(names, (MM2UM * position[k]).tolist())),
+               "quantiles_phi_arcsec": dict(zip(names, (DEG2ARCSEC * phi[k]).tolist())),
                "ppk_position": float(ppk(p[k])) if p[k] > 0 else None, "method": f"{_MC_METHOD} ({why})"}
     inputs = dict(spec_position_um=args.spec_position_um, spec_phi_arcsec=args.spec_phi_arcsec, seed=mc.seed,
                   samples=mc.n_samples, **where)
@@ -181,11 +181,11 @@ def _text(args, geometry, budget, pose, r, record, region) -> list[str]:
               f"Exact distribution of the linear model (no sampling): every probability within "
               f"{record['error_bound_ppm']:.2g} ppm.", "",
               f"{'':26s}{'P(exceed)':>12s}{'ppm':>14s}{'Ppk':>8s}"]
-    rows = [(f"position > {args.spec_position_um:g} µm", r.exceed_position, "position")]
+    rows = [(f"position > {args.spec_position_um:g} µm", "position")]
     if r.exceed_phi is not None:
-        rows += [(f"|dphi| > {args.spec_phi_arcsec:g} arcsec", r.exceed_phi, "phi"), ("either", r.exceed_any, "any")]
-    for label, value, output in rows:
-        p = float(np.ravel(value)[0])
+        rows += [(f"|dphi| > {args.spec_phi_arcsec:g} arcsec", "phi"), ("either", "any")]
+    for label, output in rows:
+        p = float(np.ravel(r.exceedance(output))[0])
         k = float(np.ravel(r.ppk(output))[0])
         lines.append(f"  {label:24s}{100 * p:11.4g} %{PPM * p:14.4f}{k:8.2f}" if np.isfinite(k) else
                      f"  {label:24s}{100 * p:11.4g} %{PPM * p:14.4f}{'> 6':>8s}")

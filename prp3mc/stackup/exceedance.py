@@ -20,7 +20,7 @@ from ._special import special_args
 from .characteristic import term_table
 from .gaussian import gaussian_terms
 from .lattice import LEVELS, channel, leg_powers, support_max
-from .result import YieldResult
+from .result import QUANTILE_LEVELS, YieldResult
 from .series import batch_series
 
 __all__ = ["exact_yield", "METHOD", "DEFAULT_TARGET"]
@@ -133,7 +133,8 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     geometry, budget = Geometry.load(geometry), Budget.load(budget)
     model = linear_model(geometry, budget, poses)
     shape = model.poses.shape[:-1]
-    laws, legs, C = gaussian_terms(budget, model.term_laws, model.legs, model.columns.reshape(-1, 3, len(model.terms)))
+    laws, legs, C = gaussian_terms(budget, model.term_laws, model.legs,
+                                   model.columns.reshape(-1, 3, len(model.terms)))    # correlated normals: exact
     T = len(laws)
     n_normal = sum(1 for tl in laws if tl.law is not None and tl.law.kind == "normal" and tl.kind == "factor")
     share = 0.01 * target / max(n_normal, 1)        # mass of one normal law past its cut
@@ -203,7 +204,7 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
         exceed_position=shaped(e_pos), bound_position=shaped(b_pos),
         exceed_phi=shaped(e_phi), bound_phi=None if Z is None else shaped(b_phi),
         exceed_any=shaped(e_any), bound_any=shaped(b_any),
-        levels=tuple(100.0 * v for v in LEVELS) if quantiles else (),
+        levels=QUANTILE_LEVELS if quantiles else (),
         quantile_position_mm=shaped(q_pos, (Q,)) if quantiles else None,
         quantile_position_err_mm=shaped(qe_pos, (Q,)) if quantiles else None,
         quantile_phi_deg=shaped(q_phi * RAD2DEG, (Q,)) if quantiles else None,
@@ -212,7 +213,8 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
         rss_position_mm=shaped(rss_pos), rss_phi_deg=shaped(rss_phi * RAD2DEG),
         bracketed_any=shaped(bracketed),
         lattice_points={"position": shaped(n_pos), "phi": shaped(n_phi), "any": shaped(n_any)},
-        target=float(target), method=METHOD + (GAUSSIAN_METHOD if budget.correlated else ""), wall_time_s=time.perf_counter() - t0)
+        target=float(target), method=METHOD + (GAUSSIAN_METHOD if budget.correlated else ""),
+        wall_time_s=time.perf_counter() - t0)
 
 
 class _Runner:
@@ -289,7 +291,9 @@ def _subset(ch, index):
 
 
 def _moments(C: np.ndarray, table) -> tuple[np.ndarray, np.ndarray]:
-    """Mean (N, 3) and covariance (N, 3, 3) of the pose error (mm, mm, rad) from the terms' moments."""
+    """Mean (N, 3) and covariance (N, 3, 3) of the pose error (mm, mm, rad) from the terms' moments: the
+    quantiles' starting guesses. :meth:`~prp3mc.model.linear.LinearModel.moments` gives the same to 3e-16
+    (relative; in deg, through the features), but its rounding moves where Newton stops (quantiles by 3e-14)."""
     mean = np.einsum("not,t->no", C, table.mean)
     cov = np.einsum("not,t,nqt->noq", C, table.var, C)
     return mean, cov
