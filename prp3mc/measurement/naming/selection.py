@@ -208,7 +208,7 @@ def name_effects(engine: Engine, fit: Fit, accepted: dict) -> tuple[NamedEffect,
         ev.update(lr=float(lr), p_bonferroni=min(1.0, ev["n_candidates"] * p),
                   delta_bic=float(lr_raw - dof * np.log(n_obs)), identified=not aliases, alias_fits=alias_fits,
                   alternative_sets=[[engine.systematic[c].name for c in alt] for alt in alias_sets])
-        if effect(name).kind == "cyclic":
+        if effect(name).dof == 2:                               # a cyclic error: its phasor
             cyc = engine.phasor(fit, name)
             phase = cyc["phase_deg"]
             ev.update(lr_df2=float(lr_raw), phasor_mm=[cyc["phasor"].real, cyc["phasor"].imag],
