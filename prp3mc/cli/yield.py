@@ -16,7 +16,6 @@ from . import (add_budget, add_geometry, add_json, add_pose_or_region, add_seed,
 DEFAULT_TARGET = 1e-9
 #: A spec this many times below the error's RSS scale is refused (a value in mm typed as µm, or the like).
 _SCALE = 1e-3
-_LEVELS = ("p99.73", "p99.9937", "p99.9999")
 _MC_METHOD = ("Monte Carlo (the budget correlates inputs: the exact series needs independent ones): the streamed "
               "sampler, error_bound = distance from the position exceedance to the farther end of its Wilson 95 % "
               "interval (a confidence statement, not a bound); quantiles are sample percentiles; P(|dphi| > Z) and P(either) "
@@ -100,10 +99,9 @@ def _pose_frame(r) -> "pd.DataFrame":
 
     from .._result import pose_columns
 
-    frame = pd.DataFrame({**pose_columns(r.poses), "exceed_position_ppm": PPM * r.exceed_position.reshape(-1)})
-    if r.exceed_phi is not None:
-        frame["exceed_phi_ppm"] = PPM * r.exceed_phi.reshape(-1)
-        frame["exceed_any_ppm"] = PPM * r.exceed_any.reshape(-1)
+    frame = pd.DataFrame(pose_columns(r.poses))
+    for output in ("position",) if r.exceed_phi is None else r.outputs:    # any = position alone
+        frame[f"exceed_{output}_ppm"] = PPM * r.exceedance(output).reshape(-1)
     frame["error_bound_ppm"] = PPM * r.error_bound.reshape(-1)
     ppk_pos = r.ppk("position").reshape(-1)
     frame["ppk_position"] = pd.Series(ppk_pos, dtype=object).where(np.isfinite(ppk_pos), None)   # P = 0: none
@@ -118,18 +116,19 @@ def _correlated(args, geometry, budget, poses, where) -> None:
 
     from .._result import pose_columns
     from ..montecarlo.propagation import monte_carlo
-    from ..stackup.result import ppk, region_summary
+    from ..stackup.result import QUANTILE_LEVELS, ppk, region_summary
 
     S = args.spec_position_um / MM2UM
     mc = monte_carlo(geometry, budget, poses, args.samples, rng=args.seed, tolerance_mm=S,
-                     percentiles=(99.73, 99.9937, 99.9999))
+                     percentiles=QUANTILE_LEVELS)
+    names = [f"p{level:g}" for level in QUANTILE_LEVELS]
     p = mc.exceed_prob.reshape(-1)
     half = np.abs(mc.exceed_ci.reshape(-1, 2) - p[:, None]).max(axis=1)    # the interval's farther end from P
     k = int(np.argmax(p))
     record = {"exceed_position_ppm": PPM * float(p[k]), "exceed_phi_ppm": None, "exceed_any_ppm": None,
               "error_bound_ppm": PPM * float(half[k]),
-              "quantiles_position_um": dict(zip(_LEVELS, (MM2UM * mc.position_pct.reshape(-1, 3)[k]).tolist())),
-              "quantiles_phi_arcsec": dict(zip(_LEVELS, (DEG2ARCSEC * mc.phi_pct.reshape(-1, 3)[k]).tolist())),
+              "quantiles_position_um": dict(zip(names, (MM2UM * mc.position_pct.reshape(-1, len(names))[k]).tolist())),
+              "quantiles_phi_arcsec": dict(zip(names, (DEG2ARCSEC * mc.phi_pct.reshape(-1, len(names))[k]).tolist())),
               "ppk_position": float(ppk(p[k])) if p[k] > 0 else None, "method": _MC_METHOD}
     inputs = dict(spec_position_um=args.spec_position_um, spec_phi_arcsec=args.spec_phi_arcsec, seed=mc.seed,
                   samples=mc.n_samples, **where)
@@ -168,11 +167,11 @@ def _text(args, geometry, budget, pose, r, record, region) -> list[str]:
               f"Exact distribution of the linear model (no sampling): every probability within "
               f"{record['error_bound_ppm']:.2g} ppm.", "",
               f"{'':26s}{'P(exceed)':>12s}{'ppm':>14s}{'Ppk':>8s}"]
-    rows = [(f"position > {args.spec_position_um:g} µm", r.exceed_position, "position")]
+    rows = [(f"position > {args.spec_position_um:g} µm", "position")]
     if r.exceed_phi is not None:
-        rows += [(f"|dphi| > {args.spec_phi_arcsec:g} arcsec", r.exceed_phi, "phi"), ("either", r.exceed_any, "any")]
-    for label, value, output in rows:
-        p = float(np.ravel(value)[0])
+        rows += [(f"|dphi| > {args.spec_phi_arcsec:g} arcsec", "phi"), ("either", "any")]
+    for label, output in rows:
+        p = float(np.ravel(r.exceedance(output))[0])
         k = float(np.ravel(r.ppk(output))[0])
         lines.append(f"  {label:24s}{100 * p:11.4g} %{PPM * p:14.4f}{k:8.2f}" if np.isfinite(k) else
                      f"  {label:24s}{100 * p:11.4g} %{PPM * p:14.4f}{'> 6':>8s}")

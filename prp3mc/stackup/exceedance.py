@@ -19,7 +19,7 @@ from ..units import DEG2ARCSEC, DEG2RAD, MM2UM, RAD2DEG
 from ._special import special_args
 from .characteristic import term_table
 from .lattice import LEVELS, channel, leg_powers, support_max
-from .result import YieldResult
+from .result import QUANTILE_LEVELS, YieldResult
 from .series import batch_series
 
 __all__ = ["exact_yield", "METHOD", "DEFAULT_TARGET"]
@@ -197,7 +197,7 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
         exceed_position=shaped(e_pos), bound_position=shaped(b_pos),
         exceed_phi=shaped(e_phi), bound_phi=None if Z is None else shaped(b_phi),
         exceed_any=shaped(e_any), bound_any=shaped(b_any),
-        levels=tuple(100.0 * v for v in LEVELS) if quantiles else (),
+        levels=QUANTILE_LEVELS if quantiles else (),
         quantile_position_mm=shaped(q_pos, (Q,)) if quantiles else None,
         quantile_position_err_mm=shaped(qe_pos, (Q,)) if quantiles else None,
         quantile_phi_deg=shaped(q_phi * RAD2DEG, (Q,)) if quantiles else None,
@@ -283,7 +283,9 @@ def _subset(ch, index):
 
 
 def _moments(C: np.ndarray, table) -> tuple[np.ndarray, np.ndarray]:
-    """Mean (N, 3) and covariance (N, 3, 3) of the pose error (mm, mm, rad) from the terms' moments."""
+    """Mean (N, 3) and covariance (N, 3, 3) of the pose error (mm, mm, rad) from the terms' moments: the
+    quantiles' starting guesses. :meth:`~prp3mc.model.linear.LinearModel.moments` gives the same to 3e-16
+    (relative; in deg, through the features), but its rounding moves where Newton stops (quantiles by 3e-14)."""
     mean = np.einsum("not,t->no", C, table.mean)
     cov = np.einsum("not,t,nqt->noq", C, table.var, C)
     return mean, cov
