@@ -51,7 +51,8 @@ class YieldCommand:
         from ..stackup.gaussian import exact_refusal
 
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
-        if budget.correlated:      # the Monte Carlo fallback (see _correlated)
+        why = exact_refusal(budget)
+        if why is not None:        # the Monte Carlo fallback (see _correlated)
             estimate = lambda n: montecarlo_estimate(args.samples, n, len(budget.factors) + 1)  # noqa: E731
         else:
             estimate = yield_estimate
@@ -61,7 +62,6 @@ class YieldCommand:
             within_limits(args, estimate(1))
         check_linearity(geometry, budget, poses)
         specs = {"spec_position_um": args.spec_position_um, "spec_phi_arcsec": args.spec_phi_arcsec}
-        why = exact_refusal(budget)
         if why is not None:
             _correlated(args, geometry, budget, poses, where, why)
             return
