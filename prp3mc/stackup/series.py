@@ -213,45 +213,46 @@ def pose_series(d, kind, par, ev, tab, sp, grp, mu, snu, Q, Vinv, mnorm, ab, lam
         out_qerr[:] = np.nan
         return np.nan, np.inf, walked, status
     n = pts.shape[0]
-    # each basis leg's characteristic function up to its extent among the kept points
-    Phis = [np.ones(1, np.complex128), np.ones(1, np.complex128), np.ones(1, np.complex128)]
+    # each basis leg's characteristic function times its share exp(i snu_j nu_j) of the known shift's phase,
+    # up to its extent among the kept points (n_j < 0: the conjugate)
+    ext = np.zeros(3, np.int64)
+    for k in range(n):
+        for j in range(d):
+            ext[j] = max(ext[j], abs(pts[k, j]))
+    Phi = np.ones((3, ext.max() + 1), np.complex128)
     for j in range(d):
-        M = 0
-        for k in range(n):
-            M = max(M, abs(pts[k, j]))
-        Phi = np.ones(M + 1, np.complex128)
-        for m in range(1, M + 1):
+        for m in range(1, ext[j] + 1):
             nu_j = _TWO_PI * m / Q[j]
+            c = complex(math.cos(snu[j] * nu_j), math.sin(snu[j] * nu_j))
             for t in range(T):
                 if grp[t] == j:
                     x = mu[t, j] * nu_j
-                    c = common_cf(kind[t], par[t, 0], par[t, 1], x)
-                    Phi[m] *= c if c.real == c.real else term_cf(kind[t], par, t, tab, sp, buf, x)
-        Phis[j] = Phi
+                    ct = common_cf(kind[t], par[t, 0], par[t, 1], x, sp, buf)
+                    c *= ct if ct.real == ct.real else term_cf(kind[t], par, t, tab, sp, buf, x)
+            Phi[j, m] = c
+    mix = np.flatnonzero((grp == -1) | (grp == MIXED_LEG))     # the terms off the basis legs
     re = np.empty(max(n, 1))
     ta = np.empty(max(n, 1))
     tb = np.empty(max(n, 1))
     tb_sum = transform_bound(d, z1, z2, 0.0, 0.0)
-    nu = np.zeros(3)
     for k in range(n):
         n0, n1, n2 = pts[k, 0], pts[k, 1], pts[k, 2]
-        nu[0] = _TWO_PI * n0 / Q[0]
-        nu[1] = _TWO_PI * n1 / Q[1]
-        nu[2] = _TWO_PI * n2 / Q[2]
-        phi = np.exp(1j * (snu[0] * nu[0] + snu[1] * nu[1] + snu[2] * nu[2]))
-        phi *= Phis[0][n0] if n0 >= 0 else np.conj(Phis[0][-n0])
-        phi *= Phis[1][n1] if n1 >= 0 else np.conj(Phis[1][-n1])
-        phi *= Phis[2][n2] if n2 >= 0 else np.conj(Phis[2][-n2])
-        for t in range(T):
-            if grp[t] == -1 or grp[t] == MIXED_LEG:
-                x = mu[t, 0] * nu[0] + mu[t, 1] * nu[1] + mu[t, 2] * nu[2]
-                c = common_cf(kind[t], par[t, 0], par[t, 1], x)
-                phi *= c if c.real == c.real else term_cf(kind[t], par, t, tab, sp, buf, x)
-        wx = Vinv[0, 0] * nu[0] + Vinv[0, 1] * nu[1] + Vinv[0, 2] * nu[2]
-        wy = Vinv[1, 0] * nu[0] + Vinv[1, 1] * nu[1] + Vinv[1, 2] * nu[2]
-        wz = Vinv[2, 0] * nu[0] + Vinv[2, 1] * nu[1] + Vinv[2, 2] * nu[2]
+        nu0 = _TWO_PI * n0 / Q[0]
+        nu1 = _TWO_PI * n1 / Q[1]
+        nu2 = _TWO_PI * n2 / Q[2]
+        phi = Phi[0, n0] if n0 >= 0 else np.conj(Phi[0, -n0])
+        phi *= Phi[1, n1] if n1 >= 0 else np.conj(Phi[1, -n1])
+        phi *= Phi[2, n2] if n2 >= 0 else np.conj(Phi[2, -n2])
+        for q in range(mix.size):
+            t = mix[q]
+            x = mu[t, 0] * nu0 + mu[t, 1] * nu1 + mu[t, 2] * nu2
+            c = common_cf(kind[t], par[t, 0], par[t, 1], x, sp, buf)
+            phi *= c if c.real == c.real else term_cf(kind[t], par, t, tab, sp, buf, x)
+        wx = Vinv[0, 0] * nu0 + Vinv[0, 1] * nu1 + Vinv[0, 2] * nu2
+        wy = Vinv[1, 0] * nu0 + Vinv[1, 1] * nu1 + Vinv[1, 2] * nu2
+        wz = Vinv[2, 0] * nu0 + Vinv[2, 1] * nu1 + Vinv[2, 2] * nu2
         if d == 1:
-            pa, pb = abs(nu[0]), 0.0
+            pa, pb = abs(nu0), 0.0
         elif d == 2:
             pa, pb = math.sqrt(wx * wx + wy * wy), 0.0
         else:
