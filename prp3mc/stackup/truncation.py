@@ -487,7 +487,7 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
     """
     empty = np.zeros((0, 3), np.int64)
     g_origin = (_tau(d, z1, z2, 0.0) / lam) ** (1.0 / d)
-    eta_lo = 1e-2 * eps                          # the 1-D arrays' end: past it E_j comes on demand
+    eta_lo = 1e-1 * eps                          # the 1-D arrays' end: past it E_j comes on demand
     one = np.ones(1)
     zero_tail = np.array([1.0, 0.0])
     gs = [one, one, one]
@@ -516,17 +516,36 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
         v0x, v0y, v1x, v1y = Vinv[0, 0], Vinv[1, 0], Vinv[0, 1], Vinv[1, 1]
         along = (v1x * v0x + v1y * v0y) / (v0x * v0x + v0y * v0y)
         d_perp = math.sqrt((v1x - along * v0x) ** 2 + (v1y - along * v0y) ** 2)
-        RB = np.zeros(N2 + 1)
-        for k in range(1, N2 + 1):
+
+        def rb(k):
             nu2 = _TWO_PI * k / Q[1]
-            RB[k] = g2[k] * _row_bound(nu2, S1, cm, g1, Q[0], ev, grp, mu, ab)
+            b = g2[k] * _row_bound(nu2, S1, cm, g1, Q[0], ev, grp, mu, ab)
             if S1E < np.inf:
-                RB[k] = min(RB[k], E2[k] * _disc_bound(z1, nu2 * d_perp) / lam
-                            * _row_bound(nu2, S1E, cm, E1, Q[0], ev, grp, mu, ab))
-        # rows |n2| > K: the rows up to the arrays' end, then g_2's tail times the bound at the end (non-increasing)
-        suffix = np.empty(N2 + 2)
-        suffix[N2 + 1] = R2[N2 + 1] * _row_bound(_TWO_PI * N2 / Q[1], S1, cm, g1, Q[0], ev, grp, mu, ab)
-        for k in range(N2, 0, -1):
+                b = min(b, E2[k] * _disc_bound(z1, nu2 * d_perp) / lam
+                        * _row_bound(nu2, S1E, cm, E1, Q[0], ev, grp, mu, ab))
+            return b
+
+        # rows |n2| > K: the rows up to the arrays' end, then g_2's tail times the bound at the end (rb is
+        # non-increasing in k: so are g_2, E_2, the transform's bound and _row_bound). The rows past K0 (the
+        # first 256) go in blocks [a, a + a // 32), each bounded by its first row's rb times its length (all
+        # of them one by one when that sum is above the part)
+        far = R2[N2 + 1] * _row_bound(_TWO_PI * N2 / Q[1], S1, cm, g1, Q[0], ev, grp, mu, ab)
+        K0 = min(N2, 256)
+        blocks = far
+        a = K0 + 1
+        while a <= N2:
+            b = min(N2 + 1, a + max(1, a // 32))
+            blocks += 2.0 * (b - a) * rb(a)
+            a = b
+        if blocks > e_outer:
+            K0 = N2
+        else:
+            far = blocks
+        RB = np.zeros(K0 + 1)
+        suffix = np.empty(K0 + 2)
+        suffix[K0 + 1] = far
+        for k in range(K0, 0, -1):
+            RB[k] = rb(k)
             suffix[k] = suffix[k + 1] + 2.0 * RB[k]
         K2 = _first_within(suffix, e_outer)
         outer = suffix[K2 + 1]
