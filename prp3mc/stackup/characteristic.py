@@ -357,10 +357,10 @@ def common_cf(k, p0, p1, x, sp, buf):
     if k == UNIFORM:
         u = x * p1
         s = 1.0 - u * u / 6.0 if abs(u) < 1e-4 else math.sin(u) / u
-        return complex(math.cos(x * p0) * s, math.sin(x * p0) * s)
+        return complex(s, 0.0) if p0 == 0.0 else complex(math.cos(x * p0) * s, math.sin(x * p0) * s)
     if k == NORMAL:
         a = math.exp(-0.5 * (p1 * x) ** 2)
-        return complex(math.cos(x * p0) * a, math.sin(x * p0) * a)
+        return complex(a, 0.0) if p0 == 0.0 else complex(math.cos(x * p0) * a, math.sin(x * p0) * a)
     if k == C_UNIFORM and p0 == 0.0:
         return complex(_int_j0_over(sp, buf, abs(x) * p1), 0.0)
     return complex(np.nan, 0.0)

@@ -11,35 +11,45 @@ Both are symmetric under n -> -n, so half of the lattice is enumerated and
 every point stands for two.
 
 The lattice is cut into *rows*, lines along n_1 (the first basis leg), at
-fixed (n_2, n_3). Along a row, beyond the peaks of its factors (n_1 = 0 for
-the basis legs; where nu_3 = 0 for the position's third, "mixed" leg), the
-row's majorant
+fixed (n_2, n_3). The target eps is shared out: 0.2 to the rows left out
+whole, 0.15 to the rows skipped for their small whole sums, 0.15 to the tails
+of the rows walked, 0.4 to the points dropped; the rest is left to floating
+point and the normal laws' cut (:mod:`.series`).
 
-    h(n_1) = E_1(nu_1) E_2(nu_2) E_3(nu_3) G_m(nu_m) tau(r) / ``|L|``
+**A row's tail.** Along a row every factor of F is an envelope of the modulus
+of an affine function of n_1 (the transform's bound: of the norm of one), so
+it is non-increasing past its peak c, and past a point U >= c it falls at
+least as ((U - c) / (n_1 - c))^p, p its local power
+(:func:`~.characteristic.envelope_power`). The factors whose peak lies beyond
+U are bounded by their value at U divided out (they are <= 1 further on); the
+others fall together at least as ((U - c_min) / (n_1 - c_min))^P, P the sum
+of their powers, so ``sum_{n_1 > U} F <= F(U) (U - c_min) / (dropped (P - 1))``
+(:func:`_row_tail`). Each row is walked outward from n_1 = 0 (F is taken
+inline, point by point) and the tail tried at every 4th point until both
+tails are within the row's share of the 0.15.
 
-(E_j: the product of basis leg j's envelopes; G_m: the mixed leg's; tau: a
-radial bound of ``|T_D|``; r = max_j ``|nu_j|`` / ``|m_j|`` <= ``|w|``) falls, and past a point
-U it falls at least as fast as (U / n_1)^p, p the sum of its factors' local
-powers (:func:`~.characteristic.envelope_power`), so ``sum_{n_1 > U} h <= h(U) kappa U / (p - 1)``
-(kappa >= 1 corrects for a peak on the other side). Each row is walked
-outward until both of its tails are within the row's share of the target.
-
-Which rows: all of them but a set whose whole sum is bounded at once. In 1-D
-there is one row. For the position, the rows with ``|n_2|`` > K_2: there the
-separable majorant ``g_1(n_1) g_2(n_2) G_m(nu_m)`` (g_j: E_j times the share
-(tau / ``|L|``)^(1/d)) sums along a row to at most ``min(S_1, G_m(|beta nu_2| / 2) S_1
+**Which rows.** In 1-D there is one row. For the position, a row's whole sum
+is bounded two ways: by the separable majorant ``g_1(n_1) g_2(n_2) G_m(nu_m)``
+(g_j: E_j, the product of basis leg j's envelopes, times the share
+(tau / ``|L|``)^(1/d) of the radial transform bound tau; G_m: the third, "mixed",
+leg's), which sums along a row to at most ``min(S_1, G_m(|beta nu_2| / 2) S_1
 + g_1(|beta nu_2| / (2 |alpha|)) C_m)`` (nu_m = alpha nu_1 + beta nu_2, so one of
-``|nu_1|``, ``|nu_m|`` is large where ``|nu_2|`` is; S_1 = sum of g_1; C_m bounds the sum of
-G_m along a row by its integral), and K_2 is the smallest that leaves out
-at most a quarter of the target. For both channels (d = 3), every basis leg
-is separable: the rows are the points (n_2, n_3) of the cross
-``S_1 g_2(n_2) g_3(n_3) >= eta``, and what the cross leaves out is summed exactly
-from the 1-D sums of the g_j (explicit, then the analytic tail
-``sum_{n > N} g(n) <= g(N) N / (p - 1)``).
+``|nu_1|``, ``|nu_m|`` is large where ``|nu_2|`` is; S_1 = sum of g_1; C_m bounds the sum
+of G_m along a row by its integral); and by E_2 times the transform's bound
+at the row's closest approach to w = 0 times the same sum of E_1 G_m. That
+bound is non-increasing in ``|n_2|``; the rows past K_2 are left out whole, K_2
+the least leaving out at most 0.2 eps (past the first 256 rows they are
+bounded in blocks [a, a + a // 32), each by its first row's bound times its
+length; past the 1-D arrays' end by g_2's analytic tail
+``sum_{n > N} g(n) <= g(N) N / (p - 1)``). For both channels (d = 3), rows
+(n_2, n_3) are kept for ``|n_3|`` <= K_3, n_2 walked from its peak as n_1 is;
+the rest is bounded from the 1-D sums of E_2, E_3 and the transform's bound
+(:func:`_rows_3d`). Of the rows kept, those of smallest whole sums are skipped
+while they add up to at most 0.15 eps.
 
 Of the points walked, the smallest are dropped while their sum stays within
 0.4 of the target (log2 bins of F; the sum dropped is counted exactly).
-The bound is outer rows + row tails + dropped points.
+The bound is outer rows + skipped rows + row tails + dropped points.
 """
 
 from __future__ import annotations
