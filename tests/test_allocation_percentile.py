@@ -91,6 +91,29 @@ def test_percentile_check_decides_as_the_exact_engine_with_its_bound():
     assert check.record(idx) is rec and check.checks == 1                  # decided once
 
 
+def test_a_choice_met_where_earlier_choices_failed_is_still_decided_at_every_pose():
+    """The check tries first the poses that refused earlier choices (to refuse sooner): a choice that meets
+    the spec there but fails at another pose of the grid is refused, at that pose."""
+    geometry, menu = Geometry.from_preset("u-shape"), small_menu()
+    poses = region_poses("u-shape", 2)
+    problem = Problem(geometry, menu, poses, percentile=Q)
+    check = PercentileCheck(geometry, problem, 0.030, Q, 2000, 0)
+    first, second = np.array([1, 0, 0, 0, 0, 1]), np.array([0, 1, 0, 0, 0, 1])
+    high = {}
+    for idx in (first, second):
+        budget = problem.budget({n: problem.class_name(j, m) for j, (n, m) in enumerate(zip(problem.inputs, idx))})
+        r = exact_yield(geometry, budget, poses, spec_position_um=30.0, quantiles=False, target=1e-7)
+        high[tuple(idx)] = r.exceedance("position") + r.bound("position")
+    fails = {key: np.flatnonzero(h > ALPHA) for key, h in high.items()}
+    assert fails[tuple(first)].tolist() == [1] and fails[tuple(second)].tolist() == [0]   # the menu's premise
+    assert high[tuple(second)][1] <= ALPHA
+    assert check.record(first) == {"met": False, "value": pytest.approx(high[tuple(first)][1], rel=1e-3),
+                                   "pose": 1, "method": "exact"}
+    rec = check.record(second)                      # met at pose 1, which is tried first; fails at pose 0
+    assert not rec["met"] and rec["pose"] == 0
+    assert rec["value"] == pytest.approx(high[tuple(second)].max(), rel=1e-3)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("preset", ["u-shape", "delta-shape"])
 def test_exact_choice_holds_by_a_large_monte_carlo(preset):

@@ -25,6 +25,7 @@ from prp3mc.model.budget import Budget
 from prp3mc.model.effects import SystematicEffect
 from prp3mc.model.laws import Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
 from prp3mc.model.linear import linear_model
+from prp3mc.stackup import OUTPUTS, QUANTILE_LEVELS
 from prp3mc.units import DEG2ARCSEC, DEG2RAD, MM2UM
 
 from .realities import with_leads
@@ -323,6 +324,7 @@ def test_result_frame_and_record_carry_the_spec_figures():
     rec = r.pose_record(1)
     assert rec["exceed_position_ppm"] == pytest.approx(1e6 * r.exceed_position[1])
     assert set(rec["quantiles_position_um"]) == {"p99.73", "p99.9937", "p99.9999"}
+    assert r.levels == QUANTILE_LEVELS == (99.73, 99.9937, 99.9999)         # in %, as the names say
     assert rec["error_bound_ppm"] >= 1e6 * r.bound_position[1]
     frame = r.to_frame()
     assert set(frame["statistic"]) >= {"exceed", "p99.73", "worst_case", "rss"}
@@ -330,6 +332,25 @@ def test_result_frame_and_record_carry_the_spec_figures():
     assert summary["argmax_pose"] == [float(v) for v in r.poses[int(np.argmax(r.exceed_position))]]
     # worst case >= every quantile (the paper's budget is bounded), and the exceedance of the worst case is 0
     assert np.all(r.quantile_position_mm[:, -1] <= r.worst_position_mm + r.quantile_position_err_mm[:, -1])
+
+
+def test_exceedance_and_bound_by_output_name():
+    """One accessor per output name; ``phi`` only with an orientation spec (``any`` is then the position's)."""
+    poses = [[0.0, 100.0, 0.0], [10.0, 120.0, 0.0]]
+    r = exact_yield("u-shape", "paper", poses, spec_position_um=150.0, spec_phi_arcsec=100.0, quantiles=False)
+    assert r.outputs == OUTPUTS == ("position", "phi", "any") and r.levels == ()
+    for output in OUTPUTS:
+        assert r.exceedance(output) is getattr(r, f"exceed_{output}")
+        assert r.bound(output) is getattr(r, f"bound_{output}")
+    assert np.array_equal(r.error_bound, np.maximum(np.maximum(r.bound_position, r.bound_any), r.bound_phi))
+    frame = r.to_frame().query("statistic == 'exceed'")
+    assert frame["output"].tolist() == ["position"] * 2 + ["phi"] * 2 + ["any"] * 2
+    alone = exact_yield("u-shape", "paper", poses, spec_position_um=150.0, quantiles=False)
+    assert alone.outputs == ("position", "any") and np.array_equal(alone.bound("any"), alone.bound_position)
+    with pytest.raises(KeyError, match="no orientation spec"):
+        alone.bound("phi")
+    with pytest.raises(KeyError, match="choose from position, phi, any"):
+        r.exceedance("x")
 
 
 def test_quantiles_agree_with_monte_carlo(seed):

@@ -105,6 +105,10 @@ class PercentileCheck:
         return self.pb.budget({n: self.pb.class_name(j, m) for j, (n, m) in enumerate(zip(self.pb.inputs, key))})
 
     def _exact(self, key) -> dict:
+        """The exact decision on ``key``: met when exceedance + bound <= 1 - q/100 at every pose of the grid
+        whose worst case passes S (with bounded laws, else at every pose; elsewhere the exceedance is 0). The
+        poses that refused earlier choices are tried first, only to refuse sooner: a choice they do not refuse
+        is then decided on all of them."""
         wc = self.pb.envelopes(np.array(key))["position"][0]
         at = np.flatnonzero(wc > self.S) if self.bounded else np.arange(wc.size)
         if at.size == 0:                       # the worst case is within S everywhere: nothing exceeds
@@ -119,7 +123,7 @@ class PercentileCheck:
                                     quantiles=False, target=min(1e-2, 1e-3 * self.alpha))
             except BudgetError:                # too few continuous laws for the series: Monte Carlo decides
                 return self._monte_carlo(key)
-            high = np.asarray(r.exceed_position + r.bound_position).reshape(-1)
+            high = np.asarray(r.exceedance("position") + r.bound("position")).reshape(-1)
             k = int(np.argmax(high))
             record = {"met": bool(high[k] <= self.alpha), "value": float(high[k]), "pose": int(poses[k]),
                       "method": "exact"}

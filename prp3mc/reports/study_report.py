@@ -32,6 +32,7 @@ import pandas as pd
 from ..output import (check_output, figure_formats, output_folder, png_data_uri, table_formats, write_csv,
                       write_json, write_text, write_workbook)
 from ..progress import Progress
+from ..stackup import QUANTILE_LEVELS
 from ..study.results import StudyResult, over_grid, pct_se
 from ..study.summary import build_summary
 from ..study.sweep import best_configurations, design_frame
@@ -180,8 +181,7 @@ def _html_table(df: pd.DataFrame, digits: int = 4) -> str:
 
 
 #: The exact yield's statistics the summary table shows, and how it names them.
-_YIELD_SHOWN = {"exceed_ppm": "P(> spec)", "p99.73": "p99.73", "p99.9937": "p99.9937", "p99.9999": "p99.9999",
-                "rss": "RSS stack"}
+_YIELD_SHOWN = {"exceed_ppm": "P(> spec)", **{f"p{lv:g}": f"p{lv:g}" for lv in QUANTILE_LEVELS}, "rss": "RSS stack"}
 
 
 def _summary_display(frame: pd.DataFrame) -> pd.DataFrame:
@@ -641,7 +641,8 @@ def _dependence(summary: dict, tables: dict) -> dict | None:
     if correlation is None:
         return None
     names = {"worst_case": "exact worst case", "montecarlo": "Monte Carlo", "shapley": "Shapley effects",
-             "sobol": "Sobol indices (S1, ST)", "allocation": "tolerance allocation"}
+             "sobol": "Sobol indices (S1, ST)", "allocation": "tolerance allocation",
+             "yield": "yield against the spec"}
     pairs = tables["correlation"].rename(columns={"input_a": "input", "input_b": "with", "spearman": "asked",
                                                   "latent": "latent normal r", "realised_se": "se"})
     return {"analyses": [{"name": names[k], **v} for k, v in correlation["analyses"].items()],

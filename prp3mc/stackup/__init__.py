@@ -8,7 +8,10 @@ has; this package inverts them with a guaranteed error bound:
 
 - :mod:`~prp3mc.stackup.exceedance` — :func:`exact_yield`, the public entry:
   P(position > S), P(``|dphi|`` > Z), P(either) and the quantiles, per pose;
-- :mod:`~prp3mc.stackup.result` — :class:`YieldResult`, and the Ppk of an exceedance;
+- :mod:`~prp3mc.stackup.result` — :class:`YieldResult`, the Ppk of an exceedance, the quantiles' levels
+  (:data:`~prp3mc.stackup.result.QUANTILE_LEVELS`) and the outputs' names;
+- :mod:`~prp3mc.stackup.gaussian` — correlated normal inputs made independent terms of the same joint
+  law (and why other correlated laws are refused);
 - :mod:`~prp3mc.stackup.characteristic` — each law's characteristic function and
   a decreasing bound of its modulus;
 - :mod:`~prp3mc.stackup.lattice` — the alias-free lattice of each channel (dphi,
@@ -22,6 +25,6 @@ Imports kinematics, model and the foundations, never study, measurement or repor
 """
 
 from .exceedance import DEFAULT_TARGET, exact_yield
-from .result import YieldResult, ppk
+from .result import OUTPUTS, QUANTILE_LEVELS, YieldResult, ppk
 
-__all__ = ["exact_yield", "YieldResult", "ppk", "DEFAULT_TARGET"]
+__all__ = ["exact_yield", "YieldResult", "ppk", "DEFAULT_TARGET", "QUANTILE_LEVELS", "OUTPUTS"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -11,8 +12,16 @@ from scipy import special
 from .._result import freeze, pose_columns, short_repr
 from .._version import __version__
 from ..units import DEG2ARCSEC, MM2UM, PPM
+from .lattice import LEVELS
 
-__all__ = ["YieldResult", "ppk", "region_summary", "PPM"]
+__all__ = ["YieldResult", "ppk", "region_summary", "PPM", "QUANTILE_LEVELS", "OUTPUTS"]
+
+#: The probabilities of the quantiles :func:`~prp3mc.stackup.exact_yield` reports, in %: 99.73 and 99.9937
+#: (3 and 4 sd of a normal law, two-sided: Cpk 1 and 1.33) and 99.9999 (1 ppm). The series solves for the
+#: fractions :data:`prp3mc.stackup.lattice.LEVELS`, which these are in %.
+QUANTILE_LEVELS = tuple(round(100.0 * v, 10) for v in LEVELS)
+#: The outputs of an exceedance: the position error, ``|dphi|``, and either.
+OUTPUTS = ("position", "phi", "any")
 
 
 def ppk(exceed) -> np.ndarray:
@@ -57,7 +66,8 @@ class YieldResult:
     exceed_any, bound_any : ndarray (...)
         P(position > S or ``|dphi|`` > Z) and its bound (the position's without an orientation spec).
     levels : tuple of float
-        The quantiles' probabilities, in % (99.73, 99.9937, 99.9999).
+        The quantiles' probabilities, in %: :data:`QUANTILE_LEVELS` (99.73, 99.9937, 99.9999), or () without
+        quantiles.
     quantile_position_mm, quantile_position_err_mm : ndarray (..., Q) or None
         Quantiles of the position error's norm and bounds of their errors.
     quantile_phi_deg, quantile_phi_err_deg : ndarray (..., Q) or None
@@ -112,22 +122,34 @@ class YieldResult:
 
     @property
     def error_bound(self) -> np.ndarray:
-        """The largest bound of the three exceedances, (...)."""
-        out = np.maximum(self.bound_position, self.bound_any)
-        return out if self.bound_phi is None else np.maximum(out, self.bound_phi)
+        """The largest bound of the exceedances (:attr:`outputs`), (...)."""
+        return functools.reduce(np.maximum, (self.bound(o) for o in self.outputs))
 
     def ppk(self, output: str = "position") -> np.ndarray:
         """The one-sided Ppk equivalent to an exceedance: Phi^-1(1 - P) / 3 (``position``, ``phi``, ``any``)."""
         return ppk(self.exceedance(output))
 
+    @property
+    def outputs(self) -> tuple[str, ...]:
+        """The outputs :meth:`exceedance` and :meth:`bound` take: :data:`OUTPUTS`, without ``phi`` when there is
+        no orientation spec (``any`` is then the position's)."""
+        return OUTPUTS if self.exceed_phi is not None else ("position", "any")
+
     def exceedance(self, output: str) -> np.ndarray:
-        """P(output beyond its spec): ``position``, ``phi`` or ``any``."""
-        values = {"position": self.exceed_position, "phi": self.exceed_phi, "any": self.exceed_any}
-        if output not in values:
-            raise KeyError(f"no output {output!r}; choose from position, phi, any")
-        if values[output] is None:
+        """P(output beyond its spec), (...): ``output`` one of :data:`OUTPUTS` (``position``, ``phi``, ``any``)."""
+        return self._output(output)[0]
+
+    def bound(self, output: str) -> np.ndarray:
+        """The bound of the absolute error of :meth:`exceedance` (``output``), (...)."""
+        return self._output(output)[1]
+
+    def _output(self, output: str) -> tuple[np.ndarray, np.ndarray]:
+        """(exceedance, bound) of ``output``; KeyError for an unknown one, or ``phi`` without an orientation spec."""
+        if output not in OUTPUTS:
+            raise KeyError(f"no output {output!r}; choose from {', '.join(OUTPUTS)}")
+        if output not in self.outputs:
             raise KeyError("no orientation spec: exceed_phi was not computed")
-        return values[output]
+        return getattr(self, f"exceed_{output}"), getattr(self, f"bound_{output}")
 
     def region_summary(self, threshold: float = 1e-6) -> dict:
         """The position exceedance over the poses (:func:`region_summary`)."""
@@ -149,10 +171,8 @@ class YieldResult:
                                       "error_bound": np.asarray(bound, dtype=float).reshape(n),
                                       "method": self.method}))
 
-        add("position", "exceed", self.exceed_position, "1", self.bound_position)
-        if self.exceed_phi is not None:
-            add("phi", "exceed", self.exceed_phi, "1", self.bound_phi)
-        add("any", "exceed", self.exceed_any, "1", self.bound_any)
+        for output in self.outputs:
+            add(output, "exceed", self.exceedance(output), "1", self.bound(output))
         for q, level in enumerate(self.levels):
             if self.quantile_position_mm is not None:
                 add("position", f"p{level:g}", self.quantile_position_mm[..., q], "mm",

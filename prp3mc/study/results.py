@@ -18,7 +18,7 @@ from .._version import __version__
 from ..units import OUTPUT_UNITS, Z95
 from ..allocation.optimum import AllocationResult
 from ..montecarlo.propagation import MonteCarloResult
-from ..stackup import YieldResult
+from ..stackup import OUTPUTS, YieldResult
 from ..worstcase.envelope import WorstCaseResult
 from .reader import Study, StudyConfiguration
 
@@ -203,15 +203,13 @@ class ConfigurationResult:
         """The exact yield's rows of :meth:`to_frame` (see there)."""
         y = self.yield_
         zero = np.zeros(y.exceed_position.shape)
-        outputs = ("position",) if y.exceed_phi is None else ("position", "phi", "any")   # any = position alone
-        bounds = {"position": y.bound_position, "phi": y.bound_phi, "any": y.bound_any}
-        for o in outputs:
+        for o in ("position",) if y.exceed_phi is None else OUTPUTS:       # any = position alone
             p = y.exceedance(o)
             add("exact_yield", o, "exceed_ppm", 1e6 * p, zero, "ppm")
             add("exact_yield", o, "exceed_pct", 100 * p, zero, "%")
             add("exact_yield", o, "ppk", y.ppk(o), zero, "1", ("min",))
             add("exact_yield", o, "above_1ppm", (p > 1e-6).astype(float), zero, "1")
-            add("exact_yield", o, "error_bound_ppm", 1e6 * bounds[o], zero, "ppm", ("max",))
+            add("exact_yield", o, "error_bound_ppm", 1e6 * y.bound(o), zero, "ppm", ("max",))
             k = np.unravel_index(np.argmax(p), p.shape)
             for axis, unit in enumerate(("mm", "mm", "deg")):
                 add("exact_yield", o, f"argmax_{('x', 'y', 'phi')[axis]}", np.full(p.shape, y.poses[k][axis]),

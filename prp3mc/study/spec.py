@@ -35,7 +35,7 @@ import numpy as np
 from ..errors import Prp3mcWarning
 from ..model.linear import linear_model
 from ..montecarlo.propagation import _wilson
-from ..stackup import YieldResult, exact_yield
+from ..stackup import OUTPUTS, YieldResult, exact_yield
 from ..stackup.result import PPM
 from ..units import DEG2ARCSEC, MM2UM, RAD2DEG
 
@@ -179,8 +179,7 @@ def exceedance_curve(config, budget, result: YieldResult, output: str, samples: 
         with warnings.catch_warnings():  # of the joint channel, not drawn; this channel's bound is kept and shown
             warnings.simplefilter("ignore", Prp3mcWarning)
             r = exact_yield(config.geometry, budget, pose, quantiles=False, **kw)
-        exact[j] = float(r.exceedance(output))
-        bound[j] = float(r.bound_position if output == "position" else r.bound_phi)
+        exact[j], bound[j] = float(r.exceedance(output)), float(r.bound(output))
     curve = dict(output=output, pose=pose, spec=float(spec), s=s, exact=exact, bound=bound, worst=worst)
     if samples is not None:
         err = linear_model(config.geometry, budget, pose[None]).evaluate(samples)[0]   # (n, 3) mm, mm, rad
@@ -207,19 +206,17 @@ def _ppk_min(result: YieldResult, output: str) -> float | None:
 
 def yield_summary(result: YieldResult, spec: YieldSpec, grid: tuple) -> dict:
     """The ``yield`` entry of a configuration in summary.json (layout in :mod:`prp3mc.study.summary`)."""
-    outputs = ("position", "any") if result.exceed_phi is None else ("position", "phi", "any")
-    bounds = {"position": result.bound_position, "phi": result.bound_phi, "any": result.bound_any}
+    outputs = result.outputs
     out = {"spec": spec.record(), "grid": list(grid)}
-    for o in ("position", "phi", "any"):
+    for o in OUTPUTS:
         if o in outputs:
             out[f"exceed_{o}_ppm"] = _exact(result.exceedance(o), PPM)
             out[f"exceed_{o}_pct"] = _exact(result.exceedance(o), 100.0)
         else:
             out[f"exceed_{o}_ppm"] = out[f"exceed_{o}_pct"] = None
-    out["ppk_min"] = {o: (_ppk_min(result, o) if o in outputs else None) for o in ("position", "phi", "any")}
+    out["ppk_min"] = {o: (_ppk_min(result, o) if o in outputs else None) for o in OUTPUTS}
     out["error_bound_ppm"] = float(PPM * result.error_bound.max())
-    out["error_bounds_ppm"] = {o: (float(PPM * bounds[o].max()) if o in outputs else None)
-                               for o in ("position", "phi", "any")}
+    out["error_bounds_ppm"] = {o: (float(PPM * result.bound(o).max()) if o in outputs else None) for o in OUTPUTS}
     levels = [f"p{lv:g}" for lv in result.levels]
     out["quantiles_position_um"] = {k: _exact(result.quantile_position_mm[..., q], MM2UM) for q, k in enumerate(levels)}
     out["quantile_error_bounds_position_um"] = {k: float(MM2UM * result.quantile_position_err_mm[..., q].max())
