@@ -154,10 +154,6 @@ def test_the_private_read_check_sees_one():
 
 
 EFFECT_KINDS = {"offset", "scale", "backlash", "thermal", "cyclic", "spread"}
-#: Modules that still compare effect kinds with strings: the fitting pipeline and the campaign simulator, which
-#: another branch is rewriting; they adopt :class:`~prp3mc.model.effects.EffectKind` after it lands.
-KIND_STRINGS_PENDING = {"measurement/campaign/simulate.py", "measurement/forward/signatures.py",
-                        "measurement/naming/selection.py", "measurement/estimation/likelihood.py", "measurement/discrepancy/updated.py"}
 
 
 def kind_string_compares(tree: ast.AST) -> list[str]:
@@ -178,9 +174,5 @@ def kind_string_compares(tree: ast.AST) -> list[str]:
 @pytest.mark.parametrize("path", MODULES, ids=lambda p: str(p.relative_to(PACKAGE)))
 def test_effect_kinds_are_dispatched_through_the_registry(path):
     """Effect kinds are the members of ``EffectKind`` and their attributes, not strings compared in every module."""
-    rel = str(path.relative_to(PACKAGE))
     found = kind_string_compares(TREES[path])
-    if rel in KIND_STRINGS_PENDING:
-        assert found, f"{rel} no longer compares kinds with strings: take it off KIND_STRINGS_PENDING"
-    else:
-        assert not found, f"{rel}: {found}"
+    assert not found, f"{path.relative_to(PACKAGE)}: {found}"

@@ -352,3 +352,34 @@ def test_the_registry_says_how_the_linear_model_takes_each_kind():
         assert unit == (kind.term_unit or eff.unit) and law.reference == kind.reference
     assert list(budget.effects_frame()["enters"]) == [effects[n].effect.kind.enters for n in budget.effects]
     assert EffectKind.THERMAL.term_unit == "K" and EffectKind.CYCLIC.dof == 2 and EffectKind.SPREAD.at_pose == "law"
+
+
+def test_the_registry_says_what_a_campaign_needs_and_what_a_controller_compensates():
+    """What a campaign needs to test an effect (:meth:`Effect.untestable`) and how a controller compensates a
+    kind come from the registry: every systematic kind says how, every kind a controller may leave says why."""
+    from prp3mc.model.effects import EFFECT_NAMES, EffectKind, effect
+    for kind in EffectKind:
+        assert (kind.compensation is None) == (not kind.systematic)
+        assert (kind.uncompensated is None) == kind.is_shift
+    everything = ({"dir_1", "dir_2", "dir_3", "temp_C"}, (True,) * 3, True, None)
+    assert all(effect(n).untestable(*everything) is None for n in EFFECT_NAMES)
+    why = {n: effect(n).untestable({"dir_1"}, (True, False, True), False, ("b_1",)) for n in EFFECT_NAMES}
+    assert why["backlash_1"] is None and why["backlash_2"] == "needs dir_2" and why["thermal"] == "needs temp_C"
+    assert "lead_mm of leg 2" in why["cyclic_2"] and why["cyclic_3"] is None
+    assert "pose measured twice" in why["spread_b_1"] and why["beta_1"] is None and why["scale_3"] is None
+    assert effect("spread_b_2").untestable(*everything[:3], ("b_1",)) == "needs its budget input"
+
+
+def test_one_lead_check_behind_every_cyclic_path():
+    """The budget's check, the slider error and the linear model's terms refuse a cyclic error without its leg's
+    lead with the same one line."""
+    from prp3mc.model.effects import check_leads, effect_terms
+    g = Geometry.from_preset("u-shape").replace(lead=(5.0, None, 4.0))
+    calls = (lambda: check_leads(["cyclic_2"], g),
+             lambda: slider_error({"cyclic_2": 0.01}, np.zeros((1, 3)), lead_mm=g.lead_mm),
+             lambda: effect_terms({"cyclic_2": SystematicEffect("cyclic_2", 0.01, phase_deg=0.0)}, g.lead_mm))
+    for call in calls:
+        with pytest.raises(BudgetError, match="cyclic_2: a cyclic screw error repeats with the lead of slider 2's "
+                                              "screw, and .* has no lead_mm for leg 2"):
+            call()
+    check_leads(["cyclic_1", "cyclic_3", "backlash_2"], g)

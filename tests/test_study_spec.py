@@ -201,15 +201,53 @@ def test_first_screen_answers_against_the_spec(written):
     assert missing_files(html, out) == [] and figures_without_files(html, out, "png") == []
 
 
-def test_correlated_budget_runs_without_exact_yield(tmp_path):
-    """The exact series needs independent inputs: a correlated budget's study says so and runs on (fast: no yield)."""
+def test_correlated_uniform_budget_falls_back_on_monte_carlo_and_says_so(tmp_path):
+    """Correlated inputs that are not all normal: no exact series; the Monte Carlo run counts every exceedance
+    (position, |dphi|, either) with its Wilson interval, and the summary's correlation section says which."""
+    from prp3mc.study.summary import build_summary
+
     (tmp_path / "corr.toml").write_text('name = "corr"\n[inputs]\n'
                                         + "".join(f'b_{i} = {{ law = "uniform", lo = 0, hi = 0.025 }}\n'
                                                   for i in (1, 2, 3))
                                         + '[correlation]\n"b_1,b_2" = 0.5\n')
-    text = _text("[spec]\nposition_um = 30\n").replace('budget = "paper"', 'budget = "corr.toml"')
+    text = _text("[spec]\nposition_um = 30\nphi_arcsec = 20\n").replace('budget = "paper"', 'budget = "corr.toml"')
     study = Study.from_text(text, source=str(tmp_path / "s.toml"), base=tmp_path)
-    with pytest.warns(Warning, match="no exact yield for u-shape: the budget correlates inputs"):
+    with pytest.warns(Warning, match="no exact yield for u-shape: budget 'corr' correlates inputs whose law is not "
+                                     "normal: b_1 .uniform., b_2 .uniform.; .* P.either. instead"):
         result = run_study(study, progress=False)
     c = result["u-shape"]
-    assert c.yield_ is None and c.curves == () and c.montecarlo.tolerance_mm == pytest.approx(0.03)
+    mc = c.montecarlo
+    assert c.yield_ is None and c.curves == () and mc.tolerance_mm == pytest.approx(0.03)
+    assert mc.tolerance_phi_deg == pytest.approx(20 / 3600)
+    assert np.all(mc.exceed_any_prob >= np.maximum(mc.exceed_prob, mc.exceed_phi_prob))
+    doc = build_summary(result)
+    exceed = doc["configurations"]["u-shape"]["montecarlo"]["exceed"]
+    assert exceed["tolerance_phi_arcsec"] == pytest.approx(20.0)
+    assert {"phi_probability", "any_probability"} <= set(exceed)
+    how = doc["correlation"]["analyses"]["yield"]
+    assert how["respects"] and "no exact series" in how["how"] and "Wilson" in how["how"]
+
+
+@pytest.mark.slow
+def test_correlated_normal_budget_gets_the_exact_yield(tmp_path):
+    """Correlated inputs that are all normal: the exact series runs (no warning) and the summary says so."""
+    import warnings
+
+    from prp3mc.study.summary import build_summary
+
+    (tmp_path / "corr.toml").write_text('name = "corr"\n[inputs]\n'
+                                        + "".join(f'b_{i} = {{ law = "normal", mu = 0, sd = 0.006 }}\n'
+                                                  for i in (1, 2, 3))
+                                        + '[correlation]\n"b_1,b_2" = 0.5\n')
+    text = (_text("[spec]\nposition_um = 20\n").replace('budget = "paper"', 'budget = "corr.toml"')
+            .replace("grid = 5", "grid = 5\nk_sigma = 3"))           # normal laws: the worst case needs k_sigma
+    study = Study.from_text(text, source=str(tmp_path / "s.toml"), base=tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        result = run_study(study, progress=False)
+    c = result["u-shape"]
+    assert c.yield_ is not None and "jointly normal" in c.yield_.method
+    direct = exact_yield("u-shape", study.budget, c.yield_.poses, spec_position_um=20.0)
+    np.testing.assert_array_equal(c.yield_.exceed_position, direct.exceed_position)
+    how = build_summary(result)["correlation"]["analyses"]["yield"]
+    assert how["respects"] and how["how"].startswith("exact")

@@ -101,9 +101,58 @@ def test_a_correlated_budget_falls_back_on_monte_carlo_and_says_so(capsys, tmp_p
     rec = json.loads(out)
     assert rec["method"].startswith("Monte Carlo")
     assert rec["inputs"]["seed"] == 3 and rec["inputs"]["samples"] == 200000
-    assert rec["error_bound_ppm"] > 0 and rec["exceed_phi_ppm"] is None
-    with pytest.raises(Exception, match="correlates"):
+    assert rec["error_bound_ppm"] > 0 and rec["exceed_phi_ppm"] is None          # no --spec-phi-arcsec
+    assert rec["exceed_any_ppm"] == rec["exceed_position_ppm"] and set(rec["ci95_ppm"]) == {"position", "any"}
+    assert "theta_1 (uniform)" in rec["method"]
+    with pytest.raises(Exception, match="correlates inputs whose law is not normal"):
         exact_yield("u-shape", Budget.from_dict(doc), [10.0, 120.0, 0.0], spec_position_um=150.0)
+
+
+def correlated_budget(tmp_path, laws: str) -> str:
+    """A budget file: theta_i and b_i of the paper's widths, normal (sd = half-width / 2) or uniform, with
+    theta_1,theta_2 and b_2,b_3 correlated."""
+    doc = Budget.load("paper").to_dict()
+    if laws == "normal":
+        doc["inputs"] = {k: {"law": "normal", "mu": 0.0, "sd": (0.02 if k.startswith("theta") else 0.006)}
+                         for k in doc["inputs"] if k[:2] in ("th", "b_")}
+    doc["correlation"] = {"theta_1,theta_2": 0.6, "b_2,b_3": -0.4}
+    path = tmp_path / f"corr_{laws}.toml"
+    Budget.from_dict(doc).to_toml(path)
+    return str(path)
+
+
+def test_the_fallback_reports_every_exceedance_with_its_interval(capsys, tmp_path):
+    """SPEC §9 with a correlated budget the series cannot take: position, |dphi| and either as floats, each
+    with its Wilson 95 % interval; the error is the farthest interval end; the region table has all three."""
+    path = correlated_budget(tmp_path, "uniform")
+    argv = ["yield", "--geometry", "u-shape", "--budget", path, "--spec-position-um", "60", "--spec-phi-arcsec", "30",
+            "--samples", "100000", "--seed", "4", "--json"]
+    assert main(argv[:5] + list(POSE) + argv[5:]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    figures = {o: rec[f"exceed_{o}_ppm"] for o in ("position", "phi", "any")}
+    assert all(isinstance(v, float) for v in figures.values())
+    assert figures["any"] >= max(figures["position"], figures["phi"])
+    assert rec["error_bound_ppm"] == pytest.approx(max(max(hi - figures[o], figures[o] - lo)
+                                                       for o, (lo, hi) in rec["ci95_ppm"].items()))
+    assert rec["method"].startswith("Monte Carlo") and rec["inputs"]["seed"] == 4
+    assert main(argv[:5] + ["--region", "u-shape", "--grid", "2"] + argv[5:]) == 0
+    rows = json.loads(capsys.readouterr().out)["rows"]
+    assert len(rows) == 4 and {"exceed_position_ppm", "exceed_phi_ppm", "exceed_any_ppm",
+                               "ci95_farther_end_ppm"} <= set(rows[0])
+
+
+def test_an_all_normal_correlated_budget_is_exact(capsys, tmp_path):
+    """Correlated inputs that are all normal: the exact series, its bound, and the method says how."""
+    path = correlated_budget(tmp_path, "normal")
+    code = main(["yield", "--geometry", "u-shape", "--budget", path, *POSE, "--spec-position-um", "60",
+                 "--spec-phi-arcsec", "60", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    rec = json.loads(out)
+    assert "jointly normal" in rec["method"] and "samples" not in rec["inputs"]
+    assert isinstance(rec["exceed_phi_ppm"], float) and rec["error_bound_ppm"] <= 1e-3 + 1e-12
+    r = exact_yield("u-shape", Budget.load(path), [10.0, 120.0, 0.0], spec_position_um=60.0, spec_phi_arcsec=60.0)
+    assert rec["exceed_position_ppm"] == pytest.approx(1e6 * float(r.exceed_position), rel=1e-12)
 
 
 def test_the_command_default_target_is_the_engine_s():

@@ -16,10 +16,10 @@ from . import (add_budget, add_geometry, add_json, add_pose_or_region, add_seed,
 DEFAULT_TARGET = 1e-9
 #: A spec this many times below the error's RSS scale is refused (a value in mm typed as µm, or the like).
 _SCALE = 1e-3
-_MC_METHOD = ("Monte Carlo (the budget correlates inputs: the exact series needs independent ones): the streamed "
-              "sampler, error_bound = distance from the position exceedance to the farther end of its Wilson 95 % "
-              "interval (a confidence statement, not a bound); quantiles are sample percentiles; P(|dphi| > Z) and P(either) "
-              "are not computed")
+_MC_METHOD = ("Monte Carlo of the linear model with the budget's Gaussian copula (the streamed sampler): every "
+              "exceedance with its Wilson 95 % interval (ci95_ppm); error_bound = the largest distance from an "
+              "exceedance to the farther end of its interval (a confidence statement, not a bound); quantiles are "
+              "sample percentiles")
 
 
 @command("yield", "exact yield of the linear model against a position (and orientation) spec, without sampling")
@@ -36,7 +36,8 @@ class YieldCommand:
         p.add_argument("--target", type=probability, default=DEFAULT_TARGET, metavar="E",
                        help=f"bound of every probability's absolute error (default {DEFAULT_TARGET:g})")
         p.add_argument("--samples", type=positive_int, default=10_000_000, metavar="N",
-                       help="samples of the Monte Carlo fallback for a budget with [correlation] (default 1e7)")
+                       help="samples of the Monte Carlo fallback for a budget that correlates inputs not all normal "
+                            "(default 1e7)")
         add_seed(p, help="seed of the Monte Carlo fallback (default: fresh, recorded in the output)")
         add_json(p)
 
@@ -46,6 +47,7 @@ class YieldCommand:
         from ..model.budget import Budget
         from ..model.validity import check_linearity
         from ..stackup import exact_yield
+        from ..stackup.gaussian import exact_refusal
 
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         poses, where = grid_poses(args)
@@ -53,8 +55,9 @@ class YieldCommand:
             check_poses(geometry, poses)
         check_linearity(geometry, budget, poses)
         specs = {"spec_position_um": args.spec_position_um, "spec_phi_arcsec": args.spec_phi_arcsec}
-        if budget.correlated:
-            _correlated(args, geometry, budget, poses, where)
+        why = exact_refusal(budget)
+        if why is not None:
+            _correlated(args, geometry, budget, poses, where, why)
             return
         with warnings.catch_warnings(record=True) as caught:    # a spec in the wrong unit: one line, not two
             warnings.simplefilter("always")
@@ -110,32 +113,43 @@ def _pose_frame(r) -> "pd.DataFrame":
     return frame
 
 
-def _correlated(args, geometry, budget, poses, where) -> None:
-    """A budget with [correlation]: the streamed Monte Carlo, its Wilson interval as the error (said in method)."""
+def _correlated(args, geometry, budget, poses, where, why: str) -> None:
+    """A budget whose correlated inputs are not all normal: the streamed Monte Carlo with the copula, every
+    exceedance with its Wilson 95 % interval; as the error, the distance to the interval's farther end (said
+    in ``method``)."""
     import pandas as pd
 
     from .._result import pose_columns
     from ..montecarlo.propagation import monte_carlo
-    from ..stackup.result import QUANTILE_LEVELS, ppk, region_summary
+    from ..stackup.result import OUTPUTS, QUANTILE_LEVELS, ppk, region_summary
 
     S = args.spec_position_um / MM2UM
-    mc = monte_carlo(geometry, budget, poses, args.samples, rng=args.seed, tolerance_mm=S,
+    Z = None if args.spec_phi_arcsec is None else args.spec_phi_arcsec / DEG2ARCSEC
+    mc = monte_carlo(geometry, budget, poses, args.samples, rng=args.seed, tolerance_mm=S, tolerance_phi_deg=Z,
                      percentiles=QUANTILE_LEVELS)
     names = [f"p{level:g}" for level in QUANTILE_LEVELS]
-    p = mc.exceed_prob.reshape(-1)
-    half = np.abs(mc.exceed_ci.reshape(-1, 2) - p[:, None]).max(axis=1)    # the interval's farther end from P
+    position, phi = mc.position_pct.reshape(-1, len(names)), mc.phi_pct.reshape(-1, len(names))
+    figures = {"position": (mc.exceed_prob, mc.exceed_ci), "phi": (mc.exceed_phi_prob, mc.exceed_phi_ci),
+               "any": (mc.exceed_prob, mc.exceed_ci) if Z is None else (mc.exceed_any_prob, mc.exceed_any_ci)}
+    figures = {o: (p.reshape(-1), ci.reshape(-1, 2)) for o, (p, ci) in figures.items() if p is not None}
+    farther = {o: np.abs(ci - p[:, None]).max(axis=1) for o, (p, ci) in figures.items()}   # from P, (N,)
+    half = np.max(list(farther.values()), axis=0)
+    p = figures["position"][0]
     k = int(np.argmax(p))
-    record = {"exceed_position_ppm": PPM * float(p[k]), "exceed_phi_ppm": None, "exceed_any_ppm": None,
-              "error_bound_ppm": PPM * float(half[k]),
-              "quantiles_position_um": dict(zip(names, (MM2UM * mc.position_pct.reshape(-1, len(names))[k]).tolist())),
-              "quantiles_phi_arcsec": dict(zip(names, (DEG2ARCSEC * mc.phi_pct.reshape(-1, len(names))[k]).tolist())),
-              "ppk_position": float(ppk(p[k])) if p[k] > 0 else None, "method": _MC_METHOD}
+    record = {f"exceed_{o}_ppm": PPM * float(figures[o][0][k]) if o in figures else None
+              for o in OUTPUTS}
+    record |= {"error_bound_ppm": PPM * float(half[k]),
+               "ci95_ppm": {o: (PPM * ci[k]).tolist() for o, (_, ci) in figures.items()},
+               "quantiles_position_um": dict(zip(names, (MM2UM * position[k]).tolist())),
+               "quantiles_phi_arcsec": dict(zip(names, (DEG2ARCSEC * phi[k]).tolist())),
+               "ppk_position": float(ppk(p[k])) if p[k] > 0 else None, "method": f"{_MC_METHOD} ({why})"}
     inputs = dict(spec_position_um=args.spec_position_um, spec_phi_arcsec=args.spec_phi_arcsec, seed=mc.seed,
                   samples=mc.n_samples, **where)
     doc = {**record, **provenance(args, geometry, budget, **inputs)}
     if args.region is not None:
         doc["region"] = region_summary(p, poses)
-        frame = pd.DataFrame({**pose_columns(poses), "exceed_position_ppm": PPM * p, "ci95_farther_end_ppm": PPM * half})
+        frame = pd.DataFrame({**pose_columns(poses), **{f"exceed_{o}_ppm": PPM * v for o, (v, _) in figures.items()},
+                              "ci95_farther_end_ppm": PPM * half})
         emit_table(args, frame, doc)
         return
     if args.json:
@@ -143,15 +157,15 @@ def _correlated(args, geometry, budget, poses, where) -> None:
         return
     x, y, phi = poses[k]
     q = record["quantiles_position_um"]
+    labels = {"position": f"position > {args.spec_position_um:g} µm", "phi": f"|dphi| > {args.spec_phi_arcsec:g} "
+              "arcsec", "any": "either"}
     print("\n".join([
         f"prp3mc {__version__}  geometry {geometry.name}  budget {budget.name}",
         f"pose x={x:g} mm  y={y:g} mm  phi={phi:g} deg",
-        f"The budget correlates inputs: Monte Carlo with {mc.n_samples:g} samples (seed {mc.seed}), not the exact "
-        "series.",
-        f"  position > {args.spec_position_um:g} µm  {100 * p[k]:.4g} %  {PPM * p[k]:.4g} ppm "
-        f"(95 % interval ± {PPM * half[k]:.2g} ppm)",
-        "  position quantiles (µm): " + "  ".join(f"{lv} {v:.3f}" for lv, v in q.items()),
-        "P(|dphi| > Z) and P(either) are not computed for a correlated budget."]))
+        f"Monte Carlo with {mc.n_samples:g} samples (seed {mc.seed}), not the exact series: {why}.",
+        *(f"  {labels[o]:24s}{100 * v[k]:11.4g} %{PPM * v[k]:14.4f} ppm  95 % interval [{PPM * ci[k, 0]:.4g}, "
+          f"{PPM * ci[k, 1]:.4g}] ppm" for o, (v, ci) in figures.items() if o != "any" or Z is not None),
+        "  position quantiles (µm): " + "  ".join(f"{lv} {v:.3f}" for lv, v in q.items())]))
 
 
 def _text(args, geometry, budget, pose, r, record, region) -> list[str]:
@@ -193,6 +207,9 @@ def _text(args, geometry, budget, pose, r, record, region) -> list[str]:
     if r.exceed_phi is not None and bool(np.ravel(r.bracketed_any)[0]):
         lines.append("'either' lies between the larger and the sum of the two (the joint series does not converge "
                      "in time for this budget): its bound covers that bracket.")
+    if budget.correlated:
+        lines.append("Correlated inputs, all normal (so jointly normal): exact, as independent normal terms with the "
+                     "same joint law.")
     if budget.effects:
         lines.append("Effects: backlash_i ±h_i/2 with probability 1/2 each, one temperature uniform over "
                      "temp_range_C; offsets, lead scales and cyclic errors are known shifts.")

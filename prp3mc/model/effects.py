@@ -67,7 +67,7 @@ from .laws import Discrete, Law, Uniform
 __all__ = ["EffectKind", "WEIGHT_ONE", "WEIGHT_B", "WEIGHT_WAVE", "Effect", "EFFECT_NAMES", "OFFSET_FAMILIES", "SPREAD_FAMILIES", "T_REF_C", "effect",
            "slider_error", "offset_errors", "SystematicEffect", "effects_from_dict", "EFFECT_LIMITS",
            "effect_factors", "FittedOn", "FIT_TOLERANCE", "phasor", "amplitude_phase", "components",
-           "check_leads", "effect_value", "ALL_LEGS", "EffectTerm", "effect_terms", "slider_factor"]
+           "check_leads", "lead_of", "effect_value", "ALL_LEGS", "EffectTerm", "effect_terms", "slider_factor"]
 
 #: Parameters whose constant offset is a library effect (``b``: encoder zero offset).
 OFFSET_FAMILIES = ("a", "alpha", "beta", "gamma", "theta", "c", "e", "psi", "b")
@@ -126,25 +126,43 @@ class EffectKind(StrEnum):
         Its value is >= 0 (a backlash width, a cyclic error's amplitude).
     enters : str
         How the analyses take it, in words (tables).
+    compensation : str or None
+        How a controller compensates it (the updated model, docs, *File
+        formats*); None for a spread.
+    uncompensated : str or None
+        Why a controller leaves it: always for a spread; for a factor, when
+        the controller does not know its driver (the temperature, the
+        approach direction). None: always compensable.
     """
 
-    def __new__(cls, value, at_pose, per_leg, weight, dof, unit, term_unit, reference, needs, nonnegative, enters):
+    def __new__(cls, value, at_pose, per_leg, weight, dof, unit, term_unit, reference, needs, nonnegative, enters,
+                compensation, uncompensated):
         member = str.__new__(cls, value)
         member._value_ = value
         member.at_pose, member.per_leg, member.weight, member.dof = at_pose, per_leg, weight, dof
         member.unit, member.term_unit, member.reference, member.needs = unit, term_unit or unit, reference, needs
         member.nonnegative, member.enters = nonnegative, enters
+        member.compensation, member.uncompensated = compensation, uncompensated
         return member
 
     #          at_pose   per_leg weight       dof unit   term_unit ref      needs       >= 0   enters
-    OFFSET = ("offset", "shift", True, WEIGHT_ONE, 1, None, None, 0.0, None, False, "known shift")
-    SCALE = ("scale", "shift", True, WEIGHT_B, 1, "1", None, 0.0, None, False, "known shift")
+    #          compensation; uncompensated
+    OFFSET = ("offset", "shift", True, WEIGHT_ONE, 1, None, None, 0.0, None, False, "known shift",
+              "load model/geometry.toml into the controller (an encoder zero b_i: shift slider i's zero)", None)
+    SCALE = ("scale", "shift", True, WEIGHT_B, 1, "1", None, 0.0, None, False, "known shift",
+             "correct slider i's lead (steps per mm) by the factor 1 / (1 + kappa_i)", None)
     BACKLASH = ("backlash", "factor", True, WEIGHT_ONE, 1, "mm", None, 0.0, "dir_{leg}", True,
-                "±h/2, approach unknown")
+                "±h/2, approach unknown",
+                "with the approach direction known: add dir_i h_i / 2 to slider i's command",
+                "the approach direction is not known: bounded as +-h/2")
     THERMAL = ("thermal", "factor", False, WEIGHT_B, 1, "1/K", "K", T_REF_C, "temp_C", False,
-               "temperature over temp_range_C")
-    CYCLIC = ("cyclic", "shift", True, WEIGHT_WAVE, 2, "mm", None, 0.0, None, True, "known shift")
-    SPREAD = ("spread", "law", True, WEIGHT_ONE, 1, None, None, 0.0, None, True, "the input's new law")
+               "temperature over temp_range_C",
+               "with a temperature sensor: correct every slider's lead by alpha_T (T - 20 degC)",
+               "the controller has no temperature sensor: bounded over temp_range_C")
+    CYCLIC = ("cyclic", "shift", True, WEIGHT_WAVE, 2, "mm", None, 0.0, None, True, "known shift",
+              "a screw error map of slider i: subtract A_i sin(2 pi b_i / p_i + phi_i) from its command", None)
+    SPREAD = ("spread", "law", True, WEIGHT_ONE, 1, None, None, 0.0, None, True, "the input's new law",
+              None, "a dispersion: random from visit to visit, no controller can predict it")
 
     @property
     def systematic(self) -> bool:
@@ -214,6 +232,34 @@ class Effect:
     def term(self) -> str:
         """Its term's name in a :class:`~prp3mc.model.linear.LinearModel` (``offset_`` before an offset's name)."""
         return f"offset_{self.name}" if self.kind is EffectKind.OFFSET else self.name
+
+    def untestable(self, columns, has_lead, repeats: bool, inputs=None) -> str | None:
+        """Why a campaign cannot test the effect, or None when it can.
+
+        Parameters
+        ----------
+        columns : collection of str
+            The campaign's optional columns (``dir_i``, ``temp_C``): a
+            backlash and the thermal expansion need their driver's.
+        has_lead : sequence of 3 bool
+            Whether slider i's screw has a lead (the geometry's ``lead_mm``):
+            a cyclic error repeats with it.
+        repeats : bool
+            Whether the campaign measures some pose twice: a spread is seen
+            in the scatter of repeats.
+        inputs : collection of str, optional
+            The budget's inputs, one of which a spread scales (None: any).
+        """
+        missing = [column for column in self.needs if column not in columns]
+        if missing:
+            return f"needs {', '.join(missing)}"
+        if self.kind.weight == WEIGHT_WAVE and not has_lead[self.leg]:
+            return f"needs lead_mm of leg {self.leg + 1} in the geometry (the lead its screw's error repeats with)"
+        if not self.systematic and not repeats:
+            return "needs a pose measured twice: a dispersion is seen in the scatter of repeats"
+        if not self.systematic and inputs is not None and self.budget_input not in inputs:
+            return "needs its budget input"
+        return None
 
 
 #: The kinds whose effects are named ``kind_i`` and act on slider i's position.
@@ -299,13 +345,26 @@ def components(effects, values) -> np.ndarray:
     return np.array(out, dtype=float)
 
 
+def lead_of(eff: Effect, lead_mm, where: str = "", geometry: str | None = None) -> float:
+    """The lead (mm) of the screw whose cyclic error ``eff`` is: ``lead_mm[eff.leg]``.
+
+    ``lead_mm`` (3,), mm, or None: the screws' leads (:attr:`Geometry.lead_mm`, NaN for a leg without);
+    ``where`` starts and ``geometry`` (its name) completes the one-line :class:`BudgetError` when there is none.
+    """
+    lead = np.nan if lead_mm is None else lead_mm[eff.leg]
+    if not np.isfinite(lead):
+        which = "the geometry" if geometry is None else f"geometry {geometry!r}"
+        raise BudgetError(f"{where}{eff.name}: a cyclic screw error repeats with the lead of slider "
+                          f"{eff.leg + 1}'s screw, and {which} has no lead_mm for leg {eff.leg + 1}: "
+                          "add lead_mm to its [[leg]] table")
+    return float(lead)
+
+
 def check_leads(names, geometry: Geometry, where: str = "") -> None:
     """Refuse cyclic effects among ``names`` whose leg has no ``lead_mm`` in ``geometry`` (one line)."""
     for eff in _as_effects(names):
-        if eff.kind is EffectKind.CYCLIC and not np.isfinite(geometry.lead_mm[eff.leg]):
-            raise BudgetError(f"{where}{eff.name}: a cyclic screw error repeats with the lead of slider "
-                              f"{eff.leg + 1}'s screw, and geometry {geometry.name!r} has no lead_mm for leg "
-                              f"{eff.leg + 1}: add lead_mm to its [[leg]] table")
+        if eff.kind.weight == WEIGHT_WAVE:
+            lead_of(eff, geometry.lead_mm, where, geometry.name)
 
 
 def slider_error(values: dict, b: np.ndarray, direction: np.ndarray | None = None,
@@ -347,10 +406,7 @@ def slider_error(values: dict, b: np.ndarray, direction: np.ndarray | None = Non
                 raise ParameterError("thermal needs temperatures temp_C")
             out += value * (np.asarray(temp_C)[:, None] - T_REF_C) * b
         elif eff.kind is EffectKind.CYCLIC:
-            lead = np.nan if lead_mm is None else lead_mm[eff.leg]
-            if not np.isfinite(lead):
-                raise BudgetError(f"{eff.name} needs the lead lead_mm of slider {eff.leg + 1}'s screw")
-            out[:, eff.leg] += np.imag(complex(value) * np.exp(2j * np.pi * b[:, eff.leg] / lead))
+            out[:, eff.leg] += np.imag(complex(value) * np.exp(2j * np.pi * b[:, eff.leg] / lead_of(eff, lead_mm)))
     return out
 
 
@@ -578,10 +634,7 @@ def effect_terms(effects: dict, lead_mm=None) -> tuple[EffectTerm, ...]:
         e, kind = eff.effect, eff.effect.kind
         wave = (0.0, 0.0)
         if kind.weight == WEIGHT_WAVE:
-            lead = np.nan if lead_mm is None else lead_mm[e.leg]
-            if not np.isfinite(lead):
-                raise BudgetError(f"{name} needs the lead lead_mm of slider {e.leg + 1}'s screw")
-            wave = (2.0 * math.pi / lead, math.radians(eff.phase_deg))
+            wave = (2.0 * math.pi / lead_of(e, lead_mm), math.radians(eff.phase_deg))
         out.append(EffectTerm(e.term, e, e.family or "b", e.leg if kind.per_leg else ALL_LEGS,
                               eff.value if kind is EffectKind.THERMAL else 1.0, kind.weight, *wave,   # alpha_T (T - 20)
                               eff.value if kind.is_shift else 0.0, kind.reference))

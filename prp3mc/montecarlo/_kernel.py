@@ -95,11 +95,20 @@ def _max32(v):
 
 
 @njit(nogil=True, cache=True)
-def _count_above(v, m, t):
-    k = 0
+def _count_above(pos, phi, m, tols, out):
+    """Add to ``out`` (3,) the samples with the norm above tols[0], |dphi| above tols[1], and either (a
+    negative tolerance: that output is never above)."""
+    tp, tf = tols[0], tols[1]
+    a = b = c = 0
     for s in range(m):
-        k += v[s] > t
-    return k
+        over_p = tp >= 0 and pos[s] > tp
+        over_f = tf >= 0 and phi[s] > tf
+        a += over_p
+        b += over_f
+        c += over_p or over_f
+    out[0] += a
+    out[1] += b
+    out[2] += c
 
 
 #: Samples per chunk of the feature sums: the chunk's centred features (F x 256 float64) stay in L1.
@@ -197,7 +206,7 @@ def _windows(v, m, p, o, lo, hi, nwin, edges, off, cap, below, inside, sub, buf,
 
 
 @njit(nogil=True, cache=True)
-def _scan_tile(FT, m, first, C, nf, seg_start, seg_stop, s0, s1, tol, main, lo, hi, nwin, edges, off, cap,
+def _scan_tile(FT, m, first, C, nf, seg_start, seg_stop, s0, s1, tols, main, lo, hi, nwin, edges, off, cap,
                below, inside, sub, buf, vmax, possum, exceed, pos_t, phi_t, flag):
     """Fold one tile (features FT[:, :m] of samples ``first`` to ``first + m``) into every pose's summaries."""
     for p in range(C.shape[0]):
@@ -210,8 +219,8 @@ def _scan_tile(FT, m, first, C, nf, seg_start, seg_stop, s0, s1, tol, main, lo, 
                 a, z = max(seg_start[j], first) - first, min(seg_stop[j], first + m) - first
                 if a < z:
                     possum[p, j] += _sum64(pos[a:z])
-            if tol >= 0:
-                exceed[p] += _count_above(pos, m, tol)
+            if tols[0] >= 0 or tols[1] >= 0:
+                _count_above(pos, phi, m, tols, exceed[p])
             vmax_bits = vmax[p].view(np.int32)
             vmax_bits[0] = max(vmax_bits[0], _max32(pos))
             vmax_bits[1] = max(vmax_bits[1], _max32(phi))
@@ -222,7 +231,7 @@ def _scan_tile(FT, m, first, C, nf, seg_start, seg_stop, s0, s1, tol, main, lo, 
 @njit(nogil=True, cache=True)
 def scan_blocks(k0, k1, n, lanes, consts, codes, params, cdf, values, ops, refs, cidx, chol, Fext, C, nf, shift,
                 block_segs,
-                seg_start, seg_stop, sums, S1, S2, tol, main, lo, hi, nwin, edges, off, cap,
+                seg_start, seg_stop, sums, S1, S2, tols, main, lo, hi, nwin, edges, off, cap,
                 below, inside, sub, buf, vmax, possum, exceed):
     """Fold sample blocks ``k0:k1`` into the summaries of a chunk of poses (one pass of one thread).
 
@@ -245,8 +254,8 @@ def scan_blocks(k0, k1, n, lanes, consts, codes, params, cdf, values, ops, refs,
         Segments of block k: ``block_segs[k]:block_segs[k + 1]``, with global sample bounds.
     sums : bool
         Add the feature sums S1 (S, F) and S2 (S, F, F) per segment.
-    tol : float32
-        Exceedance threshold of the norm (mm); negative: not counted.
+    tols : (2,) float32
+        Exceedance thresholds of the norm (mm) and of |dphi| (rad); negative: not counted.
     main : bool
         First pass: also sums of the norm, exceedances and maxima.
     lo, hi : (P, 2, W) float32
@@ -265,7 +274,8 @@ def scan_blocks(k0, k1, n, lanes, consts, codes, params, cdf, values, ops, refs,
         Collected values (the first ``cap`` of each window).
     vmax : (P, 2) float32, accumulated
     possum : (P, S) float64, accumulated when ``main``
-    exceed : (P,) int64, accumulated when ``main``
+    exceed : (P, 3) int64, accumulated when ``main``
+        Samples above tols[0] (norm), tols[1] (|dphi|), and above either.
     """
     nF, nP, T = shift.size, C.shape[2], TILE
     fused = Fext.shape[0] == 0
@@ -291,5 +301,5 @@ def scan_blocks(k0, k1, n, lanes, consts, codes, params, cdf, values, ops, refs,
                     FT[f, s] = F[f, s]
             if sums:
                 _moment_sums(F, nF, m, start + t0, shift, seg_start, seg_stop, s0, s1, S1, S2)
-            _scan_tile(FT, m, start + t0, C, nf, seg_start, seg_stop, s0, s1, tol, main, lo, hi, nwin, edges, off,
+            _scan_tile(FT, m, start + t0, C, nf, seg_start, seg_stop, s0, s1, tols, main, lo, hi, nwin, edges, off,
                        cap, below, inside, sub, buf, vmax, possum, exceed, pos_t, phi_t, flag)

@@ -132,16 +132,17 @@ class Stream:
         return Moments(mean, cov, bm, bc)
 
     # ------------------------------------------------------------------ passes
-    def scan(self, C32: np.ndarray, win: "_Windows", main: bool, tol: float, sums: dict | None,
+    def scan(self, C32: np.ndarray, win: "_Windows", main: bool, tols: tuple, sums: dict | None,
              pool: ThreadPoolExecutor) -> list[dict]:
         """One pass over all blocks for the poses of ``C32`` (P, 3, Fp), zero from column F on (Fp =
         :func:`padded_features`); per-worker accumulators.
 
         On the main pass ``sums`` receives the norm sums per pose and segment
-        (``possum``) and, if it holds ``S1`` and ``S2``, the feature sums per segment.
+        (``possum``) and, if it holds ``S1`` and ``S2``, the feature sums per segment. ``tols``: the
+        norm's (mm) and ``|dphi|``'s (rad) exceedance thresholds, None for one not counted.
         """
         P, nF = C32.shape[0], self.shift.size
-        tol32 = np.float32(-1.0 if tol is None else tol)
+        tol32 = np.array([-1.0 if t is None else t for t in tols], np.float32)
         with_sums = sums is not None and "S1" in sums
         S1 = sums["S1"] if with_sums else np.zeros((0, nF))
         S2 = sums["S2"] if with_sums else np.zeros((0, nF, nF))
@@ -151,7 +152,7 @@ class Stream:
         def work(w: int) -> dict:
             acc = {"below": np.zeros(win.shape, np.int64), "inside": np.zeros(win.shape, np.int64),
                    "sub": np.zeros(win.shape + (SUB_BINS,), np.int64), "buf": np.empty(win.size[w], np.float32),
-                   "vmax": np.zeros((P, 2), np.float32), "exceed": np.zeros(P, np.int64)}
+                   "vmax": np.zeros((P, 2), np.float32), "exceed": np.zeros((P, 3), np.int64)}
             lanes, consts = self.worker_lanes[w]
             blocks = self.worker_blocks[w]
             ranges = [(blocks.start, blocks.stop, np.zeros((0, nF)))] if self.fused else \
@@ -250,7 +251,7 @@ def pilot_windows(vals: np.ndarray, ranks: np.ndarray, n: int, worker_n: np.ndar
 
 
 def select_order_statistics(stream: Stream, C32: np.ndarray, ranks: np.ndarray, pilot_FT: np.ndarray,
-                            tol: float | None, sums: dict, pool: ThreadPoolExecutor,
+                            tols: tuple, sums: dict, pool: ThreadPoolExecutor,
                             max_window_values: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact order statistics at ``ranks`` of the norm and |dphi| of each pose of a chunk.
 
@@ -260,8 +261,9 @@ def select_order_statistics(stream: Stream, C32: np.ndarray, ranks: np.ndarray, 
         Order statistics (0 norm mm, 1 |dphi| rad) at the ranks.
     vmax : (P, 2) float32
         Largest values.
-    exceed : (P,) int64
-        Counts of norms above ``tol``.
+    exceed : (P, 3) int64
+        Counts of norms above ``tols[0]`` (mm), of ``|dphi|`` above ``tols[1]`` (rad), and of either (a
+        tolerance None: that output is not counted).
     Fills ``sums`` (per-segment norm sums, and feature sums if asked for) on the first pass.
     """
     n, P, R = stream.n, C32.shape[0], len(ranks)
@@ -280,7 +282,7 @@ def select_order_statistics(stream: Stream, C32: np.ndarray, ranks: np.ndarray, 
     while True:
         win = _Windows(specs, len(stream.worker_blocks), limit)
         main = vmax is None
-        accs = stream.scan(C32, win, main, tol, sums if main else None, pool)
+        accs = stream.scan(C32, win, main, tols, sums if main else None, pool)
         if main:
             vmax = np.max([a["vmax"] for a in accs], axis=0)
             exceed = np.sum([a["exceed"] for a in accs], axis=0)

@@ -81,6 +81,12 @@ class MonteCarloResult:
     tolerance_mm : float or None
     exceed_prob, exceed_ci : ndarray (...), (..., 2)
         P(position error > tolerance) with a Wilson 95 % interval.
+    tolerance_phi_deg : float or None
+    exceed_phi_prob, exceed_phi_ci : ndarray (...), (..., 2)
+        P(``|dphi|`` > tolerance_phi_deg) with a Wilson 95 % interval (None without that tolerance).
+    exceed_any_prob, exceed_any_ci : ndarray (...), (..., 2)
+        P(position error > tolerance_mm or ``|dphi|`` > tolerance_phi_deg) with a Wilson 95 % interval (None
+        unless both tolerances are given).
     linearization : DataFrame or None
         Exact-vs-linear comparison at a subset of poses, if asked for.
     version : str
@@ -108,6 +114,11 @@ class MonteCarloResult:
     tolerance_mm: float | None = None
     exceed_prob: np.ndarray | None = None
     exceed_ci: np.ndarray | None = None
+    tolerance_phi_deg: float | None = None
+    exceed_phi_prob: np.ndarray | None = None
+    exceed_phi_ci: np.ndarray | None = None
+    exceed_any_prob: np.ndarray | None = None
+    exceed_any_ci: np.ndarray | None = None
     linearization: pd.DataFrame | None = None
     version: str = __version__
     wall_time_s: float = field(default=float("nan"), compare=False)
@@ -179,9 +190,10 @@ class MonteCarloResult:
                     add(f"p{p:g}", output, unit, est[..., q], (ci_q[..., 1] - ci_q[..., 0]) / (2 * Z95))
         for output, mx, unit in (("position", self.position_max, "mm"), ("phi", self.phi_max, "deg")):
             add("max", output, unit, mx, ci=np.stack([mx, mx], -1), method="none")
-        if self.exceed_prob is not None:
-            add("exceed", "position", "1", self.exceed_prob,
-                ci=_wilson(self.exceed_prob * self.n_samples, self.n_samples, z), method="wilson")
+        for output, prob in (("position", self.exceed_prob), ("phi", self.exceed_phi_prob),
+                             ("any", self.exceed_any_prob)):
+            if prob is not None:
+                add("exceed", output, "1", prob, ci=_wilson(prob * self.n_samples, self.n_samples, z), method="wilson")
         frame = pd.concat(rows, ignore_index=True)
         if statistic is not None:
             if statistic not in set(frame["statistic"]):
@@ -236,7 +248,7 @@ def _wilson(k: np.ndarray, n: int, z: float = Z95) -> np.ndarray:
 
 def monte_carlo(geometry: "Geometry | str", budget: "Budget | str", poses, n_samples: int, *,
                 rng: "None | int | np.random.Generator" = None,
-                percentiles=PERCENTILES, tolerance_mm: float | None = None,
+                percentiles=PERCENTILES, tolerance_mm: float | None = None, tolerance_phi_deg: float | None = None,
                 exact_check_poses: int = 0, exact_check_samples: int = 2000,
                 progress: bool | None = None, max_chunk_bytes: int = 256 << 20,
                 workers: int | None = None) -> MonteCarloResult:
@@ -260,6 +272,10 @@ def monte_carlo(geometry: "Geometry | str", budget: "Budget | str", poses, n_sam
         Percentiles of the position-error norm and of ``|dphi|``.
     tolerance_mm : float, optional
         Report P(position error > tolerance_mm).
+    tolerance_phi_deg : float, optional
+        Report P(``|dphi|`` > tolerance_phi_deg), and with ``tolerance_mm`` P(either): the Monte Carlo
+        counterpart of :func:`prp3mc.exact_yield`, for budgets it cannot take (correlated inputs with
+        laws other than normal).
     exact_check_poses : int
         Push the first ``exact_check_samples`` samples through the exact
         nonlinear model at this many poses (spread over the batch) and report
@@ -285,6 +301,9 @@ def monte_carlo(geometry: "Geometry | str", budget: "Budget | str", poses, n_sam
     n_batches = min(_N_BATCHES, n_samples // _MIN_BATCH)
     if tolerance_mm is not None and not (math.isfinite(tolerance_mm) and tolerance_mm >= 0):
         raise ParameterError(f"tolerance must be a finite length >= 0 mm, got {tolerance_mm}")
+    if tolerance_phi_deg is not None and not (math.isfinite(tolerance_phi_deg) and tolerance_phi_deg >= 0):
+        raise ParameterError(f"tolerance_phi_deg must be a finite angle >= 0 deg, got {tolerance_phi_deg}")
+    tols = (tolerance_mm, None if tolerance_phi_deg is None else math.radians(tolerance_phi_deg))
     pct = tuple(float(p) for p in percentiles)
     if not all(0.0 <= p <= 100.0 for p in pct):
         raise ParameterError(f"percentiles must lie in [0, 100], got {pct}")
@@ -313,7 +332,7 @@ def monte_carlo(geometry: "Geometry | str", budget: "Budget | str", poses, n_sam
     C32[..., :n_feat] = C
     stats = np.empty((n_poses, 2, len(ranks)))
     vmax = np.empty((n_poses, 2))
-    exceed = np.zeros(n_poses)
+    exceed = np.zeros((n_poses, 3))
     possum = np.zeros((n_poses, n_seg))
     S1, S2 = sums["S1"], sums["S2"]
     with Progress(n_poses, "montecarlo", progress) as bar, ThreadPoolExecutor(max_workers=n_threads) as pool:
@@ -322,7 +341,7 @@ def monte_carlo(geometry: "Geometry | str", budget: "Budget | str", poses, n_sam
             sl = slice(start, min(n_poses, start + chunk))
             sums["possum"] = possum[sl]
             stats[sl], vmax[sl], exceed[sl] = select_order_statistics(
-                stream, C32[sl], ranks, pilot, tolerance_mm, sums, pool, window_values)
+                stream, C32[sl], ranks, pilot, tols, sums, pool, window_values)
             sums.pop("S1", None), sums.pop("S2", None)  # feature sums: on the first chunk's first pass
             bar.update(sl.stop - sl.start)
     mom = stream.moments(S1, S2)
@@ -351,10 +370,10 @@ def monte_carlo(geometry: "Geometry | str", budget: "Budget | str", poses, n_sam
     Q = len(pct)
 
     shape = batch_shape
-    exceed_ci = None
-    if tolerance_mm is not None:
-        exceed_ci = _wilson(exceed, n_samples).reshape(shape + (2,))
-        exceed = (exceed / n_samples).reshape(shape)
+    given = (tolerance_mm is not None, tolerance_phi_deg is not None,
+             tolerance_mm is not None and tolerance_phi_deg is not None)
+    probs = [(exceed[:, o] / n_samples).reshape(shape) if given[o] else None for o in range(3)]
+    cis = [_wilson(exceed[:, o], n_samples).reshape(shape + (2,)) if given[o] else None for o in range(3)]
     lin = _linearization(model, budget, seed, exact_check_poses, exact_check_samples) if exact_check_poses else None
     return MonteCarloResult(
         poses=model.poses, n_samples=n_samples, seed=seed,
@@ -366,7 +385,9 @@ def monte_carlo(geometry: "Geometry | str", budget: "Budget | str", poses, n_sam
         phi_pct=pct_values[:, 1].reshape(shape + (Q,)), phi_pct_ci=ci_values[:, 1].reshape(shape + (Q, 2)),
         position_max=vmax[:, 0].reshape(shape), phi_max=vmax[:, 1].reshape(shape),
         position_mean=pos_mean.reshape(shape), position_mean_se=pos_mean_se.reshape(shape),
-        tolerance_mm=tolerance_mm, exceed_prob=exceed if tolerance_mm is not None else None, exceed_ci=exceed_ci,
+        tolerance_mm=tolerance_mm, exceed_prob=probs[0], exceed_ci=cis[0],
+        tolerance_phi_deg=tolerance_phi_deg, exceed_phi_prob=probs[1], exceed_phi_ci=cis[1],
+        exceed_any_prob=probs[2], exceed_any_ci=cis[2],
         linearization=lin,
         wall_time_s=time.perf_counter() - t0,
     )

@@ -641,7 +641,8 @@ def _dependence(summary: dict, tables: dict) -> dict | None:
     if correlation is None:
         return None
     names = {"worst_case": "exact worst case", "montecarlo": "Monte Carlo", "shapley": "Shapley effects",
-             "sobol": "Sobol indices (S1, ST)", "allocation": "tolerance allocation"}
+             "sobol": "Sobol indices (S1, ST)", "allocation": "tolerance allocation",
+             "yield": "yield against the spec"}
     pairs = tables["correlation"].rename(columns={"input_a": "input", "input_b": "with", "spearman": "asked",
                                                   "latent": "latent normal r", "realised_se": "se"})
     return {"analyses": [{"name": names[k], **v} for k, v in correlation["analyses"].items()],

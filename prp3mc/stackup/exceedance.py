@@ -18,6 +18,7 @@ from ..model.linear import linear_model
 from ..units import DEG2ARCSEC, DEG2RAD, MM2UM, RAD2DEG
 from ._special import special_args
 from .characteristic import term_table
+from .gaussian import gaussian_terms
 from .lattice import LEVELS, channel, leg_powers, support_max
 from .result import QUANTILE_LEVELS, YieldResult
 from .series import batch_series
@@ -30,6 +31,11 @@ METHOD = ("exact distribution of the linear model: Fourier series of its charact
           "product of the terms' closed forms) on a lattice whose periods keep the support off the spec's "
           "region, truncated with a rigorous bound (decreasing envelopes of every term, analytic tails); "
           "error bound = truncation + floating point (1e-13 per coefficient) + normal laws' mass past their cut")
+#: What the method adds for a budget whose correlated inputs are all normal (:mod:`.gaussian`).
+GAUSSIAN_METHOD = ("; the correlated inputs (all normal, so jointly normal) enter exactly as independent normal "
+                   "terms: each input's own with sd x sqrt(smallest eigenvalue of the copula's correlation), and "
+                   "the rest of their covariance as at most three standard normal terms along its principal "
+                   "directions in the pose error")
 #: Decay power every leg's envelopes need before the joint (3-D) series is tried: the paper's legs (three
 #: uniform-like laws, power 3) would need ~1e12 lattice points for 1e-9; a leg with a normal law has power inf.
 _JOINT_POWER = 6.0
@@ -54,12 +60,14 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     For each pose: P(``|(dx, dy)|`` > S), P(``|dphi|`` > Z), P(either), and the
     quantiles p99.73, p99.9937, p99.9999 of the position error and of ``|dphi|``,
     each with a guaranteed bound of its error; no sampling. The budget's
-    inputs are independent; its ``[effects]`` enter as in the other
-    analyses (known shifts, backlash ±h/2 with probability 1/2 each, one
-    temperature uniform over its range). Every law prp3mc has is exact:
-    uniform, normal, truncated normal, triangular, discrete classes, and the
-    clearance rho cos(zeta - omega) with any radius law (the contact angle
-    uniform over whole turns).
+    inputs are independent, or correlated (``[correlation]``) between normal
+    laws only (then jointly normal: :mod:`prp3mc.stackup.gaussian` makes them
+    independent terms of the same joint law); its ``[effects]`` enter as in
+    the other analyses (known shifts, backlash ±h/2 with probability 1/2
+    each, one temperature uniform over its range). Every law prp3mc has is
+    exact: uniform, normal, truncated normal, triangular, discrete classes,
+    and the clearance rho cos(zeta - omega) with any radius law (the contact
+    angle uniform over whole turns).
 
     Method (:mod:`prp3mc.stackup`): P(Y in D) for a channel Y of the pose
     error (dphi, the position, or both) and its spec region D (an interval, a
@@ -102,8 +110,9 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     SpecError
         A spec or target out of range.
     BudgetError
-        A budget with ``[correlation]`` (the series needs independent inputs: use Monte Carlo), or whose
-        position has no 2-D density (one leg random).
+        A budget with ``[correlation]`` between inputs not all normal (the message names the Monte Carlo
+        fallback, :func:`prp3mc.monte_carlo` with ``tolerance_phi_deg``), or whose position has no 2-D
+        density (one leg random).
 
     Returns
     -------
@@ -122,22 +131,20 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     if not (isinstance(target, (int, float)) and 0 < target <= 1e-2):
         raise SpecError(f"target must be a probability in (0, 1e-2], got {target!r}")
     geometry, budget = Geometry.load(geometry), Budget.load(budget)
-    if budget.correlated:
-        raise BudgetError(f"exact yield: budget {budget.name!r} correlates inputs ([correlation]); the exact "
-                          "distribution needs independent ones: use Monte Carlo (prp3mc yield falls back on it)")
     model = linear_model(geometry, budget, poses)
     shape = model.poses.shape[:-1]
-    T = len(model.terms)
-    laws = model.term_laws
+    laws, legs, C = gaussian_terms(budget, model.term_laws, model.legs,
+                                   model.columns.reshape(-1, 3, len(model.terms)))    # correlated normals: exact
+    T = len(laws)
     n_normal = sum(1 for tl in laws if tl.law is not None and tl.law.kind == "normal" and tl.kind == "factor")
     share = 0.01 * target / max(n_normal, 1)        # mass of one normal law past its cut
     k_normal = math.sqrt(2.0) * float(special.erfcinv(share))
     table = term_table(laws, k_normal)
-    C = np.ascontiguousarray(model.columns.reshape(-1, 3, T))
+    C = np.ascontiguousarray(C)
     Ainv = model.Ainv.reshape(-1, 3, 3)
     N = C.shape[0]
     S, Z = S_um / MM2UM, (None if Z_as is None else Z_as / DEG2ARCSEC * DEG2RAD)
-    legs = np.array(model.legs)
+    legs = np.array(legs)
     levels = np.array(LEVELS if quantiles else (), dtype=float)
     mean, cov = _moments(C, table)
     run = _Runner(table, workers, target, budget.name)
@@ -206,7 +213,8 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
         rss_position_mm=shaped(rss_pos), rss_phi_deg=shaped(rss_phi * RAD2DEG),
         bracketed_any=shaped(bracketed),
         lattice_points={"position": shaped(n_pos), "phi": shaped(n_phi), "any": shaped(n_any)},
-        target=float(target), method=METHOD, wall_time_s=time.perf_counter() - t0)
+        target=float(target), method=METHOD + (GAUSSIAN_METHOD if budget.correlated else ""),
+        wall_time_s=time.perf_counter() - t0)
 
 
 class _Runner:

@@ -41,7 +41,8 @@ from ..montecarlo.propagation import monte_carlo
 from ..sobol.ranking import ranking
 from ..sobol.indices import sobol_indices
 from ..worstcase.envelope import WorstCaseResult, worst_case
-from ..units import RAD2DEG
+from ..stackup.gaussian import exact_refusal
+from ..units import DEG2ARCSEC, RAD2DEG
 from .allocation import ALLOCATION_STREAM, run_allocation
 from .reader import Study, StudyConfiguration
 from .spec import exceedance_curve, run_yield
@@ -143,6 +144,11 @@ def run_configuration(plan: Plan, variant: Variant) -> Outcome:
     return Outcome(variant.index, result, None, timings)
 
 
+def _fallback_phi_deg(study: Study) -> float | None:
+    """The orientation spec (deg) the Monte Carlo run counts when it stands in for the exact yield."""
+    return None if study.spec.phi_arcsec is None else study.spec.phi_arcsec / DEG2ARCSEC
+
+
 def _timings(study: Study) -> dict[str, float]:
     """Zero time for every analysis the study runs."""
     return dict.fromkeys(("worstcase",) + tuple(o for o in study.outputs if o != "yield" or study.spec)
@@ -167,14 +173,17 @@ def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple
     timings["worstcase"] += time.perf_counter() - t
     kw: dict[str, Any] = {}
     draws = None        # the Monte Carlo run's budget draws (its seed): the histograms' and the exceedance curves'
-    run_exact_yield = study.spec is not None and "yield" in study.outputs and not b.correlated
+    wants_yield = study.spec is not None and "yield" in study.outputs
+    refusal = exact_refusal(b) if wants_yield else None        # correlated inputs not all normal: Monte Carlo
+    run_exact_yield = wants_yield and refusal is None
     if "montecarlo" in study.outputs:
         nx, ny = study.mc_grid
         stage(f"Monte Carlo, {study.mc_samples} samples on {nx} x {ny} poses")
         t = time.perf_counter()
         kw["montecarlo"] = monte_carlo(g, b, config.region.grid(study.mc_grid), study.mc_samples,
                                        rng=mc_seed, percentiles=study.percentiles,
-                                       tolerance_mm=study.tolerance_mm, progress=progress)
+                                       tolerance_mm=study.tolerance_mm, progress=progress,
+                                       tolerance_phi_deg=_fallback_phi_deg(study) if refusal else None)
         draws = b.sample(study.mc_samples, mc_seed)
         kw["samples"] = _pose_samples(config, b, wc, draws, mc_seed, study.k_sigma)
         if not run_exact_yield:
@@ -192,10 +201,13 @@ def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple
         kw["sobol"] = s
         kw["ranking"] = {o: ranking(s, wc_s, output=o) for o in study.sobol_outputs}
         timings["sobol"] += time.perf_counter() - t
-    if study.spec is not None and "yield" in study.outputs and b.correlated:
-        warnings.warn(Prp3mcWarning(f"study {study.name}: no exact yield for {config.name}: the budget correlates "
-                                    "inputs ([correlation]) and the exact series needs independent ones; the Monte "
-                                    "Carlo run counts P(position > spec) instead"), stacklevel=2)
+    if refusal is not None:
+        warnings.warn(Prp3mcWarning(
+            f"study {study.name}: no exact yield for {config.name}: {refusal}; "
+            + ("the Monte Carlo run counts P(position > spec)" + (", P(|dphi| > spec) and P(either)" if
+                                                                  study.spec.phi_arcsec is not None else "")
+               + " instead, with Wilson 95 % intervals" if "montecarlo" in study.outputs else
+               "add montecarlo to the outputs for its Monte Carlo estimate")), stacklevel=2)
     elif run_exact_yield:
         nx, ny = study.mc_grid
         stage(f"exact yield against the spec on {nx} x {ny} poses")

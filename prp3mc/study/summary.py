@@ -12,7 +12,9 @@ Layout (µm and arcsec)::
                            "mean": {"min": ..., "max": ..., "mean": ...}},
            "phi_arcsec": {"p99.73": {...}, ...},
            "std": {"x_um": {...}, "y_um": {...}, "phi_arcsec": {...}},
-           "exceed": {"tolerance_mm": 0.1, "probability": {"min": ..., "max": ..., "mean": ...}}},
+           "exceed": {"tolerance_mm": 0.1, "probability": {"min": ..., "max": ..., "mean": ...},
+                      # when it stands in for the yield (correlated inputs not all normal) with a phi spec:
+                      "tolerance_phi_arcsec": 60.0, "phi_probability": {...}, "any_probability": {...}}},
          "sobol": {"position": {"theta_1": {"kind": "input", "S1": {"value": ..., "se": ...},
                                             "ST": {...}, "worst_case_share": 0.31}, ...}, ...}},
                                             # worst_case_share null where undefined (rho_i, zeta_i alone);
@@ -58,7 +60,9 @@ Layout (µm and arcsec)::
         "realised_from": {"samples": 32768},    # the Monte Carlo draws of the budget (inputs.montecarlo_seed)
         "analyses": {"montecarlo": {"respects": true, "how": "..."}, "shapley": {...},
                      "sobol": {"respects": false, "how": "not defined: ..."},
-                     "worst_case": {"respects": false, "how": "a box: ..."}, ...}}}
+                     "worst_case": {"respects": false, "how": "a box: ..."},
+                     "yield": {"respects": true, "how": "exact: ..."}, ...}}}   # with a spec: the exact
+                                            # series, or the Monte Carlo fallback (montecarlo.exceed)
 
 A study with a ``[sweep]`` table (SPEC §8) names its expanded configurations
 ``base.k``; each entry also carries ``"parameters": {key: value}`` with the
@@ -108,6 +112,7 @@ from ..provenance import file_record, spec_record, versions
 from ..model.budget import Budget
 from ..units import DEG2ARCSEC, MM2UM, t_value
 from ..sobol.indices import DEPENDENT_NOTE
+from ..stackup.gaussian import exact_refusal
 from ..worstcase.envelope import CORRELATION_NOTE
 from .allocation import allocation_summary
 from .spec import _exact, yield_summary
@@ -155,6 +160,10 @@ def _montecarlo(c: ConfigurationResult) -> dict:
     if mc.exceed_prob is not None:
         out["exceed"] = {"tolerance_mm": float(mc.tolerance_mm),
                          "probability": _over_grid(mc.exceed_prob, pct_se(mc.exceed_ci))}
+        if mc.exceed_phi_prob is not None:        # the yield's Monte Carlo fallback: |dphi| and either too
+            out["exceed"] |= {"tolerance_phi_arcsec": float(DEG2ARCSEC * mc.tolerance_phi_deg),
+                              "phi_probability": _over_grid(mc.exceed_phi_prob, pct_se(mc.exceed_phi_ci)),
+                              "any_probability": _over_grid(mc.exceed_any_prob, pct_se(mc.exceed_any_ci))}
     return out
 
 
@@ -256,6 +265,20 @@ def _analyses_under_correlation(study) -> dict:
                           "input's share of the output variance averaged over the orders of the inputs, the "
                           "conditional draws taken from the copula"}
         out["sobol"] = {"respects": False, "how": f"not defined: {DEPENDENT_NOTE}"}
+    if study.spec is not None and "yield" in study.outputs:
+        refusal = exact_refusal(study.budget)
+        if refusal is None:
+            out["yield"] = {"respects": True, "how": "exact: the correlated inputs are all normal, hence jointly "
+                            "normal, and enter the exact series as independent normal terms with the same joint "
+                            "law (each input's own part, and the rest of their covariance along at most three "
+                            "principal directions of the pose error); the error bound holds as for an independent "
+                            "budget"}
+        else:
+            out["yield"] = {"respects": "montecarlo" in study.outputs,
+                            "how": f"no exact series: {refusal}; " + (
+                                "the Monte Carlo run (with the copula) gives P(> spec) of the position, |δφ| and "
+                                "either with Wilson 95 % intervals (montecarlo.exceed)" if "montecarlo" in
+                                study.outputs else "not computed (the study runs no Monte Carlo)")}
     if getattr(study, "allocation", None) is not None:
         out["allocation"] = {"respects": False, "how": "not applied: the allocation's budget is the classes "
                              "menu's laws, taken independent"}
@@ -277,7 +300,7 @@ def correlation_summary(result: StudyResult) -> dict | None:
         return None
     n = study.mc_samples if "montecarlo" in study.outputs else REALISED_SAMPLES
     X = budget.sample(n, result.montecarlo_seed)[:, list(cop.index)]
-    realised = np.atleast_2d(stats.spearmanr(X).statistic)
+    realised = np.corrcoef(stats.rankdata(X, axis=0), rowvar=False)    # Spearman's, a matrix even for two inputs
     z_se = float(np.sqrt(1.06 / (n - 3)))
     pairs = []
     for a in range(len(cop.names)):

@@ -29,7 +29,7 @@ from ...kinematics.chain import as_poses, check_poses, inverse_kinematics
 from ...kinematics.exact import exact_pose_error
 from ...kinematics.geometry import Geometry
 from ...model.budget import Budget, parse_input
-from ...model.effects import check_leads, effect_value
+from ...model.effects import EffectKind, check_leads, effect_value
 from ...units import DEG2RAD
 from .data import CMD_COLUMNS, DIR_COLUMNS, MAX_ERROR, MEAS_COLUMNS, Campaign
 from ..forward.signatures import effect, offset_errors, slider_error, spread_budget
@@ -340,7 +340,7 @@ def simulate_campaign(geometry: Geometry, budget: Budget, poses, n_repeats: int 
     effects = {name: effect_value(name, value) for name, value in dict(effects or {}).items()}
     parsed = [effect(name) for name in effects]          # raises on unknown names
     for e, v in zip(parsed, effects.values()):
-        if e.kind == "backlash" and v < 0:
+        if e.kind is EffectKind.BACKLASH and v < 0:
             raise CampaignError(f"{e.name}: backlash h must be >= 0, got {v}")
     check_plausible(effects, instrument_sigma_mm, instrument_sigma_deg)
     budget.check_geometry(geometry)

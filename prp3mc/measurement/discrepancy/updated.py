@@ -39,22 +39,14 @@ from ..._result import freeze, short_repr
 from ...kinematics.geometry import Geometry
 from ...provenance import sha256_file
 from ...model.budget import Budget
-from ...model.effects import SystematicEffect
+from ...model.effects import EffectKind, SystematicEffect, offset_errors
 from ..campaign.data import Campaign
 from ..forward.signatures import effect, spread_budget
 
-__all__ = ["UpdatedModel", "updated_model", "base_name", "MODEL_FILES", "COMPENSATION"]
+__all__ = ["UpdatedModel", "updated_model", "base_name", "MODEL_FILES"]
 
 #: The files of the updated model, in ``DIR/model/``.
 MODEL_FILES = {"geometry": "geometry.toml", "budget": "budget.toml", "compensated": "budget_compensated.toml"}
-#: How a controller compensates each kind of systematic effect.
-COMPENSATION = {
-    "offset": "load model/geometry.toml into the controller (an encoder zero b_i: shift slider i's zero)",
-    "scale": "correct slider i's lead (steps per mm) by the factor 1 / (1 + kappa_i)",
-    "thermal": "with a temperature sensor: correct every slider's lead by alpha_T (T - 20 degC)",
-    "backlash": "with the approach direction known: add dir_i h_i / 2 to slider i's command",
-    "cyclic": "a screw error map of slider i: subtract A_i sin(2 pi b_i / p_i + phi_i) from its command",
-}
 #: Added to the name of an identified geometry (once).
 _SUFFIX = " identified"
 
@@ -133,15 +125,12 @@ def _campaign_record(campaign: Campaign) -> tuple[str, str | None]:
     return (path.name, sha256_file(path)) if path.is_file() else (campaign.source, None)
 
 
-def _compensable(kind: str, temperature_sensor: bool, approach_known: bool) -> tuple[bool, str]:
-    """Whether a controller compensates an effect of ``kind``, and how (or why not)."""
-    if kind == "thermal" and not temperature_sensor:
-        return False, "the controller has no temperature sensor: bounded over temp_range_C"
-    if kind == "backlash" and not approach_known:
-        return False, "the approach direction is not known: bounded as +-h/2"
-    if kind == "spread":
-        return False, "a dispersion: random from visit to visit, no controller can predict it"
-    return True, COMPENSATION[kind]
+def _compensable(kind: EffectKind, knows: dict) -> tuple[bool, str]:
+    """Whether a controller compensates an effect of ``kind``, and how (or why not): a factor only when the
+    controller ``knows`` its driver (kind -> bool)."""
+    if not kind.systematic or (kind.is_factor and not knows[kind]):
+        return False, kind.uncompensated
+    return True, kind.compensation
 
 
 def _aliases(named) -> dict:
@@ -180,7 +169,8 @@ def updated_model(geometry: Geometry, budget: Budget, named_effects, campaign: C
     source, sha = _campaign_record(campaign)
     spreads = {e.name: e.value for e in named_effects if not effect(e.name).systematic}
     new_budget = spread_budget(budget, spreads)
-    effects, offsets, named = {}, {}, set()
+    knows = {EffectKind.THERMAL: temperature_sensor, EffectKind.BACKLASH: approach_known}   # the factors' drivers
+    effects, named = {}, set()
     for e in named_effects:
         eff = effect(e.name)
         if not eff.systematic:
@@ -189,10 +179,10 @@ def updated_model(geometry: Geometry, budget: Budget, named_effects, campaign: C
         old = budget.effects.get(e.name)
         base = old.value if old is not None else 0.0
         temps = None
-        if eff.kind == "thermal":
+        if eff.kind is EffectKind.THERMAL:
             temps = old.temp_range_C if old is not None else (float(np.min(campaign.temp_C)),
                                                                float(np.max(campaign.temp_C)))
-        if eff.kind == "cyclic":             # amplitude and phase; a correction adds as a phasor (its evidence's total)
+        if eff.dof == 2:     # a cyclic error's amplitude and phase: a correction adds as a phasor (evidence's total)
             ev = e.evidence
             value, phase, ci = ((ev["total"], ev["total_phase_deg"], tuple(ev["total_ci95"])) if old is not None
                                 else (e.value, e.phase_deg, e.ci95))
@@ -201,21 +191,20 @@ def updated_model(geometry: Geometry, budget: Budget, named_effects, campaign: C
             continue
         effects[e.name] = SystematicEffect(e.name, base + e.value, ci95=(base + e.ci95[0], base + e.ci95[1]),
                                            temp_range_C=temps, campaign=source, campaign_sha256=sha)
-        if eff.kind == "offset" and eff.family != "b":
-            offsets.setdefault(eff.family, np.zeros(3))[eff.leg] += e.value
+    offsets = offset_errors({e.name: e.value for e in named_effects if effect(e.name).systematic})
     name = geometry.name if geometry.name.endswith(_SUFFIX) else geometry.name + _SUFFIX
     new_geometry = geometry.replace(name=name, **{f: np.add(getattr(geometry, f), d) for f, d in offsets.items()})
     updated = new_budget.with_effects(effects, name=f"{budget.name} updated", fitted_on=new_geometry)
     entries, kept = [], {}
     for e in named_effects:
         if not effect(e.name).systematic:
-            ok, text = _compensable("spread", temperature_sensor, approach_known)
-            entries.append({"name": e.name, "kind": "spread", "value": e.value, "unit": e.unit,
+            ok, text = _compensable(EffectKind.SPREAD, knows)
+            entries.append({"name": e.name, "kind": EffectKind.SPREAD, "value": e.value, "unit": e.unit,
                             "ci95": list(e.ci95), "named": True, "compensable": ok, "why": text,
                             **_aliases(e)})
     for key, eff in updated.effects.items():
         kind = eff.effect.kind
-        ok, text = _compensable(kind, temperature_sensor, approach_known)
+        ok, text = _compensable(kind, knows)
         entry = {"name": key, "kind": kind, "value": eff.value, "unit": eff.unit,
                  "ci95": None if eff.ci95 is None else list(eff.ci95), "named": key in named, "compensable": ok}
         if eff.phase_deg is not None:

@@ -1,13 +1,28 @@
 """The discrepancy workflow: where model and measurement disagree, which effect is missing, the gap.
 
-:func:`discrepancy` fits the instrument's registration and drift as
-nuisances (:mod:`~prp3mc.measurement.estimation.nuisance`) and the repeatable fraction
-of the budget's errors in every model (:mod:`~prp3mc.measurement.estimation.likelihood`),
-sets gross errors aside (:mod:`~prp3mc.measurement.estimation.outliers`), names missing
-effects (:mod:`~prp3mc.measurement.naming.selection`), and diagnoses the
-disagreement before and after and measures the gap
-(:mod:`~prp3mc.measurement.verdict.diagnostics`). :func:`detectable_effect` plans a
-campaign: how large an effect its layout can name.
+:func:`discrepancy` is a pipeline of named steps, each in the package of its stage:
+
+1. the campaign read and checked against the geometry and the budget;
+2. the named model (:func:`~prp3mc.measurement.naming.identify.identify`): the instrument's
+   registration and drift fitted as nuisances (:mod:`~prp3mc.measurement.estimation.nuisance`)
+   and the repeatable fraction of the budget's errors in every model
+   (:mod:`~prp3mc.measurement.estimation.likelihood`), gross errors set aside
+   (:mod:`~prp3mc.measurement.estimation.outliers`) and missing effects named
+   (:mod:`~prp3mc.measurement.naming.selection`), in passes relinearised on the exact chain;
+3. the named effects (:func:`~prp3mc.measurement.naming.selection.name_effects`) and the
+   updated model they make (:func:`~prp3mc.measurement.discrepancy.updated.updated_model`),
+   whose predicted accuracy runs beside the rest;
+4. the diagnoses before and after and the gap
+   (:func:`~prp3mc.measurement.verdict.compare.diagnoses`);
+5. what the analysis names with the gross errors kept (:func:`_with_outliers`);
+6. the listed nuisances and the drift test
+   (:func:`~prp3mc.measurement.estimation.nuisance.listed_nuisances`), what the campaign
+   cannot tell apart (:mod:`~prp3mc.measurement.naming.confounds`), the prediction of the
+   named model and its ISO 9283 figures
+   (:func:`~prp3mc.measurement.verdict.compare.predicted_iso9283`);
+7. the result, with the verdict (:func:`~prp3mc.measurement.verdict.diagnostics.verdict`).
+
+:func:`detectable_effect` plans a campaign: how large an effect its layout can name.
 
 Drift is fitted in every model and *listed* under ``nuisance`` only when a
 likelihood-ratio test (chi2(3) at ``alpha``) shows it. When a named effect
@@ -28,10 +43,10 @@ degrees of freedom.
 
 from __future__ import annotations
 
-import dataclasses
 import time
 import warnings
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 
 import numpy as np
 from scipy import optimize
@@ -42,22 +57,23 @@ from ...errors import ParameterError, Prp3mcWarning
 from ...kinematics.geometry import Geometry
 from ...progress import Progress
 from ...model.budget import Budget
+from ...model.effects import amplitude_phase
 from ...model.linear import linear_model
 from ..campaign.data import Campaign, check_error_scale, read_campaign, require_testable
-from ..naming.confounds import ambiguities, design_confounds
-from ..verdict.diagnostics import diagnose, gap, gap_value, null_variances, verdict
-from ..forward.signatures import effect
-from ...model.effects import amplitude_phase
-from ..verdict.holdout import held_out_gap
-from ..estimation.likelihood import Engine, Fit
-from ..estimation.nuisance import DRIFT, NUISANCE_NAMES, REGISTRATION
 from ..forward.prediction import noise_cov, predict
-from .results import DiscrepancyResult
+from ..forward.signatures import effect
+from ..estimation.likelihood import Engine
+from ..estimation.nuisance import listed_nuisances
+from ..estimation.outliers import outlier_rows, outlier_rule
+from ..estimation.testable import not_testable, repeatability
+from ..naming.confounds import ambiguities, design_confounds
 from ..naming.identify import Named, identify
-from ..naming.selection import name_effects, names_in, select
-from .updated import updated_model
+from ..naming.selection import effect_values, name_effects, select
+from ..verdict.compare import diagnoses, predicted_iso9283
+from ..verdict.diagnostics import diagnose, gap_value, verdict
 from .accuracy import predicted_accuracy
-from ..campaign.iso9283 import iso9283_figures
+from .results import DiscrepancyResult
+from .updated import updated_model
 
 __all__ = ["discrepancy", "detectable_effect", "detectable_in", "correlation_warning", "STAGES"]
 
@@ -122,24 +138,14 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
     """
     t0 = time.perf_counter()
     seed, rng = resolve_rng(rng)
-    for name, value in (("alpha", alpha), ("alpha_unexplained", alpha_unexplained), ("outlier_rate", outlier_rate)):
-        if not 0 < value < 1:
-            raise ParameterError(f"{name} must lie in (0, 1), got {value}")
-    budget.check_geometry(geometry)
-    campaign = require_testable(read_campaign(campaign, geometry))
-    if budget.correlated:
-        warnings.warn(Prp3mcWarning(correlation_warning(geometry, budget, campaign.poses)), stacklevel=3)
-    check_error_scale(campaign, geometry, budget, instrument_sigma_mm)
+    campaign = _checked_campaign(geometry, budget, campaign, instrument_sigma_mm,
+                                 alpha=alpha, alpha_unexplained=alpha_unexplained, outlier_rate=outlier_rate)
+    noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
     # the predicted accuracy needs the named effects only: on a thread of its own (its kernels release the
     # GIL) while the rest is diagnosed
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        noise = noise_cov(instrument_sigma_mm, instrument_sigma_deg)
-        bar = progress if isinstance(progress, Progress) else Progress(len(STAGES), "discrepancy", progress)
-        stages = iter(STAGES)
-
-        def done():
-            bar.update(label=f"discrepancy: {next(stages)}")
-
+    with ThreadPoolExecutor(max_workers=1) as pool, _stages(progress) as stage_done:
+        # registration and drift (nuisances), the repeatable fraction, gross errors set aside and effects named,
+        # in passes relinearised on the exact chain until stable
         named, linearity = identify(
             geometry, budget, campaign,
             lambda point: Engine(geometry, budget, campaign, noise, registration=registration, point=point),
@@ -148,41 +154,61 @@ def discrepancy(geometry: Geometry, budget: Budget, campaign, *, instrument_sigm
         effects = name_effects(engine, fit, named.accepted)
         model = updated_model(geometry, budget, effects, campaign)
         accuracy = pool.submit(predicted_accuracy, geometry, budget, model, campaign, seed)
-        done()
-        before, after, gap_doc = _diagnoses(named, n_bootstrap, alpha_unexplained, rng, seed)
-        done()
+        stage_done()
+        before, after, gap_doc = diagnoses(engine, named.base, fit, n_bootstrap, alpha_unexplained, rng, seed)
+        stage_done()
         with_outliers = _with_outliers(named, alpha, max_effects, n_bootstrap, gap_doc["closed_at"], rng)
-        done()
-        nuisance, drift_test = _nuisance(engine, fit, alpha, effects)
+        stage_done()
+        nuisance, drift_test = listed_nuisances(engine, fit, alpha, effects)
         shown, reasons = ambiguities(engine, fit, effects, drift_test, alpha)
         confounded = tuple(design_confounds(engine) + shown)
-        repeatability = {"repeatable_fraction": fit.r, "ci95": list(engine.r_interval(fit))}
-        if not engine.repeats:
-            repeatability = {"repeatable_fraction": None, "ci95": None, "not_testable": _ONE_VISIT}
-            gap_doc["not_tested"] = {ch: _ONE_VISIT for ch in ("dispersion", "dispersion_pose")}
-        effects_after = _effect_values(engine, fit)
-        systematic = {n: v for n, v in effects_after.items() if effect(n).systematic}
-        prediction = predict(geometry, budget, campaign, effects=effects_after, instrument_sigma_mm=instrument_sigma_mm,
+        values = effect_values(engine, fit)
+        prediction = predict(geometry, budget, campaign, effects=values, instrument_sigma_mm=instrument_sigma_mm,
                              instrument_sigma_deg=instrument_sigma_deg, repeatable_fraction=fit.r)
-        iso, iso_poses = _iso9283(engine, fit, child_seed(seed, 9283))
-        done()
-        if bar is not progress:
-            bar.close()
+        iso, iso_poses = predicted_iso9283(engine, fit, child_seed(seed, 9283))
+        stage_done()
         return DiscrepancyResult(
             named_effects=effects, unexplained=not gap_doc["closed"] or linearity["guard"] != "ok", gap=gap_doc,
             verdict=verdict(gap_doc, effects, linearity, reasons, confounded), confounded=confounded,
             before=before, after=after, steps=named.steps, prediction_after=prediction,
-            budget_after=prediction.budget, systematic=systematic, nuisance=nuisance, drift_test=drift_test,
-            registration=registration, outliers=_outlier_rows(named, campaign),
-            outlier_rule=_outlier_rule(named, outlier_rate), with_outliers=with_outliers,
-            repeatability=repeatability,
-            iso9283=iso, iso9283_poses=iso_poses, invisible=engine.invisible,
+            budget_after=prediction.budget, systematic={n: v for n, v in values.items() if effect(n).systematic},
+            nuisance=nuisance, drift_test=drift_test, registration=registration,
+            outliers=outlier_rows(campaign, named.keep, named.d2),
+            outlier_rule=outlier_rule(named.keep.size, named.limit, outlier_rate), with_outliers=with_outliers,
+            repeatability=repeatability(engine, fit), iso9283=iso, iso9283_poses=iso_poses,
+            invisible=engine.invisible,
             confounded_with_registration=tuple(n for n, w in engine.confounded.items() if "registration" in w),
             structural_aliases=tuple(tuple(g) for g in engine.structural_aliases()),
-            not_testable=_not_testable(engine), linearity=linearity, model=model, accuracy=accuracy.result(),
+            not_testable=not_testable(engine), linearity=linearity, model=model, accuracy=accuracy.result(),
             campaign=campaign, geometry=geometry, budget=budget, seed=seed, n_bootstrap=n_bootstrap, alpha=alpha,
             alpha_unexplained=alpha_unexplained, instrument_sigma_mm=instrument_sigma_mm,
             instrument_sigma_deg=instrument_sigma_deg, wall_time_s=time.perf_counter() - t0)
+
+
+def _checked_campaign(geometry: Geometry, budget: Budget, campaign, instrument_sigma_mm: float,
+                      **levels: float) -> Campaign:
+    """The campaign read and validated against ``geometry``, once the levels (each in (0, 1)) and the budget's
+    geometry are checked; warns when the budget correlates its inputs (:func:`correlation_warning`)."""
+    for name, value in levels.items():
+        if not 0 < value < 1:
+            raise ParameterError(f"{name} must lie in (0, 1), got {value}")
+    budget.check_geometry(geometry)
+    campaign = require_testable(read_campaign(campaign, geometry))
+    if budget.correlated:
+        warnings.warn(Prp3mcWarning(correlation_warning(geometry, budget, campaign.poses)), stacklevel=4)
+    check_error_scale(campaign, geometry, budget, instrument_sigma_mm)
+    return campaign
+
+
+@contextmanager
+def _stages(progress):
+    """``stage_done()``, advancing a progress bar by one of :data:`STAGES`; the bar is closed on leaving when it
+    is :func:`discrepancy`'s own (``progress`` not a :class:`~prp3mc.progress.Progress`)."""
+    bar = progress if isinstance(progress, Progress) else Progress(len(STAGES), "discrepancy", progress)
+    stages = iter(STAGES)
+    yield lambda: bar.update(label=f"discrepancy: {next(stages)}")
+    if bar is not progress:
+        bar.close()
 
 
 def correlation_warning(geometry: Geometry, budget: Budget, poses: np.ndarray) -> str:
@@ -219,18 +245,6 @@ def correlation_warning(geometry: Geometry, budget: Budget, poses: np.ndarray) -
             "correlation; docs: The discrepancy workflow, Dependent inputs)")
 
 
-def _diagnoses(named: Named, n_bootstrap: int, alpha_unexplained: float, rng, seed: int) -> tuple:
-    """The diagnoses before and after the named effects, and the gap document with its held-out part."""
-    engine, base, fit = named.engine, named.base, named.fit
-    null_before = null_variances(engine, base, n_bootstrap, rng)
-    before = diagnose(engine, base, null=null_before)
-    null_after = null_variances(engine, fit, n_bootstrap, rng)
-    after = diagnose(engine, fit, null=null_after)
-    gap_doc = gap(before, after, alpha_unexplained)
-    gap_doc["held_out"] = held_out_gap(engine, {"before": (base, null_before), "after": (fit, null_after)}, seed)
-    return before, after, gap_doc
-
-
 def _with_outliers(named: Named, alpha: float, max_effects: int, n_bootstrap: int, closed_at: float,
                    rng) -> dict | None:
     """What the analysis names, and its gap, with the gross errors kept (None when none was set aside)."""
@@ -242,41 +256,9 @@ def _with_outliers(named: Named, alpha: float, max_effects: int, n_bootstrap: in
     n_boot = max(n_bootstrap // 4, 50)               # for the comparison only
     g_before, _ = gap_value(diagnose(engine, base, n_boot, rng))
     g_after, _ = gap_value(diagnose(engine, fit, n_boot, rng))
-    return {"named_effects": [_value_entry(n, v) for n, v in _effect_values(engine, fit).items()],
+    return {"named_effects": [_value_entry(n, v) for n, v in effect_values(engine, fit).items()],
             "gap_before": g_before, "gap_after": g_after, "unexplained": bool(g_after > closed_at),
             "repeatable_fraction": fit.r}
-
-
-def _outlier_rows(named: Named, campaign: Campaign) -> tuple:
-    """The ``outliers`` entries: every row set aside, with its pose and its standardised prediction error."""
-    return tuple({"row": int(m), "pose_id": str(campaign.pose_id[m]), "z": float(np.sqrt(named.d2[m]))}
-                 for m in np.flatnonzero(~named.keep))
-
-
-def _outlier_rule(named: Named, outlier_rate: float) -> dict:
-    """The gross-error rule as ``discrepancy.json`` states it."""
-    m = named.keep.size
-    return {"family_wise_rate": outlier_rate,
-            "per_measurement_level": float(-np.expm1(np.log1p(-outlier_rate) / m)),
-            "z_threshold": float(np.sqrt(named.limit)),
-            "statistic": "squared standardised error of each measurement predicted from the other visits "
-                         "of its pose under the fitted model, chi2(3), Sidak over all rows"}
-
-
-def _not_testable(engine: Engine) -> dict:
-    """Effects the campaign cannot test, with the reason (missing columns, confounded, drift without time)."""
-    out = dict(engine.not_testable)
-    out.update({n: f"confounded with {with_}" for n, with_ in engine.confounded.items()})
-    if engine.time_source != "time_s":
-        out["drift"] = "no time_s column: drift fitted against row order"
-    if not engine.repeats:
-        out["repeatability"] = _ONE_VISIT
-    return out
-
-
-#: Why a one-visit campaign tests no dispersion.
-_ONE_VISIT = ("no pose measured twice: the dispersion channels (spreads, the repeatable fraction, the repeat "
-              "scatter) compare repeats; visit some poses again to test them")
 
 
 def _value_entry(name: str, value) -> dict:
@@ -285,58 +267,6 @@ def _value_entry(name: str, value) -> dict:
         amplitude, phase = amplitude_phase(value)
         return {"name": name, "value": amplitude, "phase_deg": phase}
     return {"name": name, "value": float(value)}
-
-
-def _effect_values(engine: Engine, fit: Fit) -> dict:
-    """Named effects of ``fit``: systematic values (a cyclic error's phasor) and spread bounds, name -> value in
-    the effect's unit."""
-    values = engine.values(fit)
-    return {n: (fit.factors[n] * engine.spread_ref[n] if n in fit.factors else values[n])
-            for n in names_in(engine, fit)}
-
-
-def _nuisance(engine: Engine, fit: Fit, alpha: float, named=()) -> tuple[tuple, dict]:
-    """The ``nuisance`` entries (registration when fitted, drift when its LR test rejects) and the drift test.
-
-    A nuisance that an alias of a named effect fits differently has the
-    union of the intervals as its ``ci95``, the named model's own as
-    ``ci95_named_model`` and each alias's fit under ``by_alias`` (module notes).
-    """
-    entries = {}
-    for name, entry in engine.nuisances(fit).items():
-        entries[name] = {"name": name, **entry}
-        alias = [{"effect": a, **f["nuisance"][name]} for e in named for a, f in e.evidence["alias_fits"].items()
-                 if name in f.get("nuisance", {})]
-        if alias:
-            ci = entry["ci95"]
-            lo = min([ci[0]] + [f["ci95"][0] for f in alias])
-            hi = max([ci[1]] + [f["ci95"][1] for f in alias])
-            entries[name].update(ci95=[lo, hi], ci95_named_model=list(ci), by_alias=alias)
-    no_drift = engine.refit(fit.sys, fit.factors, start_r=fit.r,
-                            nuis=tuple(j for j in fit.nuis if NUISANCE_NAMES[j] not in DRIFT))
-    lr = max(2.0 * (fit.loglik - no_drift.loglik), 0.0)
-    from scipy.stats import chi2  # imported when used: prp3mc --help imports this module
-    p = float(chi2.sf(lr, 3))
-    drift_test = {"lr": lr, "df": 3, "p": p, "significant": bool(p < alpha), "time": engine.time_source,
-                  "values": {n: entries[n]["value"] for n in DRIFT}}
-    listed = [n for n in REGISTRATION if n in entries] + (list(DRIFT) if drift_test["significant"] else [])
-    return tuple(entries[n] for n in listed), drift_test
-
-
-def _iso9283(engine: Engine, fit: Fit, seed: int):
-    """ISO 9283 figures of the kept rows in the machine frame (nuisances removed), measured and predicted.
-
-    Predicted by the fitted model: its mean per pose, visit-to-visit
-    covariance ``W`` and repeating covariance ``r Sigma``; the Monte Carlo
-    of :func:`~prp3mc.measurement.campaign.iso9283.iso9283_figures` draws from ``seed``.
-    """
-    n = len(fit.nuis)
-    corrected = engine.campaign.measured - engine.H[:, :, list(fit.nuis)] @ fit.theta[:n]
-    campaign = dataclasses.replace(engine.campaign, measured=corrected)
-    mean, W, R = engine.moments(fit.factors, fit.r)
-    mean = mean + engine.pose_mean(engine.known + engine.columns(fit.sys, ()) @ fit.theta[n:])
-    figures = iso9283_figures(campaign, mean, W, predicted_repeat_cov=R, rng=seed)
-    return {"measured": dict(figures["measured"]), "predicted": dict(figures["predicted"])}, figures["per_pose"]
 
 
 def detectable_effect(geometry: Geometry, budget: Budget, campaign: Campaign, name: str, *,

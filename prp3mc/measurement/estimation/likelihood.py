@@ -36,7 +36,8 @@ from ...model.linear import linear_model
 from ...units import z_value
 from ..campaign.data import Campaign
 from .cyclic import amplitude_interval
-from ..forward.signatures import EFFECT_NAMES, ROW_TO_DEG, budget_effect_errors, effect, library, signatures, spread_reference
+from ...model.effects import EffectKind
+from ..forward.signatures import ROW_TO_DEG, budget_effect_errors, library, signatures, spread_reference, untestable
 from .nuisance import DRIFT, NUISANCE_NAMES, NUISANCE_UNITS, REGISTRATION, campaign_time, nuisance_signatures
 from .relinearise import Point
 
@@ -193,7 +194,8 @@ class Engine:
         #: whether some pose is measured twice: without, the dispersion channels (spreads, r) are not testable
         self.repeats = bool((campaign.repeats >= 2).any())
         has_lead = tuple(bool(np.isfinite(p)) for p in geometry.lead_mm)
-        lib = library(budget, campaign.has_dir, campaign.temp_C is not None, has_lead, spreads=self.repeats)
+        reach = (budget, campaign.has_dir, campaign.temp_C is not None, has_lead, self.repeats)
+        lib = library(*reach)
         sys_effects = [e for e in lib if e.systematic]
         G = (signatures(geometry, campaign.poses, self.idx, sys_effects, campaign.direction, campaign.temp_C)
              if point is None else point.signatures([e.name for e in sys_effects])[keep])
@@ -209,12 +211,12 @@ class Engine:
         self.blocks = tuple(np.arange(start, start + k) for start, k in zip(np.cumsum([0] + dof[:-1]), dof))
         # least value of each column: a backlash width h >= 0, so its correction to a budget's h is >= -h
         self.lower = np.array([(-budget.effects[e.name].value if e.name in budget.effects else 0.0)
-                               if e.kind == "backlash" else -np.inf for e in self.systematic for _ in range(e.dof)])
-        self.spreads = [e for e in lib if e.kind == "spread"]
+                               if e.kind is EffectKind.BACKLASH else -np.inf
+                               for e in self.systematic for _ in range(e.dof)])
+        self.spreads = [e for e in lib if not e.systematic]
         self.spread_input = {e.name: self.inputs.index(e.budget_input) for e in self.spreads}
         self.spread_ref = {e.name: spread_reference(budget, e) for e in self.spreads}
-        tested = {x.name for x in lib}
-        self.not_testable = {e: self._why_not(effect(e)) for e in EFFECT_NAMES if e not in tested}
+        self.not_testable = untestable(*reach)
         self._order = np.argsort(self.idx, kind="stable")
         self._starts = np.concatenate([[0], np.cumsum(campaign.repeats)[:-1]])
         self.b_pose, _ = inverse_kinematics(geometry, campaign.poses, check=False)   # (P, 3) mm
@@ -231,14 +233,6 @@ class Engine:
             return self
         return Engine(self.geometry, self.budget, self.full_campaign, self.noise, registration=self.registration,
                       keep=keep, point=self.point)
-
-    def _why_not(self, eff) -> str:
-        """Why the campaign cannot test library effect ``eff``."""
-        if eff.kind == "cyclic":
-            return f"needs lead_mm of leg {eff.leg + 1} in the geometry (the lead its screw's error repeats with)"
-        if eff.kind == "spread" and not self.repeats:
-            return "needs a pose measured twice: a dispersion is seen in the scatter of repeats"
-        return f"needs {', '.join(eff.needs) or 'its budget input'}"
 
     def cols_of(self, sys: tuple) -> list[int]:
         """Columns of :attr:`G` of the candidates ``sys`` (indices into :attr:`systematic`), in order."""

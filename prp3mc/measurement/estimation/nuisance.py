@@ -28,7 +28,8 @@ from ...errors import CampaignError
 from ...units import DEG2RAD
 from ..campaign.data import Campaign
 
-__all__ = ["NUISANCE_NAMES", "NUISANCE_UNITS", "REGISTRATION", "DRIFT", "campaign_time", "nuisance_signatures"]
+__all__ = ["NUISANCE_NAMES", "NUISANCE_UNITS", "REGISTRATION", "DRIFT", "campaign_time", "nuisance_signatures",
+           "listed_nuisances"]
 
 #: Registration parameters, in signature column order.
 REGISTRATION = ("registration_x", "registration_y", "registration_phi")
@@ -92,3 +93,51 @@ def nuisance_signatures(commanded: np.ndarray, s: np.ndarray) -> np.ndarray:
     for k in range(3):
         H[:, k, 3 + k] = s
     return H
+
+
+def listed_nuisances(engine, fit, alpha: float, named=()) -> tuple[tuple, dict]:
+    """The ``nuisance`` entries of a fit (registration when fitted, drift when its LR test rejects) and the drift test.
+
+    Drift is fitted in every model; it is *listed* only when the likelihood
+    ratio against the fit without it (chi2(3)) rejects at ``alpha``. A
+    nuisance that an alias of a named effect fits differently has the union
+    of the intervals as its ``ci95``, the named model's own as
+    ``ci95_named_model`` and each alias's fit under ``by_alias``.
+
+    Parameters
+    ----------
+    engine : Engine
+        The likelihood engine of the kept rows (:mod:`~prp3mc.measurement.estimation.likelihood`).
+    fit : Fit
+        The named model.
+    alpha : float
+        Level of the drift test.
+    named : sequence of NamedEffect
+        The named effects (their ``evidence["alias_fits"]`` hold each alias's nuisances).
+
+    Returns
+    -------
+    entries : tuple of dict
+        ``name``, value, unit and ``ci95`` of each listed nuisance.
+    drift_test : dict
+        ``lr, df, p, significant, time`` (``time_s`` or row order) and the drift ``values``.
+    """
+    entries = {}
+    for name, entry in engine.nuisances(fit).items():
+        entries[name] = {"name": name, **entry}
+        alias = [{"effect": a, **f["nuisance"][name]} for e in named for a, f in e.evidence["alias_fits"].items()
+                 if name in f.get("nuisance", {})]
+        if alias:
+            ci = entry["ci95"]
+            lo = min([ci[0]] + [f["ci95"][0] for f in alias])
+            hi = max([ci[1]] + [f["ci95"][1] for f in alias])
+            entries[name].update(ci95=[lo, hi], ci95_named_model=list(ci), by_alias=alias)
+    no_drift = engine.refit(fit.sys, fit.factors, start_r=fit.r,
+                            nuis=tuple(j for j in fit.nuis if NUISANCE_NAMES[j] not in DRIFT))
+    lr = max(2.0 * (fit.loglik - no_drift.loglik), 0.0)
+    from scipy.stats import chi2  # imported when used: prp3mc --help imports this module
+    p = float(chi2.sf(lr, 3))
+    drift_test = {"lr": lr, "df": 3, "p": p, "significant": bool(p < alpha), "time": engine.time_source,
+                  "values": {n: entries[n]["value"] for n in DRIFT}}
+    listed = [n for n in REGISTRATION if n in entries] + (list(DRIFT) if drift_test["significant"] else [])
+    return tuple(entries[n] for n in listed), drift_test

@@ -27,7 +27,7 @@ from ..forward.signatures import components
 from .likelihood import Engine
 from .nuisance import NUISANCE_NAMES
 
-__all__ = ["distances", "threshold", "flag"]
+__all__ = ["distances", "threshold", "flag", "outlier_rows", "outlier_rule"]
 
 #: Most refits while flagging.
 _MAX_ROUNDS = 6
@@ -118,3 +118,20 @@ def flag(engine: Engine, fit_kept, rate: float, keep: np.ndarray | None = None) 
         if keep.sum() <= 3:
             break
     return keep, d2
+
+
+def outlier_rows(campaign, keep: np.ndarray, d2: np.ndarray) -> tuple:
+    """The ``outliers`` entries: every row set aside (``keep`` False), with its pose id and its standardised
+    prediction error ``z = sqrt(d2)`` (:func:`distances`)."""
+    return tuple({"row": int(m), "pose_id": str(campaign.pose_id[m]), "z": float(np.sqrt(d2[m]))}
+                 for m in np.flatnonzero(~keep))
+
+
+def outlier_rule(n_measurements: int, limit: float, rate: float) -> dict:
+    """The gross-error rule as ``discrepancy.json`` states it: family-wise ``rate`` over ``n_measurements`` rows,
+    the per-row level and the threshold ``limit`` of ``d2`` (:func:`threshold`) as a z."""
+    return {"family_wise_rate": rate,
+            "per_measurement_level": float(-np.expm1(np.log1p(-rate) / n_measurements)),
+            "z_threshold": float(np.sqrt(limit)),
+            "statistic": "squared standardised error of each measurement predicted from the other visits "
+                         "of its pose under the fitted model, chi2(3), Sidak over all rows"}

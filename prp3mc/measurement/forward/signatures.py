@@ -24,7 +24,8 @@ from __future__ import annotations
 import numpy as np
 
 from ...model.budget import Budget
-from ...model.effects import (EFFECT_NAMES, OFFSET_FAMILIES, SPREAD_FAMILIES, T_REF_C, Effect, _as_effects,
+from ...model.effects import (EFFECT_NAMES, OFFSET_FAMILIES, SPREAD_FAMILIES, T_REF_C, Effect, EffectKind,
+                              _as_effects,
                               components, effect, offset_errors, slider_error)
 from ...errors import BudgetError, CampaignError
 from ...kinematics.geometry import Geometry
@@ -32,7 +33,7 @@ from ...kinematics.chain import inverse_kinematics
 from ...kinematics.sensitivity import LENGTH_FAMILIES, sensitivity
 from ...units import DEG2RAD, RAD2DEG
 
-__all__ = ["Effect", "EFFECT_NAMES", "OFFSET_FAMILIES", "SPREAD_FAMILIES", "effect", "library",
+__all__ = ["Effect", "EFFECT_NAMES", "OFFSET_FAMILIES", "SPREAD_FAMILIES", "effect", "library", "untestable",
            "signatures", "budget_effect_errors", "slider_error", "offset_errors", "spread_reference", "spread_budget",
            "T_REF_C", "ROW_TO_DEG", "components"]
 
@@ -41,28 +42,26 @@ ROW_TO_DEG = np.array([1.0, 1.0, RAD2DEG])
 ROW_TO_DEG.flags.writeable = False
 
 
-def library(budget: Budget | None = None, has_dir=(True, True, True), has_temp: bool = True,
-            has_lead=(True, True, True), spreads: bool = True) -> tuple[Effect, ...]:
-    """The effects a campaign can test.
+def untestable(budget: Budget | None = None, has_dir=(True, True, True), has_temp: bool = True,
+               has_lead=(True, True, True), spreads: bool = True) -> dict[str, str]:
+    """The library effects a campaign cannot test, name -> why (:meth:`Effect.untestable`), in library order.
 
     Backlash of leg i needs a ``dir_i`` column, ``thermal`` needs ``temp_C``,
     a cyclic screw error of leg i the lead of its screw (``has_lead[i]``: the
     geometry's ``lead_mm``), and a spread needs its input in ``budget`` (all
     spreads if None) and a campaign that measures some pose twice (``spreads``).
     """
-    out = []
-    for name in EFFECT_NAMES:
-        eff = effect(name)
-        if eff.kind == "backlash" and not has_dir[eff.leg]:
-            continue
-        if eff.kind == "thermal" and not has_temp:
-            continue
-        if eff.kind == "cyclic" and not has_lead[eff.leg]:
-            continue
-        if eff.kind == "spread" and (not spreads or budget is not None and eff.budget_input not in budget.inputs):
-            continue
-        out.append(eff)
-    return tuple(out)
+    columns = {f"dir_{i + 1}" for i in range(3) if has_dir[i]} | ({"temp_C"} if has_temp else set())
+    inputs = None if budget is None else budget.inputs
+    why = {name: effect(name).untestable(columns, has_lead, spreads, inputs) for name in EFFECT_NAMES}
+    return {name: text for name, text in why.items() if text is not None}
+
+
+def library(budget: Budget | None = None, has_dir=(True, True, True), has_temp: bool = True,
+            has_lead=(True, True, True), spreads: bool = True) -> tuple[Effect, ...]:
+    """The effects a campaign can test (the arguments as :func:`untestable`'s), in library order."""
+    skip = untestable(budget, has_dir, has_temp, has_lead, spreads)
+    return tuple(effect(name) for name in EFFECT_NAMES if name not in skip)
 
 
 def signatures(geometry: Geometry, poses: np.ndarray, pose_index: np.ndarray, effects,
@@ -96,7 +95,7 @@ def signatures(geometry: Geometry, poses: np.ndarray, pose_index: np.ndarray, ef
     bm = b[pose_index]                                         # (M, 3)
     cols = []
     for eff in effs:
-        if eff.kind == "offset":
+        if eff.kind is EffectKind.OFFSET:                      # a parameter's own sensitivity
             col = s.J[eff.family][:, :, eff.leg] * ROW_TO_DEG
             if eff.family not in LENGTH_FAMILIES:
                 col = col * DEG2RAD
@@ -165,7 +164,7 @@ def spread_budget(budget: Budget, values: dict) -> Budget:
     """``budget`` with the inputs of the spread effects in ``values`` scaled to their new bounds."""
     laws = {}
     for eff, value in zip(_as_effects(values), values.values()):
-        if eff.kind != "spread":
+        if eff.systematic:
             continue
         if not value >= 0:
             raise BudgetError(f"{eff.name}: a spread bound must be >= 0, got {value}")

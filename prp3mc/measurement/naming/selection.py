@@ -44,7 +44,7 @@ from ..estimation.likelihood import Engine, Fit
 from .named import NamedEffect
 from .subsets import Gram
 
-__all__ = ["select", "name_effects", "names_in", "STEP_COLUMNS"]
+__all__ = ["select", "name_effects", "names_in", "effect_values", "STEP_COLUMNS"]
 
 #: Most candidates refitted with r and the spreads re-profiled at each step.
 _JOINT = 3
@@ -55,6 +55,14 @@ STEP_COLUMNS = ["candidate", "lr", "estimate", "lr_joint", "step", "threshold", 
 def names_in(engine: Engine, fit: Fit) -> list[str]:
     """Names of the effects in ``fit``'s model: systematic ones, then spreads."""
     return [engine.systematic[j].name for j in fit.sys] + list(fit.factors)
+
+
+def effect_values(engine: Engine, fit: Fit) -> dict:
+    """Named effects of ``fit``: systematic values (a cyclic error's phasor) and spread bounds, name -> value in
+    the effect's unit."""
+    values = engine.values(fit)
+    return {n: (fit.factors[n] * engine.spread_ref[n] if n in fit.factors else values[n])
+            for n in names_in(engine, fit)}
 
 
 def _lr(name: str, lr: float) -> float:
@@ -208,7 +216,7 @@ def name_effects(engine: Engine, fit: Fit, accepted: dict) -> tuple[NamedEffect,
         ev.update(lr=float(lr), p_bonferroni=min(1.0, ev["n_candidates"] * p),
                   delta_bic=float(lr_raw - dof * np.log(n_obs)), identified=not aliases, alias_fits=alias_fits,
                   alternative_sets=[[engine.systematic[c].name for c in alt] for alt in alias_sets])
-        if effect(name).kind == "cyclic":
+        if effect(name).dof == 2:                               # a cyclic error: its phasor
             cyc = engine.phasor(fit, name)
             phase = cyc["phase_deg"]
             ev.update(lr_df2=float(lr_raw), phasor_mm=[cyc["phasor"].real, cyc["phasor"].imag],
