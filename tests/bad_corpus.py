@@ -635,6 +635,10 @@ def second_cases() -> list[Case]:
     add(Case(M, [*y, "--pose", "0", "1000", "0", "--spec-position-um", "100"], message="stroke"))
     add(Case(M, [*y, *P, "--spec-position-um", "100", "--spec-phi-arcsec", "-1"], status=(2,), message="> 0"))
     add(Case(H, [*y, "--region", "u-shape", "--grid", "100000", "--spec-position-um", "100"], message="memory"))
+    al = ["allocate", *G, "--region", "u-shape", "--classes", "example", "--grid", "2", "--json"]
+    add(Case(S, [*al, "--spec-position-um", "0.08"], expect="accept", warning="below 1 µm"))
+    add(Case(S, [*al, "--spec-position-um", "80", "--spec-phi-arcsec", "0.03"], expect="accept", warning="below 1 arcsec"))
+    add(Case(M, [*al, "--spec-position-um", "80", "--spec-percentile", "99.99999"], message="p99.99999"))
     add(Case(T, ["yield", "--geometry", "{g_parallel}", *B, *P, "--spec-position-um", "100"], message="singular"))
     pl = ["plan", *G, *B, "--poses", "9", "--visits", "2", "--out", "{tmp}/p.csv"]
     add(Case(M, [*pl, "--effects", "nonsense_1"], message="unknown effect"))
