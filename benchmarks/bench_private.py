@@ -14,10 +14,7 @@ run, turn about, each command in a fresh process:
   (49 poses x 8 visits, registration error, as ``bench_discrepancy --speed``),
   report included, wall time, and whether ``discrepancy.json`` is the same
   but for its wall time;
-- **layout**: in this process (the ``--after`` tree), the report's figures of
-  the reduced paper study rendered to PNG as shipped (margins fixed in
-  inches, one draw: :mod:`prp3mc.reports._layout`) and with matplotlib's
-  constrained layout engine turned on, the time of each.
+- the report figures alone are timed by ``bench_figures.py`` (same ``--before``).
 
 The 1-minute load average is printed with every row: the machine may be
 shared. Usage: ``python benchmarks/bench_private.py --before DIR [--after DIR]
@@ -81,31 +78,6 @@ def _turns(trees: dict, repeat: int, argv_of) -> dict:
     return {label: {"best_s": min(t), "median_s": statistics.median(t), "runs": len(t)} for label, t in times.items()}
 
 
-def bench_layout(quick: bool = True) -> dict:
-    """PNG rendering time of the study report's figures: fixed margins (as shipped) and constrained layout."""
-    import io
-
-    from prp3mc.reports.study_report import _figures
-    from prp3mc.study.reader import Study
-    from prp3mc.study.runner import run_study
-    study = Study.load("paper_reproduction")
-    result = run_study(study.reduced() if quick else study, progress=False)
-    figures = _figures(result)
-    out = {"layout_figures": len(figures)}
-    for label, engine in (("fixed", None), ("constrained", "constrained"), ("fixed_again", None)):
-        t0 = time.perf_counter()
-        for _, _, draw in figures:
-            fig = draw()
-            if engine:
-                fig.set_layout_engine(engine)
-            fig.savefig(io.BytesIO(), format="png", dpi=150)
-        out[f"layout_{label}_s"] = time.perf_counter() - t0
-    out["layout_constrained_over_fixed"] = out["layout_constrained_s"] / min(out["layout_fixed_s"],
-                                                                             out["layout_fixed_again_s"])
-    out["layout_load"] = os.getloadavg()[0]
-    return out
-
-
 def bench_private(before: Path, after: Path, repeat: int = 3, quick: bool = False) -> dict:
     trees = {"before": before, "after": after}
     out: dict = {"lines": {label: _lines(tree) for label, tree in trees.items()}, "load_start": os.getloadavg()[0]}
@@ -134,7 +106,6 @@ def bench_private(before: Path, after: Path, repeat: int = 3, quick: bool = Fals
         out["discrepancy_json_same_but_timings"] = _without(docs[0], ("wall_time_s", "versions")) == \
             _without(docs[1], ("wall_time_s", "versions"))
         out["load_after_discrepancy"] = os.getloadavg()[0]
-    out["layout"] = bench_layout(quick=True)
     return out
 
 
@@ -150,14 +121,10 @@ def table(r: dict) -> str:
         for stat in ("best_s", "median_s"):
             b, a = r[key]["before"][stat], r[key]["after"][stat]
             rows.append(f"{what + ' (' + stat[:-2] + ')':34}{b:>12.2f}{a:>12.2f}{a / b:>14.2f}")
-    lay = r["layout"]
-    rows.append(f"figures rendered ({lay['layout_figures']}): fixed margins {lay['layout_fixed_s']:.2f} s / "
-                f"{lay['layout_fixed_again_s']:.2f} s, constrained layout {lay['layout_constrained_s']:.2f} s: "
-                f"x{lay['layout_constrained_over_fixed']:.2f}")
     rows.append(f"summary.json same but timings: {r['study_summary_same_but_timings']}; discrepancy.json same but "
                 f"timings: {r['discrepancy_json_same_but_timings']}")
     rows.append("1-minute load: " + ", ".join(f"{k.removeprefix('load_')} {v:.1f}" for k, v in r.items()
-                                              if k.startswith("load_")) + f", layout {lay['layout_load']:.1f}")
+                                              if k.startswith("load_")))
     return "\n".join(rows)
 
 

@@ -651,6 +651,10 @@ def second_cases() -> list[Case]:
              message="more than --max-gb"))
     add(Case(H, ["--max-gb", "4", "study", "{s_sweep_histograms}", "--out", "{tmp}/sw"],
              message="draws at 3000 histogram poses) needs ~45 GiB"))
+    al = ["allocate", *G, "--region", "u-shape", "--classes", "example", "--grid", "2", "--json"]
+    add(Case(S, [*al, "--spec-position-um", "0.08"], expect="accept", warning="below 1 µm"))
+    add(Case(S, [*al, "--spec-position-um", "80", "--spec-phi-arcsec", "0.03"], expect="accept", warning="below 1 arcsec"))
+    add(Case(M, [*al, "--spec-position-um", "80", "--spec-percentile", "99.99999"], message="p99.99999"))
     add(Case(T, ["yield", "--geometry", "{g_parallel}", *B, *P, "--spec-position-um", "100"], message="singular"))
     pl = ["plan", *G, *B, "--poses", "9", "--visits", "2", "--out", "{tmp}/p.csv"]
     add(Case(H, ["plan", *G, *B, "--effects", "backlash_1", "--poses", "9", "--visits", "1000000000", "--out",

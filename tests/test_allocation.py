@@ -9,7 +9,7 @@ import pytest
 
 from prp3mc import Geometry, Region, allocate, linear_model, worst_case
 from prp3mc.cli import main
-from prp3mc.errors import AllocationError, Prp3mcError
+from prp3mc.errors import AllocationError, Prp3mcError, Prp3mcWarning
 from prp3mc.allocation.optimum import allocation_front, region_poses
 from prp3mc.allocation.classes import ClassMenu
 from prp3mc.allocation.search import Problem, least_cost
@@ -332,3 +332,16 @@ def test_too_few_samples_to_confirm_a_percentile_are_refused():
     choice was called confirmed: the samples must bound the interval."""
     with pytest.raises(AllocationError, match="needs at least 1419 samples"):
         allocate("u-shape", "example", "u-shape", spec_position_um=40.0, spec_percentile=99.73, grid=3, n_samples=2)
+
+
+@pytest.mark.parametrize("kwargs, unit", [({"spec_position_um": 0.08}, "µm"), ({"spec_phi_arcsec": 0.03}, "arcsec")])
+def test_a_spec_below_one_unit_warns_naming_the_unit(kwargs, unit):
+    """0.08 (80 µm typed in mm) ran silently to an infeasible allocation; ``prp3mc yield`` warns on the same."""
+    with pytest.warns(Prp3mcWarning, match=f"below 1 {unit}"):
+        allocate("u-shape", "example", "u-shape", grid=2, **kwargs)
+
+
+def test_a_percentile_of_many_nines_keeps_its_digits():
+    """p99.99999 was printed as 'p100' (6 significant digits), a percentile the spec refuses."""
+    with pytest.raises(AllocationError, match=r"confirming p99\.99999 needs"):
+        allocate("u-shape", "example", "u-shape", spec_position_um=40.0, spec_percentile=99.99999, grid=3)

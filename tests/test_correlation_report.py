@@ -63,7 +63,7 @@ def test_independent_budget_has_no_correlation_entry():
 
 
 def test_heatmap_order_keeps_groups_together_and_draws_every_correlation():
-    from prp3mc.reports._layout import agg_figure
+    from prp3mc.reports.canvas import agg_figure
     from prp3mc.reports.plots import correlation_heatmap
     from prp3mc.reports.study_report import correlation_order
     budget = EXAMPLE.budget

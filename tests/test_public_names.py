@@ -36,3 +36,17 @@ def test_current_names_do_not_warn():
         from prp3mc.worstcase.envelope import worst_case_maxima  # noqa: F401
     with pytest.raises(AttributeError):
         envelope.NoSuchName
+
+
+def test_the_analyses_take_preset_names_as_exact_yield_and_allocate_do():
+    """monte_carlo, worst_case and sobol_indices('u-shape', 'paper', ...) raised AttributeError ('str' object has
+    no attribute 'check_geometry' / 'bounds' / 'groups'); exact_yield and allocate take names. Same numbers."""
+    import numpy as np
+    from prp3mc import Budget, Geometry, monte_carlo, sobol_indices, worst_case
+    g, b, pose = Geometry.from_preset("u-shape"), Budget.from_preset("paper"), [0.0, 100.0, 0.0]
+    assert worst_case("u-shape", "paper", pose).position_mm == worst_case(g, b, pose).position_mm
+    by_name, by_object = (monte_carlo(*gb, pose, 2048, rng=3, percentiles=(50.0,)) for gb in (("u-shape", "paper"),
+                                                                                              (g, b)))
+    assert np.array_equal(by_name.position_pct, by_object.position_pct)
+    by_name, by_object = (sobol_indices(*gb, pose, 256, rng=3, replicates=2) for gb in (("u-shape", "paper"), (g, b)))
+    assert np.array_equal(by_name.ST, by_object.ST, equal_nan=True)

@@ -1,7 +1,6 @@
-"""The study report's figures keep a fixed layout that holds what they show.
+"""matplotlib's constrained layout lays the study report's figures out so that they hold what they show.
 
-Each figure is laid out once with margins in inches and drawn once, without a
-layout engine (prp3mc.reports._layout). Drawn here for small studies that
+Each figure is laid out by matplotlib (prp3mc.reports.canvas.agg_figure). Drawn here for small studies that
 vary what the margins must hold: two configurations, one of them over a
 wide region, with long names; a budget of constant inputs (constant fields, no extrema,
 undefined Sobol indices), a sweep (the design-space figure, its best three
@@ -67,11 +66,13 @@ def figures(request, tmp_path_factory):
     return _figures(run_study(Study.load(folder / "study.toml"), progress=False))
 
 
-def test_every_figure_drawn_once_inside_its_canvas_without_overlaps(figures):
+def test_every_figure_laid_out_by_matplotlib_inside_its_canvas_without_overlaps(figures):
+    from matplotlib.layout_engine import ConstrainedLayoutEngine
     assert figures
     for name, _, draw in figures:
         fig = draw()
-        assert fig.get_layout_engine() is None, name           # one draw: nothing lays it out again
+        assert isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine), name    # no hand layout
+        fig.set_dpi(150)                                        # the report's resolution (pixels as saved)
         fig.canvas.draw()
         canvas = fig.bbox.padded(1.0)                           # a pixel of rounding
         parts = _parts(fig)

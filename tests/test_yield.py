@@ -369,3 +369,16 @@ def test_quantiles_agree_with_monte_carlo(seed):
             mc = sample_exceedance(model, n, rng, qp, qf)
             se = math.sqrt(p * (1.0 - p) / n)
             assert abs(mc[0, 0] - p) <= N_SE * se and abs(mc[1, 0] - p) <= N_SE * se, (k, level, mc[:2, 0], p)
+
+
+@pytest.mark.parametrize("index", [(), 4, (3, 0)])
+def test_pose_record_of_a_batch_needs_the_index_of_one_pose(index):
+    """pose_record() of a 3 x 3 grid raised numpy's TypeError ('only 0-dimensional arrays...'), pose_record(4)
+    an IndexError: a one-line ParameterError names the batch's shape instead."""
+    from prp3mc.errors import ParameterError
+    from prp3mc.kinematics.geometry import Region
+    r = exact_yield("u-shape", "paper", Region.from_preset("u-shape").grid(3), spec_position_um=100.0,
+                    quantiles=False)
+    with pytest.raises(ParameterError, match=r"one pose of the batch \(3, 3\)"):
+        r.pose_record(index)
+    assert r.pose_record((1, 1))["exceed_position_ppm"] == pytest.approx(1e6 * float(r.exceed_position[1, 1]))

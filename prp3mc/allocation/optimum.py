@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -36,7 +37,7 @@ from ..progress import Progress
 from .._result import freeze, pose_columns, short_repr
 from .._rng import child_seed, resolve_rng
 from .._version import __version__
-from ..errors import AllocationError
+from ..errors import AllocationError, Prp3mcWarning
 from ..kinematics.geometry import Geometry, Region
 from ..kinematics.chain import as_poses
 from ..stackup.result import PPM
@@ -202,6 +203,11 @@ def _spec_limits(spec_position_um, spec_phi_arcsec, spec_percentile) -> dict:
             raise AllocationError(f"{name} must be a finite number > 0, got {value!r}")
     if spec_position_um is None and spec_phi_arcsec is None:
         raise AllocationError("give a position spec (µm), an orientation spec (arcsec) or both")
+    for name, value, unit, big, per_big in (("spec_position_um", spec_position_um, "µm", "mm", MM2UM),
+                                            ("spec_phi_arcsec", spec_phi_arcsec, "arcsec", "deg", DEG2ARCSEC)):
+        if value is not None and value < 1.0:     # legal, but far more often a value in the larger unit
+            warnings.warn(Prp3mcWarning(f"allocation: {name} = {value:g} {unit} is below 1 {unit}; was it meant "
+                                        f"in {big} ({value:g} {big} = {per_big * value:g} {unit})?"), stacklevel=3)
     if spec_percentile is not None:
         if spec_position_um is None:
             raise AllocationError("a percentile spec bounds the position error: give spec_position_um too")
@@ -273,7 +279,7 @@ def allocate(geometry, classes, region, *, spec_position_um: float | None = None
     t0 = time.perf_counter()
     limits = _spec_limits(spec_position_um, spec_phi_arcsec, spec_percentile)
     if spec_percentile is not None and n_samples < (need := ci_samples(spec_percentile)):
-        raise AllocationError(f"confirming p{spec_percentile:g} needs at least {need} samples (the upper end of "
+        raise AllocationError(f"confirming p{spec_percentile:.10g} needs at least {need} samples (the upper end of "
                               f"its 95 % interval must lie below the sample's maximum), got {n_samples}")
     geometry, menu, fixed = Geometry.load(geometry), ClassMenu.load(classes), _fixed(budget)
     poses = region_poses(region, grid, phi_deg)

@@ -82,7 +82,7 @@ class AllocateCommand:
 
 def _text(r, args, front) -> str:
     status = "meets the spec" if r.feasible else "NO choice meets the spec; the closest one"
-    spec = [f"{args.spec_position_um:g} µm" + (f" at p{args.spec_percentile:g}" if args.spec_percentile else "")
+    spec = [f"{args.spec_position_um:g} µm" + (f" at p{args.spec_percentile:.10g}" if args.spec_percentile else "")
             if args.spec_position_um else None,
             f"{args.spec_phi_arcsec:g} arcsec" if args.spec_phi_arcsec else None]
     lines = [f"prp3mc {__version__}  geometry {args.geometry}  region {args.region} "

@@ -246,7 +246,7 @@ def _wilson(k: np.ndarray, n: int, z: float = Z95) -> np.ndarray:
     return np.stack([centre - half, centre + half], -1)
 
 
-def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
+def monte_carlo(geometry: "Geometry | str", budget: "Budget | str", poses, n_samples: int, *,
                 rng: "None | int | np.random.Generator" = None,
                 percentiles=PERCENTILES, tolerance_mm: float | None = None, tolerance_phi_deg: float | None = None,
                 exact_check_poses: int = 0, exact_check_samples: int = 2000,
@@ -256,8 +256,10 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
 
     Parameters
     ----------
-    geometry : Geometry
-    budget : Budget
+    geometry : Geometry or str
+        A Geometry, preset name or TOML path.
+    budget : Budget or str
+        A Budget, preset name or TOML path.
     poses : array_like, shape (..., 3)
         ``[x_mm, y_mm, phi_deg]``.
     n_samples : int
@@ -291,6 +293,7 @@ def monte_carlo(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     MonteCarloResult
     """
     t0 = time.perf_counter()
+    geometry, budget = Geometry.load(geometry), Budget.load(budget)
     n_samples = int(n_samples)
     if n_samples < MIN_SAMPLES:
         raise ParameterError(f"Monte Carlo needs at least {MIN_SAMPLES} samples (its standard errors come from "

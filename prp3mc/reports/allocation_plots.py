@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from ..units import DISPLAY
-from ._layout import text_inches, wrap
+from .canvas import text_width, wrap
 from .plots import legend_below, region_map
 
 __all__ = ["allocation_front_plot", "allocation_map", "class_changes", "labels_points", "MAX_LABELLED"]
@@ -85,7 +85,7 @@ def allocation_front_plot(front: pd.DataFrame, output: str = "position", *, spec
     label = "position error" if output == "position" else "|δφ|"
     ax.set_xlabel("total cost")
     ax.set_ylabel(f"worst-case {label} over the region ({unit})")
-    ax.set_title("What each step of cost buys", fontsize=10, y=1.0)
+    ax.set_title("What each step of cost buys", fontsize=10)
     ax.legend(fontsize=8, frameon=False)
     return fig
 
@@ -93,11 +93,11 @@ def allocation_front_plot(front: pd.DataFrame, output: str = "position", *, spec
 def _room_right(ax, x: np.ndarray, labels: list, fontsize: float) -> None:
     """Widen ``ax``'s x range so that ``labels`` written right of the points ``x`` end inside the axes.
 
-    The axes' width (inches) is where its figure's layout puts it; a label
-    wider than 0.9 of it is left to stick out.
+    The axes' width (inches) is taken where the figure's subplot parameters put it (its layout
+    then narrows it by its labels' room); a label wider than 0.9 of it is left to stick out.
     """
     width = ax.get_position().width * ax.figure.get_figwidth()
-    need = np.array([text_inches(t, fontsize)[0] + 6 / 72 for t in labels]) / width     # fractions of the axes
+    need = np.array([text_width(t, fontsize) + 6 / 72 for t in labels]) / width     # fractions of the axes
     margin = 0.05 * (np.ptp(x) or 1.0)                                                  # matplotlib's own
     lo, hi = x.min() - margin, x.max() + margin
     fits = need < 0.9
@@ -147,5 +147,5 @@ def allocation_map(result, shape: tuple, *, ax=None, title: str = ""):
     label = "position error" if output == "position" else "|δφ|"
     width = ax.get_position().width * fig.get_figwidth() + 0.6
     ax.set_title(wrap(f"{title + ': ' if title else ''}worst-case {label} of the chosen classes ({unit})", width, 10),
-                 fontsize=10, y=1.0)
+                 fontsize=10)
     return fig

@@ -7,10 +7,9 @@ Figure; none changes the matplotlib backend. :func:`write_report` writes
 ``discrepancy.json``, ``report.html`` with the figures embedded,
 the figures as PNG (SVG too on request), per-pose / per-measurement
 tables as CSV and the updated model in ``model/``
-(:mod:`~prp3mc.measurement.discrepancy.updated`); it draws on its own Agg canvases, outside pyplot, and renders
-each figure once (fixed margins, no layout engine, no tight bounding box),
-here or on worker processes on request (:mod:`~prp3mc.reports._render`),
-and writes the JSON, tables and model files meanwhile.
+(:mod:`~prp3mc.measurement.discrepancy.updated`); it draws on its own Agg canvases, outside pyplot, laid out
+by matplotlib's constrained layout (:func:`~prp3mc.reports.canvas.agg_figure`), here or on worker processes
+on request (:mod:`~prp3mc.reports._render`), and writes the JSON, tables and model files meanwhile.
 
 The report shows what the measurement carries besides the machine: the
 instrument's registration and drift (``nuisance``), the measurements set
@@ -34,7 +33,7 @@ from ..measurement.campaign.iso9283 import ISO_STATISTICS, N_MC
 from ..measurement.discrepancy.results import DiscrepancyResult
 from ..output import output_folder, png_data_uri, write_json, write_text
 from ..units import DEG2ARCSEC, MM2UM
-from ._layout import agg_figure, lighten
+from .canvas import agg_figure, lighten
 from ._render import rendering
 
 __all__ = ["plot_workspace", "plot_actuators", "plot_temperature", "plot_gap", "plot_candidates", "plot_iso9283",
@@ -197,15 +196,6 @@ _FIGURES = {
     "candidates": (_draw_candidates, lambda r: (4.2 * _n_steps(r), 4.2)),
     "iso9283": (_draw_iso9283, lambda r: None if r.iso9283_poses is None else (13.0, 3.9)),
 }
-#: Margins of the report's figures (:data:`_REPORT_FIGURES`), inches (left, right, bottom, top) and gaps between panels
-#: (wspace, hspace, fractions of a panel): a fixed layout renders in one pass, where a constrained
-#: one measures every label first and costs a second pass (about half of the report's time).
-_MARGINS = {
-    "workspace": (0.75, 0.3, 0.55, 0.35, 0.08, 0.16),
-    "actuators": (0.75, 0.15, 0.55, 0.35, 0.05, 0.22),
-    "temperature": (0.75, 0.15, 0.55, 0.35, 0.05, 0.2),
-    "iso9283": (0.5, 0.15, 0.55, 0.35, 0.3, 0.2),
-}
 #: Figures of the report, in its order (the gap and the candidates are tables there: quicker to read and to write).
 _REPORT_FIGURES = ("workspace", "iso9283", "actuators", "temperature")
 
@@ -308,8 +298,8 @@ _CAPTIONS = {
 
 
 def _report_figure(name: str, result: DiscrepancyResult):
-    """Figure ``name`` of the report on its own Agg canvas, with its fixed margins (rendered once where saved)."""
-    return _plot(name, result, agg_figure(_FIGURES[name][1](result), _MARGINS[name], dpi=DPI))
+    """Figure ``name`` of the report on its own Agg canvas (rendered where saved)."""
+    return _plot(name, result, agg_figure(_FIGURES[name][1](result), dpi=DPI))
 
 
 def _table(frame) -> str:

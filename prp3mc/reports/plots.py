@@ -7,12 +7,9 @@ into, sized to fit; a new pyplot figure when None). Nothing here switches the
 matplotlib backend, so figures show inline in notebooks; reports draw on a
 :class:`matplotlib.figure.Figure` of their own. Maps show µm and arcsec.
 
-The ``*_figure`` functions lay their panels out once, with margins in inches
-sized from what the figure holds (tick labels, names, titles wrapped to its
-width; :mod:`prp3mc.reports._layout`): no layout engine, so a figure renders
-in a single draw, the same in a report and in a notebook. Axes titles are set
-at ``y=1.0``, where matplotlib puts them above axes without top ticks, so
-that no draw measures every tick label to place them.
+The ``*_figure`` functions size their figure from what it holds (panels,
+names, titles wrapped to its width) and leave the placing to matplotlib's
+constrained layout, the same in a report and in a notebook.
 """
 
 from __future__ import annotations
@@ -20,8 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..units import DISPLAY
-from ._layout import (ROUND_STEPS, fix_layout, grid, lighten, number_inches, set_title, shift, text_inches,
-                      tick_width, title_lines, wrap)
+from .canvas import ROUND_STEPS, lighten, text_width, wrap
 
 __all__ = ["is_constant", "within_noise", "noise_range", "shared_levels", "region_map", "worst_case_map", "montecarlo_map", "compare_maps_figure",
            "error_histogram", "histograms_figure", "ecdf_steps", "error_ecdf", "ecdf_figure", "sobol_ranking",
@@ -49,20 +45,22 @@ def _axes(ax, figsize=(5.0, 4.2)):
     return ax
 
 
-def _figure(fig, figsize, margins):
-    """``fig`` (a new pyplot figure when None) of ``figsize`` inches, its panels placed by ``margins`` (inches).
-
-    No layout engine: the figure draws once (:func:`prp3mc.reports._layout.fix_layout`).
-    """
+def _figure(fig, figsize):
+    """``fig`` (a new pyplot figure when None) resized to ``figsize`` inches, laid out by matplotlib's constrained
+    layout."""
     if fig is None:
         import matplotlib.pyplot as plt
-        fig = plt.figure()
-    return fix_layout(fig, figsize, margins)
+        return plt.figure(figsize=figsize, layout="constrained")
+    fig.set_size_inches(figsize)
+    fig.set_layout_engine("constrained")
+    return fig
 
 
 def legend_below(ax, **kwargs):
-    """A legend centred under ``ax``, :data:`LEGEND_DROP` inches below it (under its x tick labels and label)."""
-    below = ax.transAxes + shift(ax.figure, 0.0, -LEGEND_DROP)
+    """A legend centred under ``ax``, :data:`LEGEND_DROP` inches below it (under its x tick labels and label);
+    the figure's layout makes room for it."""
+    from matplotlib.transforms import ScaledTranslation
+    below = ax.transAxes + ScaledTranslation(0.0, -LEGEND_DROP, ax.figure.dpi_scale_trans)
     return ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=below, fontsize=7,
                      frameon=False, ncol=1, **kwargs)
 
@@ -151,7 +149,7 @@ def region_map(poses: np.ndarray, values: np.ndarray, *, ax=None, levels=None, c
     ax.contourf(X, Y, np.full_like(values, np.mean(values)) if noise else values, levels=levels, cmap=cmap,
                 extend="neither")
     ax.set(xlabel="x (mm)", ylabel="y (mm)", aspect="equal")
-    ax.set_title(title, y=1.0)
+    ax.set_title(title)
     if flat:
         text = (f"constant within Monte Carlo noise:\n{_with_se(float(np.mean(values)), float(np.max(se)))} {unit}"
                 if noise else f"constant: {float(np.mean(values)):.4g} {unit}")
@@ -243,21 +241,16 @@ def compare_maps_figure(results, kind: str = "worstcase", quantity: str = "posit
         title = f"{what}, one colour scale"
     else:
         title = f"{what}, each panel on its own colour scale (their ranges differ too much to share one)"
-    # the layout, inches: y tick labels and label left of each map, its colour bar (or the shared one) right of it
     n = len(results)
-    bars = [] if all(constant) else [common] if shared else [lv for lv, flat in zip(levels, constant) if not flat]
-    bar = 0.8 + max(number_inches(v) for v in np.concatenate(bars)) if bars else 0.0
-    y_room = 0.5 + max(tick_width(float(p[..., 1].min()), float(p[..., 1].max())) for p in poses)
     aspect = max(np.ptp(p[..., 1]) / max(np.ptp(p[..., 0]), 1e-300) for p in poses)
     height = MAP_INCHES * float(np.clip(aspect, 0.35, 1.4))
-    gap = y_room + (0.0 if shared else bar)
-    width = y_room + n * MAP_INCHES + (n - 1) * gap + bar + 0.15
+    bars = 0 if all(constant) else 1 if shared else n - sum(constant)       # colour bars right of the maps
+    width = n * (MAP_INCHES + 0.9) + 1.0 * bars + 0.2
     names = [wrap(r.name, MAP_INCHES, 12) for r in results]
-    title, top = title_lines(title, width)
-    top += 0.15 + max(text_inches(name, 12)[1] for name in names) + 0.1
-    bottom = LEGEND_DROP + (0.0 if all(constant) else 0.5)
-    fig = _figure(fig, *grid((MAP_INCHES, height), (1, n), y_room, bar + 0.15, bottom, top, wgap=gap))
-    set_title(fig, title)
+    title = wrap(title, width - 0.3, 12)
+    fig = _figure(fig, (width, height + 0.3 + 0.2 * (title.count("\n") + max(m.count("\n") for m in names))
+                        + 0.5 + (0.0 if all(constant) else LEGEND_DROP + 0.5)))
+    fig.suptitle(title)
     axes = fig.subplots(1, n, squeeze=False)[0]
     for ax, r, v, name, lv in zip(axes, results, values, names, levels):
         if kind == "worstcase":
@@ -266,26 +259,22 @@ def compare_maps_figure(results, kind: str = "worstcase", quantity: str = "posit
             montecarlo_map(r.montecarlo, percentile, quantity, ax=ax, levels=lv, title=name)
     lighten(fig, ROUND_STEPS)
     if shared and not all(constant):
-        _colorbar(axes, common, cmap, f"{label} ({unit})")
+        _colorbar(list(axes), common, cmap, f"{label} ({unit})")
     elif not shared:
         for ax, lv, flat in zip(axes, levels, constant):
             if not flat:
-                _colorbar([ax], lv, cmap, f"{label} ({unit})")
+                _colorbar(ax, lv, cmap, f"{label} ({unit})")
     return fig
 
 
-def _colorbar(axes, levels, cmap: str, label: str):
-    """A colour bar of ``levels`` right of ``axes`` (as drawn, aspect kept), 85 % of their height."""
+def _colorbar(ax, levels, cmap: str, label: str):
+    """A colour bar of ``levels`` right of ``ax`` (an Axes or a list of them), 85 % of their height."""
     import matplotlib
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import BoundaryNorm
-    fig = axes[0].figure
-    boxes = [ax.get_position() for ax in axes]                 # where each is drawn, its aspect applied
-    x0, y0, y1 = max(b.x1 for b in boxes), min(b.y0 for b in boxes), max(b.y1 for b in boxes)
-    w = 1.0 / fig.get_figwidth()
-    cax = fig.add_axes((x0 + 0.15 * w, y0 + 0.075 * (y1 - y0), 0.15 * w, 0.85 * (y1 - y0)), label="<colorbar>")
     sm = ScalarMappable(norm=BoundaryNorm(levels, matplotlib.colormaps[cmap].N), cmap=cmap)
-    return fig.colorbar(sm, cax=cax, label=label)
+    fig = ax[0].figure if isinstance(ax, list) else ax.figure
+    return fig.colorbar(sm, ax=ax, shrink=0.85, label=label)
 
 
 def _at_pose(samples, index: int, quantity: str):
@@ -336,9 +325,8 @@ def error_histogram(samples, index: int, quantity: str = "position", *, ax=None,
     return ax.figure
 
 
-#: A panel of the histogram and ECDF figures, inches (width, height), and the room left of it for its y
-#: tick labels (up to seven characters) and y label.
-_POSE_PANEL, _POSE_Y_ROOM = (3.2, 2.4), 0.95
+#: A panel of the histogram and ECDF figures with its tick labels and axis labels, inches (width, height).
+_POSE_PANEL = (4.0, 3.0)
 
 
 def _labelled(axis) -> bool:
@@ -352,15 +340,14 @@ def _pose_grid(results, fig, draw, title: str, sharey: bool = False):
     ``sharey``: one y axis per row, labelled on its first panel only (the panels then sit closer).
     """
     import matplotlib
-    (pw, ph), y_room = _POSE_PANEL, _POSE_Y_ROOM
+    pw, ph = _POSE_PANEL
     shape = (len(results), max(len(r.samples.labels) for r in results))
-    heads = [[wrap(f"{r.name}: {label}", pw + 0.6, 9) + f"\n(x={x:.4g}, y={y:.4g} mm, φ={phi:.4g}°)"
+    heads = [[wrap(f"{r.name}: {label}", pw, 9) + f"\n(x={x:.4g}, y={y:.4g} mm, φ={phi:.4g}°)"
               for label, (x, y, phi) in zip(r.samples.labels, r.samples.poses)] for r in results]
-    head = max(text_inches(h, 9)[1] for row in heads for h in row) + 0.1        # a panel's title
-    wgap = 0.3 if sharey else y_room + 0.15
-    width = y_room + shape[1] * pw + (shape[1] - 1) * wgap + 0.2
-    title, top = title_lines(f"{title} ({results[0].samples.n_samples} samples)", width)
-    fig = _figure(fig, *grid(_POSE_PANEL, shape, y_room, 0.2, 0.6, top + 0.1 + head, wgap=wgap, hgap=head + 0.15))
+    head = 9 * 1.2 / 72 * max(h.count("\n") + 1 for row in heads for h in row)     # a panel's title, inches
+    width = shape[1] * pw + 0.2
+    title = wrap(f"{title} ({results[0].samples.n_samples} samples)", width - 0.3, 12)
+    fig = _figure(fig, (width, shape[0] * (ph + head) + 0.3 + 0.2 * (title.count("\n") + 1)))
     axes = fig.subplots(*shape, squeeze=False, sharex=True, sharey=sharey)
     colors = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     for i, (row, r) in enumerate(zip(axes, results)):
@@ -372,9 +359,9 @@ def _pose_grid(results, fig, draw, title: str, sharey: bool = False):
             if i + 1 < shape[0] and k >= len(results[i + 1].samples.labels):   # nothing below: x labels here
                 ax.xaxis.set_tick_params(labelbottom=True)
             draw(s, k, ax, colors[k % len(colors)])
-            ax.set_title(heads[i][k], fontsize=9, y=1.0)
+            ax.set_title(heads[i][k], fontsize=9)
     lighten(fig, ROUND_STEPS)
-    set_title(fig, title)
+    fig.suptitle(title)
     return fig
 
 
@@ -489,7 +476,7 @@ def sobol_ranking(frame, *, ax=None, title: str = ""):
     ax.set_yticks(y, _bar_labels(frame))
     ax.invert_yaxis()
     ax.set_xlabel(("Shapley effect" if shapley else "Sobol index") + " (95 % CI)")
-    ax.set_title(title, fontsize=10, y=1.0)
+    ax.set_title(title, fontsize=10)
     ax.legend(fontsize=7, loc="lower right")
     return ax.figure
 
@@ -523,7 +510,7 @@ def worst_case_shares(frame, *, ax=None, title: str = "share of the exact worst 
     ax.set_yticks(y, _bar_labels(frame))
     ax.invert_yaxis()
     ax.set_xlabel(_shares_xlabel(undefined, ax.get_position().width * ax.figure.get_figwidth()), fontsize=8)
-    ax.set_title(title, fontsize=10, y=1.0)
+    ax.set_title(title, fontsize=10)
     return ax.figure
 
 
@@ -545,19 +532,19 @@ def ranking_figure(frame, title: str = "", *, fig=None):
         "Sobol indices (variance shares)"
     heads = (wrap(f"{kind},\n{basis}", wa + 0.3, 10),
              wrap(f"share of the exact worst case,\n{basis}", wb + 0.3, 10))
-    left = max(text_inches(t)[0] for t in _bar_labels(frame)) + 0.2          # the y tick labels of each panel
-    middle = max((text_inches(t)[0] for t in _bar_labels(shares)), default=0.0) + 0.3
+    left = text_width("\n".join(_bar_labels(frame))) + 0.5             # the y tick labels and label of each panel
+    middle = text_width("\n".join(_bar_labels(shares))) + 0.3 if len(shares) else 0.3
     xlabel = _shares_xlabel(frame[frame[column].isna()]["name"].tolist(), wb)
-    title, top = title_lines(title, left + wa + middle + wb + 0.3) if title else ("", 0.0)
-    top += 0.1 + max(text_inches(h, 10)[1] for h in heads) + 0.1
-    bottom = 0.45 + max(text_inches("S", 10)[1], text_inches(xlabel, 8)[1]) + 0.1
-    fig = _figure(fig, *grid(((wa + wb) / 2, 0.27 * len(frame) + 0.45), (1, 2), left, 0.3, bottom, top,
-                             wgap=middle))
+    width = left + wa + middle + wb + 0.3
+    title = wrap(title, width - 0.3, 12) if title else ""
+    lines = (title.count("\n") + 1 if title else 0) + max(h.count("\n") + 1 for h in heads) + xlabel.count("\n")
+    fig = _figure(fig, (width, 0.27 * len(frame) + 0.45 + 0.6 + 0.2 * lines))
     a, b = fig.subplots(1, 2, width_ratios=(wa, wb))
     sobol_ranking(frame, ax=a, title=heads[0])
     worst_case_shares(frame, ax=b, column=column, title=heads[1])
     lighten(fig, ROUND_STEPS)
-    set_title(fig, title)
+    if title:
+        fig.suptitle(title)
     return fig
 
 
@@ -586,7 +573,7 @@ def contributors_pareto(contributions, *, ax=None, title: str = ""):
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=7, frameon=False, loc="center right")         # under the total, over the smallest bars
     ax.set_title(f"{title}: contributors to the worst-case position error" if title else
-                 "contributors to the worst-case position error", fontsize=10, y=1.0)
+                 "contributors to the worst-case position error", fontsize=10)
     return ax.figure
 
 
@@ -615,11 +602,11 @@ def correlation_heatmap(names, matrix, title: str = "", *, fig=None):
     """
     matrix = np.asarray(matrix, dtype=float)
     k = len(names)
-    label = max(text_inches(n, 9)[0] for n in names) + 0.15
-    bar = 0.15 + 0.12 + 0.1 + number_inches(-0.5, 8) + 0.45       # gap, colour bar, ticks, its label
-    title, top = title_lines(title, label + k * _CELL + bar) if title else ("", 0.0)
+    label = text_width("\n".join(names), 9) + 0.15                # the tick labels, left and below
     side = max(k * _CELL, 1.2)
-    fig = _figure(fig, *grid((side, side), (1, 1), label, bar, label, top + 0.15))
+    width = label + side + 1.0                                        # the colour bar with its ticks and label
+    title = wrap(title, width - 0.3, 12) if title else ""
+    fig = _figure(fig, (width, label + side + 0.2 + (0.2 * (title.count("\n") + 1) if title else 0.0)))
     ax = fig.subplots()
     image = ax.imshow(matrix, cmap="RdBu_r", vmin=-1.0, vmax=1.0, interpolation="nearest")
     ax.set_xticks(np.arange(k), names, rotation=90, fontsize=9)
@@ -635,11 +622,9 @@ def correlation_heatmap(names, matrix, title: str = "", *, fig=None):
     ax.set_yticks(np.arange(k + 1) - 0.5, minor=True)
     ax.grid(which="minor", color="white", lw=1)
     ax.tick_params(which="minor", length=0)
-    place = ax.get_position()
-    w, h = fig.get_size_inches()
-    cax = fig.add_axes((place.x1 + 0.15 / w, place.y0, 0.12 / w, place.height))
-    cb = fig.colorbar(image, cax=cax, ticks=[-1, -0.5, 0, 0.5, 1])
+    cb = fig.colorbar(image, ax=ax, ticks=[-1, -0.5, 0, 0.5, 1])
     cb.ax.tick_params(labelsize=8)
     cb.set_label("rank correlation (Spearman)", fontsize=8)
-    set_title(fig, title)
+    if title:
+        fig.suptitle(title)
     return fig

@@ -11,10 +11,10 @@
 
 The report is built from a :class:`~prp3mc.study.results.StudyResult` only;
 it is readable without prp3mc installed. Figures are drawn on figures of
-their own with an Agg canvas: writing a report never touches pyplot or the
-matplotlib backend. Each is laid out once with margins in inches and drawn
-once, without a layout engine (:mod:`prp3mc.reports._layout`), in this
-process or, on request, on worker processes while the tables are written
+their own with an Agg canvas (:func:`prp3mc.reports.canvas.agg_figure`):
+writing a report never touches pyplot or the matplotlib backend. Each is laid
+out by matplotlib's constrained layout and drawn in this process or, on
+request, on worker processes while the tables are written
 (:mod:`prp3mc.reports._render`).
 """
 
@@ -37,9 +37,8 @@ from ..study.results import StudyResult, over_grid, pct_se
 from ..study.summary import build_summary
 from ..study.sweep import best_configurations, design_frame
 from ..units import DEG2ARCSEC, DISPLAY, MM2UM, probability_text
-from ._layout import ROUND_STEPS, Margins, agg_figure, lighten
+from .canvas import ROUND_STEPS, agg_figure, lighten
 from ._render import rendering
-from .plots import LEGEND_DROP
 
 __all__ = ["write_study", "render_report", "comparison"]
 
@@ -213,15 +212,15 @@ def _summary_display(frame: pd.DataFrame) -> pd.DataFrame:
 def _draw(plot, *args, **kwargs):
     """Deferred ``plot(*args, fig=<empty Agg figure>, **kwargs)``: called where the figure is rendered.
 
-    ``plot`` sizes the figure and fixes its margins itself (one draw, no layout engine).
+    ``plot`` sizes the figure itself.
     """
     return lambda: plot(*args, fig=agg_figure(), **kwargs)
 
 
-def _draw_axes(plot, size: tuple[float, float], margins: Margins, *args, **kwargs):
-    """Deferred ``plot(*args, ax=<the axes of a new Agg figure of size inches, margins fixed>, **kwargs)``."""
+def _draw_axes(plot, size: tuple[float, float], *args, layout: str = "constrained", **kwargs):
+    """Deferred ``plot(*args, ax=<the axes of a new Agg figure of size inches, laid out by layout>, **kwargs)``."""
     def draw():
-        fig = plot(*args, ax=agg_figure(size, margins).subplots(), **kwargs)
+        fig = plot(*args, ax=agg_figure(size, layout=layout).subplots(), **kwargs)
         lighten(fig, ROUND_STEPS)
         return fig
     return draw
@@ -258,7 +257,7 @@ def _figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
     figs += [(f"pareto_{r.name}", f"{r.name}: what builds the worst case at its worst pose ({_worst_pose(r)}): each "
               "term's share of the exact worst-case position error, largest first, and their running total (at this one "
               "pose; the table above compares both rankings as means over the Sobol grid).",
-              _draw_axes(plots.contributors_pareto, *_PARETO, _contributions(r), title=r.name)) for r in res]
+              _draw_axes(plots.contributors_pareto, _PARETO, _contributions(r), title=r.name)) for r in res]
     figs += _exceedance_figures(res)
     figs += [("worstcase_position", "Exact worst-case position error (µm) over each test region (the paper's "
              f"Figs. 4-5, computed exactly). ✕ marks the maximum, ○ the minimum. {scale}",
@@ -348,17 +347,17 @@ def _exceedance_figures(results) -> list[tuple[str, str, Callable]]:
                          f"{r.name}: the share of assemblies whose {what} exceeds s, exact (no sampling), at the pose "
                          f"of the Monte Carlo grid where it exceeds the spec most; log axis from 1 to 1e-9. Dashed: "
                          f"the spec, dotted: the exact worst case (nothing exceeds it).{mc}",
-                         _draw_axes(exceedance_plot, *_EXCEEDANCE, curve, title=r.name)))
+                         _draw_axes(exceedance_plot, _EXCEEDANCE, curve, title=r.name)))
     return figs
 
 
-#: Size and margins (inches) of an exceedance curve.
-_EXCEEDANCE = ((8.8, 3.8), Margins(0.75, 3.0, 0.55, 0.35))       # the legend right of the panel
-#: Size and margins (inches) of a Pareto chart of contributors.
-_PARETO = ((6.4, 3.4), Margins(0.75, 0.2, 0.75, 0.35))
-#: Size and margins (inches) of an allocation's map (its legend below it) and of its Pareto front.
-_ALLOCATION_MAP = ((5.2, 5.6), Margins(0.8, 0.3, LEGEND_DROP + 0.5, 0.6))
-_ALLOCATION_FRONT = ((6.4, 4.4), Margins(0.85, 0.25, 0.55, 0.4))
+#: Size (inches) of an exceedance curve (its legend right of the panel).
+_EXCEEDANCE = (8.8, 3.8)
+#: Size (inches) of a Pareto chart of contributors.
+_PARETO = (6.4, 3.4)
+#: Size (inches) of an allocation's map (its legend below it) and of its Pareto front.
+_ALLOCATION_MAP = (5.2, 5.6)
+_ALLOCATION_FRONT = (6.4, 4.4)
 
 
 def _allocation_figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
@@ -374,7 +373,8 @@ def _allocation_figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
         binding = ("the pose where the Monte Carlo percentile's 95 % upper bound is largest"
                    if a.binding == "percentile" else "the binding poses, dashed red the spec where the map reaches it")
         figs.append((f"allocation_{c.name}_map", f"{c.name}: the exact worst case of the chosen classes over the "
-                     f"test region; ★ {binding}.", _draw_axes(allocation_map, *_ALLOCATION_MAP, a, (ny, nx), title=c.name)))
+                     f"test region; ★ {binding}.",
+                     _draw_axes(allocation_map, _ALLOCATION_MAP, a, (ny, nx), title=c.name, layout="compressed")))
         if front is not None and len(front):
             output = spec.front_output
             limit = spec.spec_phi_arcsec if output == "phi" else (
@@ -387,7 +387,7 @@ def _allocation_figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
                          + "; ★ the chosen classes."
                          + (" The front is of the worst case: the percentile spec is not drawn, and the chosen "
                             "classes are marked only where they lie on it." if limit is None else ""),
-                         _draw_axes(allocation_front_plot, *_ALLOCATION_FRONT, front, output, spec=limit,
+                         _draw_axes(allocation_front_plot, _ALLOCATION_FRONT, front, output, spec=limit,
                                     chosen_cost=a.cost if a.feasible else None)))
     return figs
 

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from ..units import DISPLAY
-from ._layout import ROUND_STEPS, grid, lighten, text_inches, tick_width
+from .canvas import ROUND_STEPS, lighten, text_width
 from .plots import _axes, _figure
 
 __all__ = ["merits", "merit_plot", "design_space_figure"]
@@ -123,14 +123,10 @@ def design_space_figure(frame: pd.DataFrame, *, best: list | None = None, fig=No
     fixed = {"configuration", "analysis", "output", "statistic", "value", "unit", "input"}
     parameters = [c for c in frame.columns if c not in fixed]
     rows = merits(frame)
-    # margins, inches: y tick labels and the two-line y label left; each panel's x tick labels (categories
-    # slanted at 30°) and x label below it
+    # a panel of 2.6 x 1.9 inches, its labels around it (categories slanted at 30° below) and the legends right
     categories = [t for p in parameters for t in (_positions(frame[p])[1] or [])]
-    slant = max((text_inches(t, 7)[0] / 2 for t in categories), default=0.0)
-    left = 0.45 + max(text_inches(_merit_label(*m)[0], 8)[1] for m in rows) + _tick_room(frame, rows)
-    below = 0.55 + slant
-    fig = _figure(fig, *grid((2.6, 1.9), (len(rows), len(parameters)), left, 0.2 + _legend_room(frame, best),
-                             below, 0.15, wgap=0.25, hgap=below + 0.1))
+    below = 0.55 + (text_width("\n".join(categories), 7) / 2 if categories else 0.0)
+    fig = _figure(fig, (len(parameters) * 2.85 + 1.3 + _legend_room(frame, best), len(rows) * (1.9 + below) + 0.2))
     axes = np.atleast_2d(fig.subplots(len(rows), len(parameters), squeeze=False, sharey="row"))
     for i, merit in enumerate(rows):
         for j, parameter in enumerate(parameters):
@@ -143,7 +139,7 @@ def design_space_figure(frame: pd.DataFrame, *, best: list | None = None, fig=No
 def _legend_room(frame: pd.DataFrame, best) -> float:
     """Width (inches) of the legends right of the last column: marker, gap and the longest label at 7 pt."""
     labels = ["best at this value", *(best or []), *(f"top: {v}" for v in frame.get("input", pd.Series()).dropna())]
-    return 0.55 + max(text_inches(str(t), 7)[0] for t in labels)
+    return 0.55 + text_width("\n".join(map(str, labels)), 7)
 
 
 def _merit_values(frame: pd.DataFrame, merit) -> tuple[pd.DataFrame, np.ndarray]:
@@ -152,13 +148,3 @@ def _merit_values(frame: pd.DataFrame, merit) -> tuple[pd.DataFrame, np.ndarray]
                  & (frame["statistic"] == merit[2])].reset_index(drop=True)
     return rows, _merit_label(*merit)[1] * rows["value"].to_numpy(dtype=float)
 
-
-def _tick_room(frame: pd.DataFrame, rows) -> float:
-    """Width (inches) of the widest y tick label of the merits' rows: each row's values with matplotlib's 5 % margins."""
-    widths = []
-    for merit in rows:
-        values = _merit_values(frame, merit)[1]
-        if len(values) and np.isfinite(values).any():
-            lo, hi = float(np.nanmin(values)), float(np.nanmax(values))
-            widths.append(tick_width(lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo)))
-    return max(widths, default=0.4)

@@ -1,7 +1,6 @@
 """Figures of the exact yield against a spec: the exceedance curve on a log axis.
 
-Drawn on the axes they are handed (the study report lays them out with
-fixed margins, :mod:`prp3mc.reports._layout`); no pyplot unless none is given.
+Drawn on the axes they are handed; no pyplot unless none is given.
 """
 
 from __future__ import annotations
@@ -35,7 +34,7 @@ def exceedance_plot(curve, *, ax=None, title: str = ""):
     """
     if ax is None:
         import matplotlib.pyplot as plt
-        ax = plt.figure(figsize=(8.8, 3.8)).subplots(gridspec_kw={"right": 0.66})
+        _, ax = plt.subplots(figsize=(8.8, 3.8), layout="constrained")
     name, unit, scale = _NAMES[curve.output]
     s = scale * np.asarray(curve.s)
     exact = np.where(curve.exact > 0, curve.exact, np.nan)       # a log axis has no zero
@@ -61,5 +60,5 @@ def exceedance_plot(curve, *, ax=None, title: str = ""):
     ax.legend(fontsize=7, frameon=False, loc="upper left", bbox_to_anchor=(1.02, 1.0))   # right of the curve
     x, y, phi = curve.pose
     ax.set_title(f"{title + ': ' if title else ''}{name} at x = {x:.4g}, y = {y:.4g} mm, φ = {phi:.4g}°",
-                 fontsize=10, y=1.0)
+                 fontsize=10)
     return ax.figure

@@ -202,7 +202,7 @@ def _check_power_of_two(n: int, what: str) -> int:
     return n
 
 
-def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
+def sobol_indices(geometry: "Geometry | str", budget: "Budget | str", poses, n_samples: int, *,
                   rng: "None | int | np.random.Generator" = None,
                   groups: dict | None = None, outputs=OUTPUTS, replicates: int = 16,
                   conf_level: float = 0.95, method: str = "auto", shapley_permutations: int | None = None,
@@ -212,8 +212,10 @@ def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
 
     Parameters
     ----------
-    geometry : Geometry
-    budget : Budget
+    geometry : Geometry or str
+        A Geometry, preset name or TOML path.
+    budget : Budget or str
+        A Budget, preset name or TOML path.
     poses : array_like, shape (..., 3)
         ``[x_mm, y_mm, phi_deg]``; one sample matrix serves all of them.
     n_samples : int
@@ -268,6 +270,7 @@ def sobol_indices(geometry: Geometry, budget: Budget, poses, n_samples: int, *,
     ((4, 15), 'clearance_3')
     """
     t0 = time.perf_counter()
+    geometry, budget = Geometry.load(geometry), Budget.load(budget)
     n_samples = _check_power_of_two(n_samples, "the Sobol base sample size N")
     replicates = _check_power_of_two(replicates, "the number of replicates")
     if n_samples < 2 * replicates:

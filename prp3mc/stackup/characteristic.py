@@ -350,25 +350,32 @@ def _truncated_gauss(beta, n0, y, c, bessel, tab, sp):
 
 
 @njit(cache=True, nogil=True)
-def common_cf(k, p0, p1, x):
-    """phi_t(x) of the commonest kinds from their first two parameters (scalars, so that it inlines): uniform
-    (mid, hw), normal (mu, sd) and a clearance uniform on [0, hi] (lo = 0, hi) while x hi < 1; NaN otherwise
-    (then :func:`term_cf` applies)."""
+def common_cf(k, p0, p1, x, sp, buf):
+    """phi_t(x) of the commonest kinds from their first two parameters (scalars, and the special functions
+    ``sp`` with 2 doubles of scratch ``buf``, so that it inlines): uniform (mid, hw), normal (mu, sd) and a
+    clearance uniform on [0, hi] (lo = 0, hi); NaN otherwise (then :func:`term_cf` applies)."""
     if k == UNIFORM:
         u = x * p1
         s = 1.0 - u * u / 6.0 if abs(u) < 1e-4 else math.sin(u) / u
-        return complex(math.cos(x * p0) * s, math.sin(x * p0) * s)
+        return complex(s, 0.0) if p0 == 0.0 else complex(math.cos(x * p0) * s, math.sin(x * p0) * s)
     if k == NORMAL:
         a = math.exp(-0.5 * (p1 * x) ** 2)
-        return complex(math.cos(x * p0) * a, math.sin(x * p0) * a)
-    if k == C_UNIFORM and p0 == 0.0 and abs(x) * p1 < 1.0:
-        y2 = 0.25 * (x * p1) ** 2
-        acc, term = 1.0, 1.0
+        return complex(a, 0.0) if p0 == 0.0 else complex(math.cos(x * p0) * a, math.sin(x * p0) * a)
+    if k == C_UNIFORM and p0 == 0.0:
+        return complex(_int_j0_over(sp, buf, abs(x) * p1), 0.0)
+    return complex(np.nan, 0.0)
+
+
+@njit(cache=True, nogil=True)
+def _int_j0_over(sp, buf, y):
+    """I(y) / y, I(y) = int_0^y J0 (y >= 0): the series below 1 (terms fall by y²/4 or faster), else :func:`int_j0`."""
+    if y < 1.0:
+        acc, term, y2 = 1.0, 1.0, 0.25 * y * y
         for m in range(1, 12):
             term *= -y2 / (m * m)
             acc += term / (2 * m + 1)
-        return complex(acc, 0.0)
-    return complex(np.nan, 0.0)
+        return acc
+    return int_j0(sp, buf, y) / y
 
 
 @njit(cache=True, nogil=True)
@@ -402,15 +409,8 @@ def term_cf(k, par, t, tab, sp, buf, x):
         return 1.0 + 0j
     if k == C_UNIFORM:
         lo, hi = par[t, 0], par[t, 1]
-        if lo == 0.0:                         # I(y) / y
-            y = ax * hi
-            if y < 1.0:                       # the series: terms fall by y²/4 or faster
-                acc, term, y2 = 1.0, 1.0, 0.25 * y * y
-                for m in range(1, 12):
-                    term *= -y2 / (m * m)
-                    acc += term / (2 * m + 1)
-                return acc + 0j
-            return int_j0(sp, buf, y) / y + 0j
+        if lo == 0.0:
+            return _int_j0_over(sp, buf, ax * hi) + 0j
         if ax * (hi - lo) <= 4.0:             # average of J0 over [x lo, x hi] by a 16-point rule
             i = 2                             # gl_sizes[2] == 16
             o, n = gl_off[i], gl_sizes[i]

@@ -11,6 +11,7 @@ from scipy import special
 
 from .._result import freeze, pose_columns, short_repr
 from .._version import __version__
+from ..errors import ParameterError
 from ..units import DEG2ARCSEC, MM2UM, PPM
 from .lattice import LEVELS
 
@@ -186,7 +187,20 @@ class YieldResult:
         return pd.concat(rows, ignore_index=True)
 
     def pose_record(self, index=()) -> dict:
-        """The SPEC §9 figures at one pose (µm, arcsec, ppm), as ``prp3mc yield --json`` prints them."""
+        """The SPEC §9 figures at one pose (µm, arcsec, ppm), as ``prp3mc yield --json`` prints them.
+
+        ``index`` selects the pose in the batch shape ``...`` (``()`` for a single pose, ``(i, j)`` on a
+        grid); an index that is not one pose's raises :class:`~prp3mc.errors.ParameterError`.
+        """
+        shape = np.shape(self.exceed_position)
+        try:
+            one = np.ndim(np.asarray(self.exceed_position)[index]) == 0
+        except (IndexError, TypeError, ValueError):
+            one = False
+        if not one:
+            raise ParameterError(f"pose_record: index {index!r} is not one pose of the batch {shape}: give one "
+                                 f"index per axis, e.g. {(0,) * len(shape)}")
+
         def val(a):
             return None if a is None else float(np.asarray(a)[index])
 

@@ -25,25 +25,20 @@ D (their bounding boxes in the coordinates w of y = sum_j w_j m_j).
 
 **The certified truncation.** Each term's ``|phi_t|`` is below a non-increasing
 envelope (:func:`~.characteristic.envelope`), and ``|T_D(w)|`` below a bound
-tau(``|w|``) that falls with ``|w|`` (for every z up to the largest used, so one
-lattice serves every quantile). Since ``|nu_j|`` <= ``|m_j|`` ``|w|``, every summand
-is below a *separable* product ``prod_j g_j(|n_j|)`` with
+that falls with ``|w|`` (for every z up to the largest used, so one lattice
+serves every quantile). :func:`~.truncation.select_points` walks the lattice
+row by row with these envelopes and keeps the points that matter; what it
+leaves out (rows left out or skipped whole, the tails of the rows walked,
+the points dropped) is bounded from the envelopes. With floating point (an
+assumed accuracy of each characteristic-function value,
+:data:`~._special.CF_ACCURACY`) and the mass of normal laws beyond their cut
+(mean ± k sd, which alone may alias) the parts make the reported bound.
 
-    g_j(n) = prod_{t in basis leg j} env_t(``|kappa_t|`` nu_j) * (tau(nu_j / ``|m_j|``) / ``|L|``)^(1/d)
-
-(the other terms' envelopes are dropped, being <= 1). The series keeps the
-lattice points of the *cross* ``prod_j g_j(|n_j|) >= eta``; what it leaves
-out is below ``B(eta) = sum over the rest of prod_j g_j``, computed exactly
-from the 1-D sums of the g_j: explicit up to N_j, then the analytic tail
-``sum_{n > N} g(n) <= g(N) N / (p - 1)``, where p is the decay power of g
-past N (:func:`~.characteristic.envelope_power`; it must exceed 1). eta is the
-largest value with B(eta) within half the target. Inside the cross a point
-is dropped when its full envelope (every term, the exact transform bound)
-is below a threshold whose dropped points add up to at most 0.4 of the
-target; their sum is counted exactly. With floating point (an assumed
-accuracy of each characteristic-function value, :data:`~._special.CF_ACCURACY`)
-and the mass of normal laws beyond their cut (mean ± k sd, which alone may
-alias) the four parts make the reported bound.
+**The sum.** The basis legs' characteristic functions, each times its share
+``exp(i snu_j nu_j)`` of the known shift's phase, are tabulated once per pose
+along their axes; at each kept point the series multiplies their values
+(conjugated for n_j < 0) by the off-basis terms' (the mixed leg, thermal)
+and the transform of D.
 
 Quantiles (d = 1, 2) solve ``P(z) = p`` by Newton's method with bisection
 as a safeguard on the same series, and bracket the true quantile by solving
@@ -60,7 +55,7 @@ from numba import njit
 
 from ._special import CF_ACCURACY
 from .lattice import MIXED_LEG
-from .characteristic import common_cf, term_cf
+from .characteristic import NORMAL, UNIFORM, common_cf, term_cf
 from .truncation import select_points, transform_bound
 
 __all__ = ["pose_series", "STATUS"]
@@ -213,45 +208,56 @@ def pose_series(d, kind, par, ev, tab, sp, grp, mu, snu, Q, Vinv, mnorm, ab, lam
         out_qerr[:] = np.nan
         return np.nan, np.inf, walked, status
     n = pts.shape[0]
-    # each basis leg's characteristic function up to its extent among the kept points
-    Phis = [np.ones(1, np.complex128), np.ones(1, np.complex128), np.ones(1, np.complex128)]
+    # each basis leg's characteristic function times its share exp(i snu_j nu_j) of the known shift's phase,
+    # up to its extent among the kept points (n_j < 0: the conjugate)
+    # the off-basis terms (mixed leg, thermal): a uniform or normal law's centre m_t is a known shift too,
+    # exp(i m_t mu_t . nu), separable in nu: it joins the basis legs' phases and the term keeps its centred part
+    mix = np.flatnonzero((grp == -1) | (grp == MIXED_LEG))
+    centre = np.empty(mix.size)
+    shift = snu.copy()
+    for q in range(mix.size):
+        t = mix[q]
+        centre[q] = par[t, 0]
+        if kind[t] == UNIFORM or kind[t] == NORMAL:
+            shift += par[t, 0] * mu[t]
+            centre[q] = 0.0
+    ext = np.zeros(3, np.int64)
+    for k in range(n):
+        for j in range(d):
+            ext[j] = max(ext[j], abs(pts[k, j]))
+    Phi = np.ones((3, ext.max() + 1), np.complex128)
     for j in range(d):
-        M = 0
-        for k in range(n):
-            M = max(M, abs(pts[k, j]))
-        Phi = np.ones(M + 1, np.complex128)
-        for m in range(1, M + 1):
+        for m in range(1, ext[j] + 1):
             nu_j = _TWO_PI * m / Q[j]
+            c = complex(math.cos(shift[j] * nu_j), math.sin(shift[j] * nu_j))
             for t in range(T):
                 if grp[t] == j:
                     x = mu[t, j] * nu_j
-                    c = common_cf(kind[t], par[t, 0], par[t, 1], x)
-                    Phi[m] *= c if c.real == c.real else term_cf(kind[t], par, t, tab, sp, buf, x)
-        Phis[j] = Phi
+                    ct = common_cf(kind[t], par[t, 0], par[t, 1], x, sp, buf)
+                    c *= ct if ct.real == ct.real else term_cf(kind[t], par, t, tab, sp, buf, x)
+            Phi[j, m] = c
     re = np.empty(max(n, 1))
     ta = np.empty(max(n, 1))
     tb = np.empty(max(n, 1))
     tb_sum = transform_bound(d, z1, z2, 0.0, 0.0)
-    nu = np.zeros(3)
     for k in range(n):
         n0, n1, n2 = pts[k, 0], pts[k, 1], pts[k, 2]
-        nu[0] = _TWO_PI * n0 / Q[0]
-        nu[1] = _TWO_PI * n1 / Q[1]
-        nu[2] = _TWO_PI * n2 / Q[2]
-        phi = np.exp(1j * (snu[0] * nu[0] + snu[1] * nu[1] + snu[2] * nu[2]))
-        phi *= Phis[0][n0] if n0 >= 0 else np.conj(Phis[0][-n0])
-        phi *= Phis[1][n1] if n1 >= 0 else np.conj(Phis[1][-n1])
-        phi *= Phis[2][n2] if n2 >= 0 else np.conj(Phis[2][-n2])
-        for t in range(T):
-            if grp[t] == -1 or grp[t] == MIXED_LEG:
-                x = mu[t, 0] * nu[0] + mu[t, 1] * nu[1] + mu[t, 2] * nu[2]
-                c = common_cf(kind[t], par[t, 0], par[t, 1], x)
-                phi *= c if c.real == c.real else term_cf(kind[t], par, t, tab, sp, buf, x)
-        wx = Vinv[0, 0] * nu[0] + Vinv[0, 1] * nu[1] + Vinv[0, 2] * nu[2]
-        wy = Vinv[1, 0] * nu[0] + Vinv[1, 1] * nu[1] + Vinv[1, 2] * nu[2]
-        wz = Vinv[2, 0] * nu[0] + Vinv[2, 1] * nu[1] + Vinv[2, 2] * nu[2]
+        nu0 = _TWO_PI * n0 / Q[0]
+        nu1 = _TWO_PI * n1 / Q[1]
+        nu2 = _TWO_PI * n2 / Q[2]
+        phi = Phi[0, n0] if n0 >= 0 else np.conj(Phi[0, -n0])
+        phi *= Phi[1, n1] if n1 >= 0 else np.conj(Phi[1, -n1])
+        phi *= Phi[2, n2] if n2 >= 0 else np.conj(Phi[2, -n2])
+        for q in range(mix.size):
+            t = mix[q]
+            x = mu[t, 0] * nu0 + mu[t, 1] * nu1 + mu[t, 2] * nu2
+            c = common_cf(kind[t], centre[q], par[t, 1], x, sp, buf)
+            phi *= c if c.real == c.real else term_cf(kind[t], par, t, tab, sp, buf, x)
+        wx = Vinv[0, 0] * nu0 + Vinv[0, 1] * nu1 + Vinv[0, 2] * nu2
+        wy = Vinv[1, 0] * nu0 + Vinv[1, 1] * nu1 + Vinv[1, 2] * nu2
+        wz = Vinv[2, 0] * nu0 + Vinv[2, 1] * nu1 + Vinv[2, 2] * nu2
         if d == 1:
-            pa, pb = abs(nu[0]), 0.0
+            pa, pb = abs(nu0), 0.0
         elif d == 2:
             pa, pb = math.sqrt(wx * wx + wy * wy), 0.0
         else:

@@ -11,35 +11,45 @@ Both are symmetric under n -> -n, so half of the lattice is enumerated and
 every point stands for two.
 
 The lattice is cut into *rows*, lines along n_1 (the first basis leg), at
-fixed (n_2, n_3). Along a row, beyond the peaks of its factors (n_1 = 0 for
-the basis legs; where nu_3 = 0 for the position's third, "mixed" leg), the
-row's majorant
+fixed (n_2, n_3). The target eps is shared out: 0.2 to the rows left out
+whole, 0.15 to the rows skipped for their small whole sums, 0.15 to the tails
+of the rows walked, 0.4 to the points dropped; the rest is left to floating
+point and the normal laws' cut (:mod:`.series`).
 
-    h(n_1) = E_1(nu_1) E_2(nu_2) E_3(nu_3) G_m(nu_m) tau(r) / ``|L|``
+**A row's tail.** Along a row every factor of F is an envelope of the modulus
+of an affine function of n_1 (the transform's bound: of the norm of one), so
+it is non-increasing past its peak c, and past a point U >= c it falls at
+least as ((U - c) / (n_1 - c))^p, p its local power
+(:func:`~.characteristic.envelope_power`). The factors whose peak lies beyond
+U are bounded by their value at U divided out (they are <= 1 further on); the
+others fall together at least as ((U - c_min) / (n_1 - c_min))^P, P the sum
+of their powers, so ``sum_{n_1 > U} F <= F(U) (U - c_min) / (dropped (P - 1))``
+(:func:`_row_tail`). Each row is walked outward from n_1 = 0 (F is taken
+inline, point by point) and the tail tried at every 4th point until both
+tails are within the row's share of the 0.15.
 
-(E_j: the product of basis leg j's envelopes; G_m: the mixed leg's; tau: a
-radial bound of ``|T_D|``; r = max_j ``|nu_j|`` / ``|m_j|`` <= ``|w|``) falls, and past a point
-U it falls at least as fast as (U / n_1)^p, p the sum of its factors' local
-powers (:func:`~.characteristic.envelope_power`), so ``sum_{n_1 > U} h <= h(U) kappa U / (p - 1)``
-(kappa >= 1 corrects for a peak on the other side). Each row is walked
-outward until both of its tails are within the row's share of the target.
-
-Which rows: all of them but a set whose whole sum is bounded at once. In 1-D
-there is one row. For the position, the rows with ``|n_2|`` > K_2: there the
-separable majorant ``g_1(n_1) g_2(n_2) G_m(nu_m)`` (g_j: E_j times the share
-(tau / ``|L|``)^(1/d)) sums along a row to at most ``min(S_1, G_m(|beta nu_2| / 2) S_1
+**Which rows.** In 1-D there is one row. For the position, a row's whole sum
+is bounded two ways: by the separable majorant ``g_1(n_1) g_2(n_2) G_m(nu_m)``
+(g_j: E_j, the product of basis leg j's envelopes, times the share
+(tau / ``|L|``)^(1/d) of the radial transform bound tau; G_m: the third, "mixed",
+leg's), which sums along a row to at most ``min(S_1, G_m(|beta nu_2| / 2) S_1
 + g_1(|beta nu_2| / (2 |alpha|)) C_m)`` (nu_m = alpha nu_1 + beta nu_2, so one of
-``|nu_1|``, ``|nu_m|`` is large where ``|nu_2|`` is; S_1 = sum of g_1; C_m bounds the sum of
-G_m along a row by its integral), and K_2 is the smallest that leaves out
-at most a quarter of the target. For both channels (d = 3), every basis leg
-is separable: the rows are the points (n_2, n_3) of the cross
-``S_1 g_2(n_2) g_3(n_3) >= eta``, and what the cross leaves out is summed exactly
-from the 1-D sums of the g_j (explicit, then the analytic tail
-``sum_{n > N} g(n) <= g(N) N / (p - 1)``).
+``|nu_1|``, ``|nu_m|`` is large where ``|nu_2|`` is; S_1 = sum of g_1; C_m bounds the sum
+of G_m along a row by its integral); and by E_2 times the transform's bound
+at the row's closest approach to w = 0 times the same sum of E_1 G_m. That
+bound is non-increasing in ``|n_2|``; the rows past K_2 are left out whole, K_2
+the least leaving out at most 0.2 eps (past the first 256 rows they are
+bounded in blocks [a, a + a // 32), each by its first row's bound times its
+length; past the 1-D arrays' end by g_2's analytic tail
+``sum_{n > N} g(n) <= g(N) N / (p - 1)``). For both channels (d = 3), rows
+(n_2, n_3) are kept for ``|n_3|`` <= K_3, n_2 walked from its peak as n_1 is;
+the rest is bounded from the 1-D sums of E_2, E_3 and the transform's bound
+(:func:`_rows_3d`). Of the rows kept, those of smallest whole sums are skipped
+while they add up to at most 0.15 eps.
 
 Of the points walked, the smallest are dropped while their sum stays within
 0.4 of the target (log2 bins of F; the sum dropped is counted exactly).
-The bound is outer rows + row tails + dropped points.
+The bound is outer rows + skipped rows + row tails + dropped points.
 """
 
 from __future__ import annotations
@@ -242,42 +252,17 @@ def _row_bound(nu2, S1, cm, g1, Q0, ev, grp, mu, ab):
 # ------------------------------------------------------------------ the rows
 
 @njit(cache=True, nogil=True)
-def _point(d, n1, n2, n3, E1, E2, E3, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2, nu):
-    """The envelope F at n (``nu`` is set to the point's nu)."""
-    nu[0] = _TWO_PI * n1 / Q[0]
-    nu[1] = _TWO_PI * n2 / Q[1]
-    nu[2] = _TWO_PI * n3 / Q[2]
-    f = (_leg_value(0, abs(n1), E1, d, ev, grp, mu, Q, mnorm, lam, z1, z2)
-         * _leg_value(1, abs(n2), E2, d, ev, grp, mu, Q, mnorm, lam, z1, z2)
-         * _leg_value(2, abs(n3), E3, d, ev, grp, mu, Q, mnorm, lam, z1, z2))
-    for t in range(ev.shape[0]):
-        if grp[t] == MIXED_LEG or grp[t] == -1:
-            x = mu[t, 0] * nu[0] + mu[t, 1] * nu[1] + mu[t, 2] * nu[2]
-            f *= envelope(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], abs(x))
-    wx = Vinv[0, 0] * nu[0] + Vinv[0, 1] * nu[1] + Vinv[0, 2] * nu[2]
-    wy = Vinv[1, 0] * nu[0] + Vinv[1, 1] * nu[1] + Vinv[1, 2] * nu[2]
-    if d == 1:
-        tb = transform_bound(d, z1, z2, abs(nu[0]), 0.0)
-    elif d == 2:
-        tb = transform_bound(d, z1, z2, math.sqrt(wx * wx + wy * wy), 0.0)
-    else:
-        wz = Vinv[2, 0] * nu[0] + Vinv[2, 1] * nu[1] + Vinv[2, 2] * nu[2]
-        tb = transform_bound(d, z1, z2, math.sqrt(wx * wx + wy * wy), abs(wz))
-    return f * tb / lam
-
-
-@njit(cache=True, nogil=True)
-def _factor_tail(value, c, U, p, acc):
+def _factor_tail(value, c, U, p, dropped, power, cmin):
     """Fold a factor of the row (its value at U, its peak c along the row, its decay power p at U) into
-    ``acc = (product of dropped factors, total power, smallest peak)``: past U >= c the factor falls at
-    least as ((U - c) / (n - c))^p, and (U - c) / (x - c) only grows as c falls, so the product of the
-    factors kept falls at least as ((U - c_min) / (x - c_min))^P; a factor whose peak lies beyond U may
-    still rise: it is dropped (bounded by 1)."""
+    ``(dropped, power, cmin)`` = (product of dropped factors, total power, smallest peak), returned: past
+    U >= c the factor falls at least as ((U - c) / (n - c))^p, and (U - c) / (x - c) only grows as c falls,
+    so the product of the factors kept falls at least as ((U - c_min) / (x - c_min))^P; a factor whose peak
+    lies beyond U may still rise: it is dropped (bounded by 1)."""
     if c > U:
-        acc[0] *= value
-    elif p > 0.0:
-        acc[1] += p
-        acc[2] = min(acc[2], c)
+        return dropped * value, power, cmin
+    if p > 0.0:
+        return dropped, power + p, min(cmin, c)
+    return dropped, power, cmin
 
 
 @njit(cache=True, nogil=True)
@@ -286,7 +271,7 @@ def _row_tail(d, s, U, f, n2, n3, ev, grp, mu, Q, Vinv, lam, z1, z2):
     f there: every factor of F is an envelope of ``|an affine function of n_1|`` (the transform's of the
     norm of one), non-increasing past its peak (see :func:`_factor_tail`), so
     ``sum_{n > U} F <= int_U^inf f / dropped ((U - c_min) / (x - c_min))^P dx = f / dropped (U - c_min) / (P - 1)``."""
-    acc = np.array([1.0, 0.0, float(U)])      # dropped factors' product, total power, smallest peak
+    dropped, power, cmin = 1.0, 0.0, float(U)
     nu1 = _TWO_PI * s * U / Q[0]
     nu2 = _TWO_PI * n2 / Q[1]
     nu3 = _TWO_PI * n3 / Q[2]
@@ -300,34 +285,41 @@ def _row_tail(d, s, U, f, n2, n3, ev, grp, mu, Q, Vinv, lam, z1, z2):
                 continue                      # constant along the row
             c = U - x / slope                 # where the argument crosses 0, in steps from the origin
             ax = abs(x)
-            _factor_tail(envelope(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], ax), c, U, envelope_power(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], ax), acc)
+            dropped, power, cmin = _factor_tail(
+                envelope(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], ax), c, U,
+                envelope_power(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], ax),
+                dropped, power, cmin)
     # the transform: |w_xy| is the norm of an affine function of n_1, |w_z| and |nu_1| are affine
     vx, vy, vz = Vinv[0, 0] * step, Vinv[1, 0] * step, Vinv[2, 0] * step
     wx = Vinv[0, 0] * nu1 + Vinv[0, 1] * nu2 + Vinv[0, 2] * nu3
     wy = Vinv[1, 0] * nu1 + Vinv[1, 1] * nu2 + Vinv[1, 2] * nu3
     wz = Vinv[2, 0] * nu1 + Vinv[2, 1] * nu2 + Vinv[2, 2] * nu3
     if d == 1:
-        _factor_tail(_interval_bound(z1, abs(nu1)), 0.0, U, _tau_pow(1, z1, z2, abs(nu1)), acc)
+        dropped, power, cmin = _factor_tail(_interval_bound(z1, abs(nu1)), 0.0, U, _tau_pow(1, z1, z2, abs(nu1)),
+                                            dropped, power, cmin)
     else:
         a = math.sqrt(wx * wx + wy * wy)
         vv = vx * vx + vy * vy
         if vv > 0.0:
             c = U - (wx * vx + wy * vy) / vv
-            _factor_tail(_disc_bound(z1, a), c, U, _tau_pow(2, z1, z2, a) if a > 0 else 0.0, acc)
+            dropped, power, cmin = _factor_tail(_disc_bound(z1, a), c, U, _tau_pow(2, z1, z2, a) if a > 0 else 0.0,
+                                                dropped, power, cmin)
         if d == 3 and vz != 0.0:
-            _factor_tail(_interval_bound(z2, abs(wz)), U - wz / vz, U,
-                         _tau_pow(1, z2, z2, abs(wz)) if wz != 0 else 0.0, acc)
-    if acc[1] <= 1.0 or acc[0] <= 0.0:
+            dropped, power, cmin = _factor_tail(_interval_bound(z2, abs(wz)), U - wz / vz, U,
+                                                _tau_pow(1, z2, z2, abs(wz)) if wz != 0 else 0.0, dropped, power, cmin)
+    if power <= 1.0 or dropped <= 0.0:
         return np.inf
-    return f / acc[0] * (U - acc[2]) / (acc[1] - 1.0)
+    return f / dropped * (U - cmin) / (power - 1.0)
 
 
 @njit(cache=True, nogil=True)
-def _walk_row(d, n2, n3, origin, budget, E1, E2, E3, ev, grp, mu, Q, Vinv, mnorm, lam,
-              z1, z2, nu, pts, F, count):
+def _walk_row(d, n2, n3, origin, budget, E1, e2, e3, mix, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2, pts, F, count):
     """Walk the row (n2, n3) outward from n_1 = 0, appending its points (n, F) from ``count`` on, until each
-    tail (:func:`_row_tail`, tried at every 4th point) is within half the budget. Returns
-    (count, tails, pts, F, ok)."""
+    tail (:func:`_row_tail`, tried at every 4th point) is within half the budget. ``e2``, ``e3``: the
+    row's E_2 and E_3; ``mix``: the terms off the basis legs (mixed, thermal), whose envelopes F takes
+    point by point. Returns (count, tails, pts, F, ok)."""
+    nu2 = _TWO_PI * n2 / Q[1]
+    nu3 = _TWO_PI * n3 / Q[2]
     tails = 0.0
     ok = True
     for side in range(2):
@@ -339,8 +331,24 @@ def _walk_row(d, n2, n3, origin, budget, E1, E2, E3, ev, grp, mu, Q, Vinv, mnorm
             if U > _WALK_CAP:
                 ok = False
                 break
-            f = _point(d, s * U, n2, n3, E1, E2, E3, ev, grp, mu, Q, Vinv, mnorm, lam, z1,
-                       z2, nu)
+            # F at (s U, n2, n3): the basis legs' envelopes, the others', the transform's bound
+            nu1 = _TWO_PI * (s * U) / Q[0]
+            e1 = E1[U] if U < E1.size else _leg_at(0, U, d, ev, grp, mu, Q, mnorm, lam, z1, z2)[0]
+            f = e1 * e2 * e3
+            for k in range(mix.size):
+                t = mix[k]
+                x = mu[t, 0] * nu1 + mu[t, 1] * nu2 + mu[t, 2] * nu3
+                f *= envelope(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], abs(x))
+            if d == 1:
+                tb = _interval_bound(z1, abs(nu1))
+            else:
+                wx = Vinv[0, 0] * nu1 + Vinv[0, 1] * nu2 + Vinv[0, 2] * nu3
+                wy = Vinv[1, 0] * nu1 + Vinv[1, 1] * nu2 + Vinv[1, 2] * nu3
+                tb = _disc_bound(z1, math.sqrt(wx * wx + wy * wy))
+                if d == 3:
+                    wz = Vinv[2, 0] * nu1 + Vinv[2, 1] * nu2 + Vinv[2, 2] * nu3
+                    tb *= _interval_bound(z2, abs(wz))
+            f = f * tb / lam
             if count == F.size:
                 F2 = np.empty(2 * F.size)
                 F2[:count] = F
@@ -427,7 +435,6 @@ def _rows_3d(E2, E3, SE, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2, e_part):
     row_sum[0] = np.inf                   # the origin's row
     count = 1
     tails = 0.0
-    acc = np.zeros(3)
     for n3 in range(K3 + 1):
         nu3 = _TWO_PI * n3 / Q[2]
         e3 = E3[n3]
@@ -451,14 +458,17 @@ def _rows_3d(E2, E3, SE, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2, e_part):
                 row_sum[count] = rb
                 count += 1
                 if U >= 1 and U % 4 == 0:
-                    acc[0], acc[1], acc[2] = 1.0, 0.0, float(U)
-                    _factor_tail(e2, 0.0, U, _leg_at(1, U, d, ev, grp, mu, Q, mnorm, lam, z1, z2)[3], acc)
+                    dropped, power, cmin = _factor_tail(e2, 0.0, U,
+                                                        _leg_at(1, U, d, ev, grp, mu, Q, mnorm, lam, z1, z2)[3],
+                                                        1.0, 0.0, float(U))
                     slope = a2 * _TWO_PI * s / Q[1]
                     if slope != 0.0:
                         ax = abs(x)
-                        _factor_tail(_disc_bound(z1, ax), U - x / slope, U,
-                                     1.5 if ax > 0 and cj / (ax * math.sqrt(ax)) <= math.pi * z1 * z1 else 0.0, acc)
-                    tail = np.inf if acc[1] <= 1.0 or acc[0] <= 0.0 else rb / acc[0] * (U - acc[2]) / (acc[1] - 1.0)
+                        dropped, power, cmin = _factor_tail(
+                            _disc_bound(z1, ax), U - x / slope, U,
+                            1.5 if ax > 0 and cj / (ax * math.sqrt(ax)) <= math.pi * z1 * z1 else 0.0,
+                            dropped, power, cmin)
+                    tail = np.inf if power <= 1.0 or dropped <= 0.0 else rb / dropped * (U - cmin) / (power - 1.0)
                     if tail <= 0.5 * budget:
                         tails += tail
                         break
@@ -487,7 +497,7 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
     """
     empty = np.zeros((0, 3), np.int64)
     g_origin = (_tau(d, z1, z2, 0.0) / lam) ** (1.0 / d)
-    eta_lo = 1e-2 * eps                          # the 1-D arrays' end: past it E_j comes on demand
+    eta_lo = 1e-1 * eps                          # the 1-D arrays' end: past it E_j comes on demand
     one = np.ones(1)
     zero_tail = np.array([1.0, 0.0])
     gs = [one, one, one]
@@ -516,17 +526,36 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
         v0x, v0y, v1x, v1y = Vinv[0, 0], Vinv[1, 0], Vinv[0, 1], Vinv[1, 1]
         along = (v1x * v0x + v1y * v0y) / (v0x * v0x + v0y * v0y)
         d_perp = math.sqrt((v1x - along * v0x) ** 2 + (v1y - along * v0y) ** 2)
-        RB = np.zeros(N2 + 1)
-        for k in range(1, N2 + 1):
+
+        def rb(k):
             nu2 = _TWO_PI * k / Q[1]
-            RB[k] = g2[k] * _row_bound(nu2, S1, cm, g1, Q[0], ev, grp, mu, ab)
+            b = g2[k] * _row_bound(nu2, S1, cm, g1, Q[0], ev, grp, mu, ab)
             if S1E < np.inf:
-                RB[k] = min(RB[k], E2[k] * _disc_bound(z1, nu2 * d_perp) / lam
-                            * _row_bound(nu2, S1E, cm, E1, Q[0], ev, grp, mu, ab))
-        # rows |n2| > K: the rows up to the arrays' end, then g_2's tail times the bound at the end (non-increasing)
-        suffix = np.empty(N2 + 2)
-        suffix[N2 + 1] = R2[N2 + 1] * _row_bound(_TWO_PI * N2 / Q[1], S1, cm, g1, Q[0], ev, grp, mu, ab)
-        for k in range(N2, 0, -1):
+                b = min(b, E2[k] * _disc_bound(z1, nu2 * d_perp) / lam
+                        * _row_bound(nu2, S1E, cm, E1, Q[0], ev, grp, mu, ab))
+            return b
+
+        # rows |n2| > K: the rows up to the arrays' end, then g_2's tail times the bound at the end (rb is
+        # non-increasing in k: so are g_2, E_2, the transform's bound and _row_bound). The rows past K0 (the
+        # first 256) go in blocks [a, a + a // 32), each bounded by its first row's rb times its length (all
+        # of them one by one when that sum is above the part)
+        far = R2[N2 + 1] * _row_bound(_TWO_PI * N2 / Q[1], S1, cm, g1, Q[0], ev, grp, mu, ab)
+        K0 = min(N2, 256)
+        blocks = far
+        a = K0 + 1
+        while a <= N2:
+            b = min(N2 + 1, a + max(1, a // 32))
+            blocks += 2.0 * (b - a) * rb(a)
+            a = b
+        if blocks > e_outer:
+            K0 = N2
+        else:
+            far = blocks
+        RB = np.zeros(K0 + 1)
+        suffix = np.empty(K0 + 2)
+        suffix[K0 + 1] = far
+        for k in range(K0, 0, -1):
+            RB[k] = rb(k)
             suffix[k] = suffix[k + 1] + 2.0 * RB[k]
         K2 = _first_within(suffix, e_outer)
         outer = suffix[K2 + 1]
@@ -560,15 +589,17 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
     F = np.empty(4096)
     count = 0
     tails = 0.0
-    nu = np.zeros(3)
+    mix = np.flatnonzero((grp == MIXED_LEG) | (grp == -1))
     for k in range(rows.shape[0]):
         if count > _MAX_POINTS[d - 1]:
             return empty, np.inf, count, 3
         if not walk[k]:
             continue
         n2, n3 = rows[k, 0], rows[k, 1]
-        count, t, pts, F, ok = _walk_row(d, n2, n3, k == 0, budget, Es[0], Es[1], Es[2], ev, grp, mu, Q, Vinv,
-                                         mnorm, lam, z1, z2, nu, pts, F, count)
+        e2 = _leg_value(1, abs(n2), Es[1], d, ev, grp, mu, Q, mnorm, lam, z1, z2)
+        e3 = _leg_value(2, abs(n3), Es[2], d, ev, grp, mu, Q, mnorm, lam, z1, z2)
+        count, t, pts, F, ok = _walk_row(d, n2, n3, k == 0, budget, Es[0], e2, e3, mix, ev, grp, mu, Q, Vinv,
+                                         mnorm, lam, z1, z2, pts, F, count)
         tails += 2.0 * t
         if not ok:
             status = max(status, 1)

@@ -296,14 +296,16 @@ def _maxima(model: LinearModel, tb: np.ndarray):
     return dict(zip(order, values)), dict(zip(order, generator_signs(codes, 3 + len(shared)).astype(float)))
 
 
-def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | None = None,
+def worst_case(geometry: "Geometry | str", budget: "Budget | str", poses, *, k_sigma: float | None = None,
                check: bool = True, workers: int | None = None, chunk: int = 16384) -> WorstCaseResult:
     """Exact maxima of the linear pose error over the budget's box, batched.
 
     Parameters
     ----------
-    geometry : Geometry
-    budget : Budget
+    geometry : Geometry or str
+        A Geometry, preset name or TOML path.
+    budget : Budget or str
+        A Budget, preset name or TOML path.
     poses : array_like, shape (..., 3)
         ``[x_mm, y_mm, phi_deg]``.
     k_sigma : float, optional
@@ -324,6 +326,7 @@ def worst_case(geometry: Geometry, budget: Budget, poses, *, k_sigma: float | No
     >>> round(1000 * float(wc.position_mm))  # µm
     140
     """
+    geometry, budget = Geometry.load(geometry), Budget.load(budget)
     bounds = budget.bounds(k_sigma)
     poses = as_poses(poses)
     flat = poses.reshape(-1, 3) if poses.ndim > 1 else poses[None]
