@@ -642,3 +642,23 @@ def test_the_time_limit_as_the_folder_lands(tmp_path, monkeypatch):
         with output.output_folder(tmp_path / "stopped") as folder:
             time.sleep(0.2)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["landed"]
+
+
+# ------------------------------------------------------------------ an empty batch of poses (s23 hostile test)
+@pytest.mark.parametrize("call", [
+    lambda g, b, p: __import__("prp3mc").exact_yield(g, b, p, spec_position_um=100.0),
+    lambda g, b, p: __import__("prp3mc").worst_case(g, b, p),
+    lambda g, b, p: __import__("prp3mc").sobol_indices(g, b, p, 64, rng=1),
+    lambda g, b, p: __import__("prp3mc").monte_carlo(g, b, p, 64, rng=1),
+], ids=["exact_yield", "worst_case", "sobol_indices", "monte_carlo"])
+@pytest.mark.parametrize("shape", [(0, 3), (2, 0, 3)])
+def test_an_empty_pose_batch_is_refused_in_one_line(call, shape):
+    """The public analyses refuse a batch of no poses with prp3mc's ParameterError, not numpy's errors
+    (nor, for Monte Carlo, an empty result); the shared parser still lets internal callers pass empty subsets."""
+    import numpy as np
+
+    from prp3mc.errors import ParameterError
+    from prp3mc.kinematics.chain import as_poses
+    with pytest.raises(ParameterError, match=r"^no poses: .*shape \(" + ", ".join(map(str, shape))):
+        call(Geometry.from_preset("u-shape"), Budget.from_preset("paper"), np.zeros(shape))
+    assert as_poses(np.zeros(shape)).shape == shape
