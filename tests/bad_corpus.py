@@ -644,6 +644,11 @@ def second_cases() -> list[Case]:
     add(Case(M, [*pl, "--effects", "nonsense_1"], message="unknown effect"))
     add(Case(M, [*pl, "--effects", ","], message="at least one effect"))
     add(Case(M, [*pl, "--effects", "cyclic_1"], message="lead_mm"))
+    add(Case(S, [*pl, "--effects", "cyclic_1,scale_2,cyclic_1"], message="--effects names cyclic_1 twice",
+             id="plan --effects cyclic_1,scale_2,cyclic_1"))
+    for name in ("p.json", "p.xlsx", "p.csv.txt"):
+        add(Case(S, [*pl[:-1], f"{{tmp}}/{name}", "--effects", "scale_2"], message="name it FILE.csv",
+                 id=f"plan --out {name}"))
     add(Case(M, ["plan", *G, *B, "--effects", "scale_2", "--poses", "0", "--visits", "2", "--out", "{tmp}/p.csv"],
              status=(2,), message="positive integer"))
     return out
