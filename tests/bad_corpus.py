@@ -223,6 +223,8 @@ def prepare(root: Path) -> dict:
                                                       for i in (1, 2, 3))),
         "c_plan": _csv(good.drop(columns=["x_meas", "y_meas", "phi_meas"])),
         "c_plan_far": _csv(good.drop(columns=["x_meas", "y_meas", "phi_meas"]).assign(y_cmd=400.0)),
+        "c_template": _csv(good.assign(x_meas=None, y_meas=None, phi_meas=None)),   # as prp3mc plan writes it
+        "c_one_empty": _csv(good.assign(phi_meas=None)),
         "s_formats": 'name = "f"\nseed = 1\noutputs = ["montecarlo"]\n[worstcase]\ngrid = 3\n[montecarlo]\n'
                      'samples = 1024\ngrid = 2\n[[configuration]]\ngeometry = "u-shape"\nregion = "u-shape"\n',
         "s_region_file": None,   # filled below (needs the region file's path)
@@ -582,6 +584,9 @@ def second_cases() -> list[Case]:
     add(Case(M, [*sim, "--poses", "9", "--out", "-", "--json"], message="--json"))
     add(Case(M, [*sim, "--plan", "{tmp}/nowhere.csv", "--out", "{tmp}/c.csv"], message="does not exist"))
     add(Case(M, [*sim, "--plan", "{c_plan_far}", "--out", "{tmp}/c.csv"], message="stroke"))
+    add(Case(M, [*D, "--data", "{c_template}", "--out", "{tmp}/d_template"], message="unmeasured plan template"))
+    add(Case(M, [*D, "--data", "{c_one_empty}", "--out", "{tmp}/d_one_empty"],
+             message="phi_meas: expected a finite number, got empty"))
     add(Case(M, [*sim, "--plan", "{c_plan}", "--out", "{tmp}/c_plan.csv"], expect="accept",
              check=_wrote(".", "c_plan.csv")))
     add(Case(M, [*sim, "--poses", "9", "--region", "{r_far}", "--out", "{tmp}/c.csv"], message="stroke"))
