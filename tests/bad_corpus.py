@@ -636,6 +636,9 @@ def second_cases() -> list[Case]:
     y = ["yield", *G, *B]
     add(Case(M, [*y, *P, "--spec-position-um", "0"], status=(2,), message="> 0"))
     add(Case(M, [*y, *P, "--spec-position-um", "nan"], status=(2,), message="finite"))
+    for value, msg in (("-inf", "finite"), ("-1e5", "> 0"), ("-nan", "finite"), ("-.5", "> 0")):  # not "one argument"
+        add(Case(M, [*y, *P, "--spec-position-um", value], status=(2,), message=msg))
+    add(Case(M, [*y, "--pose", "0", "-1e5", "0", "--spec-position-um", "100"], message="stroke"))
     add(Case(S, [*y, *P, "--spec-position-um", "0.06"], message="another unit"))
     add(Case(M, [*y, "--pose", "0", "1000", "0", "--spec-position-um", "100"], message="stroke"))
     add(Case(M, [*y, *P, "--spec-position-um", "100", "--spec-phi-arcsec", "-1"], status=(2,), message="> 0"))
