@@ -182,7 +182,7 @@ CASES = [
     _case("worstcase", *G, *B, *P, "--k-sigma", "-1", status=2, message="> 0"),
     _case("worstcase", *G, *B, *P, "--k-sigma", "nan", status=2, message="finite"),
     _case("worstcase", *G, "--budget", "{budget_normal}", *P, "--k-sigma", "1e300", message="k_sigma must lie in"),
-    _case("worstcase", *G, *B, "--pose", "0", "100", "-inf", status=2, message="expected 3 arguments"),
+    _case("worstcase", *G, *B, "--pose", "0", "100", "-inf", status=2, message="expected a finite number, got '-inf'"),
     # ----------------------------------------------------------- montecarlo
     _case("montecarlo", *G, *B, *P, "--seed", "-1", status=2, message="non-negative integer"),
     _case("montecarlo", *G, *B, *P, "--seed", "1.5", status=2, message="integer seed"),
