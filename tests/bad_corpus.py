@@ -229,6 +229,8 @@ def prepare(root: Path) -> dict:
                                                       for i in (1, 2, 3))),
         "c_plan": _csv(good.drop(columns=["x_meas", "y_meas", "phi_meas"])),
         "c_plan_far": _csv(good.drop(columns=["x_meas", "y_meas", "phi_meas"]).assign(y_cmd=400.0)),
+        "c_template": _csv(good.assign(x_meas=None, y_meas=None, phi_meas=None)),   # as prp3mc plan writes it
+        "c_one_empty": _csv(good.assign(phi_meas=None)),
         "s_formats": 'name = "f"\nseed = 1\noutputs = ["montecarlo"]\n[worstcase]\ngrid = 3\n[montecarlo]\n'
                      'samples = 1024\ngrid = 2\n[[configuration]]\ngeometry = "u-shape"\nregion = "u-shape"\n',
         "s_region_file": None,   # filled below (needs the region file's path)
@@ -588,6 +590,9 @@ def second_cases() -> list[Case]:
     add(Case(M, [*sim, "--poses", "9", "--out", "-", "--json"], message="--json"))
     add(Case(M, [*sim, "--plan", "{tmp}/nowhere.csv", "--out", "{tmp}/c.csv"], message="does not exist"))
     add(Case(M, [*sim, "--plan", "{c_plan_far}", "--out", "{tmp}/c.csv"], message="stroke"))
+    add(Case(M, [*D, "--data", "{c_template}", "--out", "{tmp}/d_template"], message="unmeasured plan template"))
+    add(Case(M, [*D, "--data", "{c_one_empty}", "--out", "{tmp}/d_one_empty"],
+             message="phi_meas: expected a finite number, got empty"))
     add(Case(M, [*sim, "--plan", "{c_plan}", "--out", "{tmp}/c_plan.csv"], expect="accept",
              check=_wrote(".", "c_plan.csv")))
     add(Case(M, [*sim, "--poses", "9", "--region", "{r_far}", "--out", "{tmp}/c.csv"], message="stroke"))
@@ -637,6 +642,9 @@ def second_cases() -> list[Case]:
     y = ["yield", *G, *B]
     add(Case(M, [*y, *P, "--spec-position-um", "0"], status=(2,), message="> 0"))
     add(Case(M, [*y, *P, "--spec-position-um", "nan"], status=(2,), message="finite"))
+    for value, msg in (("-inf", "finite"), ("-1e5", "> 0"), ("-nan", "finite"), ("-.5", "> 0")):  # not "one argument"
+        add(Case(M, [*y, *P, "--spec-position-um", value], status=(2,), message=msg))
+    add(Case(M, [*y, "--pose", "0", "-1e5", "0", "--spec-position-um", "100"], message="stroke"))
     add(Case(S, [*y, *P, "--spec-position-um", "0.06"], message="another unit"))
     add(Case(M, [*y, "--pose", "0", "1000", "0", "--spec-position-um", "100"], message="stroke"))
     add(Case(M, [*y, *P, "--spec-position-um", "100", "--spec-phi-arcsec", "-1"], status=(2,), message="> 0"))
@@ -662,6 +670,11 @@ def second_cases() -> list[Case]:
     add(Case(M, [*pl, "--effects", "nonsense_1"], message="unknown effect"))
     add(Case(M, [*pl, "--effects", ","], message="at least one effect"))
     add(Case(M, [*pl, "--effects", "cyclic_1"], message="lead_mm"))
+    add(Case(S, [*pl, "--effects", "cyclic_1,scale_2,cyclic_1"], message="--effects names cyclic_1 twice",
+             id="plan --effects cyclic_1,scale_2,cyclic_1"))
+    for name in ("p.json", "p.xlsx", "p.csv.txt"):
+        add(Case(S, [*pl[:-1], f"{{tmp}}/{name}", "--effects", "scale_2"], message="name it FILE.csv",
+                 id=f"plan --out {name}"))
     add(Case(M, ["plan", *G, *B, "--effects", "scale_2", "--poses", "0", "--visits", "2", "--out", "{tmp}/p.csv"],
              status=(2,), message="positive integer"))
     return out

@@ -182,7 +182,7 @@ CASES = [
     _case("worstcase", *G, *B, *P, "--k-sigma", "-1", status=2, message="> 0"),
     _case("worstcase", *G, *B, *P, "--k-sigma", "nan", status=2, message="finite"),
     _case("worstcase", *G, "--budget", "{budget_normal}", *P, "--k-sigma", "1e300", message="k_sigma must lie in"),
-    _case("worstcase", *G, *B, "--pose", "0", "100", "-inf", status=2, message="expected 3 arguments"),
+    _case("worstcase", *G, *B, "--pose", "0", "100", "-inf", status=2, message="expected a finite number, got '-inf'"),
     # ----------------------------------------------------------- montecarlo
     _case("montecarlo", *G, *B, *P, "--seed", "-1", status=2, message="non-negative integer"),
     _case("montecarlo", *G, *B, *P, "--seed", "1.5", status=2, message="integer seed"),
@@ -697,3 +697,23 @@ def test_a_signal_while_the_console_script_loads():
     run = subprocess.run([sys.executable, "-c", _EARLY_SIGNAL.format(module=module, function=function)],
                          capture_output=True, text=True, timeout=60)
     assert (run.returncode, run.stderr) == (130, "prp3mc: interrupted\n"), run.stderr[-500:]
+
+
+# ------------------------------------------------------------------ an empty batch of poses (s23 hostile test)
+@pytest.mark.parametrize("call", [
+    lambda g, b, p: __import__("prp3mc").exact_yield(g, b, p, spec_position_um=100.0),
+    lambda g, b, p: __import__("prp3mc").worst_case(g, b, p),
+    lambda g, b, p: __import__("prp3mc").sobol_indices(g, b, p, 64, rng=1),
+    lambda g, b, p: __import__("prp3mc").monte_carlo(g, b, p, 64, rng=1),
+], ids=["exact_yield", "worst_case", "sobol_indices", "monte_carlo"])
+@pytest.mark.parametrize("shape", [(0, 3), (2, 0, 3)])
+def test_an_empty_pose_batch_is_refused_in_one_line(call, shape):
+    """The public analyses refuse a batch of no poses with prp3mc's ParameterError, not numpy's errors
+    (nor, for Monte Carlo, an empty result); the shared parser still lets internal callers pass empty subsets."""
+    import numpy as np
+
+    from prp3mc.errors import ParameterError
+    from prp3mc.kinematics.chain import as_poses
+    with pytest.raises(ParameterError, match=r"^no poses: .*shape \(" + ", ".join(map(str, shape))):
+        call(Geometry.from_preset("u-shape"), Budget.from_preset("paper"), np.zeros(shape))
+    assert as_poses(np.zeros(shape)).shape == shape

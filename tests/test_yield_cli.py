@@ -59,6 +59,16 @@ def test_region_json_carries_the_region_summary_and_one_row_per_pose(capsys):
     assert doc["inputs"]["grid"] == 3
 
 
+def test_region_json_says_each_warning_once(capsys):
+    """The paper budget's P(either) is bracketed: said once for the grid, not again for its worst pose."""
+    code, out, err = run(capsys, "--region", "u-shape", "--grid", "2", *SPEC, "--json")
+    assert code == 0, err
+    said = json.loads(out)["warnings"]
+    bracket = [w for w in said if "bracketed" in w]
+    assert len(bracket) == 1 and "of 4 pose(s)" in bracket[0] and len(set(said)) == len(said), said
+    assert err.count("bracketed") == 1, err
+
+
 def test_region_table_goes_to_stdout_and_the_summary_to_stderr(capsys):
     code, out, err = run(capsys, "--region", "u-shape", "--grid", "2", "--spec-position-um", "150")
     assert code == 0

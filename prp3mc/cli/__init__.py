@@ -19,6 +19,7 @@ import importlib
 import math
 import os
 import pkgutil
+import re
 import signal
 import sys
 import threading
@@ -292,6 +293,13 @@ def _one_line(text: str) -> str:
 
 
 class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # a value such as -inf, -1e5 or -nan is a (negative) number, not an option: its option's own type then
+        # refuses it in one line ("expected a number > 0"), not argparse's "expected one argument"
+        self._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+)(e[-+]?\d+)?$|^-(inf|infinity|nan)$",
+                                                   re.IGNORECASE)
+
     def error(self, message):  # one line, exit 2
         self.exit(2, f"{self.prog}: error: {_one_line(message)}\n")
 

@@ -2,6 +2,7 @@
 
 from pathlib import Path
 
+from ..errors import ParameterError
 from ..limits import plan_estimate
 from ..output import OutputExistsError
 from . import (add_budget, add_geometry, add_instrument_noise, add_json, add_seed, command, emit_json, finite_float,
@@ -51,6 +52,12 @@ class PlanCommand:
         from ..kinematics.geometry import Geometry, Region
         from ..measurement.campaign.plan import MAX_CANDIDATES, plan_campaign
         from ..model.budget import Budget
+        twice = sorted({name for name in args.effects if args.effects.count(name) > 1})
+        if twice:
+            raise ParameterError(f"--effects names {', '.join(twice)} twice: list each effect once")
+        if args.template.suffix.lower() not in ("", ".csv"):
+            raise ParameterError(f"--out {args.template}: the plan template is a CSV file; name it FILE.csv "
+                                 "(--json prints the plan's summary on stdout)")
         if args.template.exists() and not args.force:
             raise OutputExistsError(f"{args.template} exists: choose another name or pass --force to replace it")
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)

@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..errors import ConvergenceError, InfeasiblePoseError
+from ..errors import ConvergenceError, InfeasiblePoseError, ParameterError
 from .formulas import a_row, adjugate3, dot, leg_ik, offset_vector, perp_dot, turn
 from .geometry import Geometry
 
@@ -119,9 +119,16 @@ def trig(geometry: Geometry, phi_rad, offsets: dict | None = None) -> Trig:
                 *turned(ang["psi"]))
 
 
-def as_poses(poses: "np.typing.ArrayLike") -> np.ndarray:
-    """Validate poses ``[x_mm, y_mm, phi_deg]`` of shape (..., 3); NaN is refused."""
+def as_poses(poses: "np.typing.ArrayLike", *, nonempty: bool = False) -> np.ndarray:
+    """Validate poses ``[x_mm, y_mm, phi_deg]`` of shape (..., 3); NaN is refused.
+
+    ``nonempty=True`` (the public analyses) also refuses a batch of no poses
+    (:class:`~prp3mc.errors.ParameterError`); internal callers may pass empty subsets.
+    """
     arr = pose_array(poses)
+    if nonempty and arr.size == 0:
+        raise ParameterError(f"no poses: the pose batch has shape {arr.shape}; give at least one "
+                             "[x_mm, y_mm, phi_deg]")
     if not np.isfinite(arr).all():  # (one flat pass; the pose's index only when there is one)
         raise nonfinite_pose(arr)
     return arr

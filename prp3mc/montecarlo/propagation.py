@@ -34,7 +34,7 @@ from ..units import OUTPUT_UNITS, POSE_OUTPUTS, RAD2DEG, Z95, z_value
 from .._version import __version__
 from ..model.budget import Budget
 from ..errors import ParameterError, Prp3mcWarning
-from ..kinematics.chain import inverse_kinematics
+from ..kinematics.chain import as_poses, inverse_kinematics
 from ..kinematics.exact import exact_pose_error
 from ..kinematics.geometry import Geometry
 from ._kernel import padded_features
@@ -294,6 +294,7 @@ def monte_carlo(geometry: "Geometry | str", budget: "Budget | str", poses, n_sam
     """
     t0 = time.perf_counter()
     geometry, budget = Geometry.load(geometry), Budget.load(budget)
+    poses = as_poses(poses, nonempty=True)
     n_samples = int(n_samples)
     if n_samples < MIN_SAMPLES:
         raise ParameterError(f"Monte Carlo needs at least {MIN_SAMPLES} samples (its standard errors come from "

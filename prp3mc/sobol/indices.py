@@ -41,6 +41,7 @@ from .._rng import MAX_SEED, child_seed, resolve_rng
 from .._threads import check_stop, cores, single_threaded_blas
 from .._version import __version__
 from ..errors import BudgetError, ParameterError, Prp3mcWarning
+from ..kinematics.chain import as_poses
 from ..kinematics.geometry import Geometry
 from ..progress import Progress
 from ..units import OUTPUTS, RAD2DEG, t_value
@@ -291,7 +292,7 @@ def sobol_indices(geometry: "Geometry | str", budget: "Budget | str", poses, n_s
     seed, _ = resolve_rng(rng)
     seed = seed % (MAX_SEED + 1)
     factors = design_factors(budget, groups)
-    model = linear_model(geometry, budget, poses)                  # validates every pose
+    model = linear_model(geometry, budget, as_poses(poses, nonempty=True))                  # validates every pose
     shape = model.poses.shape[:-1]
     n_poses = int(np.prod(shape, dtype=int))
     if method == "auto":   # the vectorised estimators, at one pose too (faster: benchmarks/README.md)

@@ -12,6 +12,7 @@ from scipy import special
 
 from .._threads import check_stop, cores
 from ..errors import BudgetError, Prp3mcWarning, SpecError
+from ..kinematics.chain import as_poses
 from ..kinematics.geometry import Geometry
 from ..model.budget import Budget
 from ..model.linear import linear_model
@@ -131,7 +132,7 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     if not (isinstance(target, (int, float)) and 0 < target <= 1e-2):
         raise SpecError(f"target must be a probability in (0, 1e-2], got {target!r}")
     geometry, budget = Geometry.load(geometry), Budget.load(budget)
-    model = linear_model(geometry, budget, poses)
+    model = linear_model(geometry, budget, as_poses(poses, nonempty=True))
     shape = model.poses.shape[:-1]
     laws, legs, C = gaussian_terms(budget, model.term_laws, model.legs,
                                    model.columns.reshape(-1, 3, len(model.terms)))    # correlated normals: exact

@@ -328,7 +328,7 @@ def worst_case(geometry: "Geometry | str", budget: "Budget | str", poses, *, k_s
     """
     geometry, budget = Geometry.load(geometry), Budget.load(budget)
     bounds = budget.bounds(k_sigma)
-    poses = as_poses(poses)
+    poses = as_poses(poses, nonempty=True)
     flat = poses.reshape(-1, 3) if poses.ndim > 1 else poses[None]
 
     def run(sl: slice):

@@ -212,6 +212,10 @@ class Campaign:
                                     + (f" ({int(bad.sum())} such rows)" if bad.sum() > 1 else ""))
             return values
 
+        if all((frame[c].isna() | (frame[c].astype(str).str.strip() == "")).all() for c in MEAS_COLUMNS):
+            raise CampaignError(f"{source}: every {', '.join(MEAS_COLUMNS)} cell is empty: an unmeasured plan "
+                                "template (prp3mc plan)? Measure each row and fill in the measured columns, or "
+                                "try it on a simulated campaign: prp3mc simulate --plan FILE.csv")
         cmd = np.stack([numeric(c) for c in CMD_COLUMNS], axis=1)
         meas = np.stack([numeric(c) for c in MEAS_COLUMNS], axis=1)
         _check_units(cmd, meas, source)
