@@ -218,7 +218,7 @@ def test_sobol_of_a_correlated_budget_reports_shapley(capsys, tmp_path):
     from matplotlib.figure import Figure
     from prp3mc.reports import plots
     left = plots.ranking_figure(df, fig=Figure()).axes[0]                # the report draws Sh, not empty S1/ST
-    assert left.get_xlabel() == "Shapley effect (95 % CI)" and "correlated inputs" in left.get_title()
+    assert left.get_xlabel() == "Shapley effect (95 % CI)" and "correlated inputs" in " ".join(left.get_title().split())
     assert left.get_yticklabels()[0].get_text().removesuffix(" (group)") == df["name"].iloc[0]
     path = tmp_path / "b.toml"
     b.to_toml(path)

@@ -4,7 +4,7 @@ from pathlib import Path
 
 from ..errors import ParameterError
 from ..limits import plan_estimate
-from ..output import OutputExistsError
+from ..errors import OutputExistsError
 from . import (add_budget, add_geometry, add_instrument_noise, add_json, add_seed, command, emit_json, finite_float,
                positive_float, positive_int, probability, provenance, within_limits)
 
