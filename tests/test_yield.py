@@ -382,3 +382,43 @@ def test_pose_record_of_a_batch_needs_the_index_of_one_pose(index):
     with pytest.raises(ParameterError, match=r"one pose of the batch \(3, 3\)"):
         r.pose_record(index)
     assert r.pose_record((1, 1))["exceed_position_ppm"] == pytest.approx(1e6 * float(r.exceed_position[1, 1]))
+
+
+# ------------------------------------------------------------------ specs beyond the support
+
+@pytest.mark.parametrize("which", ["paper", "ot"])
+def test_a_spec_beyond_the_worst_case_is_zero_and_leaves_the_quantiles_alone(which):
+    """S and Z from 1e3 to 1e9 (µm, arcsec): no series sized by the spec (it used to need more than 2^23 terms
+    or find "no density"); P = 0 with bound 0 on bounded laws, 0 within the normal laws' cut mass (<= the
+    target) otherwise; the quantiles bit-identical to a run with a spec inside the support."""
+    budget = Budget.load("paper") if which == "paper" else ot_budget()
+    pose = [0.0, 100.0, 0.0]
+    inside = exact_yield("u-shape", budget, pose, spec_position_um=50.0, spec_phi_arcsec=50.0)
+    for spec in (1e3, 1e4, 1e6, 1e9):
+        r = exact_yield("u-shape", budget, pose, spec_position_um=spec, spec_phi_arcsec=spec)
+        for output in OUTPUTS:
+            assert float(r.exceedance(output)) == 0.0
+            assert 0.0 <= float(r.bound(output)) <= (0.0 if which == "paper" else 2e-2 * r.target)   # any: both cuts
+        assert not bool(r.bracketed_any)
+        np.testing.assert_array_equal(r.quantile_position_mm, inside.quantile_position_mm)
+        np.testing.assert_array_equal(r.quantile_phi_deg, inside.quantile_phi_deg)
+        np.testing.assert_array_equal(r.quantile_position_err_mm, inside.quantile_position_err_mm)
+        assert int(r.lattice_points["position"]) == int(inside.lattice_points["position"])
+
+
+def test_the_exceedance_falls_to_zero_across_the_support_edge():
+    """Monotone in S through the worst case W: P(> S) within its bound non-increasing, 0 from W on, and one
+    channel beyond its support makes P(either) the other channel's exceedance."""
+    pose = [0.0, 100.0, 0.0]
+    W = MM2UM * float(exact_yield("u-shape", "paper", pose, spec_position_um=100.0,
+                                  quantiles=False).worst_position_mm)
+    specs = [0.9 * W, 0.97 * W, 0.995 * W, W * (1 - 1e-9), W * (1 + 1e-9), 1.01 * W, 10 * W]
+    r = [exact_yield("u-shape", "paper", pose, spec_position_um=s, spec_phi_arcsec=40.0, quantiles=False)
+         for s in specs]
+    p = np.array([float(x.exceed_position) for x in r])
+    b = np.array([float(x.bound_position) for x in r])
+    assert np.all(np.diff(p) <= b[:-1] + b[1:]) and p[0] > 0
+    assert np.all(p[4:] == 0.0) and np.all(b[4:] == 0.0)
+    for x in r[4:]:
+        assert float(x.exceed_any) == float(x.exceed_phi) and float(x.bound_any) == float(x.bound_phi)
+        assert not bool(x.bracketed_any)

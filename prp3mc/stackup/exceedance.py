@@ -150,27 +150,22 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     run = _Runner(table, workers, target, budget.name)
 
     # position
-    z1 = np.full(N, S)
-    pos = channel("position", C, Ainv, legs, table, z1, alias_one=share)
-    if quantiles:
-        z1 = np.maximum(z1, pos.zmax)
-        pos = channel("position", C, Ainv, legs, table, z1, alias_one=share)
+    pos, z1, zs, sure_pos = _sized("position", C, Ainv, legs, table, share, np.full(N, S), quantiles)
     lam2 = np.linalg.eigvalsh(cov[:, :2, :2])[:, -1]
     z0 = np.hypot(mean[:, 0], mean[:, 1])[:, None] + np.sqrt(-2.0 * np.log1p(-levels) * lam2[:, None])
-    p_pos, b_pos, n_pos, s_pos, q_pos, qe_pos = run(pos, z1, np.zeros(N), np.full(N, S), levels, z0,
-                                                    "the position error")
+    p_pos, b_pos, n_pos, s_pos, q_pos, qe_pos = run(pos, z1, np.zeros(N), zs, levels, z0, "the position error",
+                                                    sure=sure_pos)
     # orientation
     p_phi = b_phi = q_phi = qe_phi = None
     n_phi = np.zeros(N, np.int64)
     phi = None
+    sure_phi = np.zeros(N, dtype=bool)
     if quantiles or Z is not None:
-        zs = np.full(N, Z if Z is not None else 0.0)
-        phi = channel("phi", C, Ainv, legs, table, zs, alias_one=share)
-        z1 = np.maximum(zs, phi.zmax) if quantiles else zs
-        phi = channel("phi", C, Ainv, legs, table, z1, alias_one=share)
+        phi, z1, zs, sure_phi = _sized("phi", C, Ainv, legs, table, share, np.full(N, Z if Z is not None else 0.0),
+                                       quantiles)
         z0 = np.abs(mean[:, 2])[:, None] + np.sqrt(cov[:, 2, 2])[:, None] * special.ndtri(0.5 + 0.5 * levels)
-        p_phi, b_phi, n_phi, s_phi, q_phi, qe_phi = run(phi, z1, np.zeros(N), np.where(zs > 0, zs, z1), levels, z0,
-                                                        "|dphi|")
+        p_phi, b_phi, n_phi, s_phi, q_phi, qe_phi = run(phi, z1, np.zeros(N), zs, levels, z0, "|dphi|",
+                                                        sure=sure_phi)
     e_pos = np.clip(1.0 - p_pos, 0.0, 1.0)
     e_phi = None if Z is None else np.clip(1.0 - p_phi, 0.0, 1.0)
     # either: the joint series where it converges; else the bracket [max(P_pos, P_phi), P_pos + P_phi]
@@ -179,7 +174,8 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     if Z is None:
         e_any, b_any = e_pos, b_pos
     else:
-        e_any, b_any, n_any, bracketed = _either(run, C, Ainv, legs, table, share, S, Z, e_pos, b_pos, e_phi, b_phi)
+        e_any, b_any, n_any, bracketed = _either(run, C, Ainv, legs, table, share, S, Z, e_pos, b_pos, e_phi, b_phi,
+                                                  sure_pos | sure_phi)
     above = np.maximum(b_pos, b_phi if b_phi is not None else 0.0) > target
     if np.any(above):
         warnings.warn(Prp3mcWarning(
@@ -217,6 +213,20 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
         wall_time_s=time.perf_counter() - t0)
 
 
+def _sized(which: str, C, Ainv, legs, table, share: float, spec: np.ndarray, quantiles: bool):
+    """Channel ``which`` with its lattice sized for the spec (N,) (0: none, the quantiles alone) and, with
+    ``quantiles``, for the support's maximum. A spec at or above that maximum is *sure* (P(``|Y|`` > spec) is 0,
+    but for the normal laws' mass past their cut): its lattice is sized by the support alone, not by the
+    spec, which may be any size. Returns (channel, z1 the largest radius served, zs the radius the
+    series evaluates (<= z1), sure (N,))."""
+    ch = channel(which, C, Ainv, legs, table, spec, alias_one=share)
+    sure = (spec > 0) & (spec >= ch.zmax * (1 + 1e-12))
+    z1 = np.where(sure, ch.zmax, np.maximum(spec, ch.zmax) if quantiles else spec)
+    if not np.array_equal(z1, spec):
+        ch = channel(which, C, Ainv, legs, table, z1, alias_one=share)
+    return ch, z1, np.where(sure | (spec <= 0), z1, spec), sure
+
+
 class _Runner:
     """Runs :func:`~.series.batch_series` over a channel's poses in chunks on a pool of threads."""
 
@@ -225,20 +235,22 @@ class _Runner:
         self.workers = workers or cores()
         self.tab, self.sp = table.arrays(), special_args()
 
-    def __call__(self, ch, z1, z2, zs, levels, z0, what: str, fallback: bool = False):
+    def __call__(self, ch, z1, z2, zs, levels, z0, what: str, fallback: bool = False, sure=None):
         """The series of channel ``ch`` at every pose: (P(Y in D), bound, points, status, quantiles,
-        their bounds). Without quantiles, a pose whose spec covers the whole support (no normal law acting)
-        has P = 1 exactly. A pose the series cannot serve raises (what: the quantity, for the message), or
+        their bounds). A ``sure`` pose (its spec covers the whole support, :func:`_sized`) has P = 1, exactly
+        but for the mass of the normal laws past their cut, which is its bound; without quantiles its series
+        is not summed. A pose the series cannot serve raises (what: the quantity, for the message), or
         keeps its status (2, 3) when the caller has a ``fallback``."""
         N = z1.size
         out = (np.empty(N), np.empty(N), np.empty(N, np.int64), np.empty(N, np.int64),
                np.empty((N, levels.size)), np.empty((N, levels.size)))
-        sure = (zs >= ch.zmax * (1 + 1e-12)) & (ch.alias == 0) if levels.size == 0 else np.zeros(N, bool)
+        sure = np.zeros(N, bool) if sure is None else sure
+        skip = sure if levels.size == 0 else np.zeros(N, bool)
         z0 = np.ascontiguousarray(np.broadcast_to(z0, (N, levels.size)))
         t = self.table
         args = (ch.d, t.kind, t.par, t.env, self.tab, self.sp, ch.grp, ch.mu, ch.snu, ch.Q, ch.Vinv, ch.mnorm, ch.ab,
                 ch.lam, np.ascontiguousarray(z1), np.ascontiguousarray(z2), np.ascontiguousarray(zs), self.target,
-                ch.alias, levels, z0, ch.zmax, ch.ok & ~sure, *out)
+                ch.alias, levels, z0, ch.zmax, ch.ok & ~skip, *out)
         starts = range(0, N, _CHUNK)
         if self.workers == 1 or N <= _CHUNK:
             batch_series(0, N, *args)
@@ -246,7 +258,8 @@ class _Runner:
             with ThreadPoolExecutor(max_workers=self.workers) as pool:
                 list(pool.map(lambda s: batch_series(s, min(N, s + _CHUNK), *args), starts))
         p, b, n, status = out[:4]
-        p[sure], b[sure], n[sure], status[sure] = 1.0, 0.0, 0, 0
+        p[sure], b[sure] = 1.0, ch.alias[sure]
+        n[skip], status[skip] = 0, 0
         for code, why in ((2, "fewer legs with a continuous law, whose terms decay, than it has dimensions: it "
                               "has no density"),
                           (3, "the series needs more than 2^23 terms (too few continuous laws)")):
@@ -256,10 +269,12 @@ class _Runner:
         return out
 
 
-def _either(run, C, Ainv, legs, table, share, S, Z, e_pos, b_pos, e_phi, b_phi):
+def _either(run, C, Ainv, legs, table, share, S, Z, e_pos, b_pos, e_phi, b_phi, sure):
     """P(position > S or ``|dphi|`` > Z) and its bound, per pose: the 3-D series of the cylinder where it is
     certified, else the Fréchet bracket ``[max(P_pos, P_phi), P_pos + P_phi]`` (its midpoint, the half-width
-    plus both channels' bounds as the bound), whichever bound is smaller. The joint series converges slowly
+    plus both channels' bounds as the bound), whichever bound is smaller. Where a channel is ``sure`` (its
+    exceedance 0 but for its bound) the bracket is the other channel's exceedance, with both bounds: no
+    series, not flagged bracketed. The joint series converges slowly
     when a leg has few continuous laws (its characteristic function decays slowly along that leg's axis):
     it is tried only when every leg's envelopes decay at least as ``n^-_JOINT_POWER`` (e.g. a normal law in each
     leg), at the first pose and, if that fails, at no other. Returns (P, bound, points, bracketed)."""
@@ -267,8 +282,18 @@ def _either(run, C, Ainv, legs, table, share, S, Z, e_pos, b_pos, e_phi, b_phi):
     lo, hi = np.maximum(e_pos, e_phi), np.minimum(1.0, e_pos + e_phi)
     e_br, b_br = 0.5 * (lo + hi), 0.5 * (hi - lo) + b_pos + b_phi
     e_any, b_any, n_any = e_br.copy(), b_br.copy(), np.zeros(N, np.int64)
+    todo = np.flatnonzero(~sure)
+    if todo.size == 0:
+        return e_any, b_any, n_any, np.zeros(N, dtype=bool)
     if not np.all(leg_powers(table, C[:1], legs, 1.0 / 3.0) >= _JOINT_POWER):
-        return e_any, b_any, n_any, np.ones(N, dtype=bool)
+        return e_any, b_any, n_any, ~sure
+    if todo.size < N:
+        e_sub, b_sub, n_sub, br_sub = _either(run, C[todo], Ainv[todo], legs, table, share, S, Z, e_pos[todo],
+                                              b_pos[todo], e_phi[todo], b_phi[todo], np.zeros(todo.size, bool))
+        e_any[todo], b_any[todo], n_any[todo] = e_sub, b_sub, n_sub
+        bracketed = np.zeros(N, dtype=bool)
+        bracketed[todo] = br_sub
+        return e_any, b_any, n_any, bracketed
     both = channel("both", C, Ainv, legs, table, np.full(N, S), np.full(N, Z), alias_one=share)
     probe = run(_subset(both, slice(0, 1)), np.full(1, S), np.full(1, Z), np.full(1, S), np.zeros(0),
                 np.zeros((1, 0)), "the pose error", fallback=True)
