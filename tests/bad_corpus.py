@@ -635,6 +635,11 @@ def second_cases() -> list[Case]:
     add(Case(M, [*y, "--pose", "0", "1000", "0", "--spec-position-um", "100"], message="stroke"))
     add(Case(M, [*y, *P, "--spec-position-um", "100", "--spec-phi-arcsec", "-1"], status=(2,), message="> 0"))
     add(Case(H, [*y, "--region", "u-shape", "--grid", "100000", "--spec-position-um", "100"], message="memory"))
+    add(Case(M, [*y, *P, "--spec-position-um", "100", "--target", "1e-30"], status=(2,), message="[1e-12, 0.01]"))
+    add(Case(M, [*y, *P, "--spec-position-um", "100", "--target", "0.5"], status=(2,), message="[1e-12, 0.01]"))
+    for spec in ("1e4", "1e9"):        # beyond the worst case (140 µm): P = 0 exactly, was "more than 2^23 terms"
+        add(Case(M, [*y, *P, "--spec-position-um", spec, "--spec-phi-arcsec", spec, "--json"], expect="accept",
+                 slow=True))
     al = ["allocate", *G, "--region", "u-shape", "--classes", "example", "--grid", "2", "--json"]
     add(Case(S, [*al, "--spec-position-um", "0.08"], expect="accept", warning="below 1 µm"))
     add(Case(S, [*al, "--spec-position-um", "80", "--spec-phi-arcsec", "0.03"], expect="accept", warning="below 1 arcsec"))

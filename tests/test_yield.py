@@ -316,6 +316,8 @@ def test_bad_specs_are_refused_in_one_line():
         exact_yield("u-shape", "paper", [0.0, 100.0, 0.0], spec_position_um=60.0, spec_phi_arcsec=-1.0)
     with pytest.raises(SpecError, match="target"):
         exact_yield("u-shape", "paper", [0.0, 100.0, 0.0], spec_position_um=60.0, target=0.5)
+    with pytest.raises(SpecError, match=r"target must be a probability in \[1e-12, 0.01\].*1e-30"):
+        exact_yield("u-shape", "paper", [0.0, 100.0, 0.0], spec_position_um=60.0, target=1e-30)
 
 
 def test_result_frame_and_record_carry_the_spec_figures():

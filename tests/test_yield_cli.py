@@ -160,4 +160,28 @@ def test_the_command_default_target_is_the_engine_s():
 
     from prp3mc.stackup import DEFAULT_TARGET
 
-    assert importlib.import_module("prp3mc.cli.yield").DEFAULT_TARGET == DEFAULT_TARGET
+    from prp3mc.stackup.exceedance import TARGET_RANGE
+
+    cli = importlib.import_module("prp3mc.cli.yield")
+    assert cli.DEFAULT_TARGET == DEFAULT_TARGET and cli.TARGET_RANGE == TARGET_RANGE
+
+
+def test_a_spec_beyond_the_worst_case_answers_zero(capsys):
+    """1e4 µm against a worst case of 140 µm: P = 0 with bound 0 (it was refused: more than 2^23 terms)."""
+    code, out, err = run(capsys, "--pose", "0", "100", "0", "--spec-position-um", "1e4", "--spec-phi-arcsec", "1e9",
+                         "--json")
+    assert code == 0, err
+    rec = json.loads(out)
+    assert rec["exceed_position_ppm"] == rec["exceed_phi_ppm"] == rec["exceed_any_ppm"] == 0.0
+    assert rec["error_bound_ppm"] == 0.0
+
+
+@pytest.mark.parametrize("target", ["1e-30", "0.5"])
+def test_the_target_range_is_the_engine_s(capsys, target):
+    try:
+        code = main(["yield", "--geometry", "u-shape", "--budget", "paper", *POSE, "--spec-position-um", "100",
+                     "--target", target])
+    except SystemExit as exit_:
+        code = exit_.code
+    err = capsys.readouterr().err
+    assert code == 2 and "[1e-12, 0.01]" in err and target in err

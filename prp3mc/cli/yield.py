@@ -1,5 +1,6 @@
 """``prp3mc yield``: the exact yield of the linear model against a position (and orientation) spec (SPEC §9)."""
 
+import argparse
 import sys
 import warnings
 
@@ -10,10 +11,12 @@ from ..errors import SpecError
 from ..kinematics.geometry import Geometry
 from ..units import DEG2ARCSEC, MM2UM, PPM
 from . import (add_budget, add_geometry, add_json, add_pose_or_region, add_seed, command, emit_json, emit_table,
-               grid_poses, positive_float, positive_int, probability, provenance)
+               finite_float, grid_poses, positive_float, positive_int, provenance)
 
-#: prp3mc.stackup.DEFAULT_TARGET, written out so that --help imports no numba (tests/test_yield_cli.py checks).
+#: prp3mc.stackup.DEFAULT_TARGET and TARGET_RANGE, written out so that --help imports no numba
+#: (tests/test_yield_cli.py checks).
 DEFAULT_TARGET = 1e-9
+TARGET_RANGE = (1e-12, 1e-2)
 #: A spec this many times below the error's RSS scale is refused (a value in mm typed as µm, or the like).
 _SCALE = 1e-3
 _MC_METHOD = ("Monte Carlo of the linear model with the budget's Gaussian copula (the streamed sampler): every "
@@ -33,8 +36,9 @@ class YieldCommand:
                        help="the position error |(dx, dy)| must stay within S µm")
         p.add_argument("--spec-phi-arcsec", type=positive_float, default=None, metavar="Z",
                        help="|dphi| must stay within Z arcsec")
-        p.add_argument("--target", type=probability, default=DEFAULT_TARGET, metavar="E",
-                       help=f"bound of every probability's absolute error (default {DEFAULT_TARGET:g})")
+        p.add_argument("--target", type=_target, default=DEFAULT_TARGET, metavar="E",
+                       help=f"bound of every probability's absolute error, in [{TARGET_RANGE[0]:g}, "
+                            f"{TARGET_RANGE[1]:g}] (default {DEFAULT_TARGET:g})")
         p.add_argument("--samples", type=positive_int, default=10_000_000, metavar="N",
                        help="samples of the Monte Carlo fallback for a budget that correlates inputs not all normal "
                             "(default 1e7)")
@@ -82,6 +86,16 @@ class YieldCommand:
             emit_json({**record, **provenance(args, geometry, budget, **inputs)})
             return
         print("\n".join(_text(args, geometry, budget, poses[0], over, record, None)))
+
+
+def _target(text: str) -> float:
+    """``--target``: a probability in :data:`TARGET_RANGE` (below it floating point alone exceeds the target)."""
+    value = finite_float(text)
+    lo, hi = TARGET_RANGE
+    if not lo <= value <= hi:
+        raise argparse.ArgumentTypeError(f"expected a target in [{lo:g}, {hi:g}] (below {lo:g} floating point "
+                                         f"alone exceeds it), got {text!r}")
+    return value
 
 
 def _check_scale(args, r) -> None:
