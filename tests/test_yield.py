@@ -20,7 +20,7 @@ import pytest
 from numba import njit
 
 from prp3mc import Geometry, Region, exact_yield, monte_carlo
-from prp3mc.errors import SpecError
+from prp3mc.errors import BudgetError, SpecError
 from prp3mc.model.budget import Budget
 from prp3mc.model.effects import SystematicEffect
 from prp3mc.model.laws import Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
@@ -424,3 +424,49 @@ def test_the_exceedance_falls_to_zero_across_the_support_edge():
     for x in r[4:]:
         assert float(x.exceed_any) == float(x.exceed_phi) and float(x.bound_any) == float(x.bound_phi)
         assert not bool(x.bracketed_any)
+
+
+# ------------------------------------------------------------------ discrete classes only: enumeration
+
+def classes_budget() -> Budget:
+    return Budget({f"theta_{i}": Discrete((-0.04, 0.0, 0.04), (0.25, 0.5, 0.25)) for i in (1, 2, 3)}
+                  | {f"b_{i}": Discrete((0.0, 0.01, 0.025), (0.3, 0.4, 0.3)) for i in (1, 2, 3)}
+                  | {"a_1": Discrete((-0.01, 0.02), (0.5, 0.5))}, name="classes")
+
+
+def test_a_budget_of_discrete_classes_is_exact_by_enumeration():
+    """Every input a class: no density (it was refused "use Monte Carlo"); the pose error takes 3^6 x 2 values,
+    and the exceedances, quantiles and worst cases equal a brute-force sum over them (itertools, from the
+    linear model's columns and laws), bound ~1e-13."""
+    from itertools import product
+    budget = classes_budget()
+    poses = np.array([[0.0, 100.0, 0.0], [10.0, 120.0, 2.0]])
+    S, Z = 0.06, 60.0 * ARCSEC
+    r = exact_yield("u-shape", budget, poses, spec_position_um=MM2UM * S, spec_phi_arcsec=60.0)
+    assert r.error_bound.max() < 1e-12 and not np.any(r.bracketed_any)
+    model = linear_model(Geometry.from_preset("u-shape"), budget, poses)
+    laws = [(t, tl) for t, tl in enumerate(model.term_laws) if tl.law is not None and tl.kind == "factor"]
+    assert all(isinstance(tl.law, Discrete) for _, tl in laws)
+    for n in range(2):
+        c = model.columns.reshape(-1, 3, len(model.terms))[n]
+        ys, ws = [], []
+        for combo in product(*[list(zip(tl.law.values, tl.law.weights)) for _, tl in laws]):
+            ys.append(sum(c[:, t] * (v - tl.reference) for (t, tl), (v, _) in zip(laws, combo)))
+            ws.append(math.prod(w for _, w in combo))
+        ys, ws = np.array(ys), np.array(ws)
+        pos, phi = np.hypot(ys[:, 0], ys[:, 1]), np.abs(ys[:, 2])
+        assert abs(r.exceed_position[n] - ws[pos > S].sum()) <= r.bound_position[n]
+        assert abs(r.exceed_phi[n] - ws[phi > Z].sum()) <= r.bound_phi[n]
+        assert abs(r.exceed_any[n] - ws[(pos > S) | (phi > Z)].sum()) <= r.bound_any[n]
+        assert r.worst_position_mm[n] == pytest.approx(pos.max(), rel=1e-12)
+        order = np.argsort(pos)
+        for level, q in zip(QUANTILE_LEVELS, r.quantile_position_mm[n]):
+            k = np.searchsorted(np.cumsum(ws[order]), level / 100 - 1e-12)
+            assert q == pytest.approx(pos[order][k], rel=1e-12)
+
+
+def test_too_many_classes_are_refused_in_one_line():
+    budget = Budget({f"{p}_{i}": Discrete(tuple(np.linspace(-0.01, 0.01, 11)), (1 / 11,) * 11)
+                     for p in ("theta", "b") for i in (1, 2, 3)}, name="many")
+    with pytest.raises(BudgetError, match="combinations.*Monte Carlo"):
+        exact_yield("u-shape", budget, [0.0, 100.0, 0.0], spec_position_um=60.0)

@@ -18,6 +18,7 @@ from ..model.linear import linear_model
 from ..units import DEG2ARCSEC, DEG2RAD, MM2UM, RAD2DEG
 from ._special import special_args
 from .characteristic import term_table
+from .enumeration import ENUMERATION_METHOD, all_discrete, discrete_yield
 from .gaussian import gaussian_terms
 from .lattice import LEVELS, channel, leg_powers, support_max
 from .result import QUANTILE_LEVELS, YieldResult
@@ -71,7 +72,8 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     each, one temperature uniform over its range). Every law prp3mc has is
     exact: uniform, normal, truncated normal, triangular, discrete classes,
     and the clearance rho cos(zeta - omega) with any radius law (the contact
-    angle uniform over whole turns).
+    angle uniform over whole turns). A budget of discrete classes only has no
+    density: its finitely many values are enumerated (:mod:`.enumeration`).
 
     Method (:mod:`prp3mc.stackup`): P(Y in D) for a channel Y of the pose
     error (dphi, the position, or both) and its spec region D (an interval, a
@@ -116,8 +118,8 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
         A spec or target out of range.
     BudgetError
         A budget with ``[correlation]`` between inputs not all normal (the message names the Monte Carlo
-        fallback, :func:`prp3mc.monte_carlo` with ``tolerance_phi_deg``), or whose position has no 2-D
-        density (one leg random).
+        fallback, :func:`prp3mc.monte_carlo` with ``tolerance_phi_deg``), whose position has no 2-D
+        density (one leg random), or of discrete classes only with more than 2^20 combinations.
 
     Returns
     -------
@@ -153,6 +155,8 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     S, Z = S_um / MM2UM, (None if Z_as is None else Z_as / DEG2ARCSEC * DEG2RAD)
     legs = np.array(legs)
     levels = np.array(LEVELS if quantiles else (), dtype=float)
+    if all_discrete(table):
+        return _enumerated(model, shape, C, table, S, Z, levels, budget, target, t0)
     mean, cov = _moments(C, table)
     run = _Runner(table, workers, target, budget.name)
 
@@ -232,6 +236,33 @@ def _sized(which: str, C, Ainv, legs, table, share: float, spec: np.ndarray, qua
     if not np.array_equal(z1, spec):
         ch = channel(which, C, Ainv, legs, table, z1, alias_one=share)
     return ch, z1, np.where(sure | (spec <= 0), z1, spec), sure
+
+
+def _enumerated(model, shape, C, table, S, Z, levels, budget, target, t0) -> YieldResult:
+    """:func:`exact_yield` of a budget of discrete classes only (:mod:`.enumeration`): exact, no series."""
+    e = discrete_yield(C, table, S, Z, levels, budget.name)
+    N, Q = C.shape[0], levels.size
+    rss_pos, rss_phi = _rss(C, table)
+    bound = np.full(shape, e["bound"])
+
+    def shaped(a, tail=()):
+        return a.reshape(shape + tail)
+
+    return YieldResult(
+        poses=model.poses, spec_position_mm=S, spec_phi_deg=None if Z is None else Z * RAD2DEG,
+        exceed_position=shaped(e["e_pos"]), bound_position=bound,
+        exceed_phi=None if Z is None else shaped(e["e_phi"]), bound_phi=None if Z is None else bound,
+        exceed_any=shaped(e["e_any"]), bound_any=bound,
+        levels=QUANTILE_LEVELS if Q else (),
+        quantile_position_mm=shaped(e["q_pos"], (Q,)) if Q else None,
+        quantile_position_err_mm=shaped(e["qe_pos"], (Q,)) if Q else None,
+        quantile_phi_deg=shaped(e["q_phi"] * RAD2DEG, (Q,)) if Q else None,
+        quantile_phi_err_deg=shaped(e["qe_phi"] * RAD2DEG, (Q,)) if Q else None,
+        worst_position_mm=shaped(e["worst_pos"]), worst_phi_deg=shaped(e["worst_phi"] * RAD2DEG),
+        rss_position_mm=shaped(rss_pos), rss_phi_deg=shaped(rss_phi * RAD2DEG),
+        bracketed_any=np.zeros(shape, dtype=bool),
+        lattice_points={k: np.full(shape, e["combinations"], np.int64) for k in ("position", "phi", "any")},
+        target=float(target), method=ENUMERATION_METHOD, wall_time_s=time.perf_counter() - t0)
 
 
 class _Runner:
