@@ -185,3 +185,19 @@ def test_the_target_range_is_the_engine_s(capsys, target):
         code = exit_.code
     err = capsys.readouterr().err
     assert code == 2 and "[1e-12, 0.01]" in err and target in err
+
+
+def test_a_budget_without_a_density_falls_back_on_monte_carlo(capsys, tmp_path):
+    """One leg random (a disc clearance): no 2-D density, so no exact yield (NoExactYieldError); the command
+    falls back on Monte Carlo as for correlated laws and says why (it used to exit 1, "use Monte Carlo")."""
+    from prp3mc.model.laws import Disc, Uniform
+
+    path = tmp_path / "alone.toml"
+    Budget({"rho_1": Disc(0.01), "zeta_1": Uniform(0.0, 360.0)}, name="disc alone").to_toml(path)
+    code = main(["yield", "--geometry", "u-shape", "--budget", str(path), *POSE, "--spec-position-um", "8",
+                 "--samples", "20000", "--seed", "3", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    rec = json.loads(out)
+    assert rec["method"].startswith("Monte Carlo") and "no density" in rec["method"]
+    assert rec["inputs"]["samples"] == 20000 and 0.0 <= rec["exceed_position_ppm"] <= 1e6

@@ -7,7 +7,7 @@ import warnings
 import numpy as np
 
 from .._version import __version__
-from ..errors import SpecError
+from ..errors import NoExactYieldError, SpecError
 from ..kinematics.geometry import Geometry
 from ..units import DEG2ARCSEC, MM2UM, PPM
 from . import (add_budget, add_geometry, add_json, add_pose_or_region, add_seed, command, emit_json, emit_table,
@@ -19,10 +19,10 @@ DEFAULT_TARGET = 1e-9
 TARGET_RANGE = (1e-12, 1e-2)
 #: A spec this many times below the error's RSS scale is refused (a value in mm typed as µm, or the like).
 _SCALE = 1e-3
-_MC_METHOD = ("Monte Carlo of the linear model with the budget's Gaussian copula (the streamed sampler): every "
-              "exceedance with its Wilson 95 % interval (ci95_ppm); error_bound = the largest distance from an "
-              "exceedance to the farther end of its interval (a confidence statement, not a bound); quantiles are "
-              "sample percentiles")
+_MC_METHOD = ("Monte Carlo of the linear model with the budget's Gaussian copula, if any (the streamed sampler): "
+              "every exceedance with its Wilson 95 % interval (ci95_ppm); error_bound = the largest distance from "
+              "an exceedance to the farther end of its interval (a confidence statement, not a bound); quantiles "
+              "are sample percentiles")
 
 
 @command("yield", "exact yield of the linear model against a position (and orientation) spec, without sampling")
@@ -65,7 +65,12 @@ class YieldCommand:
             return
         with warnings.catch_warnings(record=True) as caught:    # a spec in the wrong unit: one line, not two
             warnings.simplefilter("always")
-            over = exact_yield(geometry, budget, poses, quantiles=args.region is None, target=args.target, **specs)
+            try:
+                over = exact_yield(geometry, budget, poses, quantiles=args.region is None, target=args.target,
+                                   **specs)
+            except NoExactYieldError as exc:                     # no density, too many classes or terms
+                _correlated(args, geometry, budget, poses, where, str(exc).removeprefix("exact yield: "))
+                return
         _check_scale(args, over)
         for w in caught:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
@@ -128,7 +133,8 @@ def _pose_frame(r) -> "pd.DataFrame":
 
 
 def _correlated(args, geometry, budget, poses, where, why: str) -> None:
-    """A budget whose correlated inputs are not all normal: the streamed Monte Carlo with the copula, every
+    """A budget the exact yield cannot serve (correlated inputs not all normal; no density, too many classes
+    or terms: ``why``): the streamed Monte Carlo with the copula, every
     exceedance with its Wilson 95 % interval; as the error, the distance to the interval's farther end (said
     in ``method``)."""
     import pandas as pd

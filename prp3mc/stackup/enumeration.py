@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import BudgetError
+from ..errors import NoExactYieldError
 from .characteristic import DISCRETE
 
 __all__ = ["all_discrete", "discrete_yield", "MAX_COMBINATIONS", "ENUMERATION_METHOD"]
@@ -60,14 +60,14 @@ def discrete_yield(C: np.ndarray, table, S: float, Z: float | None, levels: np.n
 
     Raises
     ------
-    BudgetError
+    NoExactYieldError
         More than :data:`MAX_COMBINATIONS` combinations.
     """
     terms = np.flatnonzero(table.random)
     offsets, counts = table.par[terms, 0].astype(np.int64), table.par[terms, 1].astype(np.int64)
     M = int(np.prod(counts, dtype=np.float64))
     if M > MAX_COMBINATIONS:
-        raise BudgetError(f"exact yield: budget {budget!r} has only discrete classes (no density) and {M:.3g} "
+        raise NoExactYieldError(f"exact yield: budget {budget!r} has only discrete classes (no density) and {M:.3g} "
                           f"combinations of them, more than the {MAX_COMBINATIONS:.3g} enumerated; use Monte Carlo")
     bound = (M + terms.size) * np.finfo(float).eps
     w = np.ones(1)

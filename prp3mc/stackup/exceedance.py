@@ -11,7 +11,7 @@ import numpy as np
 from scipy import special
 
 from .._threads import cores
-from ..errors import BudgetError, Prp3mcWarning, SpecError
+from ..errors import NoExactYieldError, Prp3mcWarning, SpecError
 from ..kinematics.geometry import Geometry
 from ..model.budget import Budget
 from ..model.linear import linear_model
@@ -118,8 +118,12 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
         A spec or target out of range.
     BudgetError
         A budget with ``[correlation]`` between inputs not all normal (the message names the Monte Carlo
-        fallback, :func:`prp3mc.monte_carlo` with ``tolerance_phi_deg``), whose position has no 2-D
-        density (one leg random), or of discrete classes only with more than 2^20 combinations.
+        fallback, :func:`prp3mc.monte_carlo` with ``tolerance_phi_deg``).
+    NoExactYieldError
+        A budget whose position has no 2-D density (one leg random; legs of discrete classes beside
+        continuous ones), of discrete classes only with more than 2^20 combinations, or whose series needs
+        more than 2^23 terms for the target (a subclass of BudgetError; ``prp3mc yield`` falls back on
+        Monte Carlo).
 
     Returns
     -------
@@ -303,8 +307,8 @@ class _Runner:
                           (3, f"the series needs more than 2^23 terms for the target {self.target:g} (too few "
                               "continuous laws for it): a larger target, or")):
             if np.any(status == code) and not fallback:
-                raise BudgetError(f"exact yield: {what} of budget {self.budget!r} at {int(np.sum(status == code))} "
-                                  f"pose(s): {why}; use Monte Carlo")
+                raise NoExactYieldError(f"exact yield: {what} of budget {self.budget!r} at "
+                                        f"{int(np.sum(status == code))} pose(s): {why}; use Monte Carlo")
         return out
 
 
