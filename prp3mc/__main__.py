@@ -1,4 +1,4 @@
-"""``python -m prp3mc`` runs the command line."""
+"""``python -m prp3mc`` and the ``prp3mc`` console script run the command line (:func:`main`)."""
 
 import os
 import signal
@@ -12,8 +12,18 @@ def _before_the_run(signum, frame):
     os._exit(130 if signum == signal.SIGINT else 143)
 
 
+def main() -> int:
+    """Entry point of the ``prp3mc`` console script and of ``python -m prp3mc``; returns the exit status.
+
+    The handlers of SIGINT and SIGTERM come first, before the command line
+    (numpy and the command's modules, a few tenths of a second) is imported:
+    a signal in that time ends the process with one line, never a traceback.
+    """
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, _before_the_run)
+    from .cli import main as run
+    return run()
+
+
 if __name__ == "__main__":          # not on import (e.g. by the documentation build walking the package)
-    for _signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(_signum, _before_the_run)
-    from .cli import main
     sys.exit(main())

@@ -27,7 +27,7 @@ from .errors import ResourceError
 __all__ = ["Estimate", "available_memory", "check", "montecarlo_estimate", "sobol_estimate",
            "worstcase_estimate", "allocate_estimate", "study_estimate", "discrepancy_estimate", "simulate_estimate",
            "sensitivity_estimate",
-           "format_bytes",
+           "yield_estimate", "plan_estimate", "format_bytes",
            "format_seconds", "MEMORY_MARGIN"]
 
 #: Share of the available memory a request may use.
@@ -47,6 +47,12 @@ _MC_CHUNK_BYTES = 256 << 20
 # Exact worst case: the kept linear model and term bounds per pose (601^2 poses held 331 MiB).
 _WC_BYTES_PER_POSE_TERM = 100
 _WC_BYTES_PER_POSE = 200
+# Exact yield: per pose the linear model's columns, each channel's lattice and results (2.0 KiB per pose at
+# 900 poses with an orientation spec, traced), and the table's row as text or as a JSON object.
+_YIELD_BYTES_PER_POSE = 4096
+# A study keeps, per configuration, the pose errors of every Monte Carlo draw at its histograms' poses
+# (position and |dphi|, float64) for the report's figures.
+_STUDY_BYTES_PER_HISTOGRAM_SAMPLE = 2 * 8
 # Discrepancy workflow: the parametric bootstrap of the tests
 # holds every replicate's samples, features and whitened errors of every row (8 (2d + 8) bytes per
 # replicate, row); the spatial test a few dense (3P)^2 matrices and their product; ISO 9283's predicted
@@ -58,6 +64,10 @@ _DISC_BYTES_FIXED = 64 << 20
 # Simulated campaign: per measurement its drawn inputs, the exact chain's pose, the table's row and its
 # CSV text (180000 rows held 1.3 KiB each at the peak).
 _SIM_BYTES_PER_MEASUREMENT = 2048
+# Campaign plan: per candidate pose and visit its approach directions, the effects' signatures and their
+# information, the planned and reference campaigns (0.63 KiB with one effect, 1.7 KiB with seven, traced at
+# 405 candidates x 100 visits).
+_PLAN_BYTES_PER_CANDIDATE_VISIT = lambda n_effects: 512 + 192 * n_effects  # noqa: E731
 # Sensitivity over a grid: every matrix entry of every pose as a row of the long table and its CSV text
 # (3600 poses held 27 KiB each).
 _SENS_BYTES_PER_POSE = 32 << 10
@@ -173,7 +183,12 @@ def worstcase_estimate(n_poses: int, n_inputs: int) -> Estimate:
     """Memory of :func:`prp3mc.worstcase.envelope.worst_case` over ``n_poses`` poses."""
     n = float(n_poses)
     return Estimate(f"exact worst case at {n_poses} poses",
-                    n * (_WC_BYTES_PER_POSE + _WC_BYTES_PER_POSE_TERM * n_inputs))
+                    n * (_WC_BYTES_PER_POSE + _WC_BYTES_PER_POSE_TERM * n_inputs), "use fewer poses")
+
+
+def yield_estimate(n_poses: int) -> Estimate:
+    """Memory of :func:`prp3mc.stackup.exceedance.exact_yield` over ``n_poses`` poses and its table."""
+    return Estimate(f"exact yield at {n_poses} poses", float(n_poses) * _YIELD_BYTES_PER_POSE, "use fewer poses")
 
 
 def allocate_estimate(n_poses: int, n_inputs: int, n_samples: int = 0) -> Estimate:
@@ -189,10 +204,18 @@ def allocate_estimate(n_poses: int, n_inputs: int, n_samples: int = 0) -> Estima
 def study_estimate(study) -> Estimate:
     """Memory of running a :class:`prp3mc.study.Study` (its analyses, one configuration after another)."""
     d = len(study.budget.factors)
-    n_conf = len(study.configurations) * math.prod(len(entry[-1]) for entry in getattr(study, "sweep", ()))
+    variants = math.prod(len(entry[-1]) for entry in getattr(study, "sweep", ()))   # of each configuration
+    n_conf = len(study.configurations) * variants
     total = worstcase_estimate(n_conf * study.worstcase_grid[0] * study.worstcase_grid[1], d)
+    mc_poses = study.mc_grid[0] * study.mc_grid[1]
     if "montecarlo" in study.outputs:
-        total = total.then(montecarlo_estimate(study.mc_samples, study.mc_grid[0] * study.mc_grid[1], d))
+        histogram_poses = variants * sum(3 if c.poses is None else len(c.poses) for c in study.configurations)
+        kept = Estimate(f"Monte Carlo draws at {histogram_poses} histogram poses",
+                        histogram_poses * float(study.mc_samples) * _STUDY_BYTES_PER_HISTOGRAM_SAMPLE)
+        mc = montecarlo_estimate(study.mc_samples, mc_poses, d)
+        total = total.then(Estimate(f"{mc.what} and the {kept.what}", mc.bytes + kept.bytes))
+    if study.spec is not None and "yield" in study.outputs:
+        total = total.then(yield_estimate(mc_poses))
     if "sobol" in study.outputs:
         n_poses = study.sobol_grid[0] * study.sobol_grid[1]
         total = total.then(sobol_estimate(study.sobol_samples, n_poses, d,
@@ -211,6 +234,12 @@ def simulate_estimate(n_measurements: int) -> Estimate:
     """Memory of :func:`prp3mc.measurement.campaign.simulate.simulate_campaign` and its CSV (``n_measurements`` rows)."""
     return Estimate(f"a simulated campaign of {n_measurements} measurements",
                     float(n_measurements) * _SIM_BYTES_PER_MEASUREMENT, "use fewer poses or visits")
+
+
+def plan_estimate(n_candidates: int, n_visits: int, n_effects: int) -> Estimate:
+    """Memory of :func:`prp3mc.measurement.campaign.plan.plan_campaign` (``n_candidates`` poses to choose from)."""
+    return Estimate(f"a campaign plan of {n_visits} visits of {n_candidates} candidate poses",
+                    float(n_candidates) * n_visits * _PLAN_BYTES_PER_CANDIDATE_VISIT(n_effects), "use fewer visits")
 
 
 def discrepancy_estimate(n_measurements: int, n_poses: int | None = None, max_visits: int | None = None,

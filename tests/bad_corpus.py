@@ -119,6 +119,7 @@ def prepare(root: Path) -> dict:
         # TOML with a BOM
         "g_bom": "\ufeff" + _geometry_text(),
         "b_bom": "\ufeff" + _budget_text(),
+        "b_correlated": _budget_text(extra="[correlation]\n\"theta_1,theta_2\" = 0.5\n"),
         "s_bom": "\ufeff" + 'name = "s"\nseed = 1\n[worstcase]\ngrid = 3\n[[configuration]]\ngeometry = "u-shape"\n',
         "classes_bom": "\ufeff" + 'name = "c"\n[theta]\nclasses = [{ name = "x", catalogue = "guide_angular_play.paper", cost = 1.0 }]\n',
         # budgets silently accepted
@@ -193,6 +194,11 @@ def prepare(root: Path) -> dict:
         "s_sweep_sizes": ('name = "s"\nseed = 1\n[montecarlo]\nsamples = 262144\ngrid = 21\n[[configuration]]\n'
                           'geometry = "u-shape"\n[sweep]\n"leg.3.a_mm" = [' + ", ".join(str(170 + k) for k in range(40))
                           + ']\n"leg.1.c_mm" = [38, 40, 42, 44]\n'),
+        # a sweep of 1000 configurations of small grids: their histograms' draws (48 GB) are what will not fit
+        "s_sweep_histograms": ('name = "s"\nseed = 1\noutputs = ["montecarlo"]\n[worstcase]\ngrid = 3\n[montecarlo]\n'
+                               'samples = 1000000\ngrid = 2\n[[configuration]]\ngeometry = "u-shape"\n'
+                               'region = "u-shape"\n[sweep]\n"leg.3.a_mm" = ['
+                               + ", ".join(f"{200 + k / 100:g}" for k in range(1000)) + ']\n'),
         "s_allocation_big": None,   # filled below (needs the classes file's path)
         "s_sweep_delta_model": None,
         "s_ctrl_name": 'name = "s\\u0001x"\nseed = 1\n[worstcase]\ngrid = 3\n[[configuration]]\ngeometry = "u-shape"\n',
@@ -634,7 +640,17 @@ def second_cases() -> list[Case]:
     add(Case(S, [*y, *P, "--spec-position-um", "0.06"], message="another unit"))
     add(Case(M, [*y, "--pose", "0", "1000", "0", "--spec-position-um", "100"], message="stroke"))
     add(Case(M, [*y, *P, "--spec-position-um", "100", "--spec-phi-arcsec", "-1"], status=(2,), message="> 0"))
-    add(Case(H, [*y, "--region", "u-shape", "--grid", "100000", "--spec-position-um", "100"], message="memory"))
+    # refused by the byte count before anything is allocated (not by a MemoryError on the way): the machine's memory
+    add(Case(H, [*y, "--region", "u-shape", "--grid", "100000", "--spec-position-um", "100"],
+             message="exact yield at 10000000000 poses needs"))
+    add(Case(H, ["yield", *G, "--budget", "{b_correlated}", *P, "--spec-position-um", "100", "--samples",
+                 "1000000000000"], message="Monte Carlo of 1000000000000 samples at 1 pose(s) needs"))
+    add(Case(H, ["yield", *G, "--budget", "{b_correlated}", "--region", "u-shape", "--grid", "100000",
+                 "--spec-position-um", "100"], message="of memory, this machine has"))
+    add(Case(H, ["--max-gb", "0.001", *y, "--region", "u-shape", "--grid", "300", "--spec-position-um", "100"],
+             message="more than --max-gb"))
+    add(Case(H, ["--max-gb", "4", "study", "{s_sweep_histograms}", "--out", "{tmp}/sw"],
+             message="draws at 3000 histogram poses) needs ~45 GiB"))
     add(Case(M, [*y, *P, "--spec-position-um", "100", "--target", "1e-30"], status=(2,), message="[1e-12, 0.01]"))
     add(Case(M, [*y, *P, "--spec-position-um", "100", "--target", "0.5"], status=(2,), message="[1e-12, 0.01]"))
     for spec in ("1e4", "1e9"):        # beyond the worst case (140 µm): P = 0 exactly, was "more than 2^23 terms"
@@ -646,6 +662,8 @@ def second_cases() -> list[Case]:
     add(Case(M, [*al, "--spec-position-um", "80", "--spec-percentile", "99.99999"], message="p99.99999"))
     add(Case(T, ["yield", "--geometry", "{g_parallel}", *B, *P, "--spec-position-um", "100"], message="singular"))
     pl = ["plan", *G, *B, "--poses", "9", "--visits", "2", "--out", "{tmp}/p.csv"]
+    add(Case(H, ["plan", *G, *B, "--effects", "backlash_1", "--poses", "9", "--visits", "1000000000", "--out",
+                 "{tmp}/p.csv"], message="a campaign plan of 1000000000 visits of 405 candidate poses needs"))
     add(Case(M, [*pl, "--effects", "nonsense_1"], message="unknown effect"))
     add(Case(M, [*pl, "--effects", ","], message="at least one effect"))
     add(Case(M, [*pl, "--effects", "cyclic_1"], message="lead_mm"))

@@ -620,11 +620,14 @@ def test_the_time_limit_as_the_folder_lands(tmp_path, monkeypatch):
     import signal as _signal
     import time
 
-    from prp3mc import cli, output
+    import threading
+
+    from prp3mc import _threads, cli, output
     from prp3mc.cli import _stopping_after, _TimeUp
     move = output._move_into_place
     monkeypatch.setitem(cli._SIGNALLED, "decided", False)   # as at the start of a run (an earlier one ended)
     monkeypatch.setitem(output.COMMITTED, "value", False)
+    monkeypatch.setattr(_threads, "_STOP", threading.Event())   # the alarm's stop request stays in this test
 
     def ring_while_moving(tmp, path, force):
         _signal.setitimer(_signal.ITIMER_REAL, 0.01)
@@ -642,3 +645,55 @@ def test_the_time_limit_as_the_folder_lands(tmp_path, monkeypatch):
         with output.output_folder(tmp_path / "stopped") as folder:
             time.sleep(0.2)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["landed"]
+
+
+# ------------------------------------------------------------------ a stop request reaches the worker threads
+def test_a_stop_request_ends_the_worker_threads():
+    """A stop request (the command line's handler of SIGINT, SIGTERM and --max-hours makes one) ends Monte Carlo's
+    worker threads at their next step, which no signal reaches: a run of 10^9 samples raises KeyboardInterrupt
+    soon after it instead of finishing its pass, and the next run, the request cleared, is whole."""
+    import threading
+    import time
+
+    from prp3mc import _threads, monte_carlo
+    g, b = Geometry.from_preset("u-shape"), Budget.from_preset("paper")
+    monte_carlo(g, b, [0.0, 100.0, 0.0], 4096, rng=1)       # the compiled code loaded
+    asked = []
+    timer = threading.Timer(1.0, lambda: asked.append(time.perf_counter()) or _threads.request_stop())
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            monte_carlo(g, b, [0.0, 100.0, 0.0], 10**9, rng=1, workers=2, percentiles=(50.0,))
+        stopped = time.perf_counter()
+    finally:
+        timer.cancel()
+        _threads.clear_stop()
+    assert stopped - asked[0] < 3.0, stopped - asked[0]
+    assert monte_carlo(g, b, [0.0, 100.0, 0.0], 4096, rng=1).n_samples == 4096
+
+
+_EARLY_SIGNAL = """
+import os, signal, sys, time
+class Slow:   # the command line's import is under way when the signal comes
+    def find_spec(self, name, path=None, target=None):
+        if name == "prp3mc.cli":
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(2)
+        return None
+sys.meta_path.insert(0, Slow())
+sys.argv[1:] = ["--version"]
+from {module} import {function}   # what pip's console script does
+sys.exit({function}())
+"""
+
+
+def test_a_signal_while_the_console_script_loads():
+    """The ``prp3mc`` console script's entry point installs its SIGINT handler before it imports the command line
+    (numpy, a few tenths of a second): a Ctrl-C then ends it with one line and exit 130, never a traceback."""
+    import tomllib
+    from pathlib import Path
+    entry = tomllib.loads((Path(__file__).parent.parent / "pyproject.toml").read_text())["project"]["scripts"]["prp3mc"]
+    module, function = entry.split(":")
+    run = subprocess.run([sys.executable, "-c", _EARLY_SIGNAL.format(module=module, function=function)],
+                         capture_output=True, text=True, timeout=60)
+    assert (run.returncode, run.stderr) == (130, "prp3mc: interrupted\n"), run.stderr[-500:]

@@ -90,6 +90,22 @@ def test_same_numbers_for_any_thread_count(workers):
         np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=name)
 
 
+@pytest.mark.parametrize("step", [1, 2])
+def test_same_numbers_in_any_calls_of_the_kernel(monkeypatch, step):
+    """A worker's pass split into compiled calls of ``step`` blocks (between which it sees a stop request)
+    draws the samples of one call: the same numbers to the last bit."""
+    from prp3mc.montecarlo import _stream
+    g = Geometry.from_preset("u-shape")
+    poses, n = [POSE, POSE + [-20.0, 10.0, 1.0]], 5 * SAMPLE_BLOCK + 333
+    monkeypatch.setattr(_stream, "STOP_BLOCKS", 1 << 30)
+    ref = monte_carlo(g, MIXED, poses, n, rng=3, workers=1, tolerance_mm=0.05)
+    monkeypatch.setattr(_stream, "STOP_BLOCKS", step)
+    got = monte_carlo(g, MIXED, poses, n, rng=3, workers=1, tolerance_mm=0.05)
+    for name in ("mean", "cov", "position_pct", "position_pct_ci", "phi_pct", "position_max", "position_mean",
+                 "position_mean_se", "exceed_prob"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=name)
+
+
 @njit
 def _sincos_rows(t):
     s, c = np.empty_like(t), np.empty_like(t)

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .._rng import check_seed
+from .._threads import clear_stop, request_stop
 from .._version import __version__
 from ..errors import OutputExistsError, Prp3mcError, Prp3mcWarning, ResourceError
 from ..limits import Estimate, check, format_bytes, format_seconds
@@ -410,9 +411,11 @@ def build_parser(command: str | None = None, *, listing: bool = False) -> argpar
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``prp3mc`` console script; returns the exit status.
+    """Run the command line ``argv`` (default: the process's own); returns the exit status.
 
-    Without ``argv`` (the process's own command line) a SIGTERM ends the run as Ctrl-C does.
+    The ``prp3mc`` console script and ``python -m prp3mc`` come here through
+    :func:`prp3mc.__main__.main`. Without ``argv`` (the process's own command
+    line) a SIGTERM ends the run as Ctrl-C does.
     """
     if argv is not None:
         return _run(argv)
@@ -421,7 +424,25 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt as exc:  # the signal came as the run's end was being decided: it wrote nothing
         status = _stopped(f"prp3mc {_command_named(sys.argv[1:]) or ''}".strip(), _signum(exc))
     _quiet_exit()
+    if _SIGNALLED["stopped"]:
+        _end_now(status)
     return status
+
+
+def _end_now(status: int) -> None:
+    """End the process of an interrupted run at once, with ``status``.
+
+    The run has unwound (its output folder and locks are gone, its one line
+    printed); what the interpreter would still do is wait for worker threads
+    to finish the step they are in and collect the whole heap, which took
+    2-5 s on a loaded machine after ``prp3mc discrepancy`` and held the
+    user's Ctrl-C for nothing. Forked report renderers end with their parent
+    (:mod:`prp3mc.reports._render`).
+    """
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError, ValueError):
+            stream.flush()
+    os._exit(status)
 
 
 def _input_files(args: argparse.Namespace) -> list[str]:
@@ -445,13 +466,15 @@ def _terminated(signum, frame):
     """
     if COMMITTED["value"] or _SIGNALLED["decided"]:
         return
-    _SIGNALLED["signum"] = signum
+    _SIGNALLED["signum"], _SIGNALLED["stopped"] = signum, True
+    request_stop()      # the worker threads the run waits for as it unwinds end at their next step
     raise _Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
 
 #: The signal that interrupted the current run, if one did: an error raised on the interrupt's way out
-#: (a figure half drawn, a file half written) is reported as the interruption, not as an error of its own.
-_SIGNALLED = {"signum": None, "decided": False}
+#: (a figure half drawn, a file half written) is reported as the interruption, not as an error of its own;
+#: ``stopped``: a signal or the time limit interrupted it (its worker threads were asked to stop).
+_SIGNALLED = {"signum": None, "decided": False, "stopped": False}
 
 
 def _signum(exc: KeyboardInterrupt) -> int:
@@ -487,6 +510,8 @@ def _time_up(signum, frame):
     """The ``--max-hours`` alarm: interrupt the run, unless its output is being installed (see :func:`_terminated`)."""
     if COMMITTED["value"] or _SIGNALLED["decided"]:
         return
+    _SIGNALLED["stopped"] = True
+    request_stop()
     raise _TimeUp()
 
 
@@ -545,7 +570,7 @@ def _run(argv: list[str], own_process: bool = False) -> int:
         sys.stdout.reconfigure(errors="surrogateescape")  # a file name that is not UTF-8 prints as its own bytes
     name = f"prp3mc {args.command}"
     WARNINGS.clear()
-    COMMITTED["value"], _SIGNALLED["signum"], _SIGNALLED["decided"] = False, None, False
+    COMMITTED["value"], _SIGNALLED["signum"], _SIGNALLED["decided"], _SIGNALLED["stopped"] = False, None, False, False
     show = warnings.showwarning
 
     def one_line_warning(message, category, filename, lineno, file=None, line=None):
@@ -569,6 +594,8 @@ def _run(argv: list[str], own_process: bool = False) -> int:
     except BaseException as exc:
         _SIGNALLED["decided"] = True  # from here a signal is let pass (see _terminated)
         return _ended_by(exc, name, args)
+    finally:
+        clear_stop()   # the run's pools have emptied: a caller's next analysis (in process) runs whole
     _SIGNALLED["decided"] = True
     return 0
 

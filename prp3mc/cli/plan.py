@@ -2,9 +2,10 @@
 
 from pathlib import Path
 
+from ..limits import plan_estimate
 from ..output import OutputExistsError
 from . import (add_budget, add_geometry, add_instrument_noise, add_json, add_seed, command, emit_json, finite_float,
-               positive_float, positive_int, probability, provenance)
+               positive_float, positive_int, probability, provenance, within_limits)
 
 
 def effect_list(text: str) -> list[str]:
@@ -48,11 +49,12 @@ class PlanCommand:
     @staticmethod
     def run(args) -> None:
         from ..kinematics.geometry import Geometry, Region
-        from ..measurement.campaign.plan import plan_campaign
+        from ..measurement.campaign.plan import MAX_CANDIDATES, plan_campaign
         from ..model.budget import Budget
         if args.template.exists() and not args.force:
             raise OutputExistsError(f"{args.template} exists: choose another name or pass --force to replace it")
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
+        within_limits(args, plan_estimate(MAX_CANDIDATES, args.visits, len(args.effects)))
         region = None if args.region is None else Region(tuple(args.region[:2]), tuple(args.region[2:]))
         plan = plan_campaign(geometry, budget, args.effects, args.poses, args.visits, minutes=args.minutes,
                              region=region, temperature_C=tuple(args.temperature),

@@ -9,9 +9,10 @@ import numpy as np
 from .._version import __version__
 from ..errors import NoExactYieldError, SpecError
 from ..kinematics.geometry import Geometry
+from ..limits import montecarlo_estimate, yield_estimate
 from ..units import DEG2ARCSEC, MM2UM, PPM
 from . import (add_budget, add_geometry, add_json, add_pose_or_region, add_seed, command, emit_json, emit_table,
-               finite_float, grid_poses, positive_float, positive_int, provenance)
+               finite_float, grid_poses, positive_float, positive_int, provenance, within_limits)
 
 #: prp3mc.stackup.DEFAULT_TARGET and TARGET_RANGE, written out so that --help imports no numba
 #: (tests/test_yield_cli.py checks).
@@ -54,12 +55,17 @@ class YieldCommand:
         from ..stackup.gaussian import exact_refusal
 
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
-        poses, where = grid_poses(args)
+        why = exact_refusal(budget)
+        if why is not None:        # the Monte Carlo fallback (see _correlated)
+            estimate = lambda n: montecarlo_estimate(args.samples, n, len(budget.factors) + 1)  # noqa: E731
+        else:
+            estimate = yield_estimate
+        poses, where = grid_poses(args, estimate)
         if args.region is None:
             check_poses(geometry, poses)
+            within_limits(args, estimate(1))
         check_linearity(geometry, budget, poses)
         specs = {"spec_position_um": args.spec_position_um, "spec_phi_arcsec": args.spec_phi_arcsec}
-        why = exact_refusal(budget)
         if why is not None:
             _correlated(args, geometry, budget, poses, where, why)
             return

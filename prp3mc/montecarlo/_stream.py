@@ -35,6 +35,7 @@ import numpy as np
 from ._kernel import SUB_BINS, TILE, feature_key, padded_features, pose_values, scan_blocks
 from ._select import count_below, order_statistics
 from ._sampler import LANES, draw_features, pcg_lanes, sampler_tables
+from .._threads import check_stop
 from ..model.budget import SAMPLE_BLOCK, Budget
 from ..model.linear import LinearModel
 
@@ -42,6 +43,9 @@ __all__ = ["Stream", "Moments", "pilot_fraction", "select_order_statistics"]
 
 _PILOT_SE = 5.0  # half-width of a pilot window, in pilot standard errors of the quantile
 _F32_INF = np.float32(np.inf)
+#: Sample blocks per compiled call of a worker's pass: between calls it sees a stop request (a fraction of a
+#: second of work; the calls carry the sampler's state on, so the samples are those of one call).
+STOP_BLOCKS = 16
 
 
 @dataclass(frozen=True)
@@ -154,11 +158,14 @@ class Stream:
                    "sub": np.zeros(win.shape + (SUB_BINS,), np.int64), "buf": np.empty(win.size[w], np.float32),
                    "vmax": np.zeros((P, 2), np.float32), "exceed": np.zeros((P, 3), np.int64)}
             lanes, consts = self.worker_lanes[w]
+            lanes = lanes.copy()                  # each call leaves them at its last block's end
             blocks = self.worker_blocks[w]
-            ranges = [(blocks.start, blocks.stop, np.zeros((0, nF)))] if self.fused else \
-                [(k, k + 1, self.features(k)) for k in blocks]
+            ranges = ((k, min(blocks.stop, k + STOP_BLOCKS), np.zeros((0, nF)))
+                      for k in range(blocks.start, blocks.stop, STOP_BLOCKS)) if self.fused else \
+                ((k, k + 1, self.features(k)) for k in blocks)
             for k0, k1, Fext in ranges:
-                scan_blocks(k0, k1, self.n, lanes.copy(), consts, *self.tables, Fext, C32, key, self.shift,
+                check_stop()
+                scan_blocks(k0, k1, self.n, lanes, consts, *self.tables, Fext, C32, key, self.shift,
                             self.block_segs, self.seg_start, self.seg_stop, with_sums, S1, S2, tol32, main,
                             win.lo, win.hi, win.nwin, win.edges, win.off[w], win.cap[w], acc["below"],
                             acc["inside"], acc["sub"], acc["buf"], acc["vmax"], possum, acc["exceed"])

@@ -38,7 +38,7 @@ import pandas as pd
 
 from .._result import freeze, interval_frame, name_columns, short_repr
 from .._rng import MAX_SEED, child_seed, resolve_rng
-from .._threads import cores, single_threaded_blas
+from .._threads import check_stop, cores, single_threaded_blas
 from .._version import __version__
 from ..errors import BudgetError, ParameterError, Prp3mcWarning
 from ..kinematics.geometry import Geometry
@@ -345,6 +345,7 @@ def _sobol_replicates(budget, model, factors, outputs, n_rep, replicates, seed, 
         return (*combine_replicates(S1, conf_level), *combine_replicates(ST, conf_level))
 
     def work(start: int) -> int:
+        check_stop()
         sl = slice(start, min(n_poses, start + chunk))
         p = sl.stop - sl.start
         if linear:

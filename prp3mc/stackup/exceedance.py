@@ -10,7 +10,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from scipy import special
 
-from .._threads import cores
+from .._threads import check_stop, cores
 from ..errors import NoExactYieldError, Prp3mcWarning, SpecError
 from ..kinematics.geometry import Geometry
 from ..model.budget import Budget
@@ -298,7 +298,7 @@ class _Runner:
             batch_series(0, N, *args)
         else:
             with ThreadPoolExecutor(max_workers=self.workers) as pool:
-                list(pool.map(lambda s: batch_series(s, min(N, s + _CHUNK), *args), starts))
+                list(pool.map(lambda s: check_stop() or batch_series(s, min(N, s + _CHUNK), *args), starts))
         p, b, n, status = out[:4]
         p[sure], b[sure] = 1.0, ch.alias[sure]
         n[skip], status[skip] = 0, 0

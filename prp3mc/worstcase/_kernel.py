@@ -31,7 +31,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from numba import literal_unroll, njit
 
-from .._threads import cores
+from .._threads import check_stop, cores
 from ..kinematics.chain import DEFAULT_LIMITS, Limits
 from ..kinematics.geometry import Geometry
 from ..kinematics.formulas import (
@@ -299,7 +299,7 @@ def envelope_kernel(poses, legc, terms, check, values, codes, bad, workers=None)
     workers = workers or cores()
     chunk = min(CHUNK, -(-N // workers))
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        return sum(pool.map(lambda a: _range(a, min(N, a + chunk), *args), range(0, N, chunk)))
+        return sum(pool.map(lambda a: check_stop() or _range(a, min(N, a + chunk), *args), range(0, N, chunk)))
 
 
 @njit(nogil=True, cache=True, error_model="numpy")

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from .._threads import cores
+from .._threads import check_stop, cores
 from .._result import FrozenDict, freeze, pose_columns, short_repr
 from .._version import __version__
 from ..errors import InfeasiblePoseError
@@ -332,6 +332,7 @@ def worst_case(geometry: "Geometry | str", budget: "Budget | str", poses, *, k_s
     flat = poses.reshape(-1, 3) if poses.ndim > 1 else poses[None]
 
     def run(sl: slice):
+        check_stop()
         model = linear_model(geometry, budget, flat[sl], check=check)
         tb = term_bounds(model, bounds)
         values, signs = _maxima(model, tb)

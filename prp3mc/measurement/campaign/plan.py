@@ -68,12 +68,14 @@ from ..forward.prediction import noise_cov
 from .simulate import visit_times
 from ..discrepancy.updated import base_name
 
-__all__ = ["CampaignPlan", "plan_campaign", "PHI_CANDIDATES_DEG", "N_ORDERS"]
+__all__ = ["CampaignPlan", "plan_campaign", "PHI_CANDIDATES_DEG", "MAX_CANDIDATES", "N_ORDERS"]
 
 #: Orientations of the candidate poses, deg.
 PHI_CANDIDATES_DEG = (-5.0, -2.5, 0.0, 2.5, 5.0)
 #: Candidate positions per side of the region.
 _GRID = 9
+#: Most candidate poses (those of the grid the geometry reaches are kept).
+MAX_CANDIDATES = _GRID ** 2 * len(PHI_CANDIDATES_DEG)
 #: Random visit orders compared.
 N_ORDERS = 24
 _RIDGE = 1e-10

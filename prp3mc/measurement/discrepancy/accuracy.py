@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..._rng import child_seed
+from ..._threads import check_stop
 from ...kinematics.chain import feasible
 from ...kinematics.geometry import REGION_PRESETS, Geometry, Region
 from ...model.budget import Budget
@@ -102,6 +103,7 @@ def predicted_accuracy(geometry: Geometry, budget: Budget, model: UpdatedModel, 
              "compensated": (model.geometry, model.compensated)}
     figures: list = []                       # (what the analyses read of a model, its figures)
     for label, (g, b) in pairs.items():
+        check_stop()                         # on a thread of its own (prp3mc.measurement.discrepancy.workflow)
         key = _content(g, b)
         known = next((f for k, f in figures if k == key), None)   # models that differ in names only: once
         if known is None:
