@@ -12,6 +12,7 @@ __all__ = [
     "InfeasiblePoseError",
     "ConvergenceError",
     "BudgetError",
+    "NoExactYieldError",
     "StudyError",
     "CampaignError",
     "AllocationError",
@@ -59,6 +60,11 @@ class ConvergenceError(Prp3mcError, RuntimeError):
 
 class BudgetError(Prp3mcError, ValueError):
     """An error budget names an unknown input or an impossible law."""
+
+
+class NoExactYieldError(BudgetError):
+    """The exact yield cannot serve this budget (no density its series can sum, or too many classes to
+    enumerate); Monte Carlo can (``prp3mc yield`` falls back on it)."""
 
 
 class StudyError(Prp3mcError, ValueError):

@@ -659,6 +659,11 @@ def second_cases() -> list[Case]:
              message="more than --max-gb"))
     add(Case(H, ["--max-gb", "4", "study", "{s_sweep_histograms}", "--out", "{tmp}/sw"],
              message="draws at 3000 histogram poses) needs ~45 GiB"))
+    add(Case(M, [*y, *P, "--spec-position-um", "100", "--target", "1e-30"], status=(2,), message="[1e-12, 0.01]"))
+    add(Case(M, [*y, *P, "--spec-position-um", "100", "--target", "0.5"], status=(2,), message="[1e-12, 0.01]"))
+    for spec in ("1e4", "1e9"):        # beyond the worst case (140 µm): P = 0 exactly, was "more than 2^23 terms"
+        add(Case(M, [*y, *P, "--spec-position-um", spec, "--spec-phi-arcsec", spec, "--json"], expect="accept",
+                 slow=True))
     al = ["allocate", *G, "--region", "u-shape", "--classes", "example", "--grid", "2", "--json"]
     add(Case(S, [*al, "--spec-position-um", "0.08"], expect="accept", warning="below 1 µm"))
     add(Case(S, [*al, "--spec-position-um", "80", "--spec-phi-arcsec", "0.03"], expect="accept", warning="below 1 arcsec"))

@@ -251,3 +251,16 @@ def test_correlated_normal_budget_gets_the_exact_yield(tmp_path):
     np.testing.assert_array_equal(c.yield_.exceed_position, direct.exceed_position)
     how = build_summary(result)["correlation"]["analyses"]["yield"]
     assert how["respects"] and how["how"].startswith("exact")
+
+
+def test_a_spec_beyond_the_worst_case_runs_and_yields_zero(tmp_path):
+    """position_um = 1e5 (the worst case is ~150 µm): the study ran into "more than 2^23 terms"; now every
+    pose's exceedance is 0 with bound 0, and the quantiles equal those of a spec inside the support."""
+    study = Study.from_text(_text("[spec]\nposition_um = 1e5\nphi_arcsec = 1e5\n"), source=str(tmp_path / "s.toml"))
+    c = run_study(study, progress=False)["u-shape"]
+    for output in ("position", "phi", "any"):
+        assert np.all(c.yield_.exceedance(output) == 0.0) and np.all(c.yield_.bound(output) == 0.0)
+    inside = exact_yield("u-shape", study.budget, c.yield_.poses, spec_position_um=100.0,
+                         quantiles=c.yield_.quantile_position_mm is not None)
+    if inside.quantile_position_mm is not None:
+        np.testing.assert_array_equal(c.yield_.quantile_position_mm, inside.quantile_position_mm)

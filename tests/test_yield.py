@@ -20,7 +20,7 @@ import pytest
 from numba import njit
 
 from prp3mc import Geometry, Region, exact_yield, monte_carlo
-from prp3mc.errors import SpecError
+from prp3mc.errors import BudgetError, SpecError
 from prp3mc.model.budget import Budget
 from prp3mc.model.effects import SystematicEffect
 from prp3mc.model.laws import Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
@@ -316,6 +316,8 @@ def test_bad_specs_are_refused_in_one_line():
         exact_yield("u-shape", "paper", [0.0, 100.0, 0.0], spec_position_um=60.0, spec_phi_arcsec=-1.0)
     with pytest.raises(SpecError, match="target"):
         exact_yield("u-shape", "paper", [0.0, 100.0, 0.0], spec_position_um=60.0, target=0.5)
+    with pytest.raises(SpecError, match=r"target must be a probability in \[1e-12, 0.01\].*1e-30"):
+        exact_yield("u-shape", "paper", [0.0, 100.0, 0.0], spec_position_um=60.0, target=1e-30)
 
 
 def test_result_frame_and_record_carry_the_spec_figures():
@@ -382,3 +384,89 @@ def test_pose_record_of_a_batch_needs_the_index_of_one_pose(index):
     with pytest.raises(ParameterError, match=r"one pose of the batch \(3, 3\)"):
         r.pose_record(index)
     assert r.pose_record((1, 1))["exceed_position_ppm"] == pytest.approx(1e6 * float(r.exceed_position[1, 1]))
+
+
+# ------------------------------------------------------------------ specs beyond the support
+
+@pytest.mark.parametrize("which", ["paper", "ot"])
+def test_a_spec_beyond_the_worst_case_is_zero_and_leaves_the_quantiles_alone(which):
+    """S and Z from 1e3 to 1e9 (µm, arcsec): no series sized by the spec (it used to need more than 2^23 terms
+    or find "no density"); P = 0 with bound 0 on bounded laws, 0 within the normal laws' cut mass (<= the
+    target) otherwise; the quantiles bit-identical to a run with a spec inside the support."""
+    budget = Budget.load("paper") if which == "paper" else ot_budget()
+    pose = [0.0, 100.0, 0.0]
+    inside = exact_yield("u-shape", budget, pose, spec_position_um=50.0, spec_phi_arcsec=50.0)
+    for spec in (1e3, 1e4, 1e6, 1e9):
+        r = exact_yield("u-shape", budget, pose, spec_position_um=spec, spec_phi_arcsec=spec)
+        for output in OUTPUTS:
+            assert float(r.exceedance(output)) == 0.0
+            assert 0.0 <= float(r.bound(output)) <= (0.0 if which == "paper" else 2e-2 * r.target)   # any: both cuts
+        assert not bool(r.bracketed_any)
+        np.testing.assert_array_equal(r.quantile_position_mm, inside.quantile_position_mm)
+        np.testing.assert_array_equal(r.quantile_phi_deg, inside.quantile_phi_deg)
+        np.testing.assert_array_equal(r.quantile_position_err_mm, inside.quantile_position_err_mm)
+        assert int(r.lattice_points["position"]) == int(inside.lattice_points["position"])
+
+
+def test_the_exceedance_falls_to_zero_across_the_support_edge():
+    """Monotone in S through the worst case W: P(> S) within its bound non-increasing, 0 from W on, and one
+    channel beyond its support makes P(either) the other channel's exceedance."""
+    pose = [0.0, 100.0, 0.0]
+    W = MM2UM * float(exact_yield("u-shape", "paper", pose, spec_position_um=100.0,
+                                  quantiles=False).worst_position_mm)
+    specs = [0.9 * W, 0.97 * W, 0.995 * W, W * (1 - 1e-9), W * (1 + 1e-9), 1.01 * W, 10 * W]
+    r = [exact_yield("u-shape", "paper", pose, spec_position_um=s, spec_phi_arcsec=40.0, quantiles=False)
+         for s in specs]
+    p = np.array([float(x.exceed_position) for x in r])
+    b = np.array([float(x.bound_position) for x in r])
+    assert np.all(np.diff(p) <= b[:-1] + b[1:]) and p[0] > 0
+    assert np.all(p[4:] == 0.0) and np.all(b[4:] == 0.0)
+    for x in r[4:]:
+        assert float(x.exceed_any) == float(x.exceed_phi) and float(x.bound_any) == float(x.bound_phi)
+        assert not bool(x.bracketed_any)
+
+
+# ------------------------------------------------------------------ discrete classes only: enumeration
+
+def classes_budget() -> Budget:
+    return Budget({f"theta_{i}": Discrete((-0.04, 0.0, 0.04), (0.25, 0.5, 0.25)) for i in (1, 2, 3)}
+                  | {f"b_{i}": Discrete((0.0, 0.01, 0.025), (0.3, 0.4, 0.3)) for i in (1, 2, 3)}
+                  | {"a_1": Discrete((-0.01, 0.02), (0.5, 0.5))}, name="classes")
+
+
+def test_a_budget_of_discrete_classes_is_exact_by_enumeration():
+    """Every input a class: no density (it was refused "use Monte Carlo"); the pose error takes 3^6 x 2 values,
+    and the exceedances, quantiles and worst cases equal a brute-force sum over them (itertools, from the
+    linear model's columns and laws), bound ~1e-13."""
+    from itertools import product
+    budget = classes_budget()
+    poses = np.array([[0.0, 100.0, 0.0], [10.0, 120.0, 2.0]])
+    S, Z = 0.06, 60.0 * ARCSEC
+    r = exact_yield("u-shape", budget, poses, spec_position_um=MM2UM * S, spec_phi_arcsec=60.0)
+    assert r.error_bound.max() < 1e-12 and not np.any(r.bracketed_any)
+    model = linear_model(Geometry.from_preset("u-shape"), budget, poses)
+    laws = [(t, tl) for t, tl in enumerate(model.term_laws) if tl.law is not None and tl.kind == "factor"]
+    assert all(isinstance(tl.law, Discrete) for _, tl in laws)
+    for n in range(2):
+        c = model.columns.reshape(-1, 3, len(model.terms))[n]
+        ys, ws = [], []
+        for combo in product(*[list(zip(tl.law.values, tl.law.weights)) for _, tl in laws]):
+            ys.append(sum(c[:, t] * (v - tl.reference) for (t, tl), (v, _) in zip(laws, combo)))
+            ws.append(math.prod(w for _, w in combo))
+        ys, ws = np.array(ys), np.array(ws)
+        pos, phi = np.hypot(ys[:, 0], ys[:, 1]), np.abs(ys[:, 2])
+        assert abs(r.exceed_position[n] - ws[pos > S].sum()) <= r.bound_position[n]
+        assert abs(r.exceed_phi[n] - ws[phi > Z].sum()) <= r.bound_phi[n]
+        assert abs(r.exceed_any[n] - ws[(pos > S) | (phi > Z)].sum()) <= r.bound_any[n]
+        assert r.worst_position_mm[n] == pytest.approx(pos.max(), rel=1e-12)
+        order = np.argsort(pos)
+        for level, q in zip(QUANTILE_LEVELS, r.quantile_position_mm[n]):
+            k = np.searchsorted(np.cumsum(ws[order]), level / 100 - 1e-12)
+            assert q == pytest.approx(pos[order][k], rel=1e-12)
+
+
+def test_too_many_classes_are_refused_in_one_line():
+    budget = Budget({f"{p}_{i}": Discrete(tuple(np.linspace(-0.01, 0.01, 11)), (1 / 11,) * 11)
+                     for p in ("theta", "b") for i in (1, 2, 3)}, name="many")
+    with pytest.raises(BudgetError, match="combinations.*Monte Carlo"):
+        exact_yield("u-shape", budget, [0.0, 100.0, 0.0], spec_position_um=60.0)

@@ -170,4 +170,44 @@ def test_the_command_default_target_is_the_engine_s():
 
     from prp3mc.stackup import DEFAULT_TARGET
 
-    assert importlib.import_module("prp3mc.cli.yield").DEFAULT_TARGET == DEFAULT_TARGET
+    from prp3mc.stackup.exceedance import TARGET_RANGE
+
+    cli = importlib.import_module("prp3mc.cli.yield")
+    assert cli.DEFAULT_TARGET == DEFAULT_TARGET and cli.TARGET_RANGE == TARGET_RANGE
+
+
+def test_a_spec_beyond_the_worst_case_answers_zero(capsys):
+    """1e4 µm against a worst case of 140 µm: P = 0 with bound 0 (it was refused: more than 2^23 terms)."""
+    code, out, err = run(capsys, "--pose", "0", "100", "0", "--spec-position-um", "1e4", "--spec-phi-arcsec", "1e9",
+                         "--json")
+    assert code == 0, err
+    rec = json.loads(out)
+    assert rec["exceed_position_ppm"] == rec["exceed_phi_ppm"] == rec["exceed_any_ppm"] == 0.0
+    assert rec["error_bound_ppm"] == 0.0
+
+
+@pytest.mark.parametrize("target", ["1e-30", "0.5"])
+def test_the_target_range_is_the_engine_s(capsys, target):
+    try:
+        code = main(["yield", "--geometry", "u-shape", "--budget", "paper", *POSE, "--spec-position-um", "100",
+                     "--target", target])
+    except SystemExit as exit_:
+        code = exit_.code
+    err = capsys.readouterr().err
+    assert code == 2 and "[1e-12, 0.01]" in err and target in err
+
+
+def test_a_budget_without_a_density_falls_back_on_monte_carlo(capsys, tmp_path):
+    """One leg random (a disc clearance): no 2-D density, so no exact yield (NoExactYieldError); the command
+    falls back on Monte Carlo as for correlated laws and says why (it used to exit 1, "use Monte Carlo")."""
+    from prp3mc.model.laws import Disc, Uniform
+
+    path = tmp_path / "alone.toml"
+    Budget({"rho_1": Disc(0.01), "zeta_1": Uniform(0.0, 360.0)}, name="disc alone").to_toml(path)
+    code = main(["yield", "--geometry", "u-shape", "--budget", str(path), *POSE, "--spec-position-um", "8",
+                 "--samples", "20000", "--seed", "3", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    rec = json.loads(out)
+    assert rec["method"].startswith("Monte Carlo") and "no density" in rec["method"]
+    assert rec["inputs"]["samples"] == 20000 and 0.0 <= rec["exceed_position_ppm"] <= 1e6

@@ -1,26 +1,29 @@
 """``prp3mc yield``: the exact yield of the linear model against a position (and orientation) spec (SPEC §9)."""
 
+import argparse
 import sys
 import warnings
 
 import numpy as np
 
 from .._version import __version__
-from ..errors import Prp3mcWarning, SpecError
+from ..errors import NoExactYieldError, Prp3mcWarning, SpecError
 from ..kinematics.geometry import Geometry
 from ..limits import montecarlo_estimate, yield_estimate
 from ..units import DEG2ARCSEC, MM2UM, PPM
 from . import (add_budget, add_geometry, add_json, add_pose_or_region, add_seed, command, emit_json, emit_table,
-               grid_poses, positive_float, positive_int, probability, provenance, within_limits)
+               finite_float, grid_poses, positive_float, positive_int, provenance, within_limits)
 
-#: prp3mc.stackup.DEFAULT_TARGET, written out so that --help imports no numba (tests/test_yield_cli.py checks).
+#: prp3mc.stackup.DEFAULT_TARGET and TARGET_RANGE, written out so that --help imports no numba
+#: (tests/test_yield_cli.py checks).
 DEFAULT_TARGET = 1e-9
+TARGET_RANGE = (1e-12, 1e-2)
 #: A spec this many times below the error's RSS scale is refused (a value in mm typed as µm, or the like).
 _SCALE = 1e-3
-_MC_METHOD = ("Monte Carlo of the linear model with the budget's Gaussian copula (the streamed sampler): every "
-              "exceedance with its Wilson 95 % interval (ci95_ppm); error_bound = the largest distance from an "
-              "exceedance to the farther end of its interval (a confidence statement, not a bound); quantiles are "
-              "sample percentiles")
+_MC_METHOD = ("Monte Carlo of the linear model with the budget's Gaussian copula, if any (the streamed sampler): "
+              "every exceedance with its Wilson 95 % interval (ci95_ppm); error_bound = the largest distance from "
+              "an exceedance to the farther end of its interval (a confidence statement, not a bound); quantiles "
+              "are sample percentiles")
 
 
 @command("yield", "exact yield of the linear model against a position (and orientation) spec, without sampling")
@@ -34,8 +37,9 @@ class YieldCommand:
                        help="the position error |(dx, dy)| must stay within S µm")
         p.add_argument("--spec-phi-arcsec", type=positive_float, default=None, metavar="Z",
                        help="|dphi| must stay within Z arcsec")
-        p.add_argument("--target", type=probability, default=DEFAULT_TARGET, metavar="E",
-                       help=f"bound of every probability's absolute error (default {DEFAULT_TARGET:g})")
+        p.add_argument("--target", type=_target, default=DEFAULT_TARGET, metavar="E",
+                       help=f"bound of every probability's absolute error, in [{TARGET_RANGE[0]:g}, "
+                            f"{TARGET_RANGE[1]:g}] (default {DEFAULT_TARGET:g})")
         p.add_argument("--samples", type=positive_int, default=10_000_000, metavar="N",
                        help="samples of the Monte Carlo fallback for a budget that correlates inputs not all normal "
                             "(default 1e7)")
@@ -67,7 +71,12 @@ class YieldCommand:
             return
         with warnings.catch_warnings(record=True) as caught:    # a spec in the wrong unit: one line, not two
             warnings.simplefilter("always")
-            over = exact_yield(geometry, budget, poses, quantiles=args.region is None, target=args.target, **specs)
+            try:
+                over = exact_yield(geometry, budget, poses, quantiles=args.region is None, target=args.target,
+                                   **specs)
+            except NoExactYieldError as exc:                     # no density, too many classes or terms
+                _correlated(args, geometry, budget, poses, where, str(exc).removeprefix("exact yield: "))
+                return
         _check_scale(args, over)
         for w in caught:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
@@ -90,6 +99,16 @@ class YieldCommand:
             emit_json({**record, **provenance(args, geometry, budget, **inputs)})
             return
         print("\n".join(_text(args, geometry, budget, poses[0], over, record, None)))
+
+
+def _target(text: str) -> float:
+    """``--target``: a probability in :data:`TARGET_RANGE` (below it floating point alone exceeds the target)."""
+    value = finite_float(text)
+    lo, hi = TARGET_RANGE
+    if not lo <= value <= hi:
+        raise argparse.ArgumentTypeError(f"expected a target in [{lo:g}, {hi:g}] (below {lo:g} floating point "
+                                         f"alone exceeds it), got {text!r}")
+    return value
 
 
 def _check_scale(args, r) -> None:
@@ -122,7 +141,8 @@ def _pose_frame(r) -> "pd.DataFrame":
 
 
 def _correlated(args, geometry, budget, poses, where, why: str) -> None:
-    """A budget whose correlated inputs are not all normal: the streamed Monte Carlo with the copula, every
+    """A budget the exact yield cannot serve (correlated inputs not all normal; no density, too many classes
+    or terms: ``why``): the streamed Monte Carlo with the copula, every
     exceedance with its Wilson 95 % interval; as the error, the distance to the interval's farther end (said
     in ``method``)."""
     import pandas as pd

@@ -10,6 +10,8 @@ has; this package inverts them with a guaranteed error bound:
   P(position > S), P(``|dphi|`` > Z), P(either) and the quantiles, per pose;
 - :mod:`~prp3mc.stackup.result` — :class:`YieldResult`, the Ppk of an exceedance, the quantiles' levels
   (:data:`~prp3mc.stackup.result.QUANTILE_LEVELS`) and the outputs' names;
+- :mod:`~prp3mc.stackup.enumeration` — a budget of discrete classes only (no density): its finitely many
+  values enumerated;
 - :mod:`~prp3mc.stackup.gaussian` — correlated normal inputs made independent terms of the same joint
   law (and why other correlated laws are refused);
 - :mod:`~prp3mc.stackup.characteristic` — each law's characteristic function and

@@ -11,7 +11,7 @@ import numpy as np
 from scipy import special
 
 from .._threads import check_stop, cores
-from ..errors import BudgetError, Prp3mcWarning, SpecError
+from ..errors import NoExactYieldError, Prp3mcWarning, SpecError
 from ..kinematics.chain import as_poses
 from ..kinematics.geometry import Geometry
 from ..model.budget import Budget
@@ -19,15 +19,20 @@ from ..model.linear import linear_model
 from ..units import DEG2ARCSEC, DEG2RAD, MM2UM, RAD2DEG
 from ._special import special_args
 from .characteristic import term_table
+from .enumeration import ENUMERATION_METHOD, all_discrete, discrete_yield
 from .gaussian import gaussian_terms
 from .lattice import LEVELS, channel, leg_powers, support_max
 from .result import QUANTILE_LEVELS, YieldResult
 from .series import batch_series
 
-__all__ = ["exact_yield", "METHOD", "DEFAULT_TARGET"]
+__all__ = ["exact_yield", "METHOD", "DEFAULT_TARGET", "TARGET_RANGE"]
 
 #: Default bound of the absolute error of every probability: 1e-9 (1e-3 ppm).
 DEFAULT_TARGET = 1e-9
+#: The targets taken: below 1e-12 the floating-point share of the bound (1e-13 per coefficient) alone exceeds
+#: the target (the paper's budget: 4e-12 at 1e-12, so the bound misses it with a warning); above 1e-2 it bounds
+#: nothing a yield needs.
+TARGET_RANGE = (1e-12, 1e-2)
 METHOD = ("exact distribution of the linear model: Fourier series of its characteristic function (the "
           "product of the terms' closed forms) on a lattice whose periods keep the support off the spec's "
           "region, truncated with a rigorous bound (decreasing envelopes of every term, analytic tails); "
@@ -68,7 +73,8 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     each, one temperature uniform over its range). Every law prp3mc has is
     exact: uniform, normal, truncated normal, triangular, discrete classes,
     and the clearance rho cos(zeta - omega) with any radius law (the contact
-    angle uniform over whole turns).
+    angle uniform over whole turns). A budget of discrete classes only has no
+    density: its finitely many values are enumerated (:mod:`.enumeration`).
 
     Method (:mod:`prp3mc.stackup`): P(Y in D) for a channel Y of the pose
     error (dphi, the position, or both) and its spec region D (an interval, a
@@ -102,7 +108,8 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     quantiles : bool
         Compute the quantiles too (the most time-consuming part on grids).
     target : float
-        Bound of the absolute error of every probability (default 1e-9, i.e. 1e-3 ppm); in (0, 1e-2].
+        Bound of the absolute error of every probability (default 1e-9, i.e. 1e-3 ppm); in [1e-12, 1e-2]
+        (:data:`TARGET_RANGE`).
     workers : int, optional
         Threads (default: the CPU count).
 
@@ -112,8 +119,12 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
         A spec or target out of range.
     BudgetError
         A budget with ``[correlation]`` between inputs not all normal (the message names the Monte Carlo
-        fallback, :func:`prp3mc.monte_carlo` with ``tolerance_phi_deg``), or whose position has no 2-D
-        density (one leg random).
+        fallback, :func:`prp3mc.monte_carlo` with ``tolerance_phi_deg``).
+    NoExactYieldError
+        A budget whose position has no 2-D density (one leg random; legs of discrete classes beside
+        continuous ones), of discrete classes only with more than 2^20 combinations, or whose series needs
+        more than 2^23 terms for the target (a subclass of BudgetError; ``prp3mc yield`` falls back on
+        Monte Carlo).
 
     Returns
     -------
@@ -129,8 +140,10 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     t0 = time.perf_counter()
     S_um = _spec("spec_position_um", spec_position_um, "µm", "mm", MM2UM)
     Z_as = None if spec_phi_arcsec is None else _spec("spec_phi_arcsec", spec_phi_arcsec, "arcsec", "deg", DEG2ARCSEC)
-    if not (isinstance(target, (int, float)) and 0 < target <= 1e-2):
-        raise SpecError(f"target must be a probability in (0, 1e-2], got {target!r}")
+    lo, hi = TARGET_RANGE
+    if isinstance(target, bool) or not isinstance(target, (int, float)) or not lo <= target <= hi:
+        raise SpecError(f"target must be a probability in [{lo:g}, {hi:g}] (below {lo:g} floating point alone "
+                        f"exceeds it), got {target!r}")
     geometry, budget = Geometry.load(geometry), Budget.load(budget)
     model = linear_model(geometry, budget, as_poses(poses, nonempty=True))
     shape = model.poses.shape[:-1]
@@ -147,31 +160,28 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     S, Z = S_um / MM2UM, (None if Z_as is None else Z_as / DEG2ARCSEC * DEG2RAD)
     legs = np.array(legs)
     levels = np.array(LEVELS if quantiles else (), dtype=float)
+    if all_discrete(table):
+        return _enumerated(model, shape, C, table, S, Z, levels, budget, target, t0)
     mean, cov = _moments(C, table)
     run = _Runner(table, workers, target, budget.name)
 
     # position
-    z1 = np.full(N, S)
-    pos = channel("position", C, Ainv, legs, table, z1, alias_one=share)
-    if quantiles:
-        z1 = np.maximum(z1, pos.zmax)
-        pos = channel("position", C, Ainv, legs, table, z1, alias_one=share)
+    pos, z1, zs, sure_pos = _sized("position", C, Ainv, legs, table, share, np.full(N, S), quantiles)
     lam2 = np.linalg.eigvalsh(cov[:, :2, :2])[:, -1]
     z0 = np.hypot(mean[:, 0], mean[:, 1])[:, None] + np.sqrt(-2.0 * np.log1p(-levels) * lam2[:, None])
-    p_pos, b_pos, n_pos, s_pos, q_pos, qe_pos = run(pos, z1, np.zeros(N), np.full(N, S), levels, z0,
-                                                    "the position error")
+    p_pos, b_pos, n_pos, s_pos, q_pos, qe_pos = run(pos, z1, np.zeros(N), zs, levels, z0, "the position error",
+                                                    sure=sure_pos)
     # orientation
     p_phi = b_phi = q_phi = qe_phi = None
     n_phi = np.zeros(N, np.int64)
     phi = None
+    sure_phi = np.zeros(N, dtype=bool)
     if quantiles or Z is not None:
-        zs = np.full(N, Z if Z is not None else 0.0)
-        phi = channel("phi", C, Ainv, legs, table, zs, alias_one=share)
-        z1 = np.maximum(zs, phi.zmax) if quantiles else zs
-        phi = channel("phi", C, Ainv, legs, table, z1, alias_one=share)
+        phi, z1, zs, sure_phi = _sized("phi", C, Ainv, legs, table, share, np.full(N, Z if Z is not None else 0.0),
+                                       quantiles)
         z0 = np.abs(mean[:, 2])[:, None] + np.sqrt(cov[:, 2, 2])[:, None] * special.ndtri(0.5 + 0.5 * levels)
-        p_phi, b_phi, n_phi, s_phi, q_phi, qe_phi = run(phi, z1, np.zeros(N), np.where(zs > 0, zs, z1), levels, z0,
-                                                        "|dphi|")
+        p_phi, b_phi, n_phi, s_phi, q_phi, qe_phi = run(phi, z1, np.zeros(N), zs, levels, z0, "|dphi|",
+                                                        sure=sure_phi)
     e_pos = np.clip(1.0 - p_pos, 0.0, 1.0)
     e_phi = None if Z is None else np.clip(1.0 - p_phi, 0.0, 1.0)
     # either: the joint series where it converges; else the bracket [max(P_pos, P_phi), P_pos + P_phi]
@@ -180,7 +190,8 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     if Z is None:
         e_any, b_any = e_pos, b_pos
     else:
-        e_any, b_any, n_any, bracketed = _either(run, C, Ainv, legs, table, share, S, Z, e_pos, b_pos, e_phi, b_phi)
+        e_any, b_any, n_any, bracketed = _either(run, C, Ainv, legs, table, share, S, Z, e_pos, b_pos, e_phi, b_phi,
+                                                  sure_pos | sure_phi)
     above = np.maximum(b_pos, b_phi if b_phi is not None else 0.0) > target
     if np.any(above):
         warnings.warn(Prp3mcWarning(
@@ -218,6 +229,47 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
         wall_time_s=time.perf_counter() - t0)
 
 
+def _sized(which: str, C, Ainv, legs, table, share: float, spec: np.ndarray, quantiles: bool):
+    """Channel ``which`` with its lattice sized for the spec (N,) (0: none, the quantiles alone) and, with
+    ``quantiles``, for the support's maximum. A spec at or above that maximum is *sure* (P(``|Y|`` > spec) is 0,
+    but for the normal laws' mass past their cut): its lattice is sized by the support alone, not by the
+    spec, which may be any size. Returns (channel, z1 the largest radius served, zs the radius the
+    series evaluates (<= z1), sure (N,))."""
+    ch = channel(which, C, Ainv, legs, table, spec, alias_one=share)
+    sure = (spec > 0) & (spec >= ch.zmax * (1 + 1e-12))
+    z1 = np.where(sure, ch.zmax, np.maximum(spec, ch.zmax) if quantiles else spec)
+    if not np.array_equal(z1, spec):
+        ch = channel(which, C, Ainv, legs, table, z1, alias_one=share)
+    return ch, z1, np.where(sure | (spec <= 0), z1, spec), sure
+
+
+def _enumerated(model, shape, C, table, S, Z, levels, budget, target, t0) -> YieldResult:
+    """:func:`exact_yield` of a budget of discrete classes only (:mod:`.enumeration`): exact, no series."""
+    e = discrete_yield(C, table, S, Z, levels, budget.name)
+    N, Q = C.shape[0], levels.size
+    rss_pos, rss_phi = _rss(C, table)
+    bound = np.full(shape, e["bound"])
+
+    def shaped(a, tail=()):
+        return a.reshape(shape + tail)
+
+    return YieldResult(
+        poses=model.poses, spec_position_mm=S, spec_phi_deg=None if Z is None else Z * RAD2DEG,
+        exceed_position=shaped(e["e_pos"]), bound_position=bound,
+        exceed_phi=None if Z is None else shaped(e["e_phi"]), bound_phi=None if Z is None else bound,
+        exceed_any=shaped(e["e_any"]), bound_any=bound,
+        levels=QUANTILE_LEVELS if Q else (),
+        quantile_position_mm=shaped(e["q_pos"], (Q,)) if Q else None,
+        quantile_position_err_mm=shaped(e["qe_pos"], (Q,)) if Q else None,
+        quantile_phi_deg=shaped(e["q_phi"] * RAD2DEG, (Q,)) if Q else None,
+        quantile_phi_err_deg=shaped(e["qe_phi"] * RAD2DEG, (Q,)) if Q else None,
+        worst_position_mm=shaped(e["worst_pos"]), worst_phi_deg=shaped(e["worst_phi"] * RAD2DEG),
+        rss_position_mm=shaped(rss_pos), rss_phi_deg=shaped(rss_phi * RAD2DEG),
+        bracketed_any=np.zeros(shape, dtype=bool),
+        lattice_points={k: np.full(shape, e["combinations"], np.int64) for k in ("position", "phi", "any")},
+        target=float(target), method=ENUMERATION_METHOD, wall_time_s=time.perf_counter() - t0)
+
+
 class _Runner:
     """Runs :func:`~.series.batch_series` over a channel's poses in chunks on a pool of threads."""
 
@@ -226,20 +278,22 @@ class _Runner:
         self.workers = workers or cores()
         self.tab, self.sp = table.arrays(), special_args()
 
-    def __call__(self, ch, z1, z2, zs, levels, z0, what: str, fallback: bool = False):
+    def __call__(self, ch, z1, z2, zs, levels, z0, what: str, fallback: bool = False, sure=None):
         """The series of channel ``ch`` at every pose: (P(Y in D), bound, points, status, quantiles,
-        their bounds). Without quantiles, a pose whose spec covers the whole support (no normal law acting)
-        has P = 1 exactly. A pose the series cannot serve raises (what: the quantity, for the message), or
+        their bounds). A ``sure`` pose (its spec covers the whole support, :func:`_sized`) has P = 1, exactly
+        but for the mass of the normal laws past their cut, which is its bound; without quantiles its series
+        is not summed. A pose the series cannot serve raises (what: the quantity, for the message), or
         keeps its status (2, 3) when the caller has a ``fallback``."""
         N = z1.size
         out = (np.empty(N), np.empty(N), np.empty(N, np.int64), np.empty(N, np.int64),
                np.empty((N, levels.size)), np.empty((N, levels.size)))
-        sure = (zs >= ch.zmax * (1 + 1e-12)) & (ch.alias == 0) if levels.size == 0 else np.zeros(N, bool)
+        sure = np.zeros(N, bool) if sure is None else sure
+        skip = sure if levels.size == 0 else np.zeros(N, bool)
         z0 = np.ascontiguousarray(np.broadcast_to(z0, (N, levels.size)))
         t = self.table
         args = (ch.d, t.kind, t.par, t.env, self.tab, self.sp, ch.grp, ch.mu, ch.snu, ch.Q, ch.Vinv, ch.mnorm, ch.ab,
                 ch.lam, np.ascontiguousarray(z1), np.ascontiguousarray(z2), np.ascontiguousarray(zs), self.target,
-                ch.alias, levels, z0, ch.zmax, ch.ok & ~sure, *out)
+                ch.alias, levels, z0, ch.zmax, ch.ok & ~skip, *out)
         starts = range(0, N, _CHUNK)
         if self.workers == 1 or N <= _CHUNK:
             batch_series(0, N, *args)
@@ -247,20 +301,24 @@ class _Runner:
             with ThreadPoolExecutor(max_workers=self.workers) as pool:
                 list(pool.map(lambda s: check_stop() or batch_series(s, min(N, s + _CHUNK), *args), starts))
         p, b, n, status = out[:4]
-        p[sure], b[sure], n[sure], status[sure] = 1.0, 0.0, 0, 0
+        p[sure], b[sure] = 1.0, ch.alias[sure]
+        n[skip], status[skip] = 0, 0
         for code, why in ((2, "fewer legs with a continuous law, whose terms decay, than it has dimensions: it "
                               "has no density"),
-                          (3, "the series needs more than 2^23 terms (too few continuous laws)")):
+                          (3, f"the series needs more than 2^23 terms for the target {self.target:g} (too few "
+                              "continuous laws for it): a larger target, or")):
             if np.any(status == code) and not fallback:
-                raise BudgetError(f"exact yield: {what} of budget {self.budget!r} at {int(np.sum(status == code))} "
-                                  f"pose(s): {why}; use Monte Carlo")
+                raise NoExactYieldError(f"exact yield: {what} of budget {self.budget!r} at "
+                                        f"{int(np.sum(status == code))} pose(s): {why}; use Monte Carlo")
         return out
 
 
-def _either(run, C, Ainv, legs, table, share, S, Z, e_pos, b_pos, e_phi, b_phi):
+def _either(run, C, Ainv, legs, table, share, S, Z, e_pos, b_pos, e_phi, b_phi, sure):
     """P(position > S or ``|dphi|`` > Z) and its bound, per pose: the 3-D series of the cylinder where it is
     certified, else the Fréchet bracket ``[max(P_pos, P_phi), P_pos + P_phi]`` (its midpoint, the half-width
-    plus both channels' bounds as the bound), whichever bound is smaller. The joint series converges slowly
+    plus both channels' bounds as the bound), whichever bound is smaller. Where a channel is ``sure`` (its
+    exceedance 0 but for its bound) the bracket is the other channel's exceedance, with both bounds: no
+    series, not flagged bracketed. The joint series converges slowly
     when a leg has few continuous laws (its characteristic function decays slowly along that leg's axis):
     it is tried only when every leg's envelopes decay at least as ``n^-_JOINT_POWER`` (e.g. a normal law in each
     leg), at the first pose and, if that fails, at no other. Returns (P, bound, points, bracketed)."""
@@ -268,8 +326,18 @@ def _either(run, C, Ainv, legs, table, share, S, Z, e_pos, b_pos, e_phi, b_phi):
     lo, hi = np.maximum(e_pos, e_phi), np.minimum(1.0, e_pos + e_phi)
     e_br, b_br = 0.5 * (lo + hi), 0.5 * (hi - lo) + b_pos + b_phi
     e_any, b_any, n_any = e_br.copy(), b_br.copy(), np.zeros(N, np.int64)
+    todo = np.flatnonzero(~sure)
+    if todo.size == 0:
+        return e_any, b_any, n_any, np.zeros(N, dtype=bool)
     if not np.all(leg_powers(table, C[:1], legs, 1.0 / 3.0) >= _JOINT_POWER):
-        return e_any, b_any, n_any, np.ones(N, dtype=bool)
+        return e_any, b_any, n_any, ~sure
+    if todo.size < N:
+        e_sub, b_sub, n_sub, br_sub = _either(run, C[todo], Ainv[todo], legs, table, share, S, Z, e_pos[todo],
+                                              b_pos[todo], e_phi[todo], b_phi[todo], np.zeros(todo.size, bool))
+        e_any[todo], b_any[todo], n_any[todo] = e_sub, b_sub, n_sub
+        bracketed = np.zeros(N, dtype=bool)
+        bracketed[todo] = br_sub
+        return e_any, b_any, n_any, bracketed
     both = channel("both", C, Ainv, legs, table, np.full(N, S), np.full(N, Z), alias_one=share)
     probe = run(_subset(both, slice(0, 1)), np.full(1, S), np.full(1, Z), np.full(1, S), np.zeros(0),
                 np.zeros((1, 0)), "the pose error", fallback=True)
