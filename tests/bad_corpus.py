@@ -576,6 +576,9 @@ def second_cases() -> list[Case]:
     add(Case(M, [*sim, "--poses", "9", "--effects", "wobble_1=1", "--out", "{tmp}/c.csv"], message="wobble_1"))
     add(Case(M, [*sim, "--poses", "9", "--effects", "scale_2", "--out", "{tmp}/c.csv"], status=(2,),
              message="NAME=VALUE"))
+    add(Case(M, [*sim, "--poses", "9", "--effects", "scale_2=1e-4,scale_2=2e-4", "--out", "{tmp}/c.csv"],
+             status=(2,), message="scale_2 is given twice"))
+    add(Case(M, [*sim, "--poses", "9", "--out", "{tmp}/c.json"], message="CAMPAIGN.csv"))
     add(Case(M, [*sim, "--poses", "9", "--effects", "cyclic_1=0.01", "--out", "{tmp}/c.csv"], message="lead_mm"))
     add(Case(M, [*sim, "--poses", "9", "--registration", "1,2", "--out", "{tmp}/c.csv"], message="--registration"))
     add(Case(M, [*sim, "--poses", "9", "--drift", "nan,0,0", "--out", "{tmp}/c.csv"], message="--drift"))

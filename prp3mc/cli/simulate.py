@@ -29,6 +29,8 @@ def _pairs(text: str) -> dict[str, float]:
         if not name.strip() or not math.isfinite(number):
             raise argparse.ArgumentTypeError(f"expected NAME=VALUE pairs separated by commas "
                                              f"(e.g. scale_2=5e-4,backlash_1=0.02), got {item!r}")
+        if name.strip() in out:
+            raise argparse.ArgumentTypeError(f"{name.strip()} is given twice: give each effect once")
         out[name.strip()] = number
     return out
 
@@ -126,6 +128,8 @@ class SimulateCommand:
         if not args.out_file.strip():
             raise CampaignError("--out is empty: name the campaign file to write (or '-' for stdout)")
         out = None if args.out_file == "-" else Path(args.out_file)
+        if out is not None and out.suffix.lower() not in ("", ".csv"):
+            raise CampaignError(f"--out {out}: the campaign is a CSV file; name it CAMPAIGN.csv (or '-' for stdout)")
         check_plausible(args.effects, args.instrument_sigma_mm, args.instrument_sigma_deg,
                         labels=("--effects", "--instrument-sigma-mm", "--instrument-sigma-deg"))
         if out is None and args.json:
