@@ -228,6 +228,30 @@ def test_correlated_uniform_budget_falls_back_on_monte_carlo_and_says_so(tmp_pat
     assert how["respects"] and "no exact series" in how["how"] and "Wilson" in how["how"]
 
 
+def test_a_budget_without_a_density_runs_on_monte_carlo_and_says_so(tmp_path):
+    """One leg random (a disc clearance): the exact series has no density to invert (NoExactYieldError, known
+    only by trying); the study warns, keeps the Monte Carlo run's P(position > spec), and writes its report
+    (it used to stop with the one-line error)."""
+    from prp3mc.model.budget import Budget
+    from prp3mc.model.laws import Disc, Uniform
+    from prp3mc.study.summary import build_summary
+
+    Budget({"rho_1": Disc(0.01), "zeta_1": Uniform(0.0, 360.0)}, name="disc alone").to_toml(tmp_path / "alone.toml")
+    text = _text("[spec]\nposition_um = 8\n").replace('budget = "paper"', 'budget = "alone.toml"')
+    with pytest.warns(Warning, match="no law for rho_2"):                  # one leg's inputs only: said as read
+        study = Study.from_text(text, source=str(tmp_path / "s.toml"), base=tmp_path)
+    with pytest.warns(Warning, match="no exact yield for u-shape: .*no density.*the Monte Carlo run counts"):
+        result = run_study(study, progress=False)
+    c = result["u-shape"]
+    assert c.yield_ is None and c.curves == () and c.montecarlo.tolerance_mm == pytest.approx(0.008)
+    assert np.all((c.montecarlo.exceed_prob >= 0) & (c.montecarlo.exceed_prob <= 1))
+    exceed = build_summary(result)["configurations"]["u-shape"]["montecarlo"]["exceed"]
+    assert "probability" in exceed and "yield" not in build_summary(result)["configurations"]["u-shape"]
+    write_study(result, tmp_path / "out")
+    html = (tmp_path / "out" / "report.html").read_text()
+    assert missing_files(html, tmp_path / "out") == [] and figures_without_files(html, tmp_path / "out", "png") == []
+
+
 @pytest.mark.slow
 def test_correlated_normal_budget_gets_the_exact_yield(tmp_path):
     """Correlated inputs that are all normal: the exact series runs (no warning) and the summary says so."""

@@ -34,7 +34,7 @@ import numpy as np
 
 from .._rng import child_seed, resolve_rng
 from .._threads import single_threaded_blas
-from ..errors import GeometryError, InfeasiblePoseError, Prp3mcWarning
+from ..errors import GeometryError, InfeasiblePoseError, NoExactYieldError, Prp3mcWarning
 from ..model.budget import Budget
 from ..model.linear import linear_model
 from ..montecarlo.propagation import monte_carlo
@@ -212,9 +212,17 @@ def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple
         nx, ny = study.mc_grid
         stage(f"exact yield against the spec on {nx} x {ny} poses")
         t = time.perf_counter()
-        y = kw["yield_"] = run_yield(config, b, study.spec, study.mc_grid)
-        kw["curves"] = tuple(exceedance_curve(config, b, y, o, draws)
-                             for o in ("position",) + (("phi",) if study.spec.phi_arcsec is not None else ()))
+        try:
+            y = kw["yield_"] = run_yield(config, b, study.spec, study.mc_grid)
+        except NoExactYieldError as e:      # no density, too many classes, too many terms: known only by trying
+            warnings.warn(Prp3mcWarning(
+                f"study {study.name}: no exact yield for {config.name}: {e}; "
+                + ("the Monte Carlo run counts P(position > spec) instead, with its Wilson 95 % interval"
+                   if "montecarlo" in study.outputs else "add montecarlo to the outputs for its Monte Carlo estimate")),
+                stacklevel=2)
+        else:
+            kw["curves"] = tuple(exceedance_curve(config, b, y, o, draws)
+                                 for o in ("position",) + (("phi",) if study.spec.phi_arcsec is not None else ()))
         timings["yield"] += time.perf_counter() - t
     allocation = study.allocation
     if allocation is not None and allocation.applies_to(variant.base.name):  # a swept one: by its base's name
