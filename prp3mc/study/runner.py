@@ -202,12 +202,9 @@ def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple
         kw["ranking"] = {o: ranking(s, wc_s, output=o) for o in study.sobol_outputs}
         timings["sobol"] += time.perf_counter() - t
     if refusal is not None:
-        warnings.warn(Prp3mcWarning(
-            f"study {study.name}: no exact yield for {config.name}: {refusal}; "
-            + ("the Monte Carlo run counts P(position > spec)" + (", P(|dphi| > spec) and P(either)" if
-                                                                  study.spec.phi_arcsec is not None else "")
-               + " instead, with Wilson 95 % intervals" if "montecarlo" in study.outputs else
-               "add montecarlo to the outputs for its Monte Carlo estimate")), stacklevel=2)
+        _no_exact_yield(study, config, refusal, "P(position > spec)" + (
+            ", P(|dphi| > spec) and P(either)" if study.spec.phi_arcsec is not None else "")
+                        + " instead, with Wilson 95 % intervals")
     elif run_exact_yield:
         nx, ny = study.mc_grid
         stage(f"exact yield against the spec on {nx} x {ny} poses")
@@ -215,11 +212,7 @@ def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple
         try:
             y = kw["yield_"] = run_yield(config, b, study.spec, study.mc_grid)
         except NoExactYieldError as e:      # no density, too many classes, too many terms: known only by trying
-            warnings.warn(Prp3mcWarning(
-                f"study {study.name}: no exact yield for {config.name}: {e}; "
-                + ("the Monte Carlo run counts P(position > spec) instead, with its Wilson 95 % interval"
-                   if "montecarlo" in study.outputs else "add montecarlo to the outputs for its Monte Carlo estimate")),
-                stacklevel=2)
+            _no_exact_yield(study, config, e, "P(position > spec) instead, with its Wilson 95 % interval")
         else:
             kw["curves"] = tuple(exceedance_curve(config, b, y, o, draws)
                                  for o in ("position",) + (("phi",) if study.spec.phi_arcsec is not None else ()))
@@ -231,6 +224,15 @@ def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple
         kw.update(run_allocation(config, allocation, study.worstcase_grid, study.k_sigma, plan.allocation_seed, b))
         timings["allocation"] += time.perf_counter() - t
     return ConfigurationResult(configuration=config, worst_case=wc, **kw), timings
+
+
+def _no_exact_yield(study, config, reason, counted: str) -> None:
+    """Warn that ``config`` has no exact yield (``reason``) and what the study reports instead: the Monte Carlo
+    run's ``counted`` exceedances, or how to get them."""
+    warnings.warn(Prp3mcWarning(
+        f"study {study.name}: no exact yield for {config.name}: {reason}; "
+        + (f"the Monte Carlo run counts {counted}" if "montecarlo" in study.outputs else
+           "add montecarlo to the outputs for its Monte Carlo estimate")), stacklevel=3)
 
 
 class SerialExecutor:
