@@ -24,7 +24,16 @@ from pathlib import Path
 from ._threads import cores
 from .errors import ResourceError
 
-__all__ = ["Estimate", "available_memory", "check", "montecarlo_estimate", "sobol_estimate",
+#: Default bound of the exact yield's absolute error of every probability: 1e-9 (1e-3 ppm). Here, not in
+#: prp3mc.stackup, so that ``prp3mc yield --help`` reads it without importing numba.
+DEFAULT_TARGET = 1e-9
+#: The exact yield's targets taken: below 1e-12 the floating-point share of the bound (1e-13 per coefficient)
+#: alone exceeds the target (the paper's budget: 4e-12 at 1e-12, so the bound misses it with a warning); above
+#: 1e-2 it bounds nothing a yield needs.
+TARGET_RANGE = (1e-12, 1e-2)
+
+__all__ = ["DEFAULT_TARGET", "TARGET_RANGE", "Estimate", "available_memory", "check", "montecarlo_estimate",
+           "sobol_estimate",
            "worstcase_estimate", "allocate_estimate", "study_estimate", "discrepancy_estimate", "simulate_estimate",
            "sensitivity_estimate",
            "yield_estimate", "plan_estimate", "format_bytes",

@@ -165,17 +165,6 @@ def test_an_all_normal_correlated_budget_is_exact(capsys, tmp_path):
     assert rec["exceed_position_ppm"] == pytest.approx(1e6 * float(r.exceed_position), rel=1e-12)
 
 
-def test_the_command_default_target_is_the_engine_s():
-    import importlib
-
-    from prp3mc.stackup import DEFAULT_TARGET
-
-    from prp3mc.stackup.exceedance import TARGET_RANGE
-
-    cli = importlib.import_module("prp3mc.cli.yield")
-    assert cli.DEFAULT_TARGET == DEFAULT_TARGET and cli.TARGET_RANGE == TARGET_RANGE
-
-
 def test_a_spec_beyond_the_worst_case_answers_zero(capsys):
     """1e4 µm against a worst case of 140 µm: P = 0 with bound 0 (it was refused: more than 2^23 terms)."""
     code, out, err = run(capsys, "--pose", "0", "100", "0", "--spec-position-um", "1e4", "--spec-phi-arcsec", "1e9",

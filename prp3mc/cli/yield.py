@@ -9,15 +9,11 @@ import numpy as np
 from .._version import __version__
 from ..errors import NoExactYieldError, Prp3mcWarning, SpecError
 from ..kinematics.geometry import Geometry
-from ..limits import montecarlo_estimate, yield_estimate
+from ..limits import DEFAULT_TARGET, TARGET_RANGE, montecarlo_estimate, yield_estimate
 from ..units import DEG2ARCSEC, MM2UM, PPM
 from . import (add_budget, add_geometry, add_json, add_pose_or_region, add_seed, command, emit_json, emit_table,
                finite_float, grid_poses, positive_float, positive_int, provenance, within_limits)
 
-#: prp3mc.stackup.DEFAULT_TARGET and TARGET_RANGE, written out so that --help imports no numba
-#: (tests/test_yield_cli.py checks).
-DEFAULT_TARGET = 1e-9
-TARGET_RANGE = (1e-12, 1e-2)
 #: A spec this many times below the error's RSS scale is refused (a value in mm typed as µm, or the like).
 _SCALE = 1e-3
 _MC_METHOD = ("Monte Carlo of the linear model with the budget's Gaussian copula, if any (the streamed sampler): "

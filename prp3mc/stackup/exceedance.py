@@ -14,6 +14,7 @@ from .._threads import check_stop, cores
 from ..errors import NoExactYieldError, Prp3mcWarning, SpecError
 from ..kinematics.chain import as_poses
 from ..kinematics.geometry import Geometry
+from ..limits import DEFAULT_TARGET, TARGET_RANGE
 from ..model.budget import Budget
 from ..model.linear import linear_model
 from ..units import DEG2ARCSEC, DEG2RAD, MM2UM, RAD2DEG
@@ -27,12 +28,6 @@ from .series import batch_series
 
 __all__ = ["exact_yield", "METHOD", "DEFAULT_TARGET", "TARGET_RANGE"]
 
-#: Default bound of the absolute error of every probability: 1e-9 (1e-3 ppm).
-DEFAULT_TARGET = 1e-9
-#: The targets taken: below 1e-12 the floating-point share of the bound (1e-13 per coefficient) alone exceeds
-#: the target (the paper's budget: 4e-12 at 1e-12, so the bound misses it with a warning); above 1e-2 it bounds
-#: nothing a yield needs.
-TARGET_RANGE = (1e-12, 1e-2)
 METHOD = ("exact distribution of the linear model: Fourier series of its characteristic function (the "
           "product of the terms' closed forms) on a lattice whose periods keep the support off the spec's "
           "region, truncated with a rigorous bound (decreasing envelopes of every term, analytic tails); "
