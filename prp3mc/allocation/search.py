@@ -66,27 +66,29 @@ QUANTITIES = ("position", "phi", "screen")
 _CHUNK_ELEMENTS = 1 << 18   # K x N elements per evaluated block
 
 
-#: Bytes a queued node holds (its class indices, key and tuple): the queue is refused past the memory.
-_NODE_BYTES = 120
+def _node_bytes(n_inputs: int) -> int:
+    """Bytes one queued node holds, at most: its heap entry (a 5-tuple and its list slot, a key of up to two
+    floats, a counter) and its class indices (a tuple of small ints, which Python shares); measured by
+    ``tests/test_allocation_memory.py``."""
+    return (96 + 8) + (56 + 2 * 24) + 32 + (56 + 8 * n_inputs)
 
 
 def _over_limits(search: "Search", queued: int) -> None:
-    """Refuse (ResourceError) a search whose queue outgrows the memory.
+    """Refuse (ResourceError) a search whose queue outgrows the memory it found free when it started.
 
     The number of choices of a menu (6^27 for nine families of six classes
     on three legs) says nothing of what branch and bound examines, which
     cannot be told before it runs; time is bounded by ``prp3mc --max-hours``
     (a wall-clock stop), memory here.
     """
-    if not queued or queued % 4096:
+    if queued <= search.max_queued:
         return
-    memory = queued * (_NODE_BYTES + 8 * len(search.pb.inputs))
-    if memory > MEMORY_MARGIN * available_memory():
-        choices = math.prod(int(n) for n in search.pb.n_classes)
-        raise ResourceError(f"tolerance allocation over {len(search.pb.inputs)} inputs ({choices:.3g} choices of "
-                            f"classes) needs more than this machine's memory ({format_bytes(memory)} queued): the "
-                            f"search examined {search.nodes} candidates without proving the least cost; give fewer "
-                            "classes or families, or a looser spec")
+    memory = queued * _node_bytes(len(search.pb.inputs))
+    choices = math.prod(int(n) for n in search.pb.n_classes)
+    raise ResourceError(f"tolerance allocation over {len(search.pb.inputs)} inputs ({choices:.3g} choices of "
+                        f"classes) needs more than this machine's memory ({format_bytes(memory)} queued): the "
+                        f"search examined {search.nodes} candidates without proving the least cost; give fewer "
+                        "classes or families, or a looser spec")
 
 
 class Problem:
@@ -283,6 +285,9 @@ class Search:
     ----------
     nodes : int
         Candidates evaluated (bound and cheap completions and full checks).
+    max_queued : int
+        Nodes the queue may hold: :data:`~prp3mc.limits.MEMORY_MARGIN` of the
+        memory available when the search was set up.
     """
 
     def __init__(self, problem: Problem, limits: dict, batch: int = 16):
@@ -310,6 +315,7 @@ class Search:
         self._tables = {k: np.concatenate([per_class[k], bound[k][:, None]], axis=1) for k in bound}
         self._keys = ("mid", "half", "mean", "dmean", "var") if "screen" in self.limits else ("mid", "half")
         self.active = np.zeros(0, dtype=int)
+        self.max_queued = int(MEMORY_MARGIN * available_memory()) // _node_bytes(J)
 
     # ------------------------------------------------------------ evaluation
     def ratio(self, env: dict) -> np.ndarray:
@@ -384,12 +390,12 @@ class Search:
         def push(A, depth):
             _over_limits(self, len(heap))
             r_bound, r_cheap = self._ratios(A, depth)
-            costs = self.cost_lb(A)
+            costs, nodes, depths = self.cost_lb(A).tolist(), A.tolist(), depth.tolist()    # Python numbers: small
             for k in np.flatnonzero(r_bound <= 1.0):
                 done = r_cheap[k] <= 1.0 and self._full(self.complete(A[k])) <= 1.0
-                if depth[k] == J and not done:      # a complete choice that fails at some pose
+                if depths[k] == J and not done:      # a complete choice that fails at some pose
                     continue
-                heapq.heappush(heap, (costs[k], next(counter), tuple(A[k]), int(depth[k]), done))
+                heapq.heappush(heap, (costs[k], next(counter), tuple(nodes[k]), depths[k], done))
 
         push(root, depth)
         while heap:
@@ -410,9 +416,9 @@ class Search:
         def push(A, depth):
             _over_limits(self, len(heap))
             r_bound, _ = self._ratios(A, depth)
-            costs = self.cost_lb(A)
-            for k in range(A.shape[0]):
-                heapq.heappush(heap, ((r_bound[k], costs[k]), next(counter), tuple(A[k]), int(depth[k]), False))
+            keys, nodes, depths = zip(r_bound.tolist(), self.cost_lb(A).tolist()), A.tolist(), depth.tolist()
+            for key, node, d in zip(keys, nodes, depths):
+                heapq.heappush(heap, (key, next(counter), tuple(node), d, False))
 
         push(root, depth)
         while True:

@@ -552,14 +552,22 @@ def _interrupt_again(hook):
 
 @contextlib.contextmanager
 def _stopping_after(seconds: float):
-    """Raise :class:`_TimeUp` in this (the main) thread after ``seconds`` of wall time inside the block."""
-    previous = signal.signal(signal.SIGALRM, _time_up)
+    """Raise :class:`_TimeUp` in this (the main) thread after ``seconds`` of wall time inside the block.
+
+    The alarm's exception, swallowed where it cannot propagate, is raised
+    again (:func:`_interrupt_again`) in a caller's process too, not only in
+    the command's own (``main(argv)``; there an allocation search went on to
+    its memory limit instead).
+    """
+    previous, hook = signal.signal(signal.SIGALRM, _time_up), sys.unraisablehook
+    sys.unraisablehook = _interrupt_again(hook)
     signal.setitimer(signal.ITIMER_REAL, seconds)
     try:
         yield
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, previous)
+        sys.unraisablehook = hook
 
 
 def _run(argv: list[str], own_process: bool = False) -> int:
