@@ -178,7 +178,7 @@ def exceedance_curve(config, budget, result: YieldResult, output: str, samples: 
               {"spec_position_um": MM2UM * result.spec_position_mm, "spec_phi_arcsec": to_um * v})
         with warnings.catch_warnings():  # of the joint channel, not drawn; this channel's bound is kept and shown
             warnings.simplefilter("ignore", Prp3mcWarning)
-            r = exact_yield(config.geometry, budget, pose, quantiles=False, **kw)
+            r = exact_yield(config.geometry, budget, pose, quantiles=False, joint=False, **kw)
         exact[j], bound[j] = float(r.exceedance(output)), float(r.bound(output))
     curve = dict(output=output, pose=pose, spec=float(spec), s=s, exact=exact, bound=bound, worst=worst)
     if samples is not None:

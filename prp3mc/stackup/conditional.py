@@ -1,0 +1,404 @@
+"""P(position > S or ``|dphi|`` > Z) of a budget of independent legs, by conditioning on two legs.
+
+When every random term belongs to one leg (no shared temperature, no
+correlated directions), the pose error is ``d = s + sum_i a_i u_i`` with
+a_i the columns of A^-1 and u_1, u_2, u_3 independent scalars, each the sum
+of its leg's terms (``u_i = sum_t kappa_t X_t``). Write the joint exceedance
+as ``P_pos + P_phi - J`` with ``J = P(position > S and |dphi| > Z)``; the two
+channels come from their own series (:mod:`.series`), J from here.
+
+For fixed (u_p, u_q), the set of u_L (L the third leg) where the position is
+in spec is an interval ``[c_A - r_A, c_A + r_A]`` (``|e + m u_L| <= S``: c_A
+linear in (u_p, u_q), r_A = sqrt(S² - e_perp²)/``|m|`` with e_perp linear), and
+where ``|dphi| <= Z`` another, ``[c_B - w_B, c_B + w_B]`` (c_B linear, w_B
+constant); so ``J = E[1 - P_L(A ∪ B) | u_p, u_q]``, a union of two
+intervals through F_L, the CDF of u_L.
+
+Each leg's CDF on a uniform grid (:func:`leg_cdfs`): its Fourier series on a
+period that holds the leg's support, every grid point at once by one FFT,
+truncated at K terms with the bound ``2 E(w_K) / (pi p)`` (E the product of
+the terms' decreasing envelopes, p its decay power, :mod:`.characteristic`),
+plus floating point (:data:`~._special.CF_ACCURACY` per coefficient) and the
+normal laws' mass past their cut. Between grid points F is bracketed by
+monotonicity.
+
+J is bracketed on a partition of (u_p, u_q) into cells of grid intervals
+(:func:`joint_exceedance`): a cell's mass is the product of its two CDF
+differences; over the cell the ends of A and B lie in ranges (exact for the
+linear parts, monotone for the square root), so A and B contain a smallest
+and lie in a largest interval, which bound ``1 - P_L(A ∪ B)`` from above and
+below. Cells where J's integrand is provably 0 (the smallest union covers
+u_L's support) have no gap; the others are split where their gap times mass
+is largest, until the bracket's half-width meets the target or the cell
+budget is spent. The reported bound is that half-width, plus the CDFs'
+errors, plus the two channels' bounds.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ._special import CF_ACCURACY, special_args
+from .characteristic import envelope, envelope_power, term_cf
+
+__all__ = ["CONDITIONAL_METHOD", "independent_legs", "leg_cdfs", "joint_exceedance"]
+
+CONDITIONAL_METHOD = (
+    "; P(either) = P(position) + P(phi) - P(both out), the last by conditioning on two legs and integrating "
+    "the third through its CDF (each leg's CDF by its Fourier series on a grid with a rigorous truncation "
+    "bound, bracketed between grid points by monotonicity; cells of the two legs bracketed by interval "
+    "arithmetic and refined where the gap is largest); its bound is the bracket's half-width plus the CDFs' "
+    "and the channels' bounds")
+_GRID = 1 << 16                 # CDF grid points per leg (at least)
+_K_MAX = 1 << 18                # Fourier terms per leg (at most)
+_LEG_EPS = 1e-12                # truncation goal of a leg's CDF
+_INITIAL = 16                   # initial cells per leg
+_MAX_CELLS = 20_000           # open cells per pose (at most): about 0.1 to 0.3 s a pose
+_MAX_ROUNDS = 60
+_WIDEN = 1e-12                  # relative widening of every interval end (floating point)
+
+
+def independent_legs(C: np.ndarray, Ainv: np.ndarray, legs, table) -> tuple[np.ndarray, np.ndarray]:
+    """Each random term's weight on its leg's direction, ``C[:, :, t] = kappa_t a_leg``, and whether the
+    pose error is ``s + sum_i a_i u_i`` over independent legs.
+
+    Returns (kappa (N, T), ok (N,)): ok is False where a random term is of all legs or off its leg's
+    direction, or a leg has no random term."""
+    legs = np.asarray(legs)
+    N, _, T = C.shape
+    kappa = np.zeros((N, T))
+    if np.any(table.random & (legs < 0)):
+        return kappa, np.zeros(N, dtype=bool)
+    ok = np.ones(N, dtype=bool)
+    for t in np.flatnonzero(table.random):
+        a = Ainv[:, :, legs[t]]
+        k = np.einsum("nj,nj->n", C[:, :, t], a) / np.einsum("nj,nj->n", a, a)
+        resid = np.abs(C[:, :, t] - k[:, None] * a).max(axis=1)
+        ok &= resid <= 1e-12 * np.abs(C[:, :, t]).max(axis=1) + 1e-300
+        kappa[:, t] = k
+    for i in range(3):
+        ok &= (np.abs(kappa[:, legs == i]) > 0).any(axis=1) if np.any(legs == i) else False
+    return kappa, ok
+
+
+# ---------------------------------------------------------------------------------------------- the CDFs
+
+@njit(cache=True, nogil=True)
+def _sizes(env, kappa, legs, Q, eps, k_max, K, tail):
+    """Terms K[n, i] of each leg's series and the bound ``tail`` of everything past them."""
+    N, T = kappa.shape
+    for n in range(N):
+        for i in range(3):
+            k = 64
+            while True:
+                w = 2.0 * math.pi * k / Q[n, i]
+                e, p = 1.0, 0.0
+                for t in range(T):
+                    if legs[t] != i or kappa[n, t] == 0.0:
+                        continue
+                    x = abs(kappa[n, t]) * w
+                    e *= envelope(env[t, 0], env[t, 1], env[t, 2], env[t, 3], env[t, 4], env[t, 5], env[t, 6],
+                                  env[t, 7], x)
+                    p += envelope_power(env[t, 0], env[t, 1], env[t, 2], env[t, 3], env[t, 4], env[t, 5],
+                                        env[t, 6], env[t, 7], x)
+                bound = 2.0 * e / (math.pi * p) if p > 0.0 else math.inf
+                if bound <= eps or k >= k_max:
+                    break
+                k *= 2
+            K[n, i], tail[n, i] = k, bound
+
+
+@njit(cache=True, nogil=True)
+def _coefficients(kind, par, tab, sp, kappa, legs, Q, lo, K, out):
+    """out[n, i, k] = phi_i(w_k) exp(-i w_k lo) / (-2 pi i k), w_k = 2 pi k / Q, for k = 1..K[n, i]."""
+    buf = np.empty(2)
+    N, T = kappa.shape
+    for n in range(N):
+        for i in range(3):
+            for k in range(1, K[n, i] + 1):
+                w = 2.0 * math.pi * k / Q[n, i]
+                phi = 1.0 + 0j
+                for t in range(T):
+                    if legs[t] == i and kappa[n, t] != 0.0:
+                        phi *= term_cf(kind[t], par, t, tab, sp, buf, kappa[n, t] * w)
+                out[n, i, k] = phi * np.exp(-1j * w * lo[n, i]) / (-2j * math.pi * k)
+
+
+def leg_cdfs(kappa: np.ndarray, legs, table, alias_one: float) -> dict:
+    """Each leg's CDF on a uniform grid, with a bound of its error, at N poses.
+
+    Parameters
+    ----------
+    kappa : ndarray (N, T)
+        Each term's weight on its leg (:func:`independent_legs`).
+    legs : sequence of int (T,)
+    table : TermTable
+    alias_one : float
+        Mass of one normal law past its cut.
+
+    Returns
+    -------
+    dict
+        ``lo`` (N, 3) the grid's first point, ``h`` (N, 3) its step, ``F`` (N, 3, M) the CDF at the M points,
+        ``lo_b``/``hi_b`` (N, 3, M) bounds of F at the points (exact 0 / 1 off the support but for the normal
+        laws' mass), ``eps`` (N, 3) the error bound, ``support`` (N, 3, 2).
+    """
+    legs = np.asarray(legs)
+    N, T = kappa.shape
+    random = table.random
+    a, b = kappa * np.where(random, table.lo, 0.0), kappa * np.where(random, table.hi, 0.0)
+    sup = np.zeros((N, 3, 2))
+    alias = np.zeros(3)
+    for i in range(3):
+        on = random & (legs == i)
+        sup[:, i, 0] = np.minimum(a, b)[:, on].sum(axis=1)
+        sup[:, i, 1] = np.maximum(a, b)[:, on].sum(axis=1)
+        alias[i] = alias_one * np.count_nonzero(on & table.normal)
+    width = sup[..., 1] - sup[..., 0]
+    pad = 0.01 * width
+    lo, Q = sup[..., 0] - pad, width + 2.0 * pad
+    K, tail = np.zeros((N, 3), np.int64), np.zeros((N, 3))
+    leg_of = np.where(random, legs, -2).astype(np.int64)
+    _sizes(table.env, kappa, leg_of, Q, _LEG_EPS, _K_MAX, K, tail)
+    M = max(_GRID, 1 << int(np.ceil(np.log2(K.max() + 2))))
+    c = np.zeros((N, 3, M), complex)
+    _coefficients(table.kind, table.par, table.arrays(), special_args(), kappa, leg_of, Q, lo, K, c)
+    F = np.arange(M) / M + 2.0 * (np.fft.fft(c, axis=-1) - c.sum(axis=-1, keepdims=True)).real
+    terms = np.log(np.maximum(K, 1)) + 1.0
+    fp = CF_ACCURACY * 2.0 * terms / math.pi + 4e-16 * np.log2(M) * (2.0 * np.abs(c).sum(axis=-1) + 1.0)
+    eps = tail + fp + alias[None, :]
+    h = Q / M
+    g = lo[..., None] + h[..., None] * np.arange(M)
+    below, above = g <= sup[..., 0, None], g >= sup[..., 1, None]
+    lo_b = np.clip(np.where(below, 0.0, np.where(above, 1.0 - alias[None, :, None], F - eps[..., None])), 0.0, 1.0)
+    hi_b = np.clip(np.where(below, alias[None, :, None], np.where(above, 1.0, F + eps[..., None])), 0.0, 1.0)
+    return {"lo": lo, "h": h, "F": F, "lo_b": lo_b, "hi_b": hi_b, "eps": eps, "support": sup, "M": M,
+            "alias": alias}
+
+
+# ---------------------------------------------------------------------------------------------- the joint
+
+def _legs_order(Ainv: np.ndarray) -> np.ndarray:
+    """(N, 3) legs (p, q, L) per pose: L, the leg integrated through its CDF, is the one whose direction
+    weighs most on both the position and dphi (both conditions then bound u_L)."""
+    m = np.linalg.norm(Ainv[:, :2, :], axis=1)                          # (N, 3)
+    g = np.abs(Ainv[:, 2, :])
+    score = np.minimum(m / m.max(axis=1, keepdims=True), g / np.maximum(g.max(axis=1, keepdims=True), 1e-300))
+    L = score.argmax(axis=1)
+    order = np.array([[1, 2, 0], [0, 2, 1], [0, 1, 2]])
+    return order[L]
+
+
+class _Cells:
+    """Bracketing J at a chunk of poses: the geometry of A and B in (u_p, u_q) and the legs' CDF bounds."""
+
+    def __init__(self, s, Ainv, cdf, S, Z):
+        n = s.shape[0]
+        rows = np.arange(n)
+        self.order = order = _legs_order(Ainv)
+        p, q, L = order.T
+        a_p, a_q, a_L = Ainv[rows, :, p], Ainv[rows, :, q], Ainv[rows, :, L]      # (n, 3)
+        norm = np.linalg.norm(a_L[:, :2], axis=1)
+        mh = a_L[:, :2] / norm[:, None]
+        g3 = a_L[:, 2]
+        self.ok = (norm > 0) & (g3 != 0)
+        norm, g3 = np.where(self.ok, norm, 1.0), np.where(self.ok, g3, 1.0)
+        dot = lambda v: (v[:, 0] * mh[:, 0] + v[:, 1] * mh[:, 1])              # noqa: E731
+        cross = lambda v: (v[:, 0] * mh[:, 1] - v[:, 1] * mh[:, 0])            # noqa: E731
+        # c_A = -e.m/|m|², e_perp = e x m/|m|, c_B = -(dphi without u_L)/g3: linear in (u_p, u_q)
+        self.cA = np.stack([-dot(s) / norm, -dot(a_p) / norm, -dot(a_q) / norm], axis=1)
+        self.ep = np.stack([cross(s), cross(a_p), cross(a_q)], axis=1)
+        self.cB = np.stack([-s[:, 2] / g3, -a_p[:, 2] / g3, -a_q[:, 2] / g3], axis=1)
+        self.norm, self.wB, self.S = norm, Z / np.abs(g3), S
+        pick = lambda key, leg: cdf[key][rows, leg]                            # noqa: E731
+        self.lo = [pick("lo", leg) for leg in (p, q, L)]
+        self.h = [pick("h", leg) for leg in (p, q, L)]
+        self.lo_b = [pick("lo_b", leg) for leg in (p, q, L)]
+        self.hi_b = [pick("hi_b", leg) for leg in (p, q, L)]
+        self.M = cdf["M"]
+        self.widthL = np.diff(cdf["support"][rows, L], axis=-1)[:, 0]
+
+    def initial(self, cdf) -> tuple:
+        """_INITIAL x _INITIAL cells per pose over the two conditioned legs' supports."""
+        n = self.norm.size
+        rows = np.arange(n)
+        edges = []
+        for k in range(2):
+            leg = self.order[:, k]
+            sup = cdf["support"][rows, leg]
+            a = np.floor((sup[:, 0] - self.lo[k]) / self.h[k]).astype(np.int64)
+            b = np.minimum(np.ceil((sup[:, 1] - self.lo[k]) / self.h[k]).astype(np.int64), self.M - 1)
+            edges.append(np.round(np.linspace(a, b, _INITIAL + 1)).astype(np.int64))
+        ei, ej = edges
+        P = np.repeat(rows, _INITIAL * _INITIAL)
+        ii = np.tile(np.repeat(np.arange(_INITIAL), _INITIAL), n)
+        jj = np.tile(np.arange(_INITIAL), n * _INITIAL)
+        cells = (P, ei[ii, P], ei[ii + 1, P], ej[jj, P], ej[jj + 1, P])
+        keep = (cells[2] > cells[1]) & (cells[4] > cells[3])
+        return tuple(c[keep] for c in cells)
+
+    def _F(self, P, x, upper: bool):
+        """A lower (or upper) bound of F_L(x)."""
+        lo, h, M = self.lo[2][P], self.h[2][P], self.M
+        j = np.floor(np.clip((x - lo) / h, -2.0, M + 1.0)).astype(np.int64)
+        if upper:
+            return np.where(j < 0, self.hi_b[2][P, 0], np.where(j >= M - 1, 1.0,
+                                                                self.hi_b[2][P, np.clip(j + 1, 0, M - 1)]))
+        return np.where(j < 0, 0.0, self.lo_b[2][P, np.clip(j, 0, M - 1)])
+
+    def _union(self, P, A, B, upper: bool):
+        """A lower (upper) bound of P_L(A ∪ B), A and B (lo, hi, empty)."""
+        def one(lo, hi, empty):
+            v = self._F(P, hi, upper) - self._F(P, lo, not upper)
+            return np.where(empty, 0.0, np.maximum(v, 0.0))
+        (a1, b1, e1), (a2, b2, e2) = A, B
+        overlap = ~e1 & ~e2 & (np.maximum(a1, a2) <= np.minimum(b1, b2))
+        hull = np.maximum(self._F(P, np.maximum(b1, b2), upper) - self._F(P, np.minimum(a1, a2), not upper), 0.0)
+        return np.clip(np.where(overlap, hull, one(a1, b1, e1) + one(a2, b2, e2)), 0.0, 1.0)
+
+    def evaluate(self, cells) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper bounds of each cell's share of J (its mass times 1 - P_L(A ∪ B))."""
+        P, i0, i1, j0, j1 = cells
+        x0, x1 = self.lo[0][P] + i0 * self.h[0][P], self.lo[0][P] + i1 * self.h[0][P]
+        y0, y1 = self.lo[1][P] + j0 * self.h[1][P], self.lo[1][P] + j1 * self.h[1][P]
+
+        def span(c):
+            c = c[P]
+            a, b = c[:, 1] * x0, c[:, 1] * x1
+            d, e = c[:, 2] * y0, c[:, 2] * y1
+            return c[:, 0] + np.minimum(a, b) + np.minimum(d, e), c[:, 0] + np.maximum(a, b) + np.maximum(d, e)
+
+        cA_lo, cA_hi = span(self.cA)
+        ep_lo, ep_hi = span(self.ep)
+        cB_lo, cB_hi = span(self.cB)
+        S, norm, wB = self.S, self.norm[P], self.wB[P]
+        amin = np.where(ep_lo * ep_hi <= 0.0, 0.0, np.minimum(np.abs(ep_lo), np.abs(ep_hi)))
+        amax = np.maximum(np.abs(ep_lo), np.abs(ep_hi))
+        r_big = np.sqrt(np.maximum(S * S - amin * amin, 0.0)) / norm
+        tol = _WIDEN * (np.abs(cA_lo) + np.abs(cA_hi) + np.abs(cB_lo) + np.abs(cB_hi) + S / norm + wB
+                        + self.widthL[P])
+        # A's ends c_A -/+ sqrt(S² - e_perp²)/|m| are convex / concave in (u_p, u_q): the largest lower end and
+        # the smallest upper end are at corners (exact); the others by intervals and by the tangent plane at
+        # the centre, whichever is tighter
+        cA, ep = self.cA[P], self.ep[P]
+        lo_max, hi_min = np.full(P.size, -np.inf), np.full(P.size, np.inf)
+        for x in (x0, x1):
+            for y in (y0, y1):
+                c = cA[:, 0] + cA[:, 1] * x + cA[:, 2] * y
+                e = ep[:, 0] + ep[:, 1] * x + ep[:, 2] * y
+                r = np.sqrt(np.maximum(S * S - e * e, 0.0)) / norm
+                lo_max, hi_min = np.maximum(lo_max, c - r), np.minimum(hi_min, c + r)
+        xm, ym, dx, dy = 0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.5 * (x1 - x0), 0.5 * (y1 - y0)
+        e = ep[:, 0] + ep[:, 1] * xm + ep[:, 2] * ym
+        root = np.sqrt(np.maximum(S * S - e * e, 0.0))
+        smooth = amax < S
+        safe = np.where(smooth, root, 1.0)
+        r_c = root / norm
+        slope = np.where(smooth, e / (safe * norm), 0.0)            # d r / d e_perp = -e / (root |m|)
+        c_m = cA[:, 0] + cA[:, 1] * xm + cA[:, 2] * ym
+        dev = np.abs(cA[:, 1] + slope * ep[:, 1]) * dx + np.abs(cA[:, 2] + slope * ep[:, 2]) * dy
+        lo_min = np.where(smooth, np.maximum(cA_lo - r_big, c_m - r_c - dev), cA_lo - r_big)
+        dev = np.abs(cA[:, 1] - slope * ep[:, 1]) * dx + np.abs(cA[:, 2] - slope * ep[:, 2]) * dy
+        hi_max = np.where(smooth, np.minimum(cA_hi + r_big, c_m + r_c + dev), cA_hi + r_big)
+        A_big = (lo_min - tol, hi_max + tol, amin > S)
+        lo, hi = lo_max + tol, hi_min - tol
+        A_small = (lo, hi, (amax > S) | (lo > hi))
+        B_big = (cB_lo - wB - tol, cB_hi + wB + tol, np.zeros(P.size, bool))
+        lo, hi = cB_hi - wB + tol, cB_lo + wB - tol
+        B_small = (lo, hi, lo > hi)
+        h_up = 1.0 - self._union(P, A_small, B_small, upper=False)
+        h_lo = 1.0 - self._union(P, A_big, B_big, upper=True)
+        mass = []
+        for k, (a, b) in enumerate(((i0, i1), (j0, j1))):
+            lb, hb = self.lo_b[k], self.hi_b[k]
+            mass.append((np.maximum(lb[P, b] - hb[P, a], 0.0), np.minimum(hb[P, b] - lb[P, a], 1.0)))
+        return mass[0][0] * mass[1][0] * h_lo, mass[0][1] * mass[1][1] * h_up
+
+
+def _split(cells):
+    """Each cell cut in halves along each leg wider than one grid step (2 or 4 children)."""
+    P, i0, i1, j0, j1 = cells
+    mi = np.where(i1 - i0 >= 2, (i0 + i1) // 2, i1)
+    mj = np.where(j1 - j0 >= 2, (j0 + j1) // 2, j1)
+    kids = [(P, i0, mi, j0, mj), (P, mi, i1, j0, mj), (P, i0, mi, mj, j1), (P, mi, i1, mj, j1)]
+    out = tuple(np.concatenate([k[f] for k in kids]) for f in range(5))
+    keep = (out[2] > out[1]) & (out[4] > out[3])
+    return tuple(c[keep] for c in out)
+
+
+def _chunk_joint(s, Ainv, kappa, legs, table, alias_one, S, Z, goal):
+    """J's bracket (lo, hi) at a chunk of poses; NaN where the legs' directions do not bound u_L."""
+    n = s.shape[0]
+    cdf = leg_cdfs(kappa, legs, table, alias_one)
+    geo = _Cells(s, Ainv, cdf, S, Z)
+    order = geo.order
+    # every CDF error is already in the cells' bounds; the mass past the normal laws' cuts is off the cells
+    outside = cdf["alias"][order[:, 0]] + cdf["alias"][order[:, 1]]
+    J_lo, J_hi = np.zeros(n), outside.copy()
+    cells = geo.initial(cdf)
+    vals = geo.evaluate(cells)
+    for rnd in range(_MAX_ROUNDS + 1):
+        lo_c, hi_c = vals
+        gap = hi_c - lo_c
+        P, i0, i1, j0, j1 = cells
+        splittable = (i1 - i0 >= 2) | (j1 - j0 >= 2)
+        closed = (gap <= 0.0) | ~splittable
+        J_lo += np.bincount(P[closed], lo_c[closed], minlength=n)
+        J_hi += np.bincount(P[closed], hi_c[closed], minlength=n)
+        op = ~closed
+        G = np.bincount(P[op], gap[op], minlength=n)
+        count = np.bincount(P[op], minlength=n)
+        done = (J_hi - J_lo + G <= goal) | (count > _MAX_CELLS) | (rnd == _MAX_ROUNDS)
+        finish = op & done[P]
+        J_lo += np.bincount(P[finish], lo_c[finish], minlength=n)
+        J_hi += np.bincount(P[finish], hi_c[finish], minlength=n)
+        op &= ~done[P]
+        if not op.any():
+            break
+        cut = op & (gap >= 0.5 * G[P] / np.maximum(count[P], 1))
+        stay = op & ~cut
+        kids = _split(tuple(c[cut] for c in cells))
+        new = geo.evaluate(kids)
+        cells = tuple(np.concatenate([c[stay], k]) for c, k in zip(cells, kids))
+        vals = tuple(np.concatenate([v[stay], w]) for v, w in zip(vals, new))
+    J_lo, J_hi = np.where(geo.ok, J_lo, np.nan), np.where(geo.ok, np.minimum(J_hi, 1.0), np.nan)
+    return J_lo, J_hi
+
+
+def joint_exceedance(C: np.ndarray, Ainv: np.ndarray, legs, table, kappa: np.ndarray, S: float, Z: float,
+                     target: float, alias_one: float, chunk: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds of J = P(``|(dx, dy)|`` > S and ``|dphi|`` > Z) at N poses of a budget of independent legs.
+
+    Parameters
+    ----------
+    C : ndarray (N, 3, T)
+        Pose error (dx mm, dy mm, dphi rad) per unit of each term.
+    Ainv : ndarray (N, 3, 3)
+    legs : sequence of int (T,)
+    table : TermTable
+    kappa : ndarray (N, T)
+        :func:`independent_legs`.
+    S, Z : float
+        The specs, mm and rad.
+    target : float
+        Goal of the bracket's width.
+    alias_one : float
+        Mass of one normal law past its cut.
+    chunk : int
+        Poses at a time (each holds three CDF grids of 2^16 points or more).
+
+    Returns
+    -------
+    (J_lo, J_hi) : ndarray (N,) each
+        J lies between them; NaN where no leg's direction bounds u_L under both specs.
+    """
+    N = C.shape[0]
+    s = np.einsum("ndt,t->nd", C, table.constant)
+    J_lo, J_hi = np.empty(N), np.empty(N)
+    for a in range(0, N, chunk):
+        b = min(N, a + chunk)
+        J_lo[a:b], J_hi[a:b] = _chunk_joint(s[a:b], Ainv[a:b], kappa[a:b], legs, table, alias_one, S, Z, target)
+    return J_lo, J_hi
