@@ -139,7 +139,6 @@ def _against_monte_carlo(preset, poses, n, seed, spec_um, spec_as):
     budget = Budget.load("paper")
     geometry = Geometry.from_preset(preset)
     r = exact_yield(geometry, budget, poses, spec_position_um=spec_um, spec_phi_arcsec=spec_as, quantiles=False)
-    assert not r.bracketed_any.any()
     mc = sample_exceedance(linear_model(geometry, budget, poses), n, np.random.default_rng(seed), spec_um / MM2UM,
                            spec_as * ARCSEC)[2]
     se = np.sqrt(np.maximum(r.exceed_any, 1.0 / n) * (1.0 - r.exceed_any) / n)
@@ -148,7 +147,8 @@ def _against_monte_carlo(preset, poses, n, seed, spec_um, spec_as):
     z = np.abs(mc - r.exceed_any) / (r.bound_any + se)
     print(f"{preset} S={spec_um} µm Z={spec_as} arcsec n={n}: P(either) {r.exceed_any.min():.3g}.."
           f"{r.exceed_any.max():.3g}, bound {r.bound_any.min():.2g}..{r.bound_any.max():.2g}, largest "
-          f"|exact - MC| / (bound + se) = {z.max():.2f}")
+          f"|exact - MC| / (bound + se) = {z.max():.2f}; {int(r.bracketed_any.sum())} pose(s) of {z.size} kept the "
+          "bracket (its bound the smaller)")
 
 
 def test_paper_budget_agrees_with_monte_carlo(seed):

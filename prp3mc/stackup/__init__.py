@@ -12,6 +12,8 @@ has; this package inverts them with a guaranteed error bound:
   (:data:`~prp3mc.stackup.result.QUANTILE_LEVELS`) and the outputs' names;
 - :mod:`~prp3mc.stackup.enumeration` — a budget of discrete classes only (no density): its finitely many
   values enumerated;
+- :mod:`~prp3mc.stackup.conditional` — P(either) of a budget of independent legs, by conditioning on two
+  legs and integrating the third through its CDF (where the 3-D series does not converge);
 - :mod:`~prp3mc.stackup.gaussian` — correlated normal inputs made independent terms of the same joint
   law (and why other correlated laws are refused);
 - :mod:`~prp3mc.stackup.characteristic` — each law's characteristic function and
