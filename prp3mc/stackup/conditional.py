@@ -54,7 +54,7 @@ CONDITIONAL_METHOD = (
     "and the channels' bounds")
 _GRID = 1 << 16                 # CDF grid points per leg (at least)
 _K_MAX = 1 << 18                # Fourier terms per leg (at most)
-_LEG_EPS = 1e-12                # truncation goal of a leg's CDF
+_LEG_EPS = 1e-11                # truncation goal of a leg's CDF (its error enters J at most 4 times)
 _INITIAL = 16                   # initial cells per leg
 _MAX_CELLS = 20_000           # open cells per pose (at most): about 0.1 to 0.3 s a pose
 _MAX_ROUNDS = 60
