@@ -252,6 +252,39 @@ def test_a_budget_without_a_density_runs_on_monte_carlo_and_says_so(tmp_path):
     assert missing_files(html, tmp_path / "out") == [] and figures_without_files(html, tmp_path / "out", "png") == []
 
 
+def test_a_budget_without_a_density_counts_every_channel_of_its_spec(tmp_path):
+    """No exact yield (NoExactYieldError, known only after trying) with a phi spec: the Monte Carlo run counts
+    P(position > S), P(|dphi| > Z) and P(either), as for a correlated budget, and summary.json carries them
+    (montecarlo.exceed); each equals the count over the run's own draws. Before, only position was counted."""
+    from prp3mc.model.budget import Budget
+    from prp3mc.model.laws import Disc, Uniform
+    from prp3mc.model.linear import linear_model
+    from prp3mc.study.summary import build_summary
+    from prp3mc.units import RAD2DEG
+
+    Budget({"rho_1": Disc(0.01), "zeta_1": Uniform(0.0, 360.0)}, name="disc alone").to_toml(tmp_path / "alone.toml")
+    text = _text("[spec]\nposition_um = 5\nphi_arcsec = 5\n").replace('budget = "paper"', 'budget = "alone.toml"')
+    with pytest.warns(Warning, match="no law for rho_2"):
+        study = Study.from_text(text, source=str(tmp_path / "s.toml"), base=tmp_path)
+    with pytest.warns(Warning, match=r"no exact yield for u-shape: .*no density.*the Monte Carlo run counts "
+                                     r"P\(position > spec\), P\(\|dphi\| > spec\) and P\(either\)"):
+        result = run_study(study, progress=False)
+    c = result["u-shape"]
+    mc = c.montecarlo
+    assert c.yield_ is None and c.curves == ()
+    assert mc.tolerance_mm == pytest.approx(0.005) and mc.tolerance_phi_deg == pytest.approx(5 / 3600)
+    err = linear_model(c.configuration.geometry, study.budget, mc.poses.reshape(-1, 3)).evaluate(
+        study.budget.sample(mc.n_samples, result.montecarlo_seed))              # (P, n, 3) mm, mm, rad
+    pos, phi = np.hypot(err[..., 0], err[..., 1]) > 0.005, np.abs(err[..., 2]) * RAD2DEG > 5 / 3600
+    for p, counted in ((mc.exceed_prob, pos), (mc.exceed_phi_prob, phi), (mc.exceed_any_prob, pos | phi)):
+        np.testing.assert_allclose(p.reshape(-1), counted.mean(axis=1))
+    assert 0 < mc.exceed_phi_prob.min() and mc.exceed_phi_prob.max() < 1 and 0 < mc.exceed_prob.max()   # both bite
+    assert np.any(mc.exceed_any_prob != mc.exceed_prob)          # either is not the position alone
+    exceed = build_summary(result)["configurations"]["u-shape"]["montecarlo"]["exceed"]
+    assert exceed["tolerance_phi_arcsec"] == pytest.approx(5.0)
+    assert {"probability", "phi_probability", "any_probability"} <= set(exceed)
+
+
 @pytest.mark.slow
 def test_correlated_normal_budget_gets_the_exact_yield(tmp_path):
     """Correlated inputs that are all normal: the exact series runs (no warning) and the summary says so."""
