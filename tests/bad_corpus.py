@@ -120,6 +120,9 @@ def prepare(root: Path) -> dict:
         "g_bom": "\ufeff" + _geometry_text(),
         "b_bom": "\ufeff" + _budget_text(),
         "b_correlated": _budget_text(extra="[correlation]\n\"theta_1,theta_2\" = 0.5\n"),
+        # one leg random: no 2-D density, so no exact yield (known only by trying): prp3mc yield's Monte Carlo
+        "b_no_density": _budget_text(inputs='rho_1 = { law = "disc", radius = 0.01 }\n'
+                                            'zeta_1 = { law = "uniform", lo = 0, hi = 360 }\n'),
         "s_bom": "\ufeff" + 'name = "s"\nseed = 1\n[worstcase]\ngrid = 3\n[[configuration]]\ngeometry = "u-shape"\n',
         "classes_bom": "\ufeff" + 'name = "c"\n[theta]\nclasses = [{ name = "x", catalogue = "guide_angular_play.paper", cost = 1.0 }]\n',
         # budgets silently accepted
@@ -660,6 +663,8 @@ def second_cases() -> list[Case]:
                  "--spec-position-um", "100"], message="of memory, this machine has"))
     add(Case(H, ["--max-gb", "0.001", *y, "--region", "u-shape", "--grid", "300", "--spec-position-um", "100"],
              message="more than --max-gb"))
+    add(Case(H, ["--max-gb", "0.01", "yield", *G, "--budget", "{b_no_density}", *P, "--spec-position-um", "8",
+                 "--samples", "20000"], message="Monte Carlo of 20000 samples at 1 pose(s) needs"))   # ran unsized
     add(Case(H, ["--max-gb", "4", "study", "{s_sweep_histograms}", "--out", "{tmp}/sw"],
              message="draws at 3000 histogram poses) needs ~45 GiB"))
     add(Case(M, [*y, *P, "--spec-position-um", "100", "--target", "1e-30"], status=(2,), message="[1e-12, 0.01]"))

@@ -200,3 +200,19 @@ def test_a_budget_without_a_density_falls_back_on_monte_carlo(capsys, tmp_path):
     rec = json.loads(out)
     assert rec["method"].startswith("Monte Carlo") and "no density" in rec["method"]
     assert rec["inputs"]["samples"] == 20000 and 0.0 <= rec["exceed_position_ppm"] <= 1e6
+
+
+def test_the_monte_carlo_fallback_of_a_budget_without_a_density_is_sized_first(capsys, tmp_path):
+    """The exact series fails only when tried (NoExactYieldError): the Monte Carlo fallback that follows is
+    sized too and refused in one line when it will not fit (here --max-gb, which the exact yield at one pose
+    passes); it used to run unchecked."""
+    from prp3mc.model.laws import Disc, Uniform
+
+    path = tmp_path / "alone.toml"
+    Budget({"rho_1": Disc(0.01), "zeta_1": Uniform(0.0, 360.0)}, name="disc alone").to_toml(path)
+    code = main(["--max-gb", "0.01", "yield", "--geometry", "u-shape", "--budget", str(path), *POSE,
+                 "--spec-position-um", "8", "--samples", "20000", "--seed", "3", "--json"])
+    out, err = capsys.readouterr()
+    refusal = [line for line in err.splitlines() if ": warning: " not in line]   # the budget's own warning aside
+    assert code == 1 and out == "" and len(refusal) == 1
+    assert "Monte Carlo of 20000 samples at 1 pose(s) needs" in err and "more than --max-gb 0.01" in err

@@ -52,10 +52,7 @@ class YieldCommand:
 
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         why = exact_refusal(budget)
-        if why is not None:        # the Monte Carlo fallback (see _correlated)
-            estimate = lambda n: montecarlo_estimate(args.samples, n, len(budget.factors) + 1)  # noqa: E731
-        else:
-            estimate = yield_estimate
+        estimate = yield_estimate if why is None else lambda n: _fallback_estimate(args, budget, n)  # noqa: E731
         poses, where = grid_poses(args, estimate)
         if args.region is None:
             check_poses(geometry, poses)
@@ -136,16 +133,24 @@ def _pose_frame(r) -> "pd.DataFrame":
     return frame
 
 
+def _fallback_estimate(args, budget, n_poses: int):
+    """Memory of the Monte Carlo fallback (:func:`_correlated`) at ``n_poses`` poses."""
+    return montecarlo_estimate(args.samples, n_poses, len(budget.factors) + 1)
+
+
 def _correlated(args, geometry, budget, poses, where, why: str) -> None:
     """A budget the exact yield cannot serve (correlated inputs not all normal; no density, too many classes
     or terms: ``why``): the streamed Monte Carlo with the copula, every
     exceedance with its Wilson 95 % interval; as the error, the distance to the interval's farther end (said
-    in ``method``)."""
+    in ``method``). Its memory is checked first: a budget that fails the exact series only when tried was
+    sized for the exact yield."""
     import pandas as pd
 
     from .._result import pose_columns
     from ..montecarlo.propagation import monte_carlo
     from ..stackup.result import OUTPUTS, QUANTILE_LEVELS, ppk, region_summary
+
+    within_limits(args, _fallback_estimate(args, budget, poses.shape[0]))
 
     S = args.spec_position_um / MM2UM
     Z = None if args.spec_phi_arcsec is None else args.spec_phi_arcsec / DEG2ARCSEC
