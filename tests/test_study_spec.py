@@ -70,8 +70,6 @@ def test_tolerance_is_the_same_position_spec():
 
 
 @pytest.mark.parametrize("spec, tolerance, line, reason", [
-    ("[spec]\nposition_um = 0.06\n", "", 15, "spec.position_um = 0.06 µm is below 1 µm: the unit is µm"),
-    ("[spec]\nposition_um = 60\nphi_arcsec = 0.01\n", "", 16, "the unit is arcsec (0.01 deg is 36 arcsec"),
     ("[spec]\nposition_um = -5\n", "", 15, "must be a finite number > 0 µm"),
     ("[spec]\nposition_um = nan\n", "", 15, "must be a finite number"),
     ("[spec]\nposition_um = \"60\"\n", "", 15, "must be a finite number"),
@@ -85,6 +83,20 @@ def test_bad_spec_one_line_naming_line_and_unit(spec, tolerance, line, reason):
         Study.from_text(_text(spec, tolerance), source="s.toml")
     message = str(err.value)
     assert "\n" not in message and message.startswith(f"s.toml:{line}: ") and reason in message, message
+
+
+@pytest.mark.parametrize("spec, value, warning", [
+    ("position_um = 0.06\n", (0.06, None), r"spec_position_um = 0.06 µm is below 1 µm: a spec in mm typed as µm\? "
+                                          r"\(0.06 mm = 60 µm\)"),
+    ("position_um = 60\nphi_arcsec = 0.01\n", (60.0, 0.01), r"spec_phi_arcsec = 0.01 arcsec is below 1 arcsec: "
+                                                           r"a spec in deg typed as arcsec\? \(0.01 deg = 36 arcsec\)"),
+])
+def test_a_spec_below_one_unit_warns_as_every_entry_point_does(spec, value, warning):
+    """Below 1 µm or 1 arcsec a study's spec is taken with the warning exact_yield, prp3mc yield and allocate
+    give, worded the same (one rule); studies refused it before, the other entry points warned."""
+    with pytest.warns(Warning, match=warning):
+        s = Study.from_text(_text("[spec]\n" + spec), source="s.toml")
+    assert (s.spec.position_um, s.spec.phi_arcsec) == value
 
 
 # ----------------------------------------------------------------- the run

@@ -10,7 +10,7 @@ from .._version import __version__
 from ..errors import NoExactYieldError, Prp3mcWarning, SpecError
 from ..kinematics.geometry import Geometry
 from ..limits import DEFAULT_TARGET, TARGET_RANGE, montecarlo_estimate, yield_estimate
-from ..units import DEG2ARCSEC, MM2UM, PPM
+from ..units import DEG2ARCSEC, MM2UM, PPM, SPEC_UNITS
 from . import (add_budget, add_geometry, add_json, add_pose_or_region, add_seed, command, emit_json, emit_table,
                finite_float, grid_poses, positive_float, positive_int, provenance, within_limits)
 
@@ -68,8 +68,10 @@ class YieldCommand:
                 over = exact_yield(geometry, budget, poses, quantiles=args.region is None, target=args.target,
                                    **specs)
             except NoExactYieldError as exc:                     # no density, too many classes or terms
-                _correlated(args, geometry, budget, poses, where, str(exc).removeprefix("exact yield: "))
-                return
+                over = str(exc).removeprefix("exact yield: ")
+        if isinstance(over, str):       # outside the block: the fallback's own warnings are said
+            _correlated(args, geometry, budget, poses, where, over)
+            return
         _check_scale(args, over)
         for w in caught:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
@@ -150,7 +152,12 @@ def _correlated(args, geometry, budget, poses, where, why: str) -> None:
     from ..montecarlo.propagation import monte_carlo
     from ..stackup.result import OUTPUTS, QUANTILE_LEVELS, ppk, region_summary
 
+    from ..stackup.exceedance import _spec as spec_in_unit
+
     within_limits(args, _fallback_estimate(args, budget, poses.shape[0]))
+    for name, value in (("spec_position_um", args.spec_position_um), ("spec_phi_arcsec", args.spec_phi_arcsec)):
+        if value is not None:   # below 1: a warning, as exact_yield gives on its own path
+            spec_in_unit(name, value, *SPEC_UNITS[name])
 
     S = args.spec_position_um / MM2UM
     Z = None if args.spec_phi_arcsec is None else args.spec_phi_arcsec / DEG2ARCSEC
