@@ -665,6 +665,8 @@ def second_cases() -> list[Case]:
              message="more than --max-gb"))
     add(Case(H, ["--max-gb", "0.01", "yield", *G, "--budget", "{b_no_density}", *P, "--spec-position-um", "8",
                  "--samples", "20000"], message="Monte Carlo of 20000 samples at 1 pose(s) needs"))   # ran unsized
+    add(Case(S, ["yield", *G, "--budget", "{b_no_density}", *P, "--spec-position-um", "0.5", "--samples", "2000"],
+             expect="accept", warning="below 1 µm"))     # the fallback said nothing, then its text: a traceback
     add(Case(H, ["--max-gb", "4", "study", "{s_sweep_histograms}", "--out", "{tmp}/sw"],
              message="draws at 3000 histogram poses) needs ~45 GiB"))
     add(Case(M, [*y, *P, "--spec-position-um", "100", "--target", "1e-30"], status=(2,), message="[1e-12, 0.01]"))

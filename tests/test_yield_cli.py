@@ -226,3 +226,11 @@ def test_a_spec_below_one_unit_warns_on_the_monte_carlo_fallback_too(capsys, tmp
     assert "spec_position_um = 0.5 µm is below 1 µm: a spec in mm typed as µm?" in err
     assert json.loads(out)["method"].startswith("Monte Carlo")
 
+
+
+def test_the_monte_carlo_fallback_prints_its_text_without_an_orientation_spec(capsys, tmp_path):
+    """The readable report of the fallback formatted --spec-phi-arcsec when none was given (a TypeError
+    traceback, found by the corpus)."""
+    code, out, err = _without_density(capsys, tmp_path, "--spec-position-um", "5", "--samples", "2000")
+    assert code == 0, err
+    assert "Monte Carlo with 2000 samples" in out and "position > 5 µm" in out and "dphi" not in out

@@ -193,8 +193,9 @@ def _correlated(args, geometry, budget, poses, where, why: str) -> None:
         return
     x, y, phi = poses[k]
     q = record["quantiles_position_um"]
-    labels = {"position": f"position > {args.spec_position_um:g} µm", "phi": f"|dphi| > {args.spec_phi_arcsec:g} "
-              "arcsec", "any": "either"}
+    labels = {"position": f"position > {args.spec_position_um:g} µm", "any": "either"}
+    if Z is not None:
+        labels["phi"] = f"|dphi| > {args.spec_phi_arcsec:g} arcsec"
     print("\n".join([
         f"prp3mc {__version__}  geometry {geometry.name}  budget {budget.name}",
         f"pose x={x:g} mm  y={y:g} mm  phi={phi:g} deg",
