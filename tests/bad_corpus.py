@@ -683,6 +683,8 @@ def second_cases() -> list[Case]:
     add(Case(H, ["plan", *G, *B, "--effects", "backlash_1", "--poses", "9", "--visits", "1000000000", "--out",
                  "{tmp}/p.csv"], message="a campaign plan of 1000000000 visits of 405 candidate poses needs"))
     add(Case(M, [*pl, "--effects", "nonsense_1"], message="unknown effect"))
+    add(Case(M, [*pl, "--effects", "scale_2", "--region", "0", "1"], message="got 2 values"))   # was usage (2)
+    add(Case(M, [*pl, "--effects", "scale_2", "--region", "nowhere"], message="nowhere"))
     add(Case(M, [*pl, "--effects", ","], message="at least one effect"))
     add(Case(M, [*pl, "--effects", "cyclic_1"], message="lead_mm"))
     add(Case(S, [*pl, "--effects", "cyclic_1,scale_2,cyclic_1"], message="--effects names cyclic_1 twice",
