@@ -240,34 +240,12 @@ def test_correlated_uniform_budget_falls_back_on_monte_carlo_and_says_so(tmp_pat
     assert how["respects"] and "no exact series" in how["how"] and "Wilson" in how["how"]
 
 
-def test_a_budget_without_a_density_runs_on_monte_carlo_and_says_so(tmp_path):
-    """One leg random (a disc clearance): the exact series has no density to invert (NoExactYieldError, known
-    only by trying); the study warns, keeps the Monte Carlo run's P(position > spec), and writes its report
-    (it used to stop with the one-line error)."""
-    from prp3mc.model.budget import Budget
-    from prp3mc.model.laws import Disc, Uniform
-    from prp3mc.study.summary import build_summary
-
-    Budget({"rho_1": Disc(0.01), "zeta_1": Uniform(0.0, 360.0)}, name="disc alone").to_toml(tmp_path / "alone.toml")
-    text = _text("[spec]\nposition_um = 8\n").replace('budget = "paper"', 'budget = "alone.toml"')
-    with pytest.warns(Warning, match="no law for rho_2"):                  # one leg's inputs only: said as read
-        study = Study.from_text(text, source=str(tmp_path / "s.toml"), base=tmp_path)
-    with pytest.warns(Warning, match="no exact yield for u-shape: .*no density.*the Monte Carlo run counts"):
-        result = run_study(study, progress=False)
-    c = result["u-shape"]
-    assert c.yield_ is None and c.curves == () and c.montecarlo.tolerance_mm == pytest.approx(0.008)
-    assert np.all((c.montecarlo.exceed_prob >= 0) & (c.montecarlo.exceed_prob <= 1))
-    exceed = build_summary(result)["configurations"]["u-shape"]["montecarlo"]["exceed"]
-    assert "probability" in exceed and "yield" not in build_summary(result)["configurations"]["u-shape"]
-    write_study(result, tmp_path / "out")
-    html = (tmp_path / "out" / "report.html").read_text()
-    assert missing_files(html, tmp_path / "out") == [] and figures_without_files(html, tmp_path / "out", "png") == []
-
-
 def test_a_budget_without_a_density_counts_every_channel_of_its_spec(tmp_path):
-    """No exact yield (NoExactYieldError, known only after trying) with a phi spec: the Monte Carlo run counts
-    P(position > S), P(|dphi| > Z) and P(either), as for a correlated budget, and summary.json carries them
-    (montecarlo.exceed); each equals the count over the run's own draws. Before, only position was counted."""
+    """One leg random (a disc clearance): the exact series has no density to invert (NoExactYieldError, known
+    only by trying); the study warns and, with a phi spec, the Monte Carlo run counts P(position > S),
+    P(|dphi| > Z) and P(either), as for a correlated budget: summary.json (montecarlo.exceed), the tables and the
+    report carry them, and each equals the count over the run's own draws. The study used to stop with the
+    one-line error, then counted position alone."""
     from prp3mc.model.budget import Budget
     from prp3mc.model.laws import Disc, Uniform
     from prp3mc.model.linear import linear_model
@@ -295,6 +273,17 @@ def test_a_budget_without_a_density_counts_every_channel_of_its_spec(tmp_path):
     exceed = build_summary(result)["configurations"]["u-shape"]["montecarlo"]["exceed"]
     assert exceed["tolerance_phi_arcsec"] == pytest.approx(5.0)
     assert {"probability", "phi_probability", "any_probability"} <= set(exceed)
+    assert "yield" not in build_summary(result)["configurations"]["u-shape"]
+    write_study(result, tmp_path / "out")                  # the tables and the report carry every channel too
+    table = pd.read_csv(tmp_path / "out" / "tables" / "summary.csv").query("analysis == 'montecarlo'")
+    for output, statistic, p in (("position", "exceed_0.005mm", mc.exceed_prob),
+                                 ("phi", "exceed_5arcsec", mc.exceed_phi_prob),
+                                 ("any", "exceed_0.005mm_or_5arcsec", mc.exceed_any_prob)):
+        row = table.query(f"output == '{output}' and statistic == '{statistic}' and aggregate == 'max'")
+        assert row["value"].tolist() == pytest.approx([p.max()])
+    html = (tmp_path / "out" / "report.html").read_text()
+    assert "P(&gt; 5 arcsec)" in html and "P(&gt; 0.005 mm or 5 arcsec)" in html
+    assert missing_files(html, tmp_path / "out") == [] and figures_without_files(html, tmp_path / "out", "png") == []
 
 
 @pytest.mark.slow
