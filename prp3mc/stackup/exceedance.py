@@ -125,7 +125,7 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
         Threads (default: the CPU count).
     joint : bool, optional
         Find P(either) by conditioning where the 3-D series does not serve (about 0.1 to 0.3 s a pose): True
-        always, False never (the bracket), None (default) when at most :data:`JOINT_POSES` poses need it.
+        always, False never (the bracket), None (default) when at most ``JOINT_POSES`` (1000) poses need it.
 
     Raises
     ------
