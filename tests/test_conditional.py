@@ -75,7 +75,7 @@ def test_a_paper_leg_cdf_matches_its_closed_form():
                                 epsrel=1e-13, limit=200) for a, b in zip(kinks[:-1], kinks[1:])]
         return sum(p[0] for p in parts), sum(p[1] for p in parts)
     M = cdf["M"]
-    for j in (M // 16, M // 4, M // 2 + 123, 3 * M // 4, 15 * M // 16):
+    for j in (M // 16, M // 2 + 123, 15 * M // 16):
         x = cdf["lo"][0, leg] + j * cdf["h"][0, leg]
         ref, err = reference(x)
         assert abs(cdf["F"][0, leg, j] - ref) <= cdf["eps"][0, leg] + err, (j, cdf["F"][0, leg, j], ref)
