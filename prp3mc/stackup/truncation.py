@@ -208,37 +208,52 @@ def _at(g, x):
 # ------------------------------------------------------------------ the position's third (mixed) leg
 
 @njit(cache=True, nogil=True)
-def _mixed(ev, grp, mu, ab, ax3):
-    """The mixed leg's envelope product G_m at ``|nu_m|`` = ax3 and its decay power there (0 at ax3 = 0)."""
+def _mixed_scales(grp, mu, ab):
+    """``|c_t . w|`` per unit of ``|nu_m|`` of each term of the mixed leg (0 for the others), (T,)."""
+    km = np.zeros(grp.size)
+    norm = math.sqrt(ab[0] * ab[0] + ab[1] * ab[1])
+    for t in range(grp.size):
+        if grp[t] == MIXED_LEG:
+            km[t] = math.sqrt(mu[t, 0] ** 2 + mu[t, 1] ** 2) / norm
+    return km
+
+
+@njit(cache=True, nogil=True)
+def _mixed(ev, grp, km, ax3):
+    """The mixed leg's envelope product G_m at ``|nu_m|`` = ax3 and its decay power there (0 at ax3 = 0); km:
+    :func:`_mixed_scales`."""
     e = 1.0
     p = 0.0
-    norm = math.sqrt(ab[0] * ab[0] + ab[1] * ab[1])
     for t in range(ev.shape[0]):
         if grp[t] == MIXED_LEG:
             v, pv = envelope_power(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7],
-                                   math.sqrt(mu[t, 0] ** 2 + mu[t, 1] ** 2) / norm * ax3)
+                                   km[t] * ax3)
             e *= v
             p += pv
     return e, p
 
 
 @njit(cache=True, nogil=True)
-def _mixed_row_sum(ev, grp, mu, ab, delta):
+def _mixed_row_sum(ev, grp, km, delta):
     """Bound of sum_k G_m(x0 + k delta) over k in Z, any x0: max G_m + (2 / delta) int_0^inf G_m
     (G_m even and non-increasing in ``|x|``); the integral by left sums on a geometric grid (ratio 1.02,
     from x0 with G_m <= 1 below it), then its analytic tail. inf when there is no mixed leg or G_m
-    does not decay faster than 1/x."""
-    kmax = 0.0
-    norm = math.sqrt(ab[0] * ab[0] + ab[1] * ab[1])
-    for t in range(ev.shape[0]):
-        if grp[t] == MIXED_LEG:
-            kmax = max(kmax, math.sqrt(mu[t, 0] ** 2 + mu[t, 1] ** 2) / norm)
+    does not decay faster than 1/x. Up to ``flat``, found by doubling, G_m is 1 (power 0): not evaluated
+    there (it is non-increasing)."""
+    kmax = km.max()
     if kmax == 0.0 or delta <= 0.0:
         return np.inf
     x = 1e-6 / kmax
+    flat = 0.0
+    probe = x
+    for _ in range(64):
+        if _mixed(ev, grp, km, probe)[0] < 1.0:
+            break
+        flat = probe
+        probe *= 2.0
     acc = x
     for _ in range(20000):
-        e, p = _mixed(ev, grp, mu, ab, x)
+        e, p = (1.0, 0.0) if x <= flat else _mixed(ev, grp, km, x)
         if p > 1.0 and e * x / (p - 1.0) <= 1e-6 * acc:
             return 1.0 + 2.0 * (acc + e * x / (p - 1.0)) / delta
         acc += e * 0.02 * x
@@ -247,14 +262,14 @@ def _mixed_row_sum(ev, grp, mu, ab, delta):
 
 
 @njit(cache=True, nogil=True)
-def _row_bound(nu2, S1, cm, g1, Q0, ev, grp, mu, ab):
+def _row_bound(nu2, S1, cm, g1, Q0, ev, grp, km, ab):
     """Bound of a position row's sum of g_1(n_1) G_m(nu_m) at ``|nu_2|`` = nu2 (g_1 non-increasing, S1 its sum over
     the row): at most S1 (G_m <= 1), and, as one of ``|nu_1|`` >= ``|beta|`` nu2 / (2 ``|alpha|``), ``|nu_m|`` >= ``|beta|`` nu2 / 2
     holds at every point, G_m(``|beta|`` nu2 / 2) S1 + g_1(``|beta|`` nu2 / (2 ``|alpha|``)) C_m."""
     alpha, beta = ab[0], ab[1]
     b = S1
     if beta != 0.0 and cm < np.inf:
-        gmv, _ = _mixed(ev, grp, mu, ab, 0.5 * abs(beta) * nu2)
+        gmv, _ = _mixed(ev, grp, km, 0.5 * abs(beta) * nu2)
         g1v = _at(g1, abs(beta) * nu2 / (2.0 * abs(alpha)) * Q0 / _TWO_PI) if alpha != 0.0 else 0.0
         b = min(b, gmv * S1 + g1v * cm)
     return b
@@ -523,7 +538,8 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
     outer = 0.0
     if d == 2:
         S1, S1E = Rs[0][0], SEs[0]
-        cm = _mixed_row_sum(ev, grp, mu, ab, abs(ab[0]) * _TWO_PI / Q[0])
+        km = _mixed_scales(grp, mu, ab)
+        cm = _mixed_row_sum(ev, grp, km, abs(ab[0]) * _TWO_PI / Q[0])
         g1, g2, R2, E1, E2 = gs[0], gs[1], Rs[1], Es[0], Es[1]
         N2 = g2.size - 1
         # a row's whole sum, two ways: g_1 g_2 G_m (the transform shared) summed along the row, or
@@ -534,17 +550,17 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
 
         def rb(k):
             nu2 = _TWO_PI * k / Q[1]
-            b = g2[k] * _row_bound(nu2, S1, cm, g1, Q[0], ev, grp, mu, ab)
+            b = g2[k] * _row_bound(nu2, S1, cm, g1, Q[0], ev, grp, km, ab)
             if S1E < np.inf:
                 b = min(b, E2[k] * _disc_bound(z1, nu2 * d_perp) / lam
-                        * _row_bound(nu2, S1E, cm, E1, Q[0], ev, grp, mu, ab))
+                        * _row_bound(nu2, S1E, cm, E1, Q[0], ev, grp, km, ab))
             return b
 
         # rows |n2| > K: the rows up to the arrays' end, then g_2's tail times the bound at the end (rb is
         # non-increasing in k: so are g_2, E_2, the transform's bound and _row_bound). The rows past K0 (the
         # first 256) go in blocks [a, a + a // 32), each bounded by its first row's rb times its length (all
         # of them one by one when that sum is above the part)
-        far = R2[N2 + 1] * _row_bound(_TWO_PI * N2 / Q[1], S1, cm, g1, Q[0], ev, grp, mu, ab)
+        far = R2[N2 + 1] * _row_bound(_TWO_PI * N2 / Q[1], S1, cm, g1, Q[0], ev, grp, km, ab)
         K0 = min(N2, 256)
         blocks = far
         a = K0 + 1
