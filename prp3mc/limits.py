@@ -56,6 +56,9 @@ _MC_CHUNK_BYTES = 256 << 20
 # Exact worst case: the kept linear model and term bounds per pose (601^2 poses held 331 MiB).
 _WC_BYTES_PER_POSE_TERM = 100
 _WC_BYTES_PER_POSE = 200
+# What a study keeps of each configuration's worst case, per pose: the poses, both maxima and the term bounds
+# (618 B traced per pose at 10^4 poses with the paper's 12 inputs).
+_WC_HELD_BYTES_PER_POSE = lambda d: 400 + 20 * d  # noqa: E731
 # Exact yield: per pose the linear model's columns, each channel's lattice and results (2.0 KiB per pose at
 # 900 poses with an orientation spec, traced), and the table's row as text or as a JSON object.
 _YIELD_BYTES_PER_POSE = 4096
@@ -211,26 +214,45 @@ def allocate_estimate(n_poses: int, n_inputs: int, n_samples: int = 0) -> Estima
 
 
 def study_estimate(study) -> Estimate:
-    """Memory of running a :class:`prp3mc.study.Study` (its analyses, one configuration after another)."""
+    """Memory of running a :class:`prp3mc.study.Study`: what its configurations keep to the report, plus the
+    largest analysis of one configuration.
+
+    A configuration's analyses run one after another (worst case, Monte Carlo and its draws at the
+    histograms' poses, exact yield, Sobol, allocation: the largest counts), while every configuration run
+    before it keeps its worst case and its histograms' draws: those are added to that analysis, not compared
+    with the memory on their own.
+    """
     d = len(study.budget.factors)
     variants = math.prod(len(entry[-1]) for entry in getattr(study, "sweep", ()))   # of each configuration
     n_conf = len(study.configurations) * variants
-    total = worstcase_estimate(n_conf * study.worstcase_grid[0] * study.worstcase_grid[1], d)
+    wc_poses = study.worstcase_grid[0] * study.worstcase_grid[1]
+    held = Estimate(f"the worst cases at {n_conf * wc_poses} poses", n_conf * wc_poses * _WC_HELD_BYTES_PER_POSE(d))
+    stage = Estimate("", 0.0).then(worstcase_estimate(wc_poses, d))
     mc_poses = study.mc_grid[0] * study.mc_grid[1]
     if "montecarlo" in study.outputs:
-        histogram_poses = variants * sum(3 if c.poses is None else len(c.poses) for c in study.configurations)
+        per_configuration = [3 if c.poses is None else len(c.poses) for c in study.configurations]
+        histogram_poses = variants * sum(per_configuration)
         kept = Estimate(f"Monte Carlo draws at {histogram_poses} histogram poses",
                         histogram_poses * float(study.mc_samples) * _STUDY_BYTES_PER_HISTOGRAM_SAMPLE)
-        mc = montecarlo_estimate(study.mc_samples, mc_poses, d)
-        total = total.then(Estimate(f"{mc.what} and the {kept.what}", mc.bytes + kept.bytes))
+        held = Estimate(f"{held.what}, {kept.what}", held.bytes + kept.bytes)
+        # after the streamed run: the budget's draws and their pose errors at one configuration's histogram poses
+        draws = float(study.mc_samples) * 8 * (d + 3 * max(per_configuration))
+        stage = stage.then(montecarlo_estimate(study.mc_samples, mc_poses, d)).then(
+            Estimate(f"{study.mc_samples} draws of {d} inputs", draws))
     if study.spec is not None and "yield" in study.outputs:
-        total = total.then(yield_estimate(mc_poses))
+        stage = stage.then(yield_estimate(mc_poses))
     if "sobol" in study.outputs:
         n_poses = study.sobol_grid[0] * study.sobol_grid[1]
-        total = total.then(sobol_estimate(study.sobol_samples, n_poses, d,
+        stage = stage.then(sobol_estimate(study.sobol_samples, n_poses, d,
                                           d + len(study.budget.groups) + len(study.sobol_groups),
                                           len(study.sobol_outputs), shapley_permutations=study.sobol_samples // 2))
-    return Estimate(f"study {study.name!r} ({total.what})", total.bytes)
+    allocation = getattr(study, "allocation", None)
+    if allocation is not None:
+        nx, ny = allocation.grid or study.worstcase_grid
+        stage = stage.then(allocate_estimate(nx * ny, len(allocation.classes.inputs) + d, allocation.samples
+                                             if allocation.spec_percentile is not None else 0))
+    return Estimate(f"study {study.name!r} (kept: {held.what}; with the largest analysis of a configuration: "
+                    f"{stage.what.removeprefix(', ')})", held.bytes + stage.bytes)
 
 
 def sensitivity_estimate(n_poses: int) -> Estimate:

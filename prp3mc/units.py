@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 __all__ = ["RAD2DEG", "DEG2RAD", "MM2UM", "DEG2ARCSEC", "PPM", "POSE_OUTPUTS", "OUTPUTS", "OUTPUT_UNITS",
-           "DISPLAY", "z_value", "t_value", "Z95", "probability_text", "quantity_text"]
+           "DISPLAY", "SPEC_UNITS", "z_value", "t_value", "Z95", "probability_text", "quantity_text"]
 
 RAD2DEG = 180.0 / math.pi
 DEG2RAD = math.pi / 180.0
@@ -17,6 +17,9 @@ MM2UM = 1e3
 DEG2ARCSEC = 3600.0
 #: Parts per million per unit of probability (exceedances in reports).
 PPM = 1e6
+#: A pose-error spec's unit, the larger unit it is mistyped in and the factor between them, by keyword: below 1
+#: of its unit a spec warns (``prp3mc.stackup.exceedance._spec``, the one rule every entry point applies).
+SPEC_UNITS = {"spec_position_um": ("µm", "mm", MM2UM), "spec_phi_arcsec": ("arcsec", "deg", DEG2ARCSEC)}
 
 #: Components of the pose error, in order: rows of every J_q.
 POSE_OUTPUTS = ("x", "y", "phi")

@@ -120,6 +120,9 @@ def prepare(root: Path) -> dict:
         "g_bom": "\ufeff" + _geometry_text(),
         "b_bom": "\ufeff" + _budget_text(),
         "b_correlated": _budget_text(extra="[correlation]\n\"theta_1,theta_2\" = 0.5\n"),
+        # one leg random: no 2-D density, so no exact yield (known only by trying): prp3mc yield's Monte Carlo
+        "b_no_density": _budget_text(inputs='rho_1 = { law = "disc", radius = 0.01 }\n'
+                                            'zeta_1 = { law = "uniform", lo = 0, hi = 360 }\n'),
         "s_bom": "\ufeff" + 'name = "s"\nseed = 1\n[worstcase]\ngrid = 3\n[[configuration]]\ngeometry = "u-shape"\n',
         "classes_bom": "\ufeff" + 'name = "c"\n[theta]\nclasses = [{ name = "x", catalogue = "guide_angular_play.paper", cost = 1.0 }]\n',
         # budgets silently accepted
@@ -660,8 +663,12 @@ def second_cases() -> list[Case]:
                  "--spec-position-um", "100"], message="of memory, this machine has"))
     add(Case(H, ["--max-gb", "0.001", *y, "--region", "u-shape", "--grid", "300", "--spec-position-um", "100"],
              message="more than --max-gb"))
+    add(Case(H, ["--max-gb", "0.01", "yield", *G, "--budget", "{b_no_density}", *P, "--spec-position-um", "8",
+                 "--samples", "20000"], message="Monte Carlo of 20000 samples at 1 pose(s) needs"))   # ran unsized
+    add(Case(S, ["yield", *G, "--budget", "{b_no_density}", *P, "--spec-position-um", "0.5", "--samples", "2000"],
+             expect="accept", warning="below 1 µm"))     # the fallback said nothing, then its text: a traceback
     add(Case(H, ["--max-gb", "4", "study", "{s_sweep_histograms}", "--out", "{tmp}/sw"],
-             message="draws at 3000 histogram poses) needs ~45 GiB"))
+             message="draws at 3000 histogram poses; with the largest analysis"))
     add(Case(M, [*y, *P, "--spec-position-um", "100", "--target", "1e-30"], status=(2,), message="[1e-12, 0.01]"))
     add(Case(M, [*y, *P, "--spec-position-um", "100", "--target", "0.5"], status=(2,), message="[1e-12, 0.01]"))
     for spec in ("1e4", "1e9"):        # beyond the worst case (140 µm): P = 0 exactly, was "more than 2^23 terms"
@@ -676,6 +683,8 @@ def second_cases() -> list[Case]:
     add(Case(H, ["plan", *G, *B, "--effects", "backlash_1", "--poses", "9", "--visits", "1000000000", "--out",
                  "{tmp}/p.csv"], message="a campaign plan of 1000000000 visits of 405 candidate poses needs"))
     add(Case(M, [*pl, "--effects", "nonsense_1"], message="unknown effect"))
+    add(Case(M, [*pl, "--effects", "scale_2", "--region", "0", "1"], message="got 2 values"))   # was usage (2)
+    add(Case(M, [*pl, "--effects", "scale_2", "--region", "nowhere"], message="nowhere"))
     add(Case(M, [*pl, "--effects", ","], message="at least one effect"))
     add(Case(M, [*pl, "--effects", "cyclic_1"], message="lead_mm"))
     add(Case(S, [*pl, "--effects", "cyclic_1,scale_2,cyclic_1"], message="--effects names cyclic_1 twice",

@@ -336,8 +336,9 @@ def test_too_few_samples_to_confirm_a_percentile_are_refused():
 
 @pytest.mark.parametrize("kwargs, unit", [({"spec_position_um": 0.08}, "µm"), ({"spec_phi_arcsec": 0.03}, "arcsec")])
 def test_a_spec_below_one_unit_warns_naming_the_unit(kwargs, unit):
-    """0.08 (80 µm typed in mm) ran silently to an infeasible allocation; ``prp3mc yield`` warns on the same."""
-    with pytest.warns(Prp3mcWarning, match=f"below 1 {unit}"):
+    """0.08 (80 µm typed in mm) ran silently to an infeasible allocation; ``prp3mc yield`` warns on the same,
+    in the same words (one rule for every entry point)."""
+    with pytest.warns(Prp3mcWarning, match=f"is below 1 {unit}: a spec in (mm|deg) typed as {unit}"):
         allocate("u-shape", "example", "u-shape", grid=2, **kwargs)
 
 

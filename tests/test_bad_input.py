@@ -717,3 +717,24 @@ def test_an_empty_pose_batch_is_refused_in_one_line(call, shape):
     with pytest.raises(ParameterError, match=r"^no poses: .*shape \(" + ", ".join(map(str, shape))):
         call(Geometry.from_preset("u-shape"), Budget.from_preset("paper"), np.zeros(shape))
     assert as_poses(np.zeros(shape)).shape == shape
+
+
+def test_the_time_limit_lost_in_a_callback_still_reads_as_the_time_limit(capsys, monkeypatch):
+    """The --max-hours alarm whose exception is swallowed (raised inside a weak reference's callback) still asks
+    the worker threads to stop; the first of them to stop ends the run with a plain KeyboardInterrupt, which is
+    reported as the time limit (one line, exit 1), not as an interruption by the user (exit 130)."""
+    import threading
+
+    from prp3mc import _threads, cli
+
+    def swallowed(signum, frame):        # _time_up with its raise lost, as in a weak set's callback
+        cli._SIGNALLED["stopped"] = cli._SIGNALLED["timed_out"] = True
+        _threads.request_stop()
+
+    monkeypatch.setattr(_threads, "_STOP", threading.Event())   # the stop request stays in this test
+    monkeypatch.setattr(cli, "_time_up", swallowed)
+    argv = ["--max-hours", "1e-6", "montecarlo", "--geometry", "u-shape", "--budget", "paper", "--pose", "0", "100",
+            "0", "--samples", "1000000000", "--seed", "1"]
+    assert main(argv) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        "prp3mc montecarlo: error: stopped at the --max-hours limit (0.0036 s of wall time): nothing was written"]

@@ -105,6 +105,32 @@ def test_cli(tmp_path, capsys):
     assert "unknown effect" in capsys.readouterr().err
 
 
+
+def test_cli_region_as_other_commands_take_it(tmp_path, capsys):
+    """``--region`` takes a preset or a region file, as allocate, simulate and the --region grids do (it took
+    four numbers only: ``--region u-shape`` was "expected 4 arguments"); the four bounds still work, and plan
+    over the same region as a file giving them."""
+    from prp3mc.kinematics.geometry import Region
+
+    out = tmp_path / "plan.csv"
+    args = ["plan", "--geometry", "u-shape", "--budget", "paper", "--effects", "scale_2", "--poses", "4",
+            "--visits", "2", "--out", str(out), "--seed", "4", "--force", "--json"]
+    u = Region.from_preset("u-shape")
+    (tmp_path / "small.toml").write_text('name = "small"\nx_mm = [-20, 20]\ny_mm = [80, 120]\nphi_deg = 0\n')
+    docs = {}
+    for form in (["u-shape"], [str(tmp_path / "small.toml")], ["-20", "20", "80", "120"]):
+        assert main(args + ["--region", *form]) == 0, capsys.readouterr().err
+        docs[" ".join(form)] = json.loads(capsys.readouterr().out)
+    named, small, numbers = docs.values()
+    assert named["inputs"]["region"] == {"name": "u-shape", "preset": "u-shape", "x_mm": list(u.x_mm),
+                                         "y_mm": list(u.y_mm)}
+    assert small["inputs"]["region"]["file"].endswith("small.toml") and "sha256" in small["inputs"]["region"]
+    assert small["poses"] == numbers["poses"] and named["poses"] != small["poses"]    # the file's region = its bounds
+    for bad, message in ((["nowhere"], "nowhere"), (["1", "2"], "got 2 values"), (["0", "1", "x", "2"], "number")):
+        assert main(args + ["--region", *bad]) != 0
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err
+
 @pytest.mark.slow
 def test_a_planned_campaign_detects_what_the_grid_misses():
     """scale_2 at the plan's detectable value (power 0.9 on the plan), 20 seeds per layout, simulated on the

@@ -70,8 +70,6 @@ def test_tolerance_is_the_same_position_spec():
 
 
 @pytest.mark.parametrize("spec, tolerance, line, reason", [
-    ("[spec]\nposition_um = 0.06\n", "", 15, "spec.position_um = 0.06 µm is below 1 µm: the unit is µm"),
-    ("[spec]\nposition_um = 60\nphi_arcsec = 0.01\n", "", 16, "the unit is arcsec (0.01 deg is 36 arcsec"),
     ("[spec]\nposition_um = -5\n", "", 15, "must be a finite number > 0 µm"),
     ("[spec]\nposition_um = nan\n", "", 15, "must be a finite number"),
     ("[spec]\nposition_um = \"60\"\n", "", 15, "must be a finite number"),
@@ -85,6 +83,20 @@ def test_bad_spec_one_line_naming_line_and_unit(spec, tolerance, line, reason):
         Study.from_text(_text(spec, tolerance), source="s.toml")
     message = str(err.value)
     assert "\n" not in message and message.startswith(f"s.toml:{line}: ") and reason in message, message
+
+
+@pytest.mark.parametrize("spec, value, warning", [
+    ("position_um = 0.06\n", (0.06, None), r"spec_position_um = 0.06 µm is below 1 µm: a spec in mm typed as µm\? "
+                                          r"\(0.06 mm = 60 µm\)"),
+    ("position_um = 60\nphi_arcsec = 0.01\n", (60.0, 0.01), r"spec_phi_arcsec = 0.01 arcsec is below 1 arcsec: "
+                                                           r"a spec in deg typed as arcsec\? \(0.01 deg = 36 arcsec\)"),
+])
+def test_a_spec_below_one_unit_warns_as_every_entry_point_does(spec, value, warning):
+    """Below 1 µm or 1 arcsec a study's spec is taken with the warning exact_yield, prp3mc yield and allocate
+    give, worded the same (one rule); studies refused it before, the other entry points warned."""
+    with pytest.warns(Warning, match=warning):
+        s = Study.from_text(_text("[spec]\n" + spec), source="s.toml")
+    assert (s.spec.position_um, s.spec.phi_arcsec) == value
 
 
 # ----------------------------------------------------------------- the run
@@ -228,27 +240,49 @@ def test_correlated_uniform_budget_falls_back_on_monte_carlo_and_says_so(tmp_pat
     assert how["respects"] and "no exact series" in how["how"] and "Wilson" in how["how"]
 
 
-def test_a_budget_without_a_density_runs_on_monte_carlo_and_says_so(tmp_path):
+def test_a_budget_without_a_density_counts_every_channel_of_its_spec(tmp_path):
     """One leg random (a disc clearance): the exact series has no density to invert (NoExactYieldError, known
-    only by trying); the study warns, keeps the Monte Carlo run's P(position > spec), and writes its report
-    (it used to stop with the one-line error)."""
+    only by trying); the study warns and, with a phi spec, the Monte Carlo run counts P(position > S),
+    P(|dphi| > Z) and P(either), as for a correlated budget: summary.json (montecarlo.exceed), the tables and the
+    report carry them, and each equals the count over the run's own draws. The study used to stop with the
+    one-line error, then counted position alone."""
     from prp3mc.model.budget import Budget
     from prp3mc.model.laws import Disc, Uniform
+    from prp3mc.model.linear import linear_model
     from prp3mc.study.summary import build_summary
+    from prp3mc.units import RAD2DEG
 
     Budget({"rho_1": Disc(0.01), "zeta_1": Uniform(0.0, 360.0)}, name="disc alone").to_toml(tmp_path / "alone.toml")
-    text = _text("[spec]\nposition_um = 8\n").replace('budget = "paper"', 'budget = "alone.toml"')
-    with pytest.warns(Warning, match="no law for rho_2"):                  # one leg's inputs only: said as read
+    text = _text("[spec]\nposition_um = 5\nphi_arcsec = 5\n").replace('budget = "paper"', 'budget = "alone.toml"')
+    with pytest.warns(Warning, match="no law for rho_2"):
         study = Study.from_text(text, source=str(tmp_path / "s.toml"), base=tmp_path)
-    with pytest.warns(Warning, match="no exact yield for u-shape: .*no density.*the Monte Carlo run counts"):
+    with pytest.warns(Warning, match=r"no exact yield for u-shape: .*no density.*the Monte Carlo run counts "
+                                     r"P\(position > spec\), P\(\|dphi\| > spec\) and P\(either\)"):
         result = run_study(study, progress=False)
     c = result["u-shape"]
-    assert c.yield_ is None and c.curves == () and c.montecarlo.tolerance_mm == pytest.approx(0.008)
-    assert np.all((c.montecarlo.exceed_prob >= 0) & (c.montecarlo.exceed_prob <= 1))
+    mc = c.montecarlo
+    assert c.yield_ is None and c.curves == ()
+    assert mc.tolerance_mm == pytest.approx(0.005) and mc.tolerance_phi_deg == pytest.approx(5 / 3600)
+    err = linear_model(c.configuration.geometry, study.budget, mc.poses.reshape(-1, 3)).evaluate(
+        study.budget.sample(mc.n_samples, result.montecarlo_seed))              # (P, n, 3) mm, mm, rad
+    pos, phi = np.hypot(err[..., 0], err[..., 1]) > 0.005, np.abs(err[..., 2]) * RAD2DEG > 5 / 3600
+    for p, counted in ((mc.exceed_prob, pos), (mc.exceed_phi_prob, phi), (mc.exceed_any_prob, pos | phi)):
+        np.testing.assert_allclose(p.reshape(-1), counted.mean(axis=1))
+    assert 0 < mc.exceed_phi_prob.min() and mc.exceed_phi_prob.max() < 1 and 0 < mc.exceed_prob.max()   # both bite
+    assert np.any(mc.exceed_any_prob != mc.exceed_prob)          # either is not the position alone
     exceed = build_summary(result)["configurations"]["u-shape"]["montecarlo"]["exceed"]
-    assert "probability" in exceed and "yield" not in build_summary(result)["configurations"]["u-shape"]
-    write_study(result, tmp_path / "out")
+    assert exceed["tolerance_phi_arcsec"] == pytest.approx(5.0)
+    assert {"probability", "phi_probability", "any_probability"} <= set(exceed)
+    assert "yield" not in build_summary(result)["configurations"]["u-shape"]
+    write_study(result, tmp_path / "out")                  # the tables and the report carry every channel too
+    table = pd.read_csv(tmp_path / "out" / "tables" / "summary.csv").query("analysis == 'montecarlo'")
+    for output, statistic, p in (("position", "exceed_0.005mm", mc.exceed_prob),
+                                 ("phi", "exceed_5arcsec", mc.exceed_phi_prob),
+                                 ("any", "exceed_0.005mm_or_5arcsec", mc.exceed_any_prob)):
+        row = table.query(f"output == '{output}' and statistic == '{statistic}' and aggregate == 'max'")
+        assert row["value"].tolist() == pytest.approx([p.max()])
     html = (tmp_path / "out" / "report.html").read_text()
+    assert "P(&gt; 5 arcsec)" in html and "P(&gt; 0.005 mm or 5 arcsec)" in html
     assert missing_files(html, tmp_path / "out") == [] and figures_without_files(html, tmp_path / "out", "png") == []
 
 

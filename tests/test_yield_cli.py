@@ -186,17 +186,51 @@ def test_the_target_range_is_the_engine_s(capsys, target):
     assert code == 2 and "[1e-12, 0.01]" in err and target in err
 
 
-def test_a_budget_without_a_density_falls_back_on_monte_carlo(capsys, tmp_path):
-    """One leg random (a disc clearance): no 2-D density, so no exact yield (NoExactYieldError); the command
-    falls back on Monte Carlo as for correlated laws and says why (it used to exit 1, "use Monte Carlo")."""
+def _without_density(capsys, tmp_path, *argv, before=()):
+    """``prp3mc [before] yield`` at POSE with a budget of one random leg (a disc clearance: no 2-D density, no
+    exact yield) and ``argv``; returns (exit status, stdout, stderr)."""
     from prp3mc.model.laws import Disc, Uniform
 
     path = tmp_path / "alone.toml"
     Budget({"rho_1": Disc(0.01), "zeta_1": Uniform(0.0, 360.0)}, name="disc alone").to_toml(path)
-    code = main(["yield", "--geometry", "u-shape", "--budget", str(path), *POSE, "--spec-position-um", "8",
-                 "--samples", "20000", "--seed", "3", "--json"])
-    out, err = capsys.readouterr()
+    code = main([*before, "yield", "--geometry", "u-shape", "--budget", str(path), *POSE, *argv, "--seed", "3"])
+    return (code, *capsys.readouterr())
+
+
+def test_a_budget_without_a_density_falls_back_on_monte_carlo(capsys, tmp_path):
+    """One leg random (a disc clearance): no 2-D density, so no exact yield (NoExactYieldError); the command
+    falls back on Monte Carlo as for correlated laws and says why (it used to exit 1, "use Monte Carlo")."""
+    code, out, err = _without_density(capsys, tmp_path, "--spec-position-um", "8", "--samples", "20000", "--json")
     assert code == 0, err
     rec = json.loads(out)
     assert rec["method"].startswith("Monte Carlo") and "no density" in rec["method"]
     assert rec["inputs"]["samples"] == 20000 and 0.0 <= rec["exceed_position_ppm"] <= 1e6
+
+
+def test_the_monte_carlo_fallback_of_a_budget_without_a_density_is_sized_first(capsys, tmp_path):
+    """The exact series fails only when tried (NoExactYieldError): the Monte Carlo fallback that follows is
+    sized too and refused in one line when it will not fit (here --max-gb, which the exact yield at one pose
+    passes); it used to run unchecked."""
+    code, out, err = _without_density(capsys, tmp_path, "--spec-position-um", "8", "--samples", "20000", "--json",
+                                      before=("--max-gb", "0.01"))
+    refusal = [line for line in err.splitlines() if ": warning: " not in line]   # the budget's own warning aside
+    assert code == 1 and out == "" and len(refusal) == 1
+    assert "Monte Carlo of 20000 samples at 1 pose(s) needs" in err and "more than --max-gb 0.01" in err
+
+
+def test_a_spec_below_one_unit_warns_on_the_monte_carlo_fallback_too(capsys, tmp_path):
+    """A spec below 1 µm warns on every path of the command: the Monte Carlo fallback (no exact yield) said
+    nothing, the exact path's warning being dropped with its recorded warnings."""
+    code, out, err = _without_density(capsys, tmp_path, "--spec-position-um", "0.5", "--samples", "2000", "--json")
+    assert code == 0, err
+    assert "spec_position_um = 0.5 µm is below 1 µm: a spec in mm typed as µm?" in err
+    assert json.loads(out)["method"].startswith("Monte Carlo")
+
+
+
+def test_the_monte_carlo_fallback_prints_its_text_without_an_orientation_spec(capsys, tmp_path):
+    """The readable report of the fallback formatted --spec-phi-arcsec when none was given (a TypeError
+    traceback, found by the corpus)."""
+    code, out, err = _without_density(capsys, tmp_path, "--spec-position-um", "5", "--samples", "2000")
+    assert code == 0, err
+    assert "Monte Carlo with 2000 samples" in out and "position > 5 µm" in out and "dphi" not in out

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -37,11 +36,12 @@ from ..progress import Progress
 from .._result import freeze, pose_columns, short_repr
 from .._rng import child_seed, resolve_rng
 from .._version import __version__
-from ..errors import AllocationError, Prp3mcWarning
+from ..errors import AllocationError
 from ..kinematics.geometry import Geometry, Region
 from ..kinematics.chain import as_poses
+from ..stackup.exceedance import _spec as spec_in_unit
 from ..stackup.result import PPM
-from ..units import DEG2ARCSEC, MM2UM
+from ..units import DEG2ARCSEC, MM2UM, SPEC_UNITS
 from .classes import ClassMenu
 from .percentile import METHODS, PercentileCheck, percentile_least_cost
 from .search import Problem, Search, least_cost
@@ -203,11 +203,9 @@ def _spec_limits(spec_position_um, spec_phi_arcsec, spec_percentile) -> dict:
             raise AllocationError(f"{name} must be a finite number > 0, got {value!r}")
     if spec_position_um is None and spec_phi_arcsec is None:
         raise AllocationError("give a position spec (µm), an orientation spec (arcsec) or both")
-    for name, value, unit, big, per_big in (("spec_position_um", spec_position_um, "µm", "mm", MM2UM),
-                                            ("spec_phi_arcsec", spec_phi_arcsec, "arcsec", "deg", DEG2ARCSEC)):
-        if value is not None and value < 1.0:     # legal, but far more often a value in the larger unit
-            warnings.warn(Prp3mcWarning(f"allocation: {name} = {value:g} {unit} is below 1 {unit}; was it meant "
-                                        f"in {big} ({value:g} {big} = {per_big * value:g} {unit})?"), stacklevel=3)
+    for name, value in (("spec_position_um", spec_position_um), ("spec_phi_arcsec", spec_phi_arcsec)):
+        if value is not None:     # below 1: legal, but far more often a value in the larger unit (a warning)
+            spec_in_unit(name, value, *SPEC_UNITS[name])
     if spec_percentile is not None:
         if spec_position_um is None:
             raise AllocationError("a percentile spec bounds the position error: give spec_position_um too")

@@ -481,8 +481,9 @@ def _terminated(signum, frame):
 
 #: The signal that interrupted the current run, if one did: an error raised on the interrupt's way out
 #: (a figure half drawn, a file half written) is reported as the interruption, not as an error of its own;
-#: ``stopped``: a signal or the time limit interrupted it (its worker threads were asked to stop).
-_SIGNALLED = {"signum": None, "decided": False, "stopped": False}
+#: ``stopped``: a signal or the time limit interrupted it (its worker threads were asked to stop);
+#: ``timed_out``: the time limit did (a worker's :func:`~prp3mc._threads.check_stop` may raise first).
+_SIGNALLED = {"signum": None, "decided": False, "stopped": False, "timed_out": False}
 
 
 def _signum(exc: KeyboardInterrupt) -> int:
@@ -518,7 +519,7 @@ def _time_up(signum, frame):
     """The ``--max-hours`` alarm: interrupt the run, unless its output is being installed (see :func:`_terminated`)."""
     if COMMITTED["value"] or _SIGNALLED["decided"]:
         return
-    _SIGNALLED["stopped"] = True
+    _SIGNALLED["stopped"] = _SIGNALLED["timed_out"] = True
     request_stop()
     raise _TimeUp()
 
@@ -586,7 +587,8 @@ def _run(argv: list[str], own_process: bool = False) -> int:
         sys.stdout.reconfigure(errors="surrogateescape")  # a file name that is not UTF-8 prints as its own bytes
     name = f"prp3mc {args.command}"
     WARNINGS.clear()
-    COMMITTED["value"], _SIGNALLED["signum"], _SIGNALLED["decided"], _SIGNALLED["stopped"] = False, None, False, False
+    COMMITTED["value"] = False
+    _SIGNALLED.update(signum=None, decided=False, stopped=False, timed_out=False)
     show = warnings.showwarning
 
     def one_line_warning(message, category, filename, lineno, file=None, line=None):
@@ -618,7 +620,7 @@ def _run(argv: list[str], own_process: bool = False) -> int:
 
 def _ended_by(exc: BaseException, name: str, args: argparse.Namespace) -> int:
     """The one line on stderr and the exit status of a run that ended in ``exc``; re-raised if unforeseen."""
-    if isinstance(exc, _TimeUp):
+    if isinstance(exc, _TimeUp) or (_SIGNALLED["timed_out"] and isinstance(exc, (KeyboardInterrupt, Exception))):
         print(f"{name}: error: stopped at the --max-hours limit ({format_seconds(3600 * args.max_hours)} of wall "
               "time): nothing was written", file=sys.stderr)
         return 1

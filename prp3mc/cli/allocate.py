@@ -48,14 +48,16 @@ class AllocateCommand:
     @staticmethod
     def run(args) -> None:
         from ..model.budget import Budget
+        from ..allocation.classes import ClassMenu
         from ..allocation.optimum import allocate, allocation_front, front_records
         budget = None if args.budget is None else Budget.load(args.budget)
-        region = Region.load(args.region)
+        region, menu = Region.load(args.region), ClassMenu.load(args.classes)
         if args.phi_deg is None:
             args.phi_deg = region.phi_deg
-        within_limits(args, allocate_estimate(args.grid ** 2, 12,  # rho, zeta, theta and b of each leg
+        terms = len(menu.inputs) + (0 if budget is None else len(budget.factors))   # the menu's; at most the budget's
+        within_limits(args, allocate_estimate(args.grid ** 2, terms,
                                               args.samples if args.spec_percentile is not None else 0))
-        r = allocate(args.geometry, args.classes, region, spec_position_um=args.spec_position_um,
+        r = allocate(args.geometry, menu, region, spec_position_um=args.spec_position_um,
                      spec_phi_arcsec=args.spec_phi_arcsec, spec_percentile=args.spec_percentile,
                      grid=args.grid, phi_deg=args.phi_deg, k_sigma=args.k_sigma, n_samples=args.samples,
                      rng=args.seed, budget=budget)

@@ -7,6 +7,7 @@ from ..limits import plan_estimate
 from ..errors import OutputExistsError
 from . import (add_budget, add_geometry, add_instrument_noise, add_json, add_seed, command, emit_json, finite_float,
                positive_float, positive_int, probability, provenance, within_limits)
+from ..provenance import spec_record
 
 
 def effect_list(text: str) -> list[str]:
@@ -32,8 +33,10 @@ class PlanCommand:
         p.add_argument("--minutes", type=positive_float, default=None, metavar="M",
                        help="spread the planned time_s evenly over M minutes (default: the moves at 20 mm/s and "
                             "4 s per measurement)")
-        p.add_argument("--region", nargs=4, type=finite_float, default=None, metavar=("X0", "X1", "Y0", "Y1"),
-                       help="where to choose poses, mm (default: the geometry's preset test region)")
+        p.add_argument("--region", nargs="+", default=None, metavar="R",
+                       help="where to choose poses: a preset (u-shape, delta-shape) or a region TOML file (prp3mc "
+                            "init region), as other commands take it, or its bounds X0 X1 Y0 Y1 in mm (default: "
+                            "the geometry's preset test region)")
         p.add_argument("--temperature", nargs=2, type=finite_float, default=(20.0, 28.0), metavar=("START", "END"),
                        help="temperature assumed for thermal expansion, rising steadily, deg C (not planned; "
                             "default 20 28)")
@@ -49,7 +52,7 @@ class PlanCommand:
 
     @staticmethod
     def run(args) -> None:
-        from ..kinematics.geometry import Geometry, Region
+        from ..kinematics.geometry import Geometry
         from ..measurement.campaign.plan import MAX_CANDIDATES, plan_campaign
         from ..model.budget import Budget
         twice = sorted({name for name in args.effects if args.effects.count(name) > 1})
@@ -62,7 +65,7 @@ class PlanCommand:
             raise OutputExistsError(f"{args.template} exists: choose another name or pass --force to replace it")
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         within_limits(args, plan_estimate(MAX_CANDIDATES, args.visits, len(args.effects)))
-        region = None if args.region is None else Region(tuple(args.region[:2]), tuple(args.region[2:]))
+        region, where = _region(args.region)
         plan = plan_campaign(geometry, budget, args.effects, args.poses, args.visits, minutes=args.minutes,
                              region=region, temperature_C=tuple(args.temperature),
                              instrument_sigma_mm=args.instrument_sigma_mm,
@@ -73,9 +76,33 @@ class PlanCommand:
         if args.json:
             doc = plan.to_dict()
             doc["inputs"] = doc["inputs"] | provenance(args, geometry, budget)["inputs"] | {"out": str(args.template)}
+            doc["inputs"]["region"] = where | doc["inputs"]["region"]      # a preset's or file's name, as grid_poses
             emit_json(doc)
             return
         print("\n".join(summary(plan) + [f"template: {args.template} (measured columns and temp_C to fill in)"]))
+
+
+def _region(values: list[str] | None) -> tuple["Region | None", dict]:
+    """``--region``: a preset or region file (one value), or its bounds X0 X1 Y0 Y1 in mm (four numbers, the
+    older form); the region (None: the geometry's preset) and, for a preset or file, its record (name, and
+    preset or file and sha256) for ``inputs.region``."""
+    import argparse
+
+    from ..kinematics.geometry import Region
+
+    if values is None:
+        return None, {}
+    if len(values) == 1:
+        region = Region.load(values[0])
+        return region, spec_record(values[0], region)
+    if len(values) != 4:
+        raise ParameterError(f"--region takes a preset or region file (R), or four bounds X0 X1 Y0 Y1 in mm; got "
+                             f"{len(values)} values: {' '.join(values)}")
+    try:
+        x0, x1, y0, y1 = (finite_float(v) for v in values)
+    except argparse.ArgumentTypeError as exc:
+        raise ParameterError(f"--region X0 X1 Y0 Y1: {exc}") from None
+    return Region((x0, x1), (y0, y1)), {}
 
 
 def summary(plan) -> list[str]:

@@ -69,12 +69,16 @@ def spread_poses(region, n: int) -> np.ndarray:
     return np.stack([x, np.repeat(y, counts), np.full(n, region.phi_deg)], axis=1)
 
 
-def _read_plan(path: str):
-    """The campaign template at ``path`` as a table (validated by the simulation)."""
+def _read_plan(args, path: str):
+    """The campaign template at ``path`` as a table (validated by the simulation), its size checked before it
+    is read (rows counted without parsing)."""
     import pandas as pd
+
+    from ..measurement.campaign.data import count_rows
 
     if not Path(path).is_file():
         raise InputFileError(f"campaign plan {path} does not exist")
+    within_limits(args, simulate_estimate(count_rows(path)))
     try:
         return pd.read_csv(path, dtype={"pose_id": str}, skipinitialspace=True)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
@@ -147,8 +151,7 @@ class SimulateCommand:
                 args.temperature, "--temperature", (2,), "START,END (deg C) or none"),
         }
         if args.plan is not None:
-            plan, poses, where = _read_plan(args.plan), None, {"plan": file_record(args.plan)}
-            within_limits(args, simulate_estimate(len(plan)))
+            plan, poses, where = _read_plan(args, args.plan), None, {"plan": file_record(args.plan)}
         else:
             within_limits(args, simulate_estimate(args.poses * args.visits))
             region_spec = args.region or (args.geometry if args.geometry in GEOMETRY_PRESETS else None)

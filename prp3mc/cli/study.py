@@ -4,7 +4,7 @@ import sys
 import time
 
 from ..errors import Prp3mcError
-from ..limits import allocate_estimate, study_estimate
+from ..limits import study_estimate
 from ..output import figure_formats, table_formats
 from ..units import MM2UM
 from ..study.distributed import parse_scheduler
@@ -47,11 +47,7 @@ class StudyCommand:
         if args.quick:
             study = study.reduced()
         formats = figure_formats(args.formats) + table_formats(args.formats)[1:]   # refused before the run
-        within_limits(args, study_estimate(study))
-        if study.allocation is not None:   # the memory of each configuration's allocation (one after another)
-            nx, ny = study.allocation.grid or study.worstcase_grid
-            within_limits(args, allocate_estimate(nx * ny, len(study.budget.factors), study.allocation.samples
-                                                  if study.allocation.spec_percentile is not None else 0))
+        within_limits(args, study_estimate(study))     # its allocation too, with what the study holds by then
         result = run_study(study, rng=args.seed, progress=args.progress, scheduler=args.scheduler)
         if not result.configurations:
             first = result.skipped[0]

@@ -10,7 +10,7 @@ from .._version import __version__
 from ..errors import NoExactYieldError, Prp3mcWarning, SpecError
 from ..kinematics.geometry import Geometry
 from ..limits import DEFAULT_TARGET, TARGET_RANGE, montecarlo_estimate, yield_estimate
-from ..units import DEG2ARCSEC, MM2UM, PPM
+from ..units import DEG2ARCSEC, MM2UM, PPM, SPEC_UNITS
 from . import (add_budget, add_geometry, add_json, add_pose_or_region, add_seed, command, emit_json, emit_table,
                finite_float, grid_poses, positive_float, positive_int, provenance, within_limits)
 
@@ -52,10 +52,7 @@ class YieldCommand:
 
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         why = exact_refusal(budget)
-        if why is not None:        # the Monte Carlo fallback (see _correlated)
-            estimate = lambda n: montecarlo_estimate(args.samples, n, len(budget.factors) + 1)  # noqa: E731
-        else:
-            estimate = yield_estimate
+        estimate = yield_estimate if why is None else lambda n: _fallback_estimate(args, budget, n)  # noqa: E731
         poses, where = grid_poses(args, estimate)
         if args.region is None:
             check_poses(geometry, poses)
@@ -71,8 +68,10 @@ class YieldCommand:
                 over = exact_yield(geometry, budget, poses, quantiles=args.region is None, target=args.target,
                                    **specs)
             except NoExactYieldError as exc:                     # no density, too many classes or terms
-                _correlated(args, geometry, budget, poses, where, str(exc).removeprefix("exact yield: "))
-                return
+                over = str(exc).removeprefix("exact yield: ")
+        if isinstance(over, str):       # outside the block: the fallback's own warnings are said
+            _correlated(args, geometry, budget, poses, where, over)
+            return
         _check_scale(args, over)
         for w in caught:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
@@ -136,16 +135,29 @@ def _pose_frame(r) -> "pd.DataFrame":
     return frame
 
 
+def _fallback_estimate(args, budget, n_poses: int):
+    """Memory of the Monte Carlo fallback (:func:`_correlated`) at ``n_poses`` poses."""
+    return montecarlo_estimate(args.samples, n_poses, len(budget.factors) + 1)
+
+
 def _correlated(args, geometry, budget, poses, where, why: str) -> None:
     """A budget the exact yield cannot serve (correlated inputs not all normal; no density, too many classes
     or terms: ``why``): the streamed Monte Carlo with the copula, every
     exceedance with its Wilson 95 % interval; as the error, the distance to the interval's farther end (said
-    in ``method``)."""
+    in ``method``). Its memory is checked first: a budget that fails the exact series only when tried was
+    sized for the exact yield."""
     import pandas as pd
 
     from .._result import pose_columns
     from ..montecarlo.propagation import monte_carlo
     from ..stackup.result import OUTPUTS, QUANTILE_LEVELS, ppk, region_summary
+
+    from ..stackup.exceedance import _spec as spec_in_unit
+
+    within_limits(args, _fallback_estimate(args, budget, poses.shape[0]))
+    for name, value in (("spec_position_um", args.spec_position_um), ("spec_phi_arcsec", args.spec_phi_arcsec)):
+        if value is not None:   # below 1: a warning, as exact_yield gives on its own path
+            spec_in_unit(name, value, *SPEC_UNITS[name])
 
     S = args.spec_position_um / MM2UM
     Z = None if args.spec_phi_arcsec is None else args.spec_phi_arcsec / DEG2ARCSEC
@@ -181,8 +193,9 @@ def _correlated(args, geometry, budget, poses, where, why: str) -> None:
         return
     x, y, phi = poses[k]
     q = record["quantiles_position_um"]
-    labels = {"position": f"position > {args.spec_position_um:g} µm", "phi": f"|dphi| > {args.spec_phi_arcsec:g} "
-              "arcsec", "any": "either"}
+    labels = {"position": f"position > {args.spec_position_um:g} µm", "any": "either"}
+    if Z is not None:
+        labels["phi"] = f"|dphi| > {args.spec_phi_arcsec:g} arcsec"
     print("\n".join([
         f"prp3mc {__version__}  geometry {geometry.name}  budget {budget.name}",
         f"pose x={x:g} mm  y={y:g} mm  phi={phi:g} deg",

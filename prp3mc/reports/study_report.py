@@ -197,7 +197,8 @@ def _summary_display(frame: pd.DataFrame) -> pd.DataFrame:
             statistic = _YIELD_SHOWN[key[3]]
         elif key[3].startswith("exceed_"):      # a Monte Carlo probability: % from 1 %, else ppm
             factor, unit = (100.0, "%") if by["value"].max() >= 0.01 else (1e6, "ppm")
-            statistic = f"P(> {key[3][len('exceed_'):-2]} mm)"
+            spec = key[3][len("exceed_"):].replace("_or_", " or ")
+            statistic = "P(> " + spec.replace("arcsec", " arcsec").replace("mm", " mm") + ")"
         else:
             factor, unit = DISPLAY[key[2]]
             statistic = key[3].replace("_", " ")
@@ -394,14 +395,22 @@ def _allocation_figures(result: StudyResult) -> list[tuple[str, str, Callable]]:
 
 def _summary_frame(result: StudyResult) -> pd.DataFrame:
     """The summary table (:meth:`StudyResult.to_frame`) and, with a Monte Carlo tolerance, the exceedance:
-    statistic ``exceed_<T>mm``, P(position error > T) over the grid, unit ``1`` (as ``summary.json``'s ``exceed``)."""
+    statistic ``exceed_<T>mm``, P(position error > T) over the grid, unit ``1`` (as ``summary.json``'s ``exceed``);
+    where the run stands in for the exact yield with an orientation spec Z also ``exceed_<Z>arcsec`` (output
+    ``phi``) and ``exceed_<T>mm_or_<Z>arcsec`` (output ``any``)."""
     rows = []
     for c in result.configurations:
         mc = c.montecarlo
         if mc is None or mc.exceed_prob is None:
             continue
-        for aggregate, (value, se) in over_grid(mc.exceed_prob, pct_se(mc.exceed_ci)).items():
-            rows.append((c.name, "montecarlo", "position", f"exceed_{mc.tolerance_mm:g}mm", aggregate, value, se, "1"))
+        channels = [("position", f"{mc.tolerance_mm:g}mm", mc.exceed_prob, mc.exceed_ci)]
+        if mc.exceed_phi_prob is not None:
+            z = f"{DEG2ARCSEC * mc.tolerance_phi_deg:g}arcsec"
+            channels += [("phi", z, mc.exceed_phi_prob, mc.exceed_phi_ci),
+                         ("any", f"{channels[0][1]}_or_{z}", mc.exceed_any_prob, mc.exceed_any_ci)]
+        for output, spec, p, ci in channels:
+            for aggregate, (value, se) in over_grid(p, pct_se(ci)).items():
+                rows.append((c.name, "montecarlo", output, f"exceed_{spec}", aggregate, value, se, "1"))
     frame = result.to_frame()
     return pd.concat([frame, pd.DataFrame(rows, columns=frame.columns)], ignore_index=True) if rows else frame
 

@@ -26,8 +26,8 @@ optional; paths are relative to the study file)::
     tolerance_mm = 0.15               # the position spec in mm (older files): see [spec]
 
     [spec]                            # the accuracy spec: exact yield at every pose of the Monte Carlo grid
-    position_um = 150.0               # the position error |(dx, dy)| must stay within it, µm (> 1)
-    phi_arcsec = 60.0                 # |dphi| must stay within it, arcsec (optional, > 1)
+    position_um = 150.0               # the position error |(dx, dy)| must stay within it, µm (below 1: a warning)
+    phi_arcsec = 60.0                 # |dphi| must stay within it, arcsec (optional; below 1: a warning)
 
     [sobol]
     samples = 4096                    # base sample size N, a power of two

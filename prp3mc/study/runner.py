@@ -172,10 +172,18 @@ def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple
     wc = worst_case(g, b, config.region.grid(study.worstcase_grid), k_sigma=study.k_sigma)
     timings["worstcase"] += time.perf_counter() - t
     kw: dict[str, Any] = {}
-    draws = None        # the Monte Carlo run's budget draws (its seed): the histograms' and the exceedance curves'
     wants_yield = study.spec is not None and "yield" in study.outputs
-    refusal = exact_refusal(b) if wants_yield else None        # correlated inputs not all normal: Monte Carlo
-    run_exact_yield = wants_yield and refusal is None
+    no_exact = exact_refusal(b) if wants_yield else None       # correlated inputs not all normal: Monte Carlo
+    if wants_yield and no_exact is None:       # before the Monte Carlo run: it counts every channel if this fails
+        nx, ny = study.mc_grid
+        stage(f"exact yield against the spec on {nx} x {ny} poses")
+        t = time.perf_counter()
+        try:
+            kw["yield_"] = run_yield(config, b, study.spec, study.mc_grid)
+        except NoExactYieldError as e:      # no density, too many classes, too many terms: known only by trying
+            no_exact = e
+        timings["yield"] += time.perf_counter() - t
+    draws = None        # the Monte Carlo run's budget draws (its seed): the histograms' and the exceedance curves'
     if "montecarlo" in study.outputs:
         nx, ny = study.mc_grid
         stage(f"Monte Carlo, {study.mc_samples} samples on {nx} x {ny} poses")
@@ -183,12 +191,20 @@ def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple
         kw["montecarlo"] = monte_carlo(g, b, config.region.grid(study.mc_grid), study.mc_samples,
                                        rng=mc_seed, percentiles=study.percentiles,
                                        tolerance_mm=study.tolerance_mm, progress=progress,
-                                       tolerance_phi_deg=_fallback_phi_deg(study) if refusal else None)
+                                       tolerance_phi_deg=_fallback_phi_deg(study) if no_exact is not None else None)
         draws = b.sample(study.mc_samples, mc_seed)
         kw["samples"] = _pose_samples(config, b, wc, draws, mc_seed, study.k_sigma)
-        if not run_exact_yield:
-            draws = None                          # not held through the Sobol run
         timings["montecarlo"] += time.perf_counter() - t
+    if no_exact is not None:
+        _no_exact_yield(study, config, no_exact, "P(position > spec)" + (
+            ", P(|dphi| > spec) and P(either)" if study.spec.phi_arcsec is not None else "")
+                        + " instead, with Wilson 95 % intervals")
+    elif "yield_" in kw:
+        t = time.perf_counter()
+        kw["curves"] = tuple(exceedance_curve(config, b, kw["yield_"], o, draws)
+                             for o in ("position",) + (("phi",) if study.spec.phi_arcsec is not None else ()))
+        timings["yield"] += time.perf_counter() - t
+    draws = None                                  # not held through the Sobol run
     if "sobol" in study.outputs:
         nx, ny = study.sobol_grid
         stage(f"Sobol indices, N = {study.sobol_samples} on {nx} x {ny} poses")
@@ -201,22 +217,6 @@ def _analyses(plan: Plan, config: StudyConfiguration, variant: Variant) -> tuple
         kw["sobol"] = s
         kw["ranking"] = {o: ranking(s, wc_s, output=o) for o in study.sobol_outputs}
         timings["sobol"] += time.perf_counter() - t
-    if refusal is not None:
-        _no_exact_yield(study, config, refusal, "P(position > spec)" + (
-            ", P(|dphi| > spec) and P(either)" if study.spec.phi_arcsec is not None else "")
-                        + " instead, with Wilson 95 % intervals")
-    elif run_exact_yield:
-        nx, ny = study.mc_grid
-        stage(f"exact yield against the spec on {nx} x {ny} poses")
-        t = time.perf_counter()
-        try:
-            y = kw["yield_"] = run_yield(config, b, study.spec, study.mc_grid)
-        except NoExactYieldError as e:      # no density, too many classes, too many terms: known only by trying
-            _no_exact_yield(study, config, e, "P(position > spec) instead, with its Wilson 95 % interval")
-        else:
-            kw["curves"] = tuple(exceedance_curve(config, b, y, o, draws)
-                                 for o in ("position",) + (("phi",) if study.spec.phi_arcsec is not None else ()))
-        timings["yield"] += time.perf_counter() - t
     allocation = study.allocation
     if allocation is not None and allocation.applies_to(variant.base.name):  # a swept one: by its base's name
         stage("tolerance allocation" + (" and its Pareto front" if allocation.front else ""))

@@ -20,8 +20,9 @@ same position spec in mm. Without ``[spec]`` it is taken as
 (the Monte Carlo run then counts P(position > S) against ``[spec]``), and if
 both are given they must agree.
 
-Unit sanity: a spec below 1 µm or 1 arcsec is refused, naming the unit (0.06
-is a spec in mm typed as µm: write 60).
+Unit sanity: a spec below 1 µm or 1 arcsec is taken with a warning naming
+the unit (0.06 is more likely a spec in mm typed as µm: 60), as every entry
+point takes it (:func:`prp3mc.exact_yield`, ``prp3mc yield``, allocations).
 """
 
 from __future__ import annotations
@@ -36,8 +37,9 @@ from ..errors import Prp3mcWarning
 from ..model.linear import linear_model
 from ..montecarlo.propagation import _wilson
 from ..stackup import OUTPUTS, YieldResult, exact_yield
+from ..stackup.exceedance import _spec as spec_in_unit
 from ..stackup.result import PPM
-from ..units import DEG2ARCSEC, MM2UM, RAD2DEG
+from ..units import DEG2ARCSEC, MM2UM, RAD2DEG, SPEC_UNITS
 
 __all__ = ["YieldSpec", "ExceedanceCurve", "read_spec", "run_yield", "exceedance_curve", "yield_summary",
            "CURVE_POINTS"]
@@ -75,17 +77,16 @@ class YieldSpec:
         return {"position_um": self.position_um, "phi_arcsec": self.phi_arcsec, "source": self.source}
 
 
-def _value(reader, table: dict, key: str, unit: str, big: str, per_big: float) -> float | None:
-    path = ("spec", key)
+def _value(reader, table: dict, key: str) -> float | None:
+    """``[spec] key``: a number > 0 (else refused, naming its line); below 1 of its unit taken with a warning,
+    worded as :func:`prp3mc.exact_yield` and ``prp3mc allocate`` word it (one rule, one text)."""
+    path, units = ("spec", key), SPEC_UNITS[f"spec_{key}"]
     value = reader.get(table, path, "number")
     if value is None:
         return None
     if not value > 0:
-        reader.fail(path, f"spec.{key} must be a finite number > 0 {unit}, got {value!r}")
-    if value < 1.0:
-        reader.fail(path, f"spec.{key} = {value:g} {unit} is below 1 {unit}: the unit is {unit} "
-                    f"({value:g} {big} is {per_big * value:g} {unit}: write that)")
-    return float(value)
+        reader.fail(path, f"spec.{key} must be a finite number > 0 {units[0]}, got {value!r}")
+    return spec_in_unit(f"spec_{key}", value, *units)
 
 
 def read_spec(reader, doc: dict, tolerance_mm: float | None) -> YieldSpec | None:
@@ -96,8 +97,7 @@ def read_spec(reader, doc: dict, tolerance_mm: float | None) -> YieldSpec | None
             return None
         return YieldSpec(position_um=MM2UM * tolerance_mm, source="[montecarlo] tolerance_mm")
     reader.unknown(table, _KEYS, ("spec",), "[spec]")
-    position = _value(reader, table, "position_um", "µm", "mm", MM2UM)
-    phi = _value(reader, table, "phi_arcsec", "arcsec", "deg", DEG2ARCSEC)
+    position, phi = _value(reader, table, "position_um"), _value(reader, table, "phi_arcsec")
     if position is None:
         reader.fail(("spec",), "[spec] needs position_um (the position error's spec, µm); phi_arcsec is optional")
     if tolerance_mm is not None and not math.isclose(MM2UM * tolerance_mm, position, rel_tol=1e-9):

@@ -13,7 +13,8 @@ Layout (µm and arcsec)::
            "phi_arcsec": {"p99.73": {...}, ...},
            "std": {"x_um": {...}, "y_um": {...}, "phi_arcsec": {...}},
            "exceed": {"tolerance_mm": 0.1, "probability": {"min": ..., "max": ..., "mean": ...},
-                      # when it stands in for the yield (correlated inputs not all normal) with a phi spec:
+                      # when it stands in for the exact yield (correlated inputs not all normal, or
+                      # NoExactYieldError: no density, too many classes or terms) with a phi spec:
                       "tolerance_phi_arcsec": 60.0, "phi_probability": {...}, "any_probability": {...}}},
          "sobol": {"position": {"theta_1": {"kind": "input", "S1": {"value": ..., "se": ...},
                                             "ST": {...}, "worst_case_share": 0.31}, ...}, ...}},
