@@ -5,7 +5,9 @@ time, its CPU time (``time.process_time``: every thread of the process; less sen
 load than the wall time) and the 1-minute load average right after it:
 
 - one pose: P(position > S) alone; with P(|dphi| > Z), P(either) and the quantiles;
-- a grid of poses (21 x 21; 101 x 101 with ``--full``), P(position > S) at every pose;
+- a grid of poses (21 x 21; 101 x 101 with ``--full``), P(position > S) at every pose, on every core and on
+  one thread: CPU time, and the wall time two free cores would take (CPU time / 2, the pool's chunks
+  keeping both busy), next to the wall time measured;
 - Monte Carlo to the same precision at 1 ppm: :func:`prp3mc.monte_carlo` with the exceedance, its rate
   measured at one pose on 1e7 samples, extrapolated to the 1e8 samples that +-10 % (one standard error)
   at P = 1e-6 needs;
@@ -118,11 +120,15 @@ def main() -> None:
                        "bound_any": float(r.bound_any), "bracketed_any": bool(r.bracketed_any)}
     n = 101 if args.full else 21
     grid = Region.from_preset("u-shape").grid(n)
-    tg, cg, lg = timed(lambda: exact_yield(g, b, grid, spec_position_um=S_UM, quantiles=False), 1)
-    out["grid"] = {"n": n, "poses": n * n, "position_s": tg, "per_pose_ms": 1e3 * tg / (n * n), "load": lg,
-                   "cpu_s": cg, "cpu_per_pose_ms": 1e3 * cg / (n * n),
-                   "extrapolated_101x101_s": tg / (n * n) * 101 ** 2,
-                   "extrapolated_101x101_cpu_over_2_cores_s": cg / (n * n) * 101 ** 2 / 2}
+    out["grid"] = {"n": n, "poses": n * n}
+    for name, workers in (("all_cores", None), ("one_thread", 1)):
+        before = os.getloadavg()[0]
+        tg, cg, lg = timed(lambda: exact_yield(g, b, grid, spec_position_um=S_UM, quantiles=False,
+                                               workers=workers), 1)
+        out["grid"][name] = {"workers": workers or os.cpu_count(), "position_s": tg, "cpu_s": cg,
+                             "per_pose_ms": 1e3 * tg / (n * n), "cpu_per_pose_ms": 1e3 * cg / (n * n),
+                             "load": [before, lg], "two_free_cores_s": cg / 2,
+                             "extrapolated_101x101_two_free_cores_s": cg / (n * n) * 101 ** 2 / 2}
     # Monte Carlo at one pose: its rate, and the samples +-10 % at 1 ppm needs: (1 - p) / (p REL²)
     n_mc = 10_000_000
     monte_carlo(g, b, POSE, 10_000, rng=1, tolerance_mm=S_UM / 1e3, percentiles=(99.73,), progress=False)  # compile

@@ -34,7 +34,7 @@ from the total variation of the density (``|phi|`` <= V(f) / ``|x|``, and V(f') 
 when f is continuous; for a clearance, integrating J0 by parts), from
 ``|J0(y)| <= min(1, sqrt(2 / (pi y)))``, ``|int_0^y J0| <= I_MAX`` and
 ``sqrt(u) |J1(u)| <= C_J1`` (:mod:`._special`); and a *power*
-(:func:`envelope_power`): p such that ``env(x) <= env(x0) (x0 / x)^p`` for all
+(:func:`envelope_power`, with the envelope's value): p such that ``env(x) <= env(x0) (x0 / x)^p`` for all
 x >= x0, which bounds the truncation tails analytically (:mod:`.truncation`).
 """
 
@@ -473,14 +473,17 @@ def envelope(a1, a2, a15, w0, bh, f2, w, sd, x):
 
 @njit(cache=True, nogil=True)
 def envelope_power(a1, a2, a15, w0, bh, f2, w, sd, x0):
-    """A power p >= 0 with ``envelope(x) <= envelope(x0) (x0 / x)^p`` for every x >= x0 (0 at x0 = 0).
+    """:func:`envelope` at ``|x|`` = x0 and a power p >= 0 with ``envelope(x) <= envelope(x0) (x0 / x)^p`` for
+    every x >= x0 (0 at x0 = 0), in one pass: ``(envelope, p)``.
 
     Past x0 the envelope is below the form that is smallest at x0, which falls
     as x^-q (q = 0 for the form 1, and for w0 + bh/sqrt(x) when w0 > 0), times
     the normal factor, which falls at least as fast as (x0/x)^(sd² x0²) past x0.
+    The envelope is that smallest form times the normal factor (the forms and
+    their order as in :func:`envelope`, so the value is the same to the bit).
     """
     if x0 <= 0.0:
-        return 0.0
+        return 1.0, 0.0
     best, p = 1.0, 0.0
     if a1 > 0.0 and a1 / x0 < best:
         best, p = a1 / x0, 1.0
@@ -492,4 +495,6 @@ def envelope_power(a1, a2, a15, w0, bh, f2, w, sd, x0):
         best, p = w0 + bh / math.sqrt(x0), (0.5 if w0 == 0.0 else 0.0)
     if (f2 > 0.0 or w > 0.0) and f2 / x0 + w / (x0 * x0) < best:
         best, p = f2 / x0 + w / (x0 * x0), 1.0
-    return p + (sd * x0) ** 2
+    if sd > 0.0:
+        best *= math.exp(-0.5 * (sd * x0) ** 2)
+    return best, p + (sd * x0) ** 2

@@ -244,10 +244,12 @@ def pose_series(d, kind, par, ev, tab, sp, grp, mu, snu, Q, Vinv, mnorm, ab, lam
         n0, n1, n2 = pts[k, 0], pts[k, 1], pts[k, 2]
         nu0 = _TWO_PI * n0 / Q[0]
         nu1 = _TWO_PI * n1 / Q[1]
-        nu2 = _TWO_PI * n2 / Q[2]
+        nu2 = _TWO_PI * n2 / Q[2] if d == 3 else 0.0
         phi = Phi[0, n0] if n0 >= 0 else np.conj(Phi[0, -n0])
-        phi *= Phi[1, n1] if n1 >= 0 else np.conj(Phi[1, -n1])
-        phi *= Phi[2, n2] if n2 >= 0 else np.conj(Phi[2, -n2])
+        if d >= 2:                                  # the axes past d hold 1
+            phi *= Phi[1, n1] if n1 >= 0 else np.conj(Phi[1, -n1])
+        if d == 3:
+            phi *= Phi[2, n2] if n2 >= 0 else np.conj(Phi[2, -n2])
         for q in range(mix.size):
             t = mix[q]
             x = mu[t, 0] * nu0 + mu[t, 1] * nu1 + mu[t, 2] * nu2

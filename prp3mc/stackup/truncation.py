@@ -24,7 +24,7 @@ least as ((U - c) / (n_1 - c))^p, p its local power
 U are bounded by their value at U divided out (they are <= 1 further on); the
 others fall together at least as ((U - c_min) / (n_1 - c_min))^P, P the sum
 of their powers, so ``sum_{n_1 > U} F <= F(U) (U - c_min) / (dropped (P - 1))``
-(:func:`_row_tail`). Each row is walked outward from n_1 = 0 (F is taken
+(:func:`_walk_row`). Each row is walked outward from n_1 = 0 (F is taken
 inline, point by point) and the tail tried at every 4th point until both
 tails are within the row's share of the 0.15.
 
@@ -128,6 +128,12 @@ def transform_bound(d, z1, z2, a, b):
 # ------------------------------------------------------------------ a basis leg's envelope along its axis
 
 @njit(cache=True, nogil=True)
+def _root(v, d):
+    """v^(1/d) (a square root for d = 2: no call to pow)."""
+    return v if d == 1 else (math.sqrt(v) if d == 2 else v ** (1.0 / 3.0))
+
+
+@njit(cache=True, nogil=True)
 def _leg_at(j, m, d, ev, grp, mu, Q, mnorm, lam, z1, z2):
     """Basis leg j at n_j = m: its envelope product E_j, its share g_j = E_j (tau(nu_j / ``|m_j|``) / ``|L|``)^(1/d),
     and the decay powers of g_j and of E_j there (0 at m = 0)."""
@@ -136,13 +142,13 @@ def _leg_at(j, m, d, ev, grp, mu, Q, mnorm, lam, z1, z2):
     pe = 0.0
     for t in range(ev.shape[0]):
         if grp[t] == j:
-            x = abs(mu[t, j]) * nu
-            e *= envelope(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], x)
-            if m > 0:
-                pe += envelope_power(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], x)
+            v, pv = envelope_power(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7],
+                                   abs(mu[t, j]) * nu)
+            e *= v
+            pe += pv
     r = nu / mnorm[j]
     pg = pe + _tau_pow(d, z1, z2, r) / d if m > 0 else 0.0
-    return e, e * (_tau(d, z1, z2, r) / lam) ** (1.0 / d), pg, pe
+    return e, e * _root(_tau(d, z1, z2, r) / lam, d), pg, pe
 
 
 @njit(cache=True, nogil=True)
@@ -150,11 +156,13 @@ def leg_envelope(j, d, ev, grp, mu, Q, mnorm, lam, z1, z2, g0, eta_lo):
     """Leg j's E_j and g_j (:func:`_leg_at`) at n = 0..N, and ``Rs[m + 1] = sum_{|n| > m} g_j(|n|)``
     (Rs[0]: the whole sum), the tail past N analytic: ``2 g(N) N / (p - 1)``. N: where g_j times the other
     legs' g(0) is below ``eta_lo`` with a decay power above 1 (past it, :func:`_leg_at` gives E_j on demand).
-    Returns (g, E, Rs, SE, ok): SE = sum_{n in Z} E_j(``|n|``) (inf when E_j's power stays at or below 1); not
-    ok when g_j's does (no finite sum)."""
+    Returns (g, E, PE, Rs, SE, ok): PE the decay power of E_j at each n (the sum of its terms'); SE =
+    sum_{n in Z} E_j(``|n|``) (inf when E_j's power stays at or below 1); not ok when g_j's does (no finite
+    sum)."""
     cap = 256
     g = np.empty(cap)
     E = np.empty(cap)
+    PE = np.empty(cap)
     m = 0
     p = 0.0
     while True:
@@ -163,16 +171,19 @@ def leg_envelope(j, d, ev, grp, mu, Q, mnorm, lam, z1, z2, g0, eta_lo):
             cap *= 2
             g2 = np.empty(cap)
             E2 = np.empty(cap)
+            P2 = np.empty(cap)
             g2[:m] = g[:m]
             E2[:m] = E[:m]
-            g, E = g2, E2
+            P2[:m] = PE[:m]
+            g, E, PE = g2, E2, P2
         g[m] = gm
         E[m] = e
+        PE[m] = pe
         if m >= 1 and p > 1.0 and gm * g0 ** (d - 1) < eta_lo:
             break
         if m >= _N_CAP:
             if p <= 1.0:
-                return g[:m + 1], E[:m + 1], np.full(m + 2, np.inf), np.inf, False
+                return g[:m + 1], E[:m + 1], PE[:m + 1], np.full(m + 2, np.inf), np.inf, False
             break
         m += 1
     N = m
@@ -184,7 +195,7 @@ def leg_envelope(j, d, ev, grp, mu, Q, mnorm, lam, z1, z2, g0, eta_lo):
     SE = np.inf
     if pe > 1.0:
         SE = E[0] + 2.0 * (E[1:N + 1].sum() + E[N] * N / (pe - 1.0))
-    return g[:N + 1], E[:N + 1], Rs, SE, True
+    return g[:N + 1], E[:N + 1], PE[:N + 1], Rs, SE, True
 
 
 @njit(cache=True, nogil=True)
@@ -197,37 +208,52 @@ def _at(g, x):
 # ------------------------------------------------------------------ the position's third (mixed) leg
 
 @njit(cache=True, nogil=True)
-def _mixed(ev, grp, mu, ab, ax3):
-    """The mixed leg's envelope product G_m at ``|nu_m|`` = ax3 and its decay power there (0 at ax3 = 0)."""
+def _mixed_scales(grp, mu, ab):
+    """``|c_t . w|`` per unit of ``|nu_m|`` of each term of the mixed leg (0 for the others), (T,)."""
+    km = np.zeros(grp.size)
+    norm = math.sqrt(ab[0] * ab[0] + ab[1] * ab[1])
+    for t in range(grp.size):
+        if grp[t] == MIXED_LEG:
+            km[t] = math.sqrt(mu[t, 0] ** 2 + mu[t, 1] ** 2) / norm
+    return km
+
+
+@njit(cache=True, nogil=True)
+def _mixed(ev, grp, km, ax3):
+    """The mixed leg's envelope product G_m at ``|nu_m|`` = ax3 and its decay power there (0 at ax3 = 0); km:
+    :func:`_mixed_scales`."""
     e = 1.0
     p = 0.0
-    norm = math.sqrt(ab[0] * ab[0] + ab[1] * ab[1])
     for t in range(ev.shape[0]):
         if grp[t] == MIXED_LEG:
-            x = math.sqrt(mu[t, 0] ** 2 + mu[t, 1] ** 2) / norm * ax3
-            e *= envelope(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], x)
-            if ax3 > 0:
-                p += envelope_power(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], x)
+            v, pv = envelope_power(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7],
+                                   km[t] * ax3)
+            e *= v
+            p += pv
     return e, p
 
 
 @njit(cache=True, nogil=True)
-def _mixed_row_sum(ev, grp, mu, ab, delta):
+def _mixed_row_sum(ev, grp, km, delta):
     """Bound of sum_k G_m(x0 + k delta) over k in Z, any x0: max G_m + (2 / delta) int_0^inf G_m
     (G_m even and non-increasing in ``|x|``); the integral by left sums on a geometric grid (ratio 1.02,
     from x0 with G_m <= 1 below it), then its analytic tail. inf when there is no mixed leg or G_m
-    does not decay faster than 1/x."""
-    kmax = 0.0
-    norm = math.sqrt(ab[0] * ab[0] + ab[1] * ab[1])
-    for t in range(ev.shape[0]):
-        if grp[t] == MIXED_LEG:
-            kmax = max(kmax, math.sqrt(mu[t, 0] ** 2 + mu[t, 1] ** 2) / norm)
+    does not decay faster than 1/x. Up to ``flat``, found by doubling, G_m is 1 (power 0): not evaluated
+    there (it is non-increasing)."""
+    kmax = km.max()
     if kmax == 0.0 or delta <= 0.0:
         return np.inf
     x = 1e-6 / kmax
+    flat = 0.0
+    probe = x
+    for _ in range(64):
+        if _mixed(ev, grp, km, probe)[0] < 1.0:
+            break
+        flat = probe
+        probe *= 2.0
     acc = x
     for _ in range(20000):
-        e, p = _mixed(ev, grp, mu, ab, x)
+        e, p = (1.0, 0.0) if x <= flat else _mixed(ev, grp, km, x)
         if p > 1.0 and e * x / (p - 1.0) <= 1e-6 * acc:
             return 1.0 + 2.0 * (acc + e * x / (p - 1.0)) / delta
         acc += e * 0.02 * x
@@ -236,14 +262,14 @@ def _mixed_row_sum(ev, grp, mu, ab, delta):
 
 
 @njit(cache=True, nogil=True)
-def _row_bound(nu2, S1, cm, g1, Q0, ev, grp, mu, ab):
+def _row_bound(nu2, S1, cm, g1, Q0, ev, grp, km, ab):
     """Bound of a position row's sum of g_1(n_1) G_m(nu_m) at ``|nu_2|`` = nu2 (g_1 non-increasing, S1 its sum over
     the row): at most S1 (G_m <= 1), and, as one of ``|nu_1|`` >= ``|beta|`` nu2 / (2 ``|alpha|``), ``|nu_m|`` >= ``|beta|`` nu2 / 2
     holds at every point, G_m(``|beta|`` nu2 / 2) S1 + g_1(``|beta|`` nu2 / (2 ``|alpha|``)) C_m."""
     alpha, beta = ab[0], ab[1]
     b = S1
     if beta != 0.0 and cm < np.inf:
-        gmv, _ = _mixed(ev, grp, mu, ab, 0.5 * abs(beta) * nu2)
+        gmv, _ = _mixed(ev, grp, km, 0.5 * abs(beta) * nu2)
         g1v = _at(g1, abs(beta) * nu2 / (2.0 * abs(alpha)) * Q0 / _TWO_PI) if alpha != 0.0 else 0.0
         b = min(b, gmv * S1 + g1v * cm)
     return b
@@ -266,60 +292,21 @@ def _factor_tail(value, c, U, p, dropped, power, cmin):
 
 
 @njit(cache=True, nogil=True)
-def _row_tail(d, s, U, f, n2, n3, ev, grp, mu, Q, Vinv, lam, z1, z2):
-    """Bound of F summed over the row's points beyond U on side s (n_1 = s U, s U + s, ...), from F's value
-    f there: every factor of F is an envelope of ``|an affine function of n_1|`` (the transform's of the
-    norm of one), non-increasing past its peak (see :func:`_factor_tail`), so
-    ``sum_{n > U} F <= int_U^inf f / dropped ((U - c_min) / (x - c_min))^P dx = f / dropped (U - c_min) / (P - 1)``."""
-    dropped, power, cmin = 1.0, 0.0, float(U)
-    nu1 = _TWO_PI * s * U / Q[0]
-    nu2 = _TWO_PI * n2 / Q[1]
-    nu3 = _TWO_PI * n3 / Q[2]
-    step = _TWO_PI * s / Q[0]                 # nu_1 per step along the side
-    for t in range(ev.shape[0]):
-        g = grp[t]
-        if g == 0 or g == MIXED_LEG or g == -1:
-            slope = mu[t, 0] * step
-            x = mu[t, 0] * nu1 + mu[t, 1] * nu2 + mu[t, 2] * nu3
-            if slope == 0.0:
-                continue                      # constant along the row
-            c = U - x / slope                 # where the argument crosses 0, in steps from the origin
-            ax = abs(x)
-            dropped, power, cmin = _factor_tail(
-                envelope(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], ax), c, U,
-                envelope_power(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], ax),
-                dropped, power, cmin)
-    # the transform: |w_xy| is the norm of an affine function of n_1, |w_z| and |nu_1| are affine
-    vx, vy, vz = Vinv[0, 0] * step, Vinv[1, 0] * step, Vinv[2, 0] * step
-    wx = Vinv[0, 0] * nu1 + Vinv[0, 1] * nu2 + Vinv[0, 2] * nu3
-    wy = Vinv[1, 0] * nu1 + Vinv[1, 1] * nu2 + Vinv[1, 2] * nu3
-    wz = Vinv[2, 0] * nu1 + Vinv[2, 1] * nu2 + Vinv[2, 2] * nu3
-    if d == 1:
-        dropped, power, cmin = _factor_tail(_interval_bound(z1, abs(nu1)), 0.0, U, _tau_pow(1, z1, z2, abs(nu1)),
-                                            dropped, power, cmin)
-    else:
-        a = math.sqrt(wx * wx + wy * wy)
-        vv = vx * vx + vy * vy
-        if vv > 0.0:
-            c = U - (wx * vx + wy * vy) / vv
-            dropped, power, cmin = _factor_tail(_disc_bound(z1, a), c, U, _tau_pow(2, z1, z2, a) if a > 0 else 0.0,
-                                                dropped, power, cmin)
-        if d == 3 and vz != 0.0:
-            dropped, power, cmin = _factor_tail(_interval_bound(z2, abs(wz)), U - wz / vz, U,
-                                                _tau_pow(1, z2, z2, abs(wz)) if wz != 0 else 0.0, dropped, power, cmin)
-    if power <= 1.0 or dropped <= 0.0:
-        return np.inf
-    return f / dropped * (U - cmin) / (power - 1.0)
-
-
-@njit(cache=True, nogil=True)
-def _walk_row(d, n2, n3, origin, budget, E1, e2, e3, mix, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2, pts, F, count):
+def _walk_row(d, n2, n3, origin, budget, E1, P1, e2, e3, mix, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2, pts, F,
+              count):
     """Walk the row (n2, n3) outward from n_1 = 0, appending its points (n, F) from ``count`` on, until each
-    tail (:func:`_row_tail`, tried at every 4th point) is within half the budget. ``e2``, ``e3``: the
-    row's E_2 and E_3; ``mix``: the terms off the basis legs (mixed, thermal), whose envelopes F takes
-    point by point. Returns (count, tails, pts, F, ok)."""
+    side's tail is within half the budget. ``E1``, ``P1``: the first basis leg's envelope product and its
+    power along its axis (:func:`leg_envelope`); ``e2``, ``e3``: the row's E_2 and E_3; ``mix``: the terms off
+    the basis legs (mixed, thermal), whose envelopes F takes point by point.
+
+    The tail is tried at every 4th point U, from F's value f there: every factor of F is an envelope of
+    ``|an affine function of n_1|`` (the transform's of the norm of one), non-increasing past its peak (see
+    :func:`_factor_tail`; the basis leg's peak at n_1 = 0), so
+    ``sum_{n > U} F <= int_U^inf f / dropped ((U - c_min) / (x - c_min))^P dx = f / dropped (U - c_min) / (P - 1)``.
+    Returns (count, tails, pts, F, ok)."""
     nu2 = _TWO_PI * n2 / Q[1]
     nu3 = _TWO_PI * n3 / Q[2]
+    e23 = e2 * e3
     tails = 0.0
     ok = True
     for side in range(2):
@@ -327,27 +314,60 @@ def _walk_row(d, n2, n3, origin, budget, E1, e2, e3, mix, ev, grp, mu, Q, Vinv, 
             break
         s = 1 if side == 0 else -1
         U = 1 if (origin or side == 1) else 0             # side 0 holds n1 = 0 (origin row: n1 >= 1)
+        step = _TWO_PI * s / Q[0]                         # nu_1 per step along the side
+        vx, vy, vz = Vinv[0, 0] * step, Vinv[1, 0] * step, Vinv[2, 0] * step
         while True:
             if U > _WALK_CAP:
                 ok = False
                 break
-            # F at (s U, n2, n3): the basis legs' envelopes, the others', the transform's bound
+            tail_here = U >= 1 and U % 4 == 0
+            # F at (s U, n2, n3): the basis legs' envelopes, the others', the transform's bound; at a tail
+            # point also each factor's decay power and peak (dropped, power, cmin: see _factor_tail)
             nu1 = _TWO_PI * (s * U) / Q[0]
-            e1 = E1[U] if U < E1.size else _leg_at(0, U, d, ev, grp, mu, Q, mnorm, lam, z1, z2)[0]
-            f = e1 * e2 * e3
+            if U < E1.size:
+                e1, p1 = E1[U], P1[U]
+            else:
+                e1, _, _, p1 = _leg_at(0, U, d, ev, grp, mu, Q, mnorm, lam, z1, z2)
+            f = e1 * e23
+            dropped, power, cmin = 1.0, p1, (min(float(U), 0.0) if p1 > 0.0 else float(U))
             for k in range(mix.size):
                 t = mix[k]
                 x = mu[t, 0] * nu1 + mu[t, 1] * nu2 + mu[t, 2] * nu3
-                f *= envelope(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7], abs(x))
+                if tail_here:
+                    v, pv = envelope_power(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6],
+                                           ev[t, 7], abs(x))
+                    slope = mu[t, 0] * step
+                    if slope != 0.0:                      # else constant along the row
+                        dropped, power, cmin = _factor_tail(v, U - x / slope, U, pv, dropped, power, cmin)
+                else:
+                    v = envelope(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7],
+                                 abs(x))
+                f *= v
+            # the transform: |nu_1| and |w_z| are affine in n_1, |w_xy| the norm of an affine function
             if d == 1:
-                tb = _interval_bound(z1, abs(nu1))
+                a = abs(nu1)
+                tb = _interval_bound(z1, a)
+                if tail_here:
+                    dropped, power, cmin = _factor_tail(tb, 0.0, U, _tau_pow(1, z1, z2, a), dropped, power, cmin)
             else:
                 wx = Vinv[0, 0] * nu1 + Vinv[0, 1] * nu2 + Vinv[0, 2] * nu3
                 wy = Vinv[1, 0] * nu1 + Vinv[1, 1] * nu2 + Vinv[1, 2] * nu3
-                tb = _disc_bound(z1, math.sqrt(wx * wx + wy * wy))
+                a = math.sqrt(wx * wx + wy * wy)
+                tb = _disc_bound(z1, a)
+                if tail_here:
+                    vv = vx * vx + vy * vy
+                    if vv > 0.0:
+                        dropped, power, cmin = _factor_tail(tb, U - (wx * vx + wy * vy) / vv, U,
+                                                            _tau_pow(2, z1, z2, a) if a > 0 else 0.0,
+                                                            dropped, power, cmin)
                 if d == 3:
                     wz = Vinv[2, 0] * nu1 + Vinv[2, 1] * nu2 + Vinv[2, 2] * nu3
-                    tb *= _interval_bound(z2, abs(wz))
+                    tz = _interval_bound(z2, abs(wz))
+                    tb *= tz
+                    if tail_here and vz != 0.0:
+                        dropped, power, cmin = _factor_tail(tz, U - wz / vz, U,
+                                                            _tau_pow(1, z2, z2, abs(wz)) if wz != 0 else 0.0,
+                                                            dropped, power, cmin)
             f = f * tb / lam
             if count == F.size:
                 F2 = np.empty(2 * F.size)
@@ -358,8 +378,8 @@ def _walk_row(d, n2, n3, origin, budget, E1, e2, e3, mix, ev, grp, mu, Q, Vinv, 
             pts[count, 0], pts[count, 1], pts[count, 2] = s * U, n2, n3
             F[count] = f
             count += 1
-            if U >= 1 and U % 4 == 0:
-                tail = _row_tail(d, s, U, f, n2, n3, ev, grp, mu, Q, Vinv, lam, z1, z2)
+            if tail_here and power > 1.0 and dropped > 0.0:
+                tail = f / dropped * (U - cmin) / (power - 1.0)
                 if tail <= 0.5 * budget:
                     tails += tail
                     break
@@ -496,20 +516,20 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
         then falls back on a bracket).
     """
     empty = np.zeros((0, 3), np.int64)
-    g_origin = (_tau(d, z1, z2, 0.0) / lam) ** (1.0 / d)
+    g_origin = _root(_tau(d, z1, z2, 0.0) / lam, d)
     eta_lo = 1e-1 * eps                          # the 1-D arrays' end: past it E_j comes on demand
     one = np.ones(1)
     zero_tail = np.array([1.0, 0.0])
     gs = [one, one, one]
     Es = [one, one, one]
+    PEs = [one, one, one]
     Rs = [zero_tail, zero_tail, zero_tail]
     SEs = np.ones(3)
     for j in range(d):
-        g, E, R, SEs[j], ok = leg_envelope(j, d, ev, grp, mu, Q, mnorm, lam, z1, z2,
-                                   g_origin, eta_lo)
+        g, E, PE, R, SEs[j], ok = leg_envelope(j, d, ev, grp, mu, Q, mnorm, lam, z1, z2, g_origin, eta_lo)
         if not ok:
             return empty, np.inf, 0, 2
-        gs[j], Es[j], Rs[j] = g, E, R
+        gs[j], Es[j], PEs[j], Rs[j] = g, E, PE, R
     status = 0
     e_outer, e_skip, e_rows, e_drop = 0.2 * eps, 0.15 * eps, 0.15 * eps, 0.4 * eps
     # --- the rows: (n2, n3) pairs of the half-plane, the origin's row first
@@ -518,7 +538,8 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
     outer = 0.0
     if d == 2:
         S1, S1E = Rs[0][0], SEs[0]
-        cm = _mixed_row_sum(ev, grp, mu, ab, abs(ab[0]) * _TWO_PI / Q[0])
+        km = _mixed_scales(grp, mu, ab)
+        cm = _mixed_row_sum(ev, grp, km, abs(ab[0]) * _TWO_PI / Q[0])
         g1, g2, R2, E1, E2 = gs[0], gs[1], Rs[1], Es[0], Es[1]
         N2 = g2.size - 1
         # a row's whole sum, two ways: g_1 g_2 G_m (the transform shared) summed along the row, or
@@ -529,17 +550,17 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
 
         def rb(k):
             nu2 = _TWO_PI * k / Q[1]
-            b = g2[k] * _row_bound(nu2, S1, cm, g1, Q[0], ev, grp, mu, ab)
+            b = g2[k] * _row_bound(nu2, S1, cm, g1, Q[0], ev, grp, km, ab)
             if S1E < np.inf:
                 b = min(b, E2[k] * _disc_bound(z1, nu2 * d_perp) / lam
-                        * _row_bound(nu2, S1E, cm, E1, Q[0], ev, grp, mu, ab))
+                        * _row_bound(nu2, S1E, cm, E1, Q[0], ev, grp, km, ab))
             return b
 
         # rows |n2| > K: the rows up to the arrays' end, then g_2's tail times the bound at the end (rb is
         # non-increasing in k: so are g_2, E_2, the transform's bound and _row_bound). The rows past K0 (the
         # first 256) go in blocks [a, a + a // 32), each bounded by its first row's rb times its length (all
         # of them one by one when that sum is above the part)
-        far = R2[N2 + 1] * _row_bound(_TWO_PI * N2 / Q[1], S1, cm, g1, Q[0], ev, grp, mu, ab)
+        far = R2[N2 + 1] * _row_bound(_TWO_PI * N2 / Q[1], S1, cm, g1, Q[0], ev, grp, km, ab)
         K0 = min(N2, 256)
         blocks = far
         a = K0 + 1
@@ -598,8 +619,8 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
         n2, n3 = rows[k, 0], rows[k, 1]
         e2 = _leg_value(1, abs(n2), Es[1], d, ev, grp, mu, Q, mnorm, lam, z1, z2)
         e3 = _leg_value(2, abs(n3), Es[2], d, ev, grp, mu, Q, mnorm, lam, z1, z2)
-        count, t, pts, F, ok = _walk_row(d, n2, n3, k == 0, budget, Es[0], e2, e3, mix, ev, grp, mu, Q, Vinv,
-                                         mnorm, lam, z1, z2, pts, F, count)
+        count, t, pts, F, ok = _walk_row(d, n2, n3, k == 0, budget, Es[0], PEs[0], e2, e3, mix, ev, grp, mu, Q,
+                                         Vinv, mnorm, lam, z1, z2, pts, F, count)
         tails += 2.0 * t
         if not ok:
             status = max(status, 1)
@@ -607,7 +628,7 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
     bins = np.zeros(_BINS)
     for i in range(count):
         if F[i] > 0.0:
-            bins[min(_BINS - 1, max(0, int(math.floor(math.log2(F[i]))) + 1300))] += 2.0 * F[i]
+            bins[min(_BINS - 1, max(0, math.frexp(F[i])[1] - 1 + 1300))] += 2.0 * F[i]   # floor(log2 F) + 1300
     cut = 0
     acc = 0.0
     for k in range(_BINS):
