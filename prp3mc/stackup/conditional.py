@@ -42,7 +42,7 @@ import numpy as np
 from numba import njit
 
 from ._special import CF_ACCURACY, special_args
-from .characteristic import envelope, envelope_power, term_cf
+from .characteristic import envelope_power, term_cf
 
 __all__ = ["CONDITIONAL_METHOD", "independent_legs", "leg_cdfs", "joint_exceedance"]
 
@@ -100,10 +100,10 @@ def _sizes(env, kappa, legs, Q, eps, k_max, K, tail):
                     if legs[t] != i or kappa[n, t] == 0.0:
                         continue
                     x = abs(kappa[n, t]) * w
-                    e *= envelope(env[t, 0], env[t, 1], env[t, 2], env[t, 3], env[t, 4], env[t, 5], env[t, 6],
-                                  env[t, 7], x)
-                    p += envelope_power(env[t, 0], env[t, 1], env[t, 2], env[t, 3], env[t, 4], env[t, 5],
-                                        env[t, 6], env[t, 7], x)
+                    et, pt = envelope_power(env[t, 0], env[t, 1], env[t, 2], env[t, 3], env[t, 4], env[t, 5],
+                                            env[t, 6], env[t, 7], x)
+                    e *= et
+                    p += pt
                 bound = 2.0 * e / (math.pi * p) if p > 0.0 else math.inf
                 if bound <= eps or k >= k_max:
                     break
