@@ -58,7 +58,8 @@ _WC_BYTES_PER_POSE_TERM = 100
 _WC_BYTES_PER_POSE = 200
 # What a study keeps of each configuration's worst case, per pose: the poses, both maxima and the term bounds
 # (618 B traced per pose at 10^4 poses with the paper's 12 inputs).
-_WC_HELD_BYTES_PER_POSE = lambda d: 400 + 20 * d  # noqa: E731
+def _wc_held_bytes_per_pose(d: int) -> int:
+    return 400 + 20 * d
 # Exact yield: per pose the linear model's columns, each channel's lattice and results (2.0 KiB per pose at
 # 900 poses with an orientation spec, traced), and the table's row as text or as a JSON object.
 _YIELD_BYTES_PER_POSE = 4096
@@ -226,7 +227,7 @@ def study_estimate(study) -> Estimate:
     variants = math.prod(len(entry[-1]) for entry in getattr(study, "sweep", ()))   # of each configuration
     n_conf = len(study.configurations) * variants
     wc_poses = study.worstcase_grid[0] * study.worstcase_grid[1]
-    held = Estimate(f"the worst cases at {n_conf * wc_poses} poses", n_conf * wc_poses * _WC_HELD_BYTES_PER_POSE(d))
+    held = Estimate(f"the worst cases at {n_conf * wc_poses} poses", n_conf * wc_poses * _wc_held_bytes_per_pose(d))
     stage = Estimate("", 0.0).then(worstcase_estimate(wc_poses, d))
     mc_poses = study.mc_grid[0] * study.mc_grid[1]
     if "montecarlo" in study.outputs:

@@ -7,9 +7,12 @@ Units are mm and degrees at every boundary, radians inside; reports show
 from __future__ import annotations
 
 import math
+import warnings
+
+from .errors import Prp3mcWarning, SpecError
 
 __all__ = ["RAD2DEG", "DEG2RAD", "MM2UM", "DEG2ARCSEC", "PPM", "POSE_OUTPUTS", "OUTPUTS", "OUTPUT_UNITS",
-           "DISPLAY", "SPEC_UNITS", "z_value", "t_value", "Z95", "probability_text", "quantity_text"]
+           "DISPLAY", "SPEC_UNITS", "spec_value", "z_value", "t_value", "Z95", "probability_text", "quantity_text"]
 
 RAD2DEG = 180.0 / math.pi
 DEG2RAD = math.pi / 180.0
@@ -18,8 +21,24 @@ DEG2ARCSEC = 3600.0
 #: Parts per million per unit of probability (exceedances in reports).
 PPM = 1e6
 #: A pose-error spec's unit, the larger unit it is mistyped in and the factor between them, by keyword: below 1
-#: of its unit a spec warns (``prp3mc.stackup.exceedance._spec``, the one rule every entry point applies).
+#: of its unit a spec warns (:func:`spec_value`, the one rule every entry point applies).
 SPEC_UNITS = {"spec_position_um": ("µm", "mm", MM2UM), "spec_phi_arcsec": ("arcsec", "deg", DEG2ARCSEC)}
+
+
+def spec_value(name: str, value) -> float:
+    """The value of spec keyword ``name`` (a key of :data:`SPEC_UNITS`): a finite number > 0 in its unit (else
+    SpecError); below 1 it is taken, with a warning, as a value typed in the larger unit (mm, deg)? The one rule
+    of every entry point (:func:`prp3mc.exact_yield`, ``prp3mc allocate``, ``prp3mc yield``, a study's ``[spec]``)."""
+    import numpy as np
+
+    unit, big_unit, per_big = SPEC_UNITS[name]
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+            or not math.isfinite(value) or value <= 0:
+        raise SpecError(f"{name} must be a finite number > 0 {unit}, got {value!r}")
+    if value < 1.0:
+        warnings.warn(Prp3mcWarning(f"{name} = {value:g} {unit} is below 1 {unit}: a spec in {big_unit} typed as "
+                                    f"{unit}? ({value:g} {big_unit} = {per_big * value:g} {unit})"), stacklevel=3)
+    return float(value)
 
 #: Components of the pose error, in order: rows of every J_q.
 POSE_OUTPUTS = ("x", "y", "phi")

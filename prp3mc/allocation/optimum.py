@@ -39,9 +39,8 @@ from .._version import __version__
 from ..errors import AllocationError
 from ..kinematics.geometry import Geometry, Region
 from ..kinematics.chain import as_poses
-from ..stackup.exceedance import _spec as spec_in_unit
 from ..stackup.result import PPM
-from ..units import DEG2ARCSEC, MM2UM, SPEC_UNITS
+from ..units import DEG2ARCSEC, MM2UM, spec_value
 from .classes import ClassMenu
 from .percentile import METHODS, PercentileCheck, percentile_least_cost
 from .search import Problem, Search, least_cost
@@ -205,7 +204,7 @@ def _spec_limits(spec_position_um, spec_phi_arcsec, spec_percentile) -> dict:
         raise AllocationError("give a position spec (µm), an orientation spec (arcsec) or both")
     for name, value in (("spec_position_um", spec_position_um), ("spec_phi_arcsec", spec_phi_arcsec)):
         if value is not None:     # below 1: legal, but far more often a value in the larger unit (a warning)
-            spec_in_unit(name, value, *SPEC_UNITS[name])
+            spec_value(name, value)
     if spec_percentile is not None:
         if spec_position_um is None:
             raise AllocationError("a percentile spec bounds the position error: give spec_position_um too")

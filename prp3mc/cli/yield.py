@@ -10,7 +10,7 @@ from .._version import __version__
 from ..errors import NoExactYieldError, Prp3mcWarning, SpecError
 from ..kinematics.geometry import Geometry
 from ..limits import DEFAULT_TARGET, TARGET_RANGE, montecarlo_estimate, yield_estimate
-from ..units import DEG2ARCSEC, MM2UM, PPM, SPEC_UNITS
+from ..units import DEG2ARCSEC, MM2UM, PPM, spec_value
 from . import (add_budget, add_geometry, add_json, add_pose_or_region, add_seed, command, emit_json, emit_table,
                finite_float, grid_poses, positive_float, positive_int, provenance, within_limits)
 
@@ -152,12 +152,10 @@ def _correlated(args, geometry, budget, poses, where, why: str) -> None:
     from ..montecarlo.propagation import monte_carlo
     from ..stackup.result import OUTPUTS, QUANTILE_LEVELS, ppk, region_summary
 
-    from ..stackup.exceedance import _spec as spec_in_unit
-
     within_limits(args, _fallback_estimate(args, budget, poses.shape[0]))
     for name, value in (("spec_position_um", args.spec_position_um), ("spec_phi_arcsec", args.spec_phi_arcsec)):
         if value is not None:   # below 1: a warning, as exact_yield gives on its own path
-            spec_in_unit(name, value, *SPEC_UNITS[name])
+            spec_value(name, value)
 
     S = args.spec_position_um / MM2UM
     Z = None if args.spec_phi_arcsec is None else args.spec_phi_arcsec / DEG2ARCSEC

@@ -17,7 +17,7 @@ from ..kinematics.geometry import Geometry
 from ..limits import DEFAULT_TARGET, TARGET_RANGE
 from ..model.budget import Budget
 from ..model.linear import linear_model
-from ..units import DEG2ARCSEC, DEG2RAD, MM2UM, RAD2DEG
+from ..units import DEG2ARCSEC, DEG2RAD, MM2UM, RAD2DEG, spec_value
 from ._special import special_args
 from .characteristic import term_table
 from .conditional import CONDITIONAL_METHOD, independent_legs, joint_exceedance
@@ -48,17 +48,6 @@ _LEG_POWER = 2.5
 #: is 441; about 0.1 to 0.3 s a pose).
 JOINT_POSES = 1000
 _CHUNK = 64                      # poses per task of the thread pool
-
-
-def _spec(name: str, value, unit: str, big_unit: str, per_big: float) -> float:
-    """A spec > 0 in ``unit``; below 1 it is taken, with a warning, as a value typed in ``big_unit``."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
-            or not math.isfinite(value) or value <= 0:
-        raise SpecError(f"{name} must be a finite number > 0 {unit}, got {value!r}")
-    if value < 1.0:
-        warnings.warn(Prp3mcWarning(f"{name} = {value:g} {unit} is below 1 {unit}: a spec in {big_unit} typed as "
-                                    f"{unit}? ({value:g} {big_unit} = {per_big * value:g} {unit})"), stacklevel=3)
-    return float(value)
 
 
 def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_arcsec: float | None = None,
@@ -152,8 +141,8 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     (1159.9, True)
     """
     t0 = time.perf_counter()
-    S_um = _spec("spec_position_um", spec_position_um, "µm", "mm", MM2UM)
-    Z_as = None if spec_phi_arcsec is None else _spec("spec_phi_arcsec", spec_phi_arcsec, "arcsec", "deg", DEG2ARCSEC)
+    S_um = spec_value("spec_position_um", spec_position_um)
+    Z_as = None if spec_phi_arcsec is None else spec_value("spec_phi_arcsec", spec_phi_arcsec)
     lo, hi = TARGET_RANGE
     if isinstance(target, bool) or not isinstance(target, (int, float)) or not lo <= target <= hi:
         raise SpecError(f"target must be a probability in [{lo:g}, {hi:g}] (below {lo:g} floating point alone "

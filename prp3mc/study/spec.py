@@ -37,9 +37,8 @@ from ..errors import Prp3mcWarning
 from ..model.linear import linear_model
 from ..montecarlo.propagation import _wilson
 from ..stackup import OUTPUTS, YieldResult, exact_yield
-from ..stackup.exceedance import _spec as spec_in_unit
 from ..stackup.result import PPM
-from ..units import DEG2ARCSEC, MM2UM, RAD2DEG, SPEC_UNITS
+from ..units import DEG2ARCSEC, MM2UM, RAD2DEG, SPEC_UNITS, spec_value
 
 __all__ = ["YieldSpec", "ExceedanceCurve", "read_spec", "run_yield", "exceedance_curve", "yield_summary",
            "CURVE_POINTS"]
@@ -86,7 +85,7 @@ def _value(reader, table: dict, key: str) -> float | None:
         return None
     if not value > 0:
         reader.fail(path, f"spec.{key} must be a finite number > 0 {units[0]}, got {value!r}")
-    return spec_in_unit(f"spec_{key}", value, *units)
+    return spec_value(f"spec_{key}", value)
 
 
 def read_spec(reader, doc: dict, tolerance_mm: float | None) -> YieldSpec | None:
