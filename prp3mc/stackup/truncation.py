@@ -71,8 +71,6 @@ _N_CAP = 1 << 20            # longest 1-D envelope array of a basis leg
 _BINS = 1400                # log2 bins of the envelope, from 2^-1300 up
 _WALK_CAP = 1 << 22         # farthest point of a row walk
 _MAX_POINTS = (1 << 23, 1 << 23, 1 << 18)   # most points walked at one pose, per dimension (beyond: status 3)
-_VALLEY = 1.0 / 16.0        # a valley's block is bounded, not walked, below this fraction of the drop's threshold
-_BLOCK = (4, 64)            # a valley block's first and largest length (points)
 
 
 # ------------------------------------------------------------------ bounds of the transform of D
@@ -294,72 +292,10 @@ def _factor_tail(value, c, U, p, dropped, power, cmin):
 
 
 @njit(cache=True, nogil=True)
-def _last_peak(d, s, nu2, nu3, mix, mu, Q, Vinv):
-    """The farthest point U along a row's side s (n_1 = s U) where a factor of F other than the basis leg's
-    peaks: where a term's argument vanishes, or w comes closest to 0 (-inf when none lies ahead)."""
-    step = _TWO_PI * s / Q[0]
-    far = -np.inf
-    for k in range(mix.size):
-        t = mix[k]
-        slope = mu[t, 0] * step
-        if slope != 0.0:
-            far = max(far, -(mu[t, 1] * nu2 + mu[t, 2] * nu3) / slope)
-    if d >= 2:
-        vx, vy = Vinv[0, 0] * step, Vinv[1, 0] * step
-        vv = vx * vx + vy * vy
-        if vv > 0.0:
-            far = max(far, -((Vinv[0, 1] * nu2 + Vinv[0, 2] * nu3) * vx + (Vinv[1, 1] * nu2 + Vinv[1, 2] * nu3) * vy)
-                      / vv)
-        vz = Vinv[2, 0] * step
-        if d == 3 and vz != 0.0:
-            far = max(far, -(Vinv[2, 1] * nu2 + Vinv[2, 2] * nu3) / vz)
-    return far
-
-
-@njit(cache=True, nogil=True)
-def _block_bound(d, U, B, s, nu2, nu3, e23, E1, mix, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2):
-    """The largest F can take on the points n_1 = s U .. s (U + B - 1) of a row. Every factor is
-    non-increasing in ``|its argument|``, an affine function of n_1 (the transform's: the norm of one), so it
-    is at most its value where that argument is smallest over the block (0 where it changes sign): the
-    basis leg at n_1 = s U, each other term at the block's end nearest its zero, the transform at the
-    closest approach of w."""
-    step = _TWO_PI * s / Q[0]
-    nu_a = step * U
-    nu_b = step * (U + B - 1)
-    m = E1[U] if U < E1.size else _leg_at(0, U, d, ev, grp, mu, Q, mnorm, lam, z1, z2)[0]
-    m *= e23
-    for k in range(mix.size):
-        t = mix[k]
-        rest = mu[t, 1] * nu2 + mu[t, 2] * nu3
-        xa = mu[t, 0] * nu_a + rest
-        xb = mu[t, 0] * nu_b + rest
-        if xa * xb <= 0.0:
-            return np.inf
-        m *= envelope(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7],
-                      min(abs(xa), abs(xb)))
-    if d == 1:
-        m *= _interval_bound(z1, abs(nu_a))
-    else:
-        wx = Vinv[0, 0] * nu_a + Vinv[0, 1] * nu2 + Vinv[0, 2] * nu3
-        wy = Vinv[1, 0] * nu_a + Vinv[1, 1] * nu2 + Vinv[1, 2] * nu3
-        vx, vy = Vinv[0, 0] * step, Vinv[1, 0] * step
-        vv = vx * vx + vy * vy
-        c = min(max(-(wx * vx + wy * vy) / vv, 0.0), B - 1.0) if vv > 0.0 else 0.0
-        m *= _disc_bound(z1, math.sqrt((wx + c * vx) ** 2 + (wy + c * vy) ** 2))
-        if d == 3:
-            za = Vinv[2, 0] * nu_a + Vinv[2, 1] * nu2 + Vinv[2, 2] * nu3
-            zb = Vinv[2, 0] * nu_b + Vinv[2, 1] * nu2 + Vinv[2, 2] * nu3
-            if za * zb <= 0.0:
-                return np.inf
-            m *= _interval_bound(z2, min(abs(za), abs(zb)))
-    return m / lam
-
-
-@njit(cache=True, nogil=True)
 def _walk_row(d, n2, n3, origin, budget, E1, P1, e2, e3, mix, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2, pts, F,
-              count, tau, bins):
-    """Walk the row (n2, n3) outward from n_1 = 0, appending its points (n, F) from ``count`` on (each 2 F
-    added to its log2 bin of ``bins``), until each side's tail is within half the budget. ``E1``, ``P1``: the first basis leg's envelope product and its
+              count):
+    """Walk the row (n2, n3) outward from n_1 = 0, appending its points (n, F) from ``count`` on, until each
+    side's tail is within half the budget. ``E1``, ``P1``: the first basis leg's envelope product and its
     power along its axis (:func:`leg_envelope`); ``e2``, ``e3``: the row's E_2 and E_3; ``mix``: the terms off
     the basis legs (mixed, thermal), whose envelopes F takes point by point.
 
@@ -367,16 +303,11 @@ def _walk_row(d, n2, n3, origin, budget, E1, P1, e2, e3, mix, ev, grp, mu, Q, Vi
     ``|an affine function of n_1|`` (the transform's of the norm of one), non-increasing past its peak (see
     :func:`_factor_tail`; the basis leg's peak at n_1 = 0), so
     ``sum_{n > U} F <= int_U^inf f / dropped ((U - c_min) / (x - c_min))^P dx = f / dropped (U - c_min) / (P - 1)``.
-    A valley (past a point below ``tau``, before the last peak of a factor, :func:`_last_peak`) is crossed
-    in blocks: a block whose largest F (:func:`_block_bound`) is at most ``tau`` is not walked, its length
-    times that bound added to ``valley`` (twice: n -> -n); the blocks start at ``_BLOCK[0]`` points and
-    double while they pass (up to ``_BLOCK[1]``), and end before the last peak.
-    Returns (count, tails, valley, pts, F, ok)."""
+    Returns (count, tails, pts, F, ok)."""
     nu2 = _TWO_PI * n2 / Q[1]
     nu3 = _TWO_PI * n3 / Q[2]
     e23 = e2 * e3
     tails = 0.0
-    valley = 0.0
     ok = True
     for side in range(2):
         if origin and side == 1:
@@ -385,9 +316,6 @@ def _walk_row(d, n2, n3, origin, budget, E1, P1, e2, e3, mix, ev, grp, mu, Q, Vi
         U = 1 if (origin or side == 1) else 0             # side 0 holds n1 = 0 (origin row: n1 >= 1)
         step = _TWO_PI * s / Q[0]                         # nu_1 per step along the side
         vx, vy, vz = Vinv[0, 0] * step, Vinv[1, 0] * step, Vinv[2, 0] * step
-        B = _BLOCK[0]
-        over = 1.0
-        peak = _last_peak(d, s, nu2, nu3, mix, mu, Q, Vinv) if tau > 0.0 else -np.inf
         while True:
             if U > _WALK_CAP:
                 ok = False
@@ -450,28 +378,15 @@ def _walk_row(d, n2, n3, origin, budget, E1, P1, e2, e3, mix, ev, grp, mu, Q, Vi
             pts[count, 0], pts[count, 1], pts[count, 2] = s * U, n2, n3
             F[count] = f
             count += 1
-            if f > 0.0:
-                bins[min(_BINS - 1, max(0, math.frexp(f)[1] - 1 + 1300))] += 2.0 * f   # floor(log2 F) + 1300
             if tail_here and power > 1.0 and dropped > 0.0:
                 tail = f / dropped * (U - cmin) / (power - 1.0)
                 if tail <= 0.5 * budget:
                     tails += tail
                     break
             U += 1
-            if f * over <= tau:
-                while U + _BLOCK[0] <= peak and U <= _WALK_CAP:
-                    b = min(B, int(peak) - U)           # the block ends before the last peak
-                    m = _block_bound(d, U, b, s, nu2, nu3, e23, E1, mix, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2)
-                    if m > tau:
-                        over = m / f                    # the next try waits until F is that much below tau
-                        B = max(_BLOCK[0], B // 2)
-                        break
-                    valley += 2.0 * b * m
-                    U += b
-                    B = min(_BLOCK[1], 2 * B)
         if not ok:
             tails += np.inf
-    return count, tails, valley, pts, F, ok
+    return count, tails, pts, F, ok
 
 
 @njit(cache=True, nogil=True)
@@ -581,19 +496,6 @@ def _rows_3d(E2, E3, SE, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2, e_part):
                     return rows[:count], row_sum[:count], np.inf, np.inf, 3
                 U += 1
     return rows[:count], row_sum[:count], outer, 2.0 * tails, status
-
-
-@njit(cache=True, nogil=True)
-def _cut(bins, e):
-    """The most log2 bins, from the lowest, whose sum is at most e."""
-    cut = 0
-    acc = 0.0
-    for k in range(_BINS):
-        if acc + bins[k] > e:
-            break
-        acc += bins[k]
-        cut = k + 1
-    return cut
 
 
 @njit(cache=True, nogil=True)
@@ -708,9 +610,6 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
     F = np.empty(4096)
     count = 0
     tails = 0.0
-    valley = 0.0
-    bins = np.zeros(_BINS)          # 2 F of the points walked, by floor(log2 F) + 1300
-    tau = 0.0                       # no valley blocks before the first row's points set a threshold
     mix = np.flatnonzero((grp == MIXED_LEG) | (grp == -1))
     for k in range(rows.shape[0]):
         if count > _MAX_POINTS[d - 1]:
@@ -720,21 +619,26 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
         n2, n3 = rows[k, 0], rows[k, 1]
         e2 = _leg_value(1, abs(n2), Es[1], d, ev, grp, mu, Q, mnorm, lam, z1, z2)
         e3 = _leg_value(2, abs(n3), Es[2], d, ev, grp, mu, Q, mnorm, lam, z1, z2)
-        count, t, v, pts, F, ok = _walk_row(d, n2, n3, k == 0, budget, Es[0], PEs[0], e2, e3, mix, ev, grp, mu, Q,
-                                            Vinv, mnorm, lam, z1, z2, pts, F, count, tau, bins)
+        count, t, pts, F, ok = _walk_row(d, n2, n3, k == 0, budget, Es[0], PEs[0], e2, e3, mix, ev, grp, mu, Q,
+                                         Vinv, mnorm, lam, z1, z2, pts, F, count)
         tails += 2.0 * t
-        valley += v
         if not ok:
             status = max(status, 1)
-        # the threshold the points so far would give (it only falls as points come; taken after rows 0, 1,
-        # 2, 4, 8, ... and every 16th): a fraction of it bounds the valleys' blocks, whose points then lie
-        # below the final threshold
-        if k & (k - 1) == 0 or k % 16 == 0:
-            tau = _VALLEY * 2.0 ** (_cut(bins, e_drop - valley) - 1300)
-    # --- drop the smallest points while their sum (with the valleys' blocks) stays within e_drop (log2 bins)
-    threshold = 2.0 ** (_cut(bins, e_drop - valley) - 1300)
+    # --- drop the smallest points while their sum stays within e_drop (log2 bins)
+    bins = np.zeros(_BINS)
+    for i in range(count):
+        if F[i] > 0.0:
+            bins[min(_BINS - 1, max(0, math.frexp(F[i])[1] - 1 + 1300))] += 2.0 * F[i]   # floor(log2 F) + 1300
+    cut = 0
+    acc = 0.0
+    for k in range(_BINS):
+        if acc + bins[k] > e_drop:
+            break
+        acc += bins[k]
+        cut = k + 1
+    threshold = 2.0 ** (cut - 1300)
     kept = 0
-    dropped = valley
+    dropped = 0.0
     for i in range(count):
         if F[i] >= threshold:
             pts[kept] = pts[i]
