@@ -37,14 +37,17 @@ errors, plus the two channels' bounds.
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from numba import njit
 
+from .._threads import check_stop, cores
+from ..limits import CONDITIONED_THREAD_BYTES
 from ._special import CF_ACCURACY, special_args
 from .characteristic import envelope_power, term_cf
 
-__all__ = ["CONDITIONAL_METHOD", "independent_legs", "leg_cdfs", "joint_exceedance"]
+__all__ = ["CONDITIONAL_METHOD", "independent_legs", "leg_cdfs", "joint_exceedance", "chunk_bytes"]
 
 CONDITIONAL_METHOD = (
     "; P(either) = P(position) + P(phi) - P(both out), the last by conditioning on two legs and integrating "
@@ -59,6 +62,13 @@ _INITIAL = 16                   # initial cells per leg
 _MAX_CELLS = 20_000           # open cells per pose (at most): about 0.1 to 0.3 s a pose
 _MAX_ROUNDS = 60
 _WIDEN = 1e-12                  # relative widening of every interval end (floating point)
+_CELL_BLOCK = 1 << 15           # cells evaluated at once
+# memory (chunk_bytes): computing one pose's CDFs, per point of a leg's grid (its coefficients, FFT, CDF and
+# bounds); a pose's cells at a round's peak, per cell (their ends and bounds, the round's copies and children);
+# the temporaries of evaluating one cell
+_CDF_BYTES_PER_POINT = 64         # 51 traced (paper budget, 2^16 and 2^18 points)
+_BYTES_PER_CELL = 200             # 56 held, ~180 with a round's copies and children
+_BYTES_PER_EVALUATED_CELL = 512   # 456 traced
 
 
 def independent_legs(C: np.ndarray, Ainv: np.ndarray, legs, table) -> tuple[np.ndarray, np.ndarray]:
@@ -127,6 +137,32 @@ def _coefficients(kind, par, tab, sp, kappa, legs, Q, lo, K, out):
                 out[n, i, k] = phi * np.exp(-1j * w * lo[n, i]) / (-2j * math.pi * k)
 
 
+def _leg_sizes(kappa: np.ndarray, legs: np.ndarray, table) -> tuple:
+    """Each leg's support (N, 3, 2), grid start and period (N, 3), its series' terms K and their truncation
+    bound (N, 3), and the legs of the random terms (T,; -2 for a constant)."""
+    N, T = kappa.shape
+    random = table.random
+    a, b = kappa * np.where(random, table.lo, 0.0), kappa * np.where(random, table.hi, 0.0)
+    sup = np.zeros((N, 3, 2))
+    for i in range(3):
+        on = random & (legs == i)
+        sup[:, i, 0] = np.minimum(a, b)[:, on].sum(axis=1)
+        sup[:, i, 1] = np.maximum(a, b)[:, on].sum(axis=1)
+    width = sup[..., 1] - sup[..., 0]
+    pad = 0.01 * width
+    lo, Q = sup[..., 0] - pad, width + 2.0 * pad
+    K, tail = np.zeros((N, 3), np.int64), np.zeros((N, 3))
+    leg_of = np.where(random, legs, -2).astype(np.int64)
+    _sizes(table.env, kappa, leg_of, Q, _LEG_EPS, _K_MAX, K, tail)
+    return sup, lo, Q, K, tail, leg_of
+
+
+def _points(K: np.ndarray) -> np.ndarray:
+    """Grid points M of each pose's CDFs (N,), for the legs' series terms K (N, 3): a power of 2, at least
+    :data:`_GRID` and above twice the most terms."""
+    return np.maximum(_GRID, np.left_shift(1, np.ceil(np.log2(K.max(axis=-1) + 2)).astype(np.int64)))
+
+
 def leg_cdfs(kappa: np.ndarray, legs, table, alias_one: float) -> dict:
     """Each leg's CDF on a uniform grid, with a bound of its error, at N poses.
 
@@ -142,37 +178,30 @@ def leg_cdfs(kappa: np.ndarray, legs, table, alias_one: float) -> dict:
     Returns
     -------
     dict
-        ``lo`` (N, 3) the grid's first point, ``h`` (N, 3) its step, ``F`` (N, 3, M) the CDF at the M points,
-        ``lo_b``/``hi_b`` (N, 3, M) bounds of F at the points (exact 0 / 1 off the support but for the normal
-        laws' mass), ``eps`` (N, 3) the error bound, ``support`` (N, 3, 2).
+        ``lo`` (N, 3) the grid's first point, ``h`` (N, 3) its step, ``F`` (N, 3, M) the CDF at the M points
+        (M the largest of the poses' :func:`_points`), ``lo_b``/``hi_b`` (N, 3, M) bounds of F at the points
+        (exact 0 / 1 off the support but for the normal laws' mass), ``eps`` (N, 3) the error bound,
+        ``support`` (N, 3, 2).
     """
     legs = np.asarray(legs)
-    N, T = kappa.shape
-    random = table.random
-    a, b = kappa * np.where(random, table.lo, 0.0), kappa * np.where(random, table.hi, 0.0)
-    sup = np.zeros((N, 3, 2))
-    alias = np.zeros(3)
-    for i in range(3):
-        on = random & (legs == i)
-        sup[:, i, 0] = np.minimum(a, b)[:, on].sum(axis=1)
-        sup[:, i, 1] = np.maximum(a, b)[:, on].sum(axis=1)
-        alias[i] = alias_one * np.count_nonzero(on & table.normal)
-    width = sup[..., 1] - sup[..., 0]
-    pad = 0.01 * width
-    lo, Q = sup[..., 0] - pad, width + 2.0 * pad
-    K, tail = np.zeros((N, 3), np.int64), np.zeros((N, 3))
-    leg_of = np.where(random, legs, -2).astype(np.int64)
-    _sizes(table.env, kappa, leg_of, Q, _LEG_EPS, _K_MAX, K, tail)
-    M = max(_GRID, 1 << int(np.ceil(np.log2(K.max() + 2))))
-    c = np.zeros((N, 3, M), complex)
+    sup, lo, Q, K, tail, leg_of = _leg_sizes(kappa, legs, table)
+    alias = np.array([alias_one * np.count_nonzero(table.random & (legs == i) & table.normal) for i in range(3)],
+                     dtype=float)
+    M = int(_points(K).max())
+    c = np.zeros(kappa.shape[:1] + (3, M), complex)
     _coefficients(table.kind, table.par, table.arrays(), special_args(), kappa, leg_of, Q, lo, K, c)
-    F = np.arange(M) / M + 2.0 * (np.fft.fft(c, axis=-1) - c.sum(axis=-1, keepdims=True)).real
+    f = np.fft.fft(c, axis=-1)
+    f -= c.sum(axis=-1, keepdims=True)
+    F = np.arange(M) / M + 2.0 * f.real
+    del f
     terms = np.log(np.maximum(K, 1)) + 1.0
     fp = CF_ACCURACY * 2.0 * terms / math.pi + 4e-16 * np.log2(M) * (2.0 * np.abs(c).sum(axis=-1) + 1.0)
+    del c
     eps = tail + fp + alias[None, :]
     h = Q / M
     g = lo[..., None] + h[..., None] * np.arange(M)
     below, above = g <= sup[..., 0, None], g >= sup[..., 1, None]
+    del g
     lo_b = np.clip(np.where(below, 0.0, np.where(above, 1.0 - alias[None, :, None], F - eps[..., None])), 0.0, 1.0)
     hi_b = np.clip(np.where(below, alias[None, :, None], np.where(above, 1.0, F + eps[..., None])), 0.0, 1.0)
     return {"lo": lo, "h": h, "F": F, "lo_b": lo_b, "hi_b": hi_b, "eps": eps, "support": sup, "M": M,
@@ -329,18 +358,46 @@ def _split(cells):
     return tuple(c[keep] for c in out)
 
 
+def _cdf_bounds(kappa, legs, table, alias_one) -> dict:
+    """The legs' CDF bounds at a chunk of poses whose grids have the same points, one pose at a time: a
+    pose's coefficients, FFT and CDF are freed before the next; only the bounds (``lo_b``, ``hi_b``), grids
+    and supports are kept (:func:`leg_cdfs` for the keys)."""
+    n = kappa.shape[0]
+    keep = {}
+    for j in range(n):          # a pose's CDFs are 3 x M >= 196,608 points: vectorised within, memory bound
+        one = leg_cdfs(kappa[j:j + 1], legs, table, alias_one)
+        if j == 0:
+            keep = {"M": one["M"], "alias": one["alias"]}
+            keep.update({key: np.empty((n,) + one[key].shape[1:]) for key in ("lo", "h", "lo_b", "hi_b", "support")})
+        for key in ("lo", "h", "lo_b", "hi_b", "support"):
+            keep[key][j] = one[key][0]
+        del one
+    return keep
+
+
+def _evaluate(geo: _Cells, cells) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`_Cells.evaluate` in blocks of :data:`_CELL_BLOCK` cells (each cell's bounds are its own)."""
+    n = cells[0].size
+    if n <= _CELL_BLOCK:
+        return geo.evaluate(cells)
+    parts = [geo.evaluate(tuple(c[a:a + _CELL_BLOCK] for c in cells)) for a in range(0, n, _CELL_BLOCK)]
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
 def _chunk_joint(s, Ainv, kappa, legs, table, alias_one, S, Z, goal):
     """J's bracket (lo, hi) at a chunk of poses; NaN where the legs' directions do not bound u_L."""
     n = s.shape[0]
-    cdf = leg_cdfs(kappa, legs, table, alias_one)
+    cdf = _cdf_bounds(kappa, legs, table, alias_one)
     geo = _Cells(s, Ainv, cdf, S, Z)
     order = geo.order
     # every CDF error is already in the cells' bounds; the mass past the normal laws' cuts is off the cells
     outside = cdf["alias"][order[:, 0]] + cdf["alias"][order[:, 1]]
     J_lo, J_hi = np.zeros(n), outside.copy()
     cells = geo.initial(cdf)
-    vals = geo.evaluate(cells)
+    del cdf
+    vals = _evaluate(geo, cells)
     for rnd in range(_MAX_ROUNDS + 1):
+        check_stop()
         lo_c, hi_c = vals
         gap = hi_c - lo_c
         P, i0, i1, j0, j1 = cells
@@ -361,16 +418,48 @@ def _chunk_joint(s, Ainv, kappa, legs, table, alias_one, S, Z, goal):
         cut = op & (gap >= 0.5 * G[P] / np.maximum(count[P], 1))
         stay = op & ~cut
         kids = _split(tuple(c[cut] for c in cells))
-        new = geo.evaluate(kids)
+        new = _evaluate(geo, kids)
         cells = tuple(np.concatenate([c[stay], k]) for c, k in zip(cells, kids))
         vals = tuple(np.concatenate([v[stay], w]) for v, w in zip(vals, new))
+        del kids, new
     J_lo, J_hi = np.where(geo.ok, J_lo, np.nan), np.where(geo.ok, np.minimum(J_hi, 1.0), np.nan)
     return J_lo, J_hi
 
 
+def chunk_bytes(n: int, M: int) -> float:
+    """Peak bytes of :func:`joint_exceedance` on one chunk of ``n`` poses whose CDF grids have ``M`` points: the
+    memory model its chunks are sized by (:data:`~prp3mc.limits.CONDITIONED_THREAD_BYTES` each).
+
+    Every pose holds its three legs' CDF bounds (two float64 a point, twice while the cells copy them in
+    their legs' order) and at most ``4 x _MAX_CELLS`` cells (a round splits at most ``_MAX_CELLS`` open cells
+    in four); one pose at a time computes its CDFs, and the cells are evaluated :data:`_CELL_BLOCK` at a
+    time."""
+    return (3.0 * M * (_CDF_BYTES_PER_POINT + n * 32) + n * 4.0 * _MAX_CELLS * _BYTES_PER_CELL
+            + _CELL_BLOCK * _BYTES_PER_EVALUATED_CELL)
+
+
+def _chunks(M: np.ndarray, workers: int) -> list[np.ndarray]:
+    """The poses (indices) in chunks of equal grid points M, each as many as fit in
+    :data:`~prp3mc.limits.CONDITIONED_THREAD_BYTES` by :func:`chunk_bytes` (one at least) and no more than
+    an equal share of the ``workers``."""
+    out = []
+    for m in np.unique(M):
+        idx = np.flatnonzero(M == m)
+        most = -(-idx.size // workers)
+        n = 1
+        while n < most and chunk_bytes(n + 1, int(m)) <= CONDITIONED_THREAD_BYTES:
+            n += 1
+        out += [idx[a:a + n] for a in range(0, idx.size, n)]
+    return out
+
+
 def joint_exceedance(C: np.ndarray, Ainv: np.ndarray, legs, table, kappa: np.ndarray, S: float, Z: float,
-                     target: float, alias_one: float, chunk: int = 8) -> tuple[np.ndarray, np.ndarray]:
+                     target: float, alias_one: float, workers: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Bounds of J = P(``|(dx, dy)|`` > S and ``|dphi|`` > Z) at N poses of a budget of independent legs.
+
+    The poses are independent: they run in chunks (:func:`chunk_bytes`; each pose's results do not depend on
+    its chunk) on a pool of threads, each holding at most
+    :data:`~prp3mc.limits.CONDITIONED_THREAD_BYTES` (:func:`~prp3mc.limits.yield_estimate` counts them).
 
     Parameters
     ----------
@@ -387,18 +476,28 @@ def joint_exceedance(C: np.ndarray, Ainv: np.ndarray, legs, table, kappa: np.nda
         Goal of the bracket's width.
     alias_one : float
         Mass of one normal law past its cut.
-    chunk : int
-        Poses at a time (each holds three CDF grids of 2^16 points or more).
+    workers : int, optional
+        Threads (default: the CPU count).
 
     Returns
     -------
     (J_lo, J_hi) : ndarray (N,) each
         J lies between them; NaN where no leg's direction bounds u_L under both specs.
     """
+    legs = np.asarray(legs)
     N = C.shape[0]
     s = np.einsum("ndt,t->nd", C, table.constant)
     J_lo, J_hi = np.empty(N), np.empty(N)
-    for a in range(0, N, chunk):
-        b = min(N, a + chunk)
-        J_lo[a:b], J_hi[a:b] = _chunk_joint(s[a:b], Ainv[a:b], kappa[a:b], legs, table, alias_one, S, Z, target)
+    workers = workers or cores()
+    chunks = _chunks(_points(_leg_sizes(kappa, legs, table)[3]), workers)
+
+    def run(idx):
+        J_lo[idx], J_hi[idx] = _chunk_joint(s[idx], Ainv[idx], kappa[idx], legs, table, alias_one, S, Z, target)
+
+    if workers == 1 or len(chunks) == 1:
+        for idx in chunks:
+            run(idx)
+    else:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            list(pool.map(run, chunks))
     return J_lo, J_hi
