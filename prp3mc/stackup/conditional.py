@@ -62,13 +62,10 @@ _INITIAL = 16                   # initial cells per leg
 _MAX_CELLS = 20_000           # open cells per pose (at most): about 0.1 to 0.3 s a pose
 _MAX_ROUNDS = 60
 _WIDEN = 1e-12                  # relative widening of every interval end (floating point)
-_CELL_BLOCK = 1 << 15           # cells evaluated at once
 # memory (chunk_bytes): computing one pose's CDFs, per point of a leg's grid (its coefficients, FFT, CDF and
-# bounds); a pose's cells at a round's peak, per cell (their ends and bounds, the round's copies and children);
-# the temporaries of evaluating one cell
+# bounds); a pose's cells at a round's peak, per cell (their ends and bounds, the round's copies and children)
 _CDF_BYTES_PER_POINT = 64         # 51 traced (paper budget, 2^16 and 2^18 points)
 _BYTES_PER_CELL = 200             # 56 held, ~180 with a round's copies and children
-_BYTES_PER_EVALUATED_CELL = 512   # 456 traced
 
 
 def independent_legs(C: np.ndarray, Ainv: np.ndarray, legs, table) -> tuple[np.ndarray, np.ndarray]:
@@ -242,12 +239,12 @@ class _Cells:
         self.ep = np.stack([cross(s), cross(a_p), cross(a_q)], axis=1)
         self.cB = np.stack([-s[:, 2] / g3, -a_p[:, 2] / g3, -a_q[:, 2] / g3], axis=1)
         self.norm, self.wB, self.S = norm, Z / np.abs(g3), S
-        pick = lambda key, leg: cdf[key][rows, leg]                            # noqa: E731
-        self.lo = [pick("lo", leg) for leg in (p, q, L)]
-        self.h = [pick("h", leg) for leg in (p, q, L)]
-        self.lo_b = [pick("lo_b", leg) for leg in (p, q, L)]
-        self.hi_b = [pick("hi_b", leg) for leg in (p, q, L)]
-        self.M = cdf["M"]
+        self.lo = np.stack([cdf["lo"][rows, leg] for leg in (p, q, L)])                   # (3, n): p, q, L
+        self.h = np.stack([cdf["h"][rows, leg] for leg in (p, q, L)])
+        self.M = M = cdf["M"]
+        self.lo_b, self.hi_b = np.empty((3, n, M)), np.empty((3, n, M))               # (3, n, M)
+        for k, leg in enumerate((p, q, L)):
+            self.lo_b[k], self.hi_b[k] = cdf["lo_b"][rows, leg], cdf["hi_b"][rows, leg]
         self.widthL = np.diff(cdf["support"][rows, L], axis=-1)[:, 0]
 
     def initial(self, cdf) -> tuple:
@@ -269,82 +266,106 @@ class _Cells:
         keep = (cells[2] > cells[1]) & (cells[4] > cells[3])
         return tuple(c[keep] for c in cells)
 
-    def _F(self, P, x, upper: bool):
-        """A lower (or upper) bound of F_L(x)."""
-        lo, h, M = self.lo[2][P], self.h[2][P], self.M
-        j = np.floor(np.clip((x - lo) / h, -2.0, M + 1.0)).astype(np.int64)
-        if upper:
-            return np.where(j < 0, self.hi_b[2][P, 0], np.where(j >= M - 1, 1.0,
-                                                                self.hi_b[2][P, np.clip(j + 1, 0, M - 1)]))
-        return np.where(j < 0, 0.0, self.lo_b[2][P, np.clip(j, 0, M - 1)])
-
-    def _union(self, P, A, B, upper: bool):
-        """A lower (upper) bound of P_L(A ∪ B), A and B (lo, hi, empty)."""
-        def one(lo, hi, empty):
-            v = self._F(P, hi, upper) - self._F(P, lo, not upper)
-            return np.where(empty, 0.0, np.maximum(v, 0.0))
-        (a1, b1, e1), (a2, b2, e2) = A, B
-        overlap = ~e1 & ~e2 & (np.maximum(a1, a2) <= np.minimum(b1, b2))
-        hull = np.maximum(self._F(P, np.maximum(b1, b2), upper) - self._F(P, np.minimum(a1, a2), not upper), 0.0)
-        return np.clip(np.where(overlap, hull, one(a1, b1, e1) + one(a2, b2, e2)), 0.0, 1.0)
-
     def evaluate(self, cells) -> tuple[np.ndarray, np.ndarray]:
-        """Lower and upper bounds of each cell's share of J (its mass times 1 - P_L(A ∪ B))."""
+        """Lower and upper bounds of each cell's share of J (its mass times 1 - P_L(A ∪ B)): :func:`_bracket`."""
         P, i0, i1, j0, j1 = cells
-        x0, x1 = self.lo[0][P] + i0 * self.h[0][P], self.lo[0][P] + i1 * self.h[0][P]
-        y0, y1 = self.lo[1][P] + j0 * self.h[1][P], self.lo[1][P] + j1 * self.h[1][P]
+        lo, hi = np.empty(P.size), np.empty(P.size)
+        _bracket(P, i0, i1, j0, j1, self.lo, self.h, self.lo_b, self.hi_b, self.cA, self.ep, self.cB, self.norm,
+                 self.wB, float(self.S), self.widthL, lo, hi)
+        return lo, hi
 
-        def span(c):
-            c = c[P]
-            a, b = c[:, 1] * x0, c[:, 1] * x1
-            d, e = c[:, 2] * y0, c[:, 2] * y1
-            return c[:, 0] + np.minimum(a, b) + np.minimum(d, e), c[:, 0] + np.maximum(a, b) + np.maximum(d, e)
 
-        cA_lo, cA_hi = span(self.cA)
-        ep_lo, ep_hi = span(self.ep)
-        cB_lo, cB_hi = span(self.cB)
-        S, norm, wB = self.S, self.norm[P], self.wB[P]
-        amin = np.where(ep_lo * ep_hi <= 0.0, 0.0, np.minimum(np.abs(ep_lo), np.abs(ep_hi)))
-        amax = np.maximum(np.abs(ep_lo), np.abs(ep_hi))
-        r_big = np.sqrt(np.maximum(S * S - amin * amin, 0.0)) / norm
-        tol = _WIDEN * (np.abs(cA_lo) + np.abs(cA_hi) + np.abs(cB_lo) + np.abs(cB_hi) + S / norm + wB
-                        + self.widthL[P])
+@njit(cache=True, nogil=True)
+def _cdf_bound(lo_b, hi_b, P, x, lo, h, M, upper):
+    """A lower (or upper) bound of F_L(x) at pose P from the bounds at the grid points (monotonicity)."""
+    v = (x - lo) / h
+    j = int(math.floor(min(max(v, -2.0), M + 1.0)))
+    if upper:
+        if j < 0:
+            return hi_b[P, 0]
+        if j >= M - 1:
+            return 1.0
+        return hi_b[P, j + 1]
+    if j < 0:
+        return 0.0
+    return lo_b[P, min(j, M - 1)]
+
+
+@njit(cache=True, nogil=True)
+def _union(lo_b, hi_b, P, lo, h, M, a1, b1, e1, a2, b2, e2, upper):
+    """A lower (upper) bound of P_L(A ∪ B), A = [a1, b1] (empty if e1) and B = [a2, b2]."""
+    if not e1 and not e2 and max(a1, a2) <= min(b1, b2):
+        v = max(_cdf_bound(lo_b, hi_b, P, max(b1, b2), lo, h, M, upper)
+                - _cdf_bound(lo_b, hi_b, P, min(a1, a2), lo, h, M, not upper), 0.0)
+    else:
+        v1 = 0.0 if e1 else max(_cdf_bound(lo_b, hi_b, P, b1, lo, h, M, upper)
+                                - _cdf_bound(lo_b, hi_b, P, a1, lo, h, M, not upper), 0.0)
+        v2 = 0.0 if e2 else max(_cdf_bound(lo_b, hi_b, P, b2, lo, h, M, upper)
+                                - _cdf_bound(lo_b, hi_b, P, a2, lo, h, M, not upper), 0.0)
+        v = v1 + v2
+    return min(max(v, 0.0), 1.0)
+
+
+@njit(cache=True, nogil=True)
+def _bracket(P, i0, i1, j0, j1, lo, h, lo_b, hi_b, cA, ep, cB, norm, wB, S, widthL, out_lo, out_hi):
+    """Lower and upper bounds (out_lo, out_hi) of each cell's share of J: its mass (the product of its two
+    legs' CDF differences, bracketed) times 1 - P_L(A ∪ B), over the cell A and B containing a smallest and
+    lying in a largest interval. Cell c is pose P[c]'s grid intervals [i0, i1] x [j0, j1] of legs p, q; lo, h
+    (3, n) the legs' (p, q, L) grids, lo_b, hi_b (3, n, M) their CDF bounds; cA, ep, cB (n, 3) the linear
+    forms (constant, u_p, u_q) of c_A, e_perp and c_B; norm, wB, widthL (n,)."""
+    M = lo_b.shape[2]
+    bL_lo, bL_hi = lo_b[2], hi_b[2]
+    for c in range(P.size):
+        p = P[c]
+        x0, x1 = lo[0, p] + i0[c] * h[0, p], lo[0, p] + i1[c] * h[0, p]
+        y0, y1 = lo[1, p] + j0[c] * h[1, p], lo[1, p] + j1[c] * h[1, p]
+        # the ranges of the linear forms over the cell
+        a, b, d, e = cA[p, 1] * x0, cA[p, 1] * x1, cA[p, 2] * y0, cA[p, 2] * y1
+        cA_lo, cA_hi = cA[p, 0] + min(a, b) + min(d, e), cA[p, 0] + max(a, b) + max(d, e)
+        a, b, d, e = ep[p, 1] * x0, ep[p, 1] * x1, ep[p, 2] * y0, ep[p, 2] * y1
+        ep_lo, ep_hi = ep[p, 0] + min(a, b) + min(d, e), ep[p, 0] + max(a, b) + max(d, e)
+        a, b, d, e = cB[p, 1] * x0, cB[p, 1] * x1, cB[p, 2] * y0, cB[p, 2] * y1
+        cB_lo, cB_hi = cB[p, 0] + min(a, b) + min(d, e), cB[p, 0] + max(a, b) + max(d, e)
+        nrm, w = norm[p], wB[p]
+        amin = 0.0 if ep_lo * ep_hi <= 0.0 else min(abs(ep_lo), abs(ep_hi))
+        amax = max(abs(ep_lo), abs(ep_hi))
+        r_big = math.sqrt(max(S * S - amin * amin, 0.0)) / nrm
+        tol = _WIDEN * (abs(cA_lo) + abs(cA_hi) + abs(cB_lo) + abs(cB_hi) + S / nrm + w + widthL[p])
         # A's ends c_A -/+ sqrt(S² - e_perp²)/|m| are convex / concave in (u_p, u_q): the largest lower end and
         # the smallest upper end are at corners (exact); the others by intervals and by the tangent plane at
         # the centre, whichever is tighter
-        cA, ep = self.cA[P], self.ep[P]
-        lo_max, hi_min = np.full(P.size, -np.inf), np.full(P.size, np.inf)
+        lo_max, hi_min = -np.inf, np.inf
         for x in (x0, x1):
             for y in (y0, y1):
-                c = cA[:, 0] + cA[:, 1] * x + cA[:, 2] * y
-                e = ep[:, 0] + ep[:, 1] * x + ep[:, 2] * y
-                r = np.sqrt(np.maximum(S * S - e * e, 0.0)) / norm
-                lo_max, hi_min = np.maximum(lo_max, c - r), np.minimum(hi_min, c + r)
+                cc = cA[p, 0] + cA[p, 1] * x + cA[p, 2] * y
+                ee = ep[p, 0] + ep[p, 1] * x + ep[p, 2] * y
+                r = math.sqrt(max(S * S - ee * ee, 0.0)) / nrm
+                lo_max, hi_min = max(lo_max, cc - r), min(hi_min, cc + r)
         xm, ym, dx, dy = 0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.5 * (x1 - x0), 0.5 * (y1 - y0)
-        e = ep[:, 0] + ep[:, 1] * xm + ep[:, 2] * ym
-        root = np.sqrt(np.maximum(S * S - e * e, 0.0))
-        smooth = amax < S
-        safe = np.where(smooth, root, 1.0)
-        r_c = root / norm
-        slope = np.where(smooth, e / (safe * norm), 0.0)            # d r / d e_perp = -e / (root |m|)
-        c_m = cA[:, 0] + cA[:, 1] * xm + cA[:, 2] * ym
-        dev = np.abs(cA[:, 1] + slope * ep[:, 1]) * dx + np.abs(cA[:, 2] + slope * ep[:, 2]) * dy
-        lo_min = np.where(smooth, np.maximum(cA_lo - r_big, c_m - r_c - dev), cA_lo - r_big)
-        dev = np.abs(cA[:, 1] - slope * ep[:, 1]) * dx + np.abs(cA[:, 2] - slope * ep[:, 2]) * dy
-        hi_max = np.where(smooth, np.minimum(cA_hi + r_big, c_m + r_c + dev), cA_hi + r_big)
-        A_big = (lo_min - tol, hi_max + tol, amin > S)
-        lo, hi = lo_max + tol, hi_min - tol
-        A_small = (lo, hi, (amax > S) | (lo > hi))
-        B_big = (cB_lo - wB - tol, cB_hi + wB + tol, np.zeros(P.size, bool))
-        lo, hi = cB_hi - wB + tol, cB_lo + wB - tol
-        B_small = (lo, hi, lo > hi)
-        h_up = 1.0 - self._union(P, A_small, B_small, upper=False)
-        h_lo = 1.0 - self._union(P, A_big, B_big, upper=True)
-        mass = []
-        for k, (a, b) in enumerate(((i0, i1), (j0, j1))):
-            lb, hb = self.lo_b[k], self.hi_b[k]
-            mass.append((np.maximum(lb[P, b] - hb[P, a], 0.0), np.minimum(hb[P, b] - lb[P, a], 1.0)))
-        return mass[0][0] * mass[1][0] * h_lo, mass[0][1] * mass[1][1] * h_up
+        ee = ep[p, 0] + ep[p, 1] * xm + ep[p, 2] * ym
+        root = math.sqrt(max(S * S - ee * ee, 0.0))
+        if amax < S:                                     # d r / d e_perp = -e / (root |m|)
+            r_c = root / nrm
+            slope = ee / (root * nrm)
+            c_m = cA[p, 0] + cA[p, 1] * xm + cA[p, 2] * ym
+            dev = abs(cA[p, 1] + slope * ep[p, 1]) * dx + abs(cA[p, 2] + slope * ep[p, 2]) * dy
+            lo_min = max(cA_lo - r_big, c_m - r_c - dev)
+            dev = abs(cA[p, 1] - slope * ep[p, 1]) * dx + abs(cA[p, 2] - slope * ep[p, 2]) * dy
+            hi_max = min(cA_hi + r_big, c_m + r_c + dev)
+        else:
+            lo_min, hi_max = cA_lo - r_big, cA_hi + r_big
+        lo_s, hi_s = lo_max + tol, hi_min - tol
+        lo_Bs, hi_Bs = cB_hi - w + tol, cB_lo + w - tol
+        h_up = 1.0 - _union(bL_lo, bL_hi, p, lo[2, p], h[2, p], M, lo_s, hi_s, (amax > S) or (lo_s > hi_s),
+                            lo_Bs, hi_Bs, lo_Bs > hi_Bs, False)
+        h_lo = 1.0 - _union(bL_lo, bL_hi, p, lo[2, p], h[2, p], M, lo_min - tol, hi_max + tol, amin > S,
+                            cB_lo - w - tol, cB_hi + w + tol, False, True)
+        m0_lo = max(lo_b[0, p, i1[c]] - hi_b[0, p, i0[c]], 0.0)
+        m0_hi = min(hi_b[0, p, i1[c]] - lo_b[0, p, i0[c]], 1.0)
+        m1_lo = max(lo_b[1, p, j1[c]] - hi_b[1, p, j0[c]], 0.0)
+        m1_hi = min(hi_b[1, p, j1[c]] - lo_b[1, p, j0[c]], 1.0)
+        out_lo[c] = m0_lo * m1_lo * h_lo
+        out_hi[c] = m0_hi * m1_hi * h_up
 
 
 def _split(cells):
@@ -375,15 +396,6 @@ def _cdf_bounds(kappa, legs, table, alias_one) -> dict:
     return keep
 
 
-def _evaluate(geo: _Cells, cells) -> tuple[np.ndarray, np.ndarray]:
-    """:meth:`_Cells.evaluate` in blocks of :data:`_CELL_BLOCK` cells (each cell's bounds are its own)."""
-    n = cells[0].size
-    if n <= _CELL_BLOCK:
-        return geo.evaluate(cells)
-    parts = [geo.evaluate(tuple(c[a:a + _CELL_BLOCK] for c in cells)) for a in range(0, n, _CELL_BLOCK)]
-    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
-
-
 def _chunk_joint(s, Ainv, kappa, legs, table, alias_one, S, Z, goal):
     """J's bracket (lo, hi) at a chunk of poses; NaN where the legs' directions do not bound u_L."""
     n = s.shape[0]
@@ -395,7 +407,7 @@ def _chunk_joint(s, Ainv, kappa, legs, table, alias_one, S, Z, goal):
     J_lo, J_hi = np.zeros(n), outside.copy()
     cells = geo.initial(cdf)
     del cdf
-    vals = _evaluate(geo, cells)
+    vals = geo.evaluate(cells)
     for rnd in range(_MAX_ROUNDS + 1):
         check_stop()
         lo_c, hi_c = vals
@@ -418,7 +430,7 @@ def _chunk_joint(s, Ainv, kappa, legs, table, alias_one, S, Z, goal):
         cut = op & (gap >= 0.5 * G[P] / np.maximum(count[P], 1))
         stay = op & ~cut
         kids = _split(tuple(c[cut] for c in cells))
-        new = _evaluate(geo, kids)
+        new = geo.evaluate(kids)
         cells = tuple(np.concatenate([c[stay], k]) for c, k in zip(cells, kids))
         vals = tuple(np.concatenate([v[stay], w]) for v, w in zip(vals, new))
         del kids, new
@@ -432,16 +444,14 @@ def chunk_bytes(n: int, M: int) -> float:
 
     Every pose holds its three legs' CDF bounds (two float64 a point, twice while the cells copy them in
     their legs' order) and at most ``4 x _MAX_CELLS`` cells (a round splits at most ``_MAX_CELLS`` open cells
-    in four); one pose at a time computes its CDFs, and the cells are evaluated :data:`_CELL_BLOCK` at a
-    time."""
-    return (3.0 * M * (_CDF_BYTES_PER_POINT + n * 32) + n * 4.0 * _MAX_CELLS * _BYTES_PER_CELL
-            + _CELL_BLOCK * _BYTES_PER_EVALUATED_CELL)
+    in four); one pose at a time computes its CDFs."""
+    return 3.0 * M * (_CDF_BYTES_PER_POINT + n * 32) + n * 4.0 * _MAX_CELLS * _BYTES_PER_CELL
 
 
 def _chunks(M: np.ndarray, workers: int) -> list[np.ndarray]:
     """The poses (indices) in chunks of equal grid points M, each as many as fit in
     :data:`~prp3mc.limits.CONDITIONED_THREAD_BYTES` by :func:`chunk_bytes` (one at least) and no more than
-    an equal share of the ``workers``."""
+    each of the ``workers``' equal share of them."""
     out = []
     for m in np.unique(M):
         idx = np.flatnonzero(M == m)
@@ -459,7 +469,9 @@ def joint_exceedance(C: np.ndarray, Ainv: np.ndarray, legs, table, kappa: np.nda
 
     The poses are independent: they run in chunks (:func:`chunk_bytes`; each pose's results do not depend on
     its chunk) on a pool of threads, each holding at most
-    :data:`~prp3mc.limits.CONDITIONED_THREAD_BYTES` (:func:`~prp3mc.limits.yield_estimate` counts them).
+    :data:`~prp3mc.limits.CONDITIONED_THREAD_BYTES` (:func:`~prp3mc.limits.yield_estimate` counts them). The
+    time goes to compiled kernels that release the GIL (the CDFs' coefficients, their FFT, the cells'
+    brackets, :func:`_bracket`), so the threads run on every core.
 
     Parameters
     ----------
