@@ -32,7 +32,8 @@ DEFAULT_TARGET = 1e-9
 #: 1e-2 it bounds nothing a yield needs.
 TARGET_RANGE = (1e-12, 1e-2)
 
-__all__ = ["DEFAULT_TARGET", "TARGET_RANGE", "CONDITIONED_THREAD_BYTES", "Estimate", "available_memory", "check", "montecarlo_estimate",
+__all__ = ["DEFAULT_TARGET", "TARGET_RANGE", "CONDITIONED_THREAD_BYTES", "Estimate", "available_memory", "check",
+           "montecarlo_estimate",
            "sobol_estimate",
            "worstcase_estimate", "allocate_estimate", "study_estimate", "discrepancy_estimate", "simulate_estimate",
            "sensitivity_estimate",
