@@ -33,12 +33,9 @@ DEFAULT_TARGET = 1e-9
 TARGET_RANGE = (1e-12, 1e-2)
 
 __all__ = ["DEFAULT_TARGET", "TARGET_RANGE", "CONDITIONED_THREAD_BYTES", "Estimate", "available_memory", "check",
-           "montecarlo_estimate",
-           "sobol_estimate",
-           "worstcase_estimate", "allocate_estimate", "study_estimate", "discrepancy_estimate", "simulate_estimate",
-           "sensitivity_estimate",
-           "yield_estimate", "plan_estimate", "format_bytes",
-           "format_seconds", "MEMORY_MARGIN"]
+           "montecarlo_estimate", "sobol_estimate", "worstcase_estimate", "allocate_estimate", "study_estimate",
+           "discrepancy_estimate", "simulate_estimate", "sensitivity_estimate", "yield_estimate", "plan_estimate",
+           "format_bytes", "format_seconds", "MEMORY_MARGIN"]
 
 #: Share of the available memory a request may use.
 MEMORY_MARGIN = 0.8
