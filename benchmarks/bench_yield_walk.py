@@ -52,7 +52,7 @@ def capture(geometry: str, n: int, s_um: float) -> tuple:
 def _legs(d, ev, grp, mu, Q, mnorm, lam, z1, z2, eps):
     s = 0.0
     for i in range(grp.shape[0]):
-        g0 = (z1[i] * z1[i] * np.pi / lam[i]) ** 0.5
+        g0 = (z1[i] * z1[i] * np.pi / lam[i]) ** 0.5        # select_points' g at the origin (d = 2: the disc)
         for j in range(d):
             s += leg_envelope(j, d, ev, grp[i], mu[i], Q[i], mnorm[i], lam[i], z1[i], z2[i], g0, 1e-1 * eps)[4]
     return s
