@@ -50,7 +50,7 @@ from ..errors import BudgetError
 from ..model.laws import Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
 from ._special import C_J1, I_MAX, gauss_legendre_tables, int_j0
 
-__all__ = ["TermTable", "term_table", "term_cf", "common_cf", "envelope", "envelope_power", "KINDS", "NPAR"]
+__all__ = ["TermTable", "term_table", "term_cf", "common_cf", "int_j0_over", "envelope", "envelope_power", "KINDS", "NPAR"]
 
 #: Kind codes of :class:`TermTable` (-1: a constant, folded into the known shift).
 KINDS = ("uniform", "normal", "truncnormal", "triangular", "discrete",
@@ -362,12 +362,12 @@ def common_cf(k, p0, p1, x, sp, buf):
         a = math.exp(-0.5 * (p1 * x) ** 2)
         return complex(a, 0.0) if p0 == 0.0 else complex(math.cos(x * p0) * a, math.sin(x * p0) * a)
     if k == C_UNIFORM and p0 == 0.0:
-        return complex(_int_j0_over(sp, buf, abs(x) * p1), 0.0)
+        return complex(int_j0_over(sp, buf, abs(x) * p1), 0.0)
     return complex(np.nan, 0.0)
 
 
 @njit(cache=True, nogil=True)
-def _int_j0_over(sp, buf, y):
+def int_j0_over(sp, buf, y):
     """I(y) / y, I(y) = int_0^y J0 (y >= 0): the series below 1 (terms fall by y²/4 or faster), else :func:`int_j0`."""
     if y < 1.0:
         acc, term, y2 = 1.0, 1.0, 0.25 * y * y
@@ -410,7 +410,7 @@ def term_cf(k, par, t, tab, sp, buf, x):
     if k == C_UNIFORM:
         lo, hi = par[t, 0], par[t, 1]
         if lo == 0.0:
-            return _int_j0_over(sp, buf, ax * hi) + 0j
+            return int_j0_over(sp, buf, ax * hi) + 0j
         if ax * (hi - lo) <= 4.0:             # average of J0 over [x lo, x hi] by a 16-point rule
             i = 2                             # gl_sizes[2] == 16
             o, n = gl_off[i], gl_sizes[i]
