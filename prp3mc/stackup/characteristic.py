@@ -307,6 +307,13 @@ def _h(z):
     return (np.exp(z) * (z - 1.0) + 1.0) / (z * z)
 
 
+#: The Bernstein ellipses :func:`_gl_size` tries: for rho = 1.2 ... 16, (b, log(rho² - 1), 2 log rho) with
+#: b = (rho - 1/rho) / 2 (the logarithms once, not at every call: the same doubles).
+_ELLIPSES = tuple((0.5 * (rho - 1.0 / rho), math.log(rho * rho - 1.0), 2.0 * math.log(rho))
+                  for rho in (1.2, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0))
+_LOG_64_15 = math.log(64.0 / 15.0)
+
+
 @njit(cache=True, nogil=True)
 def _gl_size(y, beta, n0, gl_sizes):
     """Index of the smallest Gauss-Legendre rule whose error on int_{-1}^{1} exp(-beta² s²/2) g(y s) ds,
@@ -314,10 +321,10 @@ def _gl_size(y, beta, n0, gl_sizes):
     Bernstein-ellipse bound (64/15) M rho^-2n / (rho² - 1), M = exp(beta² b²/2 + ``|y|`` b), b = (rho - 1/rho)/2;
     -1 if none is."""
     best = 1e300
-    for rho in (1.2, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0):
-        b = 0.5 * (rho - 1.0 / rho)
+    log_tol = math.log(1e-16 * n0)
+    for b, log_r2, two_log_r in _ELLIPSES:
         logm = 0.5 * beta * beta * b * b + abs(y) * b
-        n = (math.log(64.0 / 15.0) + logm - math.log(rho * rho - 1.0) - math.log(1e-16 * n0)) / (2.0 * math.log(rho))
+        n = (_LOG_64_15 + logm - log_r2 - log_tol) / two_log_r
         best = min(best, n)
     for i in range(gl_sizes.size):
         if gl_sizes[i] >= best:
