@@ -32,12 +32,10 @@ DEFAULT_TARGET = 1e-9
 #: 1e-2 it bounds nothing a yield needs.
 TARGET_RANGE = (1e-12, 1e-2)
 
-__all__ = ["DEFAULT_TARGET", "TARGET_RANGE", "Estimate", "available_memory", "check", "montecarlo_estimate",
-           "sobol_estimate",
-           "worstcase_estimate", "allocate_estimate", "study_estimate", "discrepancy_estimate", "simulate_estimate",
-           "sensitivity_estimate",
-           "yield_estimate", "plan_estimate", "format_bytes",
-           "format_seconds", "MEMORY_MARGIN"]
+__all__ = ["DEFAULT_TARGET", "TARGET_RANGE", "CONDITIONED_THREAD_BYTES", "Estimate", "available_memory", "check",
+           "montecarlo_estimate", "sobol_estimate", "worstcase_estimate", "allocate_estimate", "study_estimate",
+           "discrepancy_estimate", "simulate_estimate", "sensitivity_estimate", "yield_estimate", "plan_estimate",
+           "format_bytes", "format_seconds", "MEMORY_MARGIN"]
 
 #: Share of the available memory a request may use.
 MEMORY_MARGIN = 0.8
@@ -63,6 +61,10 @@ def _wc_held_bytes_per_pose(d: int) -> int:
 # Exact yield: per pose the linear model's columns, each channel's lattice and results (2.0 KiB per pose at
 # 900 poses with an orientation spec, traced), and the table's row as text or as a JSON object.
 _YIELD_BYTES_PER_POSE = 4096
+#: Bytes each thread of the exact yield's P(either) by conditioning on two legs (prp3mc.stackup.conditional) holds
+#: at most: its chunk of poses is sized to it (the legs' CDF bounds and the cells of every pose; one pose's CDFs
+#: computed at a time; at least one pose, which fits at the largest grid, 2^19 points a leg).
+CONDITIONED_THREAD_BYTES = 192 << 20
 # A study keeps, per configuration, the pose errors of every Monte Carlo draw at its histograms' poses
 # (position and |dphi|, float64) for the report's figures.
 _STUDY_BYTES_PER_HISTOGRAM_SAMPLE = 2 * 8
@@ -199,9 +201,17 @@ def worstcase_estimate(n_poses: int, n_inputs: int) -> Estimate:
                     n * (_WC_BYTES_PER_POSE + _WC_BYTES_PER_POSE_TERM * n_inputs), "use fewer poses")
 
 
-def yield_estimate(n_poses: int) -> Estimate:
-    """Memory of :func:`prp3mc.stackup.exceedance.exact_yield` over ``n_poses`` poses and its table."""
-    return Estimate(f"exact yield at {n_poses} poses", float(n_poses) * _YIELD_BYTES_PER_POSE, "use fewer poses")
+def yield_estimate(n_poses: int, conditioned: bool = False, workers: int | None = None) -> Estimate:
+    """Memory of :func:`prp3mc.stackup.exceedance.exact_yield` over ``n_poses`` poses and its table.
+
+    ``conditioned``: with an orientation spec, P(either) may be found by conditioning on two legs
+    (:mod:`prp3mc.stackup.conditional`), whose threads (one per core, at most one per pose) hold
+    :data:`CONDITIONED_THREAD_BYTES` each at most.
+    """
+    memory = float(n_poses) * _YIELD_BYTES_PER_POSE
+    if conditioned:
+        memory += min(workers or cores(), max(n_poses, 1)) * float(CONDITIONED_THREAD_BYTES)
+    return Estimate(f"exact yield at {n_poses} poses", memory, "use fewer poses")
 
 
 def allocate_estimate(n_poses: int, n_inputs: int, n_samples: int = 0) -> Estimate:
@@ -241,7 +251,7 @@ def study_estimate(study) -> Estimate:
         stage = stage.then(montecarlo_estimate(study.mc_samples, mc_poses, d)).then(
             Estimate(f"{study.mc_samples} draws of {d} inputs", draws))
     if study.spec is not None and "yield" in study.outputs:
-        stage = stage.then(yield_estimate(mc_poses))
+        stage = stage.then(yield_estimate(mc_poses, conditioned=study.spec.phi_arcsec is not None))
     if "sobol" in study.outputs:
         n_poses = study.sobol_grid[0] * study.sobol_grid[1]
         stage = stage.then(sobol_estimate(study.sobol_samples, n_poses, d,

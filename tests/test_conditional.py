@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 import pytest
-from scipy import integrate
+from scipy import integrate, special
 
 from prp3mc import Geometry, exact_yield
 from prp3mc.model.budget import Budget
@@ -107,7 +107,7 @@ def test_conditioning_agrees_with_the_joint_series(which):
     assert not r.bracketed_any.any() and CONDITIONAL_METHOD not in r.method and r.bound_any.max() <= 1e-9
     m, C, Ainv = _model("u-shape", budget, poses)
     share = 1e-13
-    table = term_table(m.term_laws, math.sqrt(2.0) * float(__import__("scipy").special.erfcinv(share)))
+    table = term_table(m.term_laws, math.sqrt(2.0) * float(special.erfcinv(share)))
     kappa, ok = independent_legs(C, Ainv, m.legs, table)
     assert ok.all()
     J_lo, J_hi = joint_exceedance(C, Ainv, m.legs, table, kappa, S_um / MM2UM, Z_as * ARCSEC, 1e-9, share)
@@ -180,3 +180,27 @@ def test_paper_budget_agrees_with_1e7_samples_at_20_poses(preset, specs, seed):
 def test_paper_budget_with_effects_agrees_with_1e7_samples_at_20_poses(seed):
     poses = poses_of("delta-shape", 20, np.random.default_rng(seed))
     _against_monte_carlo("delta-shape", poses, 10_000_000, seed, 90.0, 40.0, effects=True)
+
+
+def paper_legs(poses, spec_um, spec_as):
+    """The arguments of prp3mc.stackup.conditional.joint_exceedance for the paper's budget (U-shape) at ``poses``."""
+    m = linear_model(Geometry.from_preset("u-shape"), Budget.load("paper"), poses)
+    C, Ainv = m.columns.reshape(-1, 3, len(m.terms)), m.Ainv.reshape(-1, 3, 3)
+    share = 1e-11
+    table = term_table(m.term_laws, math.sqrt(2.0) * float(special.erfcinv(share)))
+    kappa, ok = independent_legs(C, Ainv, m.legs, table)
+    assert ok.all()
+    return (C, Ainv, m.legs, table, kappa, spec_um / MM2UM, spec_as * ARCSEC, 1e-9, share)
+
+
+def test_threads_and_chunks_leave_every_bit():
+    """The poses run in chunks on threads: J's bracket at each pose is the same to the bit on one thread (one
+    chunk) and on three (a pose a chunk), and the same as the pose alone."""
+    poses = np.array([[-20.0, 80.0, 2.0], [15.0, 110.0, -3.0], [30.0, 95.0, 0.0]])
+    args = paper_legs(poses, 100.0, 60.0)
+    serial = joint_exceedance(*args, workers=1)
+    threaded = joint_exceedance(*args, workers=3)
+    alone = joint_exceedance(*(a[1:2] if k in (0, 1, 4) else a for k, a in enumerate(args)), workers=1)
+    assert all(np.array_equal(a, b) for a, b in zip(serial, threaded))
+    assert all(np.array_equal(a[1:2], b) for a, b in zip(serial, alone))
+    assert np.all(serial[0] < serial[1])

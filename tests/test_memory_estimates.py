@@ -80,3 +80,44 @@ def test_simulate_sizes_a_plan_before_reading_it(tmp_path, monkeypatch, capsys):
                  "--plan", str(plan), "--out", str(tmp_path / "c.csv")]) == 1
     err = capsys.readouterr().err
     assert "a simulated campaign of 1000 measurements needs" in err and "more than --max-gb" in err
+
+
+def test_conditioning_on_two_legs_stays_within_its_estimate():
+    """P(either) by conditioning on two legs held every pose's CDF grids, Fourier coefficients and cells of a
+    chunk of 8 at once (135 MiB traced on the paper's budget, ~1 GB with 2^19-point grids) and limits' yield
+    estimate did not count it. One chunk's traced peak now lies below the model its chunks are sized by
+    (chunk_bytes, an upper bound: at most 4 x _MAX_CELLS cells a pose) and above a fifth of it, at specs where
+    every pose refines up to its cell budget; a thread's chunk fits CONDITIONED_THREAD_BYTES, one pose at the
+    largest grid included, and the estimate with an orientation spec counts a thread per core."""
+    import tracemalloc
+
+    import numpy as np
+
+    from prp3mc.limits import CONDITIONED_THREAD_BYTES, yield_estimate
+    from prp3mc.stackup import conditional
+
+    from .test_conditional import paper_legs
+
+    poses = np.array([[-20.0, 80.0, 2.0], [15.0, 110.0, -3.0]])
+    args = paper_legs(poses, 80.0, 30.0)
+    conditional.joint_exceedance(*(a[:1] if k in (0, 1, 4) else a for k, a in enumerate(args)), workers=1)  # warm
+    tracemalloc.start()
+    J_lo, J_hi = conditional.joint_exceedance(*args, workers=1)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    model = conditional.chunk_bytes(len(poses), 1 << 16)
+    print(f"traced peak {peak / 2 ** 20:.1f} MiB, model {model / 2 ** 20:.1f} MiB ({peak / model:.2f})")
+    assert 0.2 * model < peak < model
+    assert np.all(J_hi - J_lo > 1e-6)                   # the bracket refined up to its cell budget
+    assert conditional.chunk_bytes(1, 2 * conditional._K_MAX) <= CONDITIONED_THREAD_BYTES
+    plain, joint = yield_estimate(441).bytes, yield_estimate(441, conditioned=True, workers=2).bytes
+    assert joint - plain == 2 * CONDITIONED_THREAD_BYTES
+    assert yield_estimate(1, conditioned=True, workers=2).bytes < joint - plain     # one pose, one thread
+
+
+def test_prp3mc_yield_refuses_by_bytes_the_conditioning_that_would_not_fit(capsys):
+    """With an orientation spec the conditioning's threads are counted: refused in one line under --max-gb."""
+    assert main(["--max-gb", "0.1", "yield", "--geometry", "u-shape", "--budget", "paper", "--region", "u-shape",
+                 "--grid", "3", "--spec-position-um", "100", "--spec-phi-arcsec", "60"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "exact yield at 9 poses needs" in err and "more than --max-gb" in err and "\n" not in err

@@ -52,7 +52,13 @@ class YieldCommand:
 
         geometry, budget = Geometry.load(args.geometry), Budget.load(args.budget)
         why = exact_refusal(budget)
-        estimate = yield_estimate if why is None else lambda n: _fallback_estimate(args, budget, n)  # noqa: E731
+
+        def estimate(n):
+            """Memory at ``n`` poses: the exact yield (conditioning on two legs with a phi spec) or the fallback."""
+            if why is None:
+                return yield_estimate(n, conditioned=args.spec_phi_arcsec is not None)
+            return _fallback_estimate(args, budget, n)
+
         poses, where = grid_poses(args, estimate)
         if args.region is None:
             check_poses(geometry, poses)

@@ -37,14 +37,17 @@ errors, plus the two channels' bounds.
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from numba import njit
 
+from .._threads import check_stop, cores
+from ..limits import CONDITIONED_THREAD_BYTES
 from ._special import CF_ACCURACY, special_args
 from .characteristic import envelope_power, term_cf
 
-__all__ = ["CONDITIONAL_METHOD", "independent_legs", "leg_cdfs", "joint_exceedance"]
+__all__ = ["CONDITIONAL_METHOD", "independent_legs", "leg_cdfs", "joint_exceedance", "chunk_bytes"]
 
 CONDITIONAL_METHOD = (
     "; P(either) = P(position) + P(phi) - P(both out), the last by conditioning on two legs and integrating "
@@ -59,6 +62,10 @@ _INITIAL = 16                   # initial cells per leg
 _MAX_CELLS = 20_000           # open cells per pose (at most): about 0.1 to 0.3 s a pose
 _MAX_ROUNDS = 60
 _WIDEN = 1e-12                  # relative widening of every interval end (floating point)
+# memory (chunk_bytes): computing one pose's CDFs, per point of a leg's grid (its coefficients, FFT, CDF and
+# bounds); a pose's cells at a round's peak, per cell (their ends and bounds, the round's copies and children)
+_CDF_BYTES_PER_POINT = 64         # 51 traced (paper budget, 2^16 and 2^18 points)
+_BYTES_PER_CELL = 200             # 56 held, ~180 with a round's copies and children
 
 
 def independent_legs(C: np.ndarray, Ainv: np.ndarray, legs, table) -> tuple[np.ndarray, np.ndarray]:
@@ -127,6 +134,32 @@ def _coefficients(kind, par, tab, sp, kappa, legs, Q, lo, K, out):
                 out[n, i, k] = phi * np.exp(-1j * w * lo[n, i]) / (-2j * math.pi * k)
 
 
+def _leg_sizes(kappa: np.ndarray, legs: np.ndarray, table) -> tuple:
+    """Each leg's support (N, 3, 2), grid start and period (N, 3), its series' terms K and their truncation
+    bound (N, 3), and the legs of the random terms (T,; -2 for a constant)."""
+    N, T = kappa.shape
+    random = table.random
+    a, b = kappa * np.where(random, table.lo, 0.0), kappa * np.where(random, table.hi, 0.0)
+    sup = np.zeros((N, 3, 2))
+    for i in range(3):
+        on = random & (legs == i)
+        sup[:, i, 0] = np.minimum(a, b)[:, on].sum(axis=1)
+        sup[:, i, 1] = np.maximum(a, b)[:, on].sum(axis=1)
+    width = sup[..., 1] - sup[..., 0]
+    pad = 0.01 * width
+    lo, Q = sup[..., 0] - pad, width + 2.0 * pad
+    K, tail = np.zeros((N, 3), np.int64), np.zeros((N, 3))
+    leg_of = np.where(random, legs, -2).astype(np.int64)
+    _sizes(table.env, kappa, leg_of, Q, _LEG_EPS, _K_MAX, K, tail)
+    return sup, lo, Q, K, tail, leg_of
+
+
+def _points(K: np.ndarray) -> np.ndarray:
+    """Grid points M of each pose's CDFs (N,), for the legs' series terms K (N, 3): a power of 2, at least
+    :data:`_GRID` and above twice the most terms."""
+    return np.maximum(_GRID, np.left_shift(1, np.ceil(np.log2(K.max(axis=-1) + 2)).astype(np.int64)))
+
+
 def leg_cdfs(kappa: np.ndarray, legs, table, alias_one: float) -> dict:
     """Each leg's CDF on a uniform grid, with a bound of its error, at N poses.
 
@@ -142,37 +175,30 @@ def leg_cdfs(kappa: np.ndarray, legs, table, alias_one: float) -> dict:
     Returns
     -------
     dict
-        ``lo`` (N, 3) the grid's first point, ``h`` (N, 3) its step, ``F`` (N, 3, M) the CDF at the M points,
-        ``lo_b``/``hi_b`` (N, 3, M) bounds of F at the points (exact 0 / 1 off the support but for the normal
-        laws' mass), ``eps`` (N, 3) the error bound, ``support`` (N, 3, 2).
+        ``lo`` (N, 3) the grid's first point, ``h`` (N, 3) its step, ``F`` (N, 3, M) the CDF at the M points
+        (M the largest of the poses' :func:`_points`), ``lo_b``/``hi_b`` (N, 3, M) bounds of F at the points
+        (exact 0 / 1 off the support but for the normal laws' mass), ``eps`` (N, 3) the error bound,
+        ``support`` (N, 3, 2).
     """
     legs = np.asarray(legs)
-    N, T = kappa.shape
-    random = table.random
-    a, b = kappa * np.where(random, table.lo, 0.0), kappa * np.where(random, table.hi, 0.0)
-    sup = np.zeros((N, 3, 2))
-    alias = np.zeros(3)
-    for i in range(3):
-        on = random & (legs == i)
-        sup[:, i, 0] = np.minimum(a, b)[:, on].sum(axis=1)
-        sup[:, i, 1] = np.maximum(a, b)[:, on].sum(axis=1)
-        alias[i] = alias_one * np.count_nonzero(on & table.normal)
-    width = sup[..., 1] - sup[..., 0]
-    pad = 0.01 * width
-    lo, Q = sup[..., 0] - pad, width + 2.0 * pad
-    K, tail = np.zeros((N, 3), np.int64), np.zeros((N, 3))
-    leg_of = np.where(random, legs, -2).astype(np.int64)
-    _sizes(table.env, kappa, leg_of, Q, _LEG_EPS, _K_MAX, K, tail)
-    M = max(_GRID, 1 << int(np.ceil(np.log2(K.max() + 2))))
-    c = np.zeros((N, 3, M), complex)
+    sup, lo, Q, K, tail, leg_of = _leg_sizes(kappa, legs, table)
+    alias = np.array([alias_one * np.count_nonzero(table.random & (legs == i) & table.normal) for i in range(3)],
+                     dtype=float)
+    M = int(_points(K).max())
+    c = np.zeros(kappa.shape[:1] + (3, M), complex)
     _coefficients(table.kind, table.par, table.arrays(), special_args(), kappa, leg_of, Q, lo, K, c)
-    F = np.arange(M) / M + 2.0 * (np.fft.fft(c, axis=-1) - c.sum(axis=-1, keepdims=True)).real
+    f = np.fft.fft(c, axis=-1)
+    f -= c.sum(axis=-1, keepdims=True)
+    F = np.arange(M) / M + 2.0 * f.real
+    del f
     terms = np.log(np.maximum(K, 1)) + 1.0
     fp = CF_ACCURACY * 2.0 * terms / math.pi + 4e-16 * np.log2(M) * (2.0 * np.abs(c).sum(axis=-1) + 1.0)
+    del c
     eps = tail + fp + alias[None, :]
     h = Q / M
     g = lo[..., None] + h[..., None] * np.arange(M)
     below, above = g <= sup[..., 0, None], g >= sup[..., 1, None]
+    del g
     lo_b = np.clip(np.where(below, 0.0, np.where(above, 1.0 - alias[None, :, None], F - eps[..., None])), 0.0, 1.0)
     hi_b = np.clip(np.where(below, alias[None, :, None], np.where(above, 1.0, F + eps[..., None])), 0.0, 1.0)
     return {"lo": lo, "h": h, "F": F, "lo_b": lo_b, "hi_b": hi_b, "eps": eps, "support": sup, "M": M,
@@ -213,12 +239,12 @@ class _Cells:
         self.ep = np.stack([cross(s), cross(a_p), cross(a_q)], axis=1)
         self.cB = np.stack([-s[:, 2] / g3, -a_p[:, 2] / g3, -a_q[:, 2] / g3], axis=1)
         self.norm, self.wB, self.S = norm, Z / np.abs(g3), S
-        pick = lambda key, leg: cdf[key][rows, leg]                            # noqa: E731
-        self.lo = [pick("lo", leg) for leg in (p, q, L)]
-        self.h = [pick("h", leg) for leg in (p, q, L)]
-        self.lo_b = [pick("lo_b", leg) for leg in (p, q, L)]
-        self.hi_b = [pick("hi_b", leg) for leg in (p, q, L)]
-        self.M = cdf["M"]
+        self.lo = np.stack([cdf["lo"][rows, leg] for leg in (p, q, L)])                   # (3, n): p, q, L
+        self.h = np.stack([cdf["h"][rows, leg] for leg in (p, q, L)])
+        self.M = M = cdf["M"]
+        self.lo_b, self.hi_b = np.empty((3, n, M)), np.empty((3, n, M))               # (3, n, M)
+        for k, leg in enumerate((p, q, L)):
+            self.lo_b[k], self.hi_b[k] = cdf["lo_b"][rows, leg], cdf["hi_b"][rows, leg]
         self.widthL = np.diff(cdf["support"][rows, L], axis=-1)[:, 0]
 
     def initial(self, cdf) -> tuple:
@@ -240,82 +266,106 @@ class _Cells:
         keep = (cells[2] > cells[1]) & (cells[4] > cells[3])
         return tuple(c[keep] for c in cells)
 
-    def _F(self, P, x, upper: bool):
-        """A lower (or upper) bound of F_L(x)."""
-        lo, h, M = self.lo[2][P], self.h[2][P], self.M
-        j = np.floor(np.clip((x - lo) / h, -2.0, M + 1.0)).astype(np.int64)
-        if upper:
-            return np.where(j < 0, self.hi_b[2][P, 0], np.where(j >= M - 1, 1.0,
-                                                                self.hi_b[2][P, np.clip(j + 1, 0, M - 1)]))
-        return np.where(j < 0, 0.0, self.lo_b[2][P, np.clip(j, 0, M - 1)])
-
-    def _union(self, P, A, B, upper: bool):
-        """A lower (upper) bound of P_L(A ∪ B), A and B (lo, hi, empty)."""
-        def one(lo, hi, empty):
-            v = self._F(P, hi, upper) - self._F(P, lo, not upper)
-            return np.where(empty, 0.0, np.maximum(v, 0.0))
-        (a1, b1, e1), (a2, b2, e2) = A, B
-        overlap = ~e1 & ~e2 & (np.maximum(a1, a2) <= np.minimum(b1, b2))
-        hull = np.maximum(self._F(P, np.maximum(b1, b2), upper) - self._F(P, np.minimum(a1, a2), not upper), 0.0)
-        return np.clip(np.where(overlap, hull, one(a1, b1, e1) + one(a2, b2, e2)), 0.0, 1.0)
-
     def evaluate(self, cells) -> tuple[np.ndarray, np.ndarray]:
-        """Lower and upper bounds of each cell's share of J (its mass times 1 - P_L(A ∪ B))."""
+        """Lower and upper bounds of each cell's share of J (its mass times 1 - P_L(A ∪ B)): :func:`_bracket`."""
         P, i0, i1, j0, j1 = cells
-        x0, x1 = self.lo[0][P] + i0 * self.h[0][P], self.lo[0][P] + i1 * self.h[0][P]
-        y0, y1 = self.lo[1][P] + j0 * self.h[1][P], self.lo[1][P] + j1 * self.h[1][P]
+        lo, hi = np.empty(P.size), np.empty(P.size)
+        _bracket(P, i0, i1, j0, j1, self.lo, self.h, self.lo_b, self.hi_b, self.cA, self.ep, self.cB, self.norm,
+                 self.wB, float(self.S), self.widthL, lo, hi)
+        return lo, hi
 
-        def span(c):
-            c = c[P]
-            a, b = c[:, 1] * x0, c[:, 1] * x1
-            d, e = c[:, 2] * y0, c[:, 2] * y1
-            return c[:, 0] + np.minimum(a, b) + np.minimum(d, e), c[:, 0] + np.maximum(a, b) + np.maximum(d, e)
 
-        cA_lo, cA_hi = span(self.cA)
-        ep_lo, ep_hi = span(self.ep)
-        cB_lo, cB_hi = span(self.cB)
-        S, norm, wB = self.S, self.norm[P], self.wB[P]
-        amin = np.where(ep_lo * ep_hi <= 0.0, 0.0, np.minimum(np.abs(ep_lo), np.abs(ep_hi)))
-        amax = np.maximum(np.abs(ep_lo), np.abs(ep_hi))
-        r_big = np.sqrt(np.maximum(S * S - amin * amin, 0.0)) / norm
-        tol = _WIDEN * (np.abs(cA_lo) + np.abs(cA_hi) + np.abs(cB_lo) + np.abs(cB_hi) + S / norm + wB
-                        + self.widthL[P])
+@njit(cache=True, nogil=True)
+def _cdf_bound(lo_b, hi_b, P, x, lo, h, M, upper):
+    """A lower (or upper) bound of F_L(x) at pose P from the bounds at the grid points (monotonicity)."""
+    v = (x - lo) / h
+    j = int(math.floor(min(max(v, -2.0), M + 1.0)))
+    if upper:
+        if j < 0:
+            return hi_b[P, 0]
+        if j >= M - 1:
+            return 1.0
+        return hi_b[P, j + 1]
+    if j < 0:
+        return 0.0
+    return lo_b[P, min(j, M - 1)]
+
+
+@njit(cache=True, nogil=True)
+def _union(lo_b, hi_b, P, lo, h, M, a1, b1, e1, a2, b2, e2, upper):
+    """A lower (upper) bound of P_L(A ∪ B), A = [a1, b1] (empty if e1) and B = [a2, b2]."""
+    if not e1 and not e2 and max(a1, a2) <= min(b1, b2):
+        v = max(_cdf_bound(lo_b, hi_b, P, max(b1, b2), lo, h, M, upper)
+                - _cdf_bound(lo_b, hi_b, P, min(a1, a2), lo, h, M, not upper), 0.0)
+    else:
+        v1 = 0.0 if e1 else max(_cdf_bound(lo_b, hi_b, P, b1, lo, h, M, upper)
+                                - _cdf_bound(lo_b, hi_b, P, a1, lo, h, M, not upper), 0.0)
+        v2 = 0.0 if e2 else max(_cdf_bound(lo_b, hi_b, P, b2, lo, h, M, upper)
+                                - _cdf_bound(lo_b, hi_b, P, a2, lo, h, M, not upper), 0.0)
+        v = v1 + v2
+    return min(max(v, 0.0), 1.0)
+
+
+@njit(cache=True, nogil=True)
+def _bracket(P, i0, i1, j0, j1, lo, h, lo_b, hi_b, cA, ep, cB, norm, wB, S, widthL, out_lo, out_hi):
+    """Lower and upper bounds (out_lo, out_hi) of each cell's share of J: its mass (the product of its two
+    legs' CDF differences, bracketed) times 1 - P_L(A ∪ B), over the cell A and B containing a smallest and
+    lying in a largest interval. Cell c is pose P[c]'s grid intervals [i0, i1] x [j0, j1] of legs p, q; lo, h
+    (3, n) the legs' (p, q, L) grids, lo_b, hi_b (3, n, M) their CDF bounds; cA, ep, cB (n, 3) the linear
+    forms (constant, u_p, u_q) of c_A, e_perp and c_B; norm, wB, widthL (n,)."""
+    M = lo_b.shape[2]
+    bL_lo, bL_hi = lo_b[2], hi_b[2]
+    for c in range(P.size):
+        p = P[c]
+        x0, x1 = lo[0, p] + i0[c] * h[0, p], lo[0, p] + i1[c] * h[0, p]
+        y0, y1 = lo[1, p] + j0[c] * h[1, p], lo[1, p] + j1[c] * h[1, p]
+        # the ranges of the linear forms over the cell
+        a, b, d, e = cA[p, 1] * x0, cA[p, 1] * x1, cA[p, 2] * y0, cA[p, 2] * y1
+        cA_lo, cA_hi = cA[p, 0] + min(a, b) + min(d, e), cA[p, 0] + max(a, b) + max(d, e)
+        a, b, d, e = ep[p, 1] * x0, ep[p, 1] * x1, ep[p, 2] * y0, ep[p, 2] * y1
+        ep_lo, ep_hi = ep[p, 0] + min(a, b) + min(d, e), ep[p, 0] + max(a, b) + max(d, e)
+        a, b, d, e = cB[p, 1] * x0, cB[p, 1] * x1, cB[p, 2] * y0, cB[p, 2] * y1
+        cB_lo, cB_hi = cB[p, 0] + min(a, b) + min(d, e), cB[p, 0] + max(a, b) + max(d, e)
+        nrm, w = norm[p], wB[p]
+        amin = 0.0 if ep_lo * ep_hi <= 0.0 else min(abs(ep_lo), abs(ep_hi))
+        amax = max(abs(ep_lo), abs(ep_hi))
+        r_big = math.sqrt(max(S * S - amin * amin, 0.0)) / nrm
+        tol = _WIDEN * (abs(cA_lo) + abs(cA_hi) + abs(cB_lo) + abs(cB_hi) + S / nrm + w + widthL[p])
         # A's ends c_A -/+ sqrt(S² - e_perp²)/|m| are convex / concave in (u_p, u_q): the largest lower end and
         # the smallest upper end are at corners (exact); the others by intervals and by the tangent plane at
         # the centre, whichever is tighter
-        cA, ep = self.cA[P], self.ep[P]
-        lo_max, hi_min = np.full(P.size, -np.inf), np.full(P.size, np.inf)
+        lo_max, hi_min = -np.inf, np.inf
         for x in (x0, x1):
             for y in (y0, y1):
-                c = cA[:, 0] + cA[:, 1] * x + cA[:, 2] * y
-                e = ep[:, 0] + ep[:, 1] * x + ep[:, 2] * y
-                r = np.sqrt(np.maximum(S * S - e * e, 0.0)) / norm
-                lo_max, hi_min = np.maximum(lo_max, c - r), np.minimum(hi_min, c + r)
+                cc = cA[p, 0] + cA[p, 1] * x + cA[p, 2] * y
+                ee = ep[p, 0] + ep[p, 1] * x + ep[p, 2] * y
+                r = math.sqrt(max(S * S - ee * ee, 0.0)) / nrm
+                lo_max, hi_min = max(lo_max, cc - r), min(hi_min, cc + r)
         xm, ym, dx, dy = 0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.5 * (x1 - x0), 0.5 * (y1 - y0)
-        e = ep[:, 0] + ep[:, 1] * xm + ep[:, 2] * ym
-        root = np.sqrt(np.maximum(S * S - e * e, 0.0))
-        smooth = amax < S
-        safe = np.where(smooth, root, 1.0)
-        r_c = root / norm
-        slope = np.where(smooth, e / (safe * norm), 0.0)            # d r / d e_perp = -e / (root |m|)
-        c_m = cA[:, 0] + cA[:, 1] * xm + cA[:, 2] * ym
-        dev = np.abs(cA[:, 1] + slope * ep[:, 1]) * dx + np.abs(cA[:, 2] + slope * ep[:, 2]) * dy
-        lo_min = np.where(smooth, np.maximum(cA_lo - r_big, c_m - r_c - dev), cA_lo - r_big)
-        dev = np.abs(cA[:, 1] - slope * ep[:, 1]) * dx + np.abs(cA[:, 2] - slope * ep[:, 2]) * dy
-        hi_max = np.where(smooth, np.minimum(cA_hi + r_big, c_m + r_c + dev), cA_hi + r_big)
-        A_big = (lo_min - tol, hi_max + tol, amin > S)
-        lo, hi = lo_max + tol, hi_min - tol
-        A_small = (lo, hi, (amax > S) | (lo > hi))
-        B_big = (cB_lo - wB - tol, cB_hi + wB + tol, np.zeros(P.size, bool))
-        lo, hi = cB_hi - wB + tol, cB_lo + wB - tol
-        B_small = (lo, hi, lo > hi)
-        h_up = 1.0 - self._union(P, A_small, B_small, upper=False)
-        h_lo = 1.0 - self._union(P, A_big, B_big, upper=True)
-        mass = []
-        for k, (a, b) in enumerate(((i0, i1), (j0, j1))):
-            lb, hb = self.lo_b[k], self.hi_b[k]
-            mass.append((np.maximum(lb[P, b] - hb[P, a], 0.0), np.minimum(hb[P, b] - lb[P, a], 1.0)))
-        return mass[0][0] * mass[1][0] * h_lo, mass[0][1] * mass[1][1] * h_up
+        ee = ep[p, 0] + ep[p, 1] * xm + ep[p, 2] * ym
+        root = math.sqrt(max(S * S - ee * ee, 0.0))
+        if amax < S:                                     # d r / d e_perp = -e / (root |m|)
+            r_c = root / nrm
+            slope = ee / (root * nrm)
+            c_m = cA[p, 0] + cA[p, 1] * xm + cA[p, 2] * ym
+            dev = abs(cA[p, 1] + slope * ep[p, 1]) * dx + abs(cA[p, 2] + slope * ep[p, 2]) * dy
+            lo_min = max(cA_lo - r_big, c_m - r_c - dev)
+            dev = abs(cA[p, 1] - slope * ep[p, 1]) * dx + abs(cA[p, 2] - slope * ep[p, 2]) * dy
+            hi_max = min(cA_hi + r_big, c_m + r_c + dev)
+        else:
+            lo_min, hi_max = cA_lo - r_big, cA_hi + r_big
+        lo_s, hi_s = lo_max + tol, hi_min - tol
+        lo_Bs, hi_Bs = cB_hi - w + tol, cB_lo + w - tol
+        h_up = 1.0 - _union(bL_lo, bL_hi, p, lo[2, p], h[2, p], M, lo_s, hi_s, (amax > S) or (lo_s > hi_s),
+                            lo_Bs, hi_Bs, lo_Bs > hi_Bs, False)
+        h_lo = 1.0 - _union(bL_lo, bL_hi, p, lo[2, p], h[2, p], M, lo_min - tol, hi_max + tol, amin > S,
+                            cB_lo - w - tol, cB_hi + w + tol, False, True)
+        m0_lo = max(lo_b[0, p, i1[c]] - hi_b[0, p, i0[c]], 0.0)
+        m0_hi = min(hi_b[0, p, i1[c]] - lo_b[0, p, i0[c]], 1.0)
+        m1_lo = max(lo_b[1, p, j1[c]] - hi_b[1, p, j0[c]], 0.0)
+        m1_hi = min(hi_b[1, p, j1[c]] - lo_b[1, p, j0[c]], 1.0)
+        out_lo[c] = m0_lo * m1_lo * h_lo
+        out_hi[c] = m0_hi * m1_hi * h_up
 
 
 def _split(cells):
@@ -329,18 +379,37 @@ def _split(cells):
     return tuple(c[keep] for c in out)
 
 
+def _cdf_bounds(kappa, legs, table, alias_one) -> dict:
+    """The legs' CDF bounds at a chunk of poses whose grids have the same points, one pose at a time: a
+    pose's coefficients, FFT and CDF are freed before the next; only the bounds (``lo_b``, ``hi_b``), grids
+    and supports are kept (:func:`leg_cdfs` for the keys)."""
+    n = kappa.shape[0]
+    keep = {}
+    for j in range(n):          # a pose's CDFs are 3 x M >= 196,608 points: vectorised within, memory bound
+        one = leg_cdfs(kappa[j:j + 1], legs, table, alias_one)
+        if j == 0:
+            keep = {"M": one["M"], "alias": one["alias"]}
+            keep.update({key: np.empty((n,) + one[key].shape[1:]) for key in ("lo", "h", "lo_b", "hi_b", "support")})
+        for key in ("lo", "h", "lo_b", "hi_b", "support"):
+            keep[key][j] = one[key][0]
+        del one
+    return keep
+
+
 def _chunk_joint(s, Ainv, kappa, legs, table, alias_one, S, Z, goal):
     """J's bracket (lo, hi) at a chunk of poses; NaN where the legs' directions do not bound u_L."""
     n = s.shape[0]
-    cdf = leg_cdfs(kappa, legs, table, alias_one)
+    cdf = _cdf_bounds(kappa, legs, table, alias_one)
     geo = _Cells(s, Ainv, cdf, S, Z)
     order = geo.order
     # every CDF error is already in the cells' bounds; the mass past the normal laws' cuts is off the cells
     outside = cdf["alias"][order[:, 0]] + cdf["alias"][order[:, 1]]
     J_lo, J_hi = np.zeros(n), outside.copy()
     cells = geo.initial(cdf)
+    del cdf
     vals = geo.evaluate(cells)
     for rnd in range(_MAX_ROUNDS + 1):
+        check_stop()
         lo_c, hi_c = vals
         gap = hi_c - lo_c
         P, i0, i1, j0, j1 = cells
@@ -364,13 +433,45 @@ def _chunk_joint(s, Ainv, kappa, legs, table, alias_one, S, Z, goal):
         new = geo.evaluate(kids)
         cells = tuple(np.concatenate([c[stay], k]) for c, k in zip(cells, kids))
         vals = tuple(np.concatenate([v[stay], w]) for v, w in zip(vals, new))
+        del kids, new
     J_lo, J_hi = np.where(geo.ok, J_lo, np.nan), np.where(geo.ok, np.minimum(J_hi, 1.0), np.nan)
     return J_lo, J_hi
 
 
+def chunk_bytes(n: int, M: int) -> float:
+    """Peak bytes of :func:`joint_exceedance` on one chunk of ``n`` poses whose CDF grids have ``M`` points: the
+    memory model its chunks are sized by (:data:`~prp3mc.limits.CONDITIONED_THREAD_BYTES` each).
+
+    Every pose holds its three legs' CDF bounds (two float64 a point, twice while the cells copy them in
+    their legs' order) and at most ``4 x _MAX_CELLS`` cells (a round splits at most ``_MAX_CELLS`` open cells
+    in four); one pose at a time computes its CDFs."""
+    return 3.0 * M * (_CDF_BYTES_PER_POINT + n * 32) + n * 4.0 * _MAX_CELLS * _BYTES_PER_CELL
+
+
+def _chunks(M: np.ndarray, workers: int) -> list[np.ndarray]:
+    """The poses (indices) in chunks of equal grid points M, each as many as fit in
+    :data:`~prp3mc.limits.CONDITIONED_THREAD_BYTES` by :func:`chunk_bytes` (one at least) and no more than
+    each of the ``workers``' equal share of them."""
+    out = []
+    for m in np.unique(M):
+        idx = np.flatnonzero(M == m)
+        most = -(-idx.size // workers)
+        n = 1
+        while n < most and chunk_bytes(n + 1, int(m)) <= CONDITIONED_THREAD_BYTES:
+            n += 1
+        out += [idx[a:a + n] for a in range(0, idx.size, n)]
+    return out
+
+
 def joint_exceedance(C: np.ndarray, Ainv: np.ndarray, legs, table, kappa: np.ndarray, S: float, Z: float,
-                     target: float, alias_one: float, chunk: int = 8) -> tuple[np.ndarray, np.ndarray]:
+                     target: float, alias_one: float, workers: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Bounds of J = P(``|(dx, dy)|`` > S and ``|dphi|`` > Z) at N poses of a budget of independent legs.
+
+    The poses are independent: they run in chunks (:func:`chunk_bytes`; each pose's results do not depend on
+    its chunk) on a pool of threads, each holding at most
+    :data:`~prp3mc.limits.CONDITIONED_THREAD_BYTES` (:func:`~prp3mc.limits.yield_estimate` counts them). The
+    time goes to compiled kernels that release the GIL (the CDFs' coefficients, their FFT, the cells'
+    brackets, :func:`_bracket`), so the threads run on every core.
 
     Parameters
     ----------
@@ -387,18 +488,28 @@ def joint_exceedance(C: np.ndarray, Ainv: np.ndarray, legs, table, kappa: np.nda
         Goal of the bracket's width.
     alias_one : float
         Mass of one normal law past its cut.
-    chunk : int
-        Poses at a time (each holds three CDF grids of 2^16 points or more).
+    workers : int, optional
+        Threads (default: the CPU count).
 
     Returns
     -------
     (J_lo, J_hi) : ndarray (N,) each
         J lies between them; NaN where no leg's direction bounds u_L under both specs.
     """
+    legs = np.asarray(legs)
     N = C.shape[0]
     s = np.einsum("ndt,t->nd", C, table.constant)
     J_lo, J_hi = np.empty(N), np.empty(N)
-    for a in range(0, N, chunk):
-        b = min(N, a + chunk)
-        J_lo[a:b], J_hi[a:b] = _chunk_joint(s[a:b], Ainv[a:b], kappa[a:b], legs, table, alias_one, S, Z, target)
+    workers = workers or cores()
+    chunks = _chunks(_points(_leg_sizes(kappa, legs, table)[3]), workers)
+
+    def run(idx):
+        J_lo[idx], J_hi[idx] = _chunk_joint(s[idx], Ainv[idx], kappa[idx], legs, table, alias_one, S, Z, target)
+
+    if workers == 1 or len(chunks) == 1:
+        for idx in chunks:
+            run(idx)
+    else:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            list(pool.map(run, chunks))
     return J_lo, J_hi

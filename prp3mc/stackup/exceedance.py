@@ -6,6 +6,7 @@ import math
 import time
 import warnings
 from concurrent.futures import ThreadPoolExecutor
+from typing import NamedTuple
 
 import numpy as np
 from scipy import special
@@ -197,8 +198,9 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
         e_any, b_any, n_any, bracketed = _either(run, C, Ainv, legs, table, share, S, Z, e_pos, b_pos, e_phi, b_phi,
                                                   sure_pos | sure_phi)
         if joint or (joint is None and np.count_nonzero(bracketed) <= JOINT_POSES):
-            e_any, b_any, bracketed, conditioned = _conditioned(C, Ainv, legs, table, share, S, Z, target, e_pos,
-                                                                b_pos, e_phi, b_phi, e_any, b_any, bracketed)
+            e_any, b_any, bracketed, conditioned = _conditioned(
+                _Either(e_any, b_any, bracketed, conditioned), C=C, Ainv=Ainv, legs=legs, table=table, share=share,
+                S=S, Z=Z, target=target, position=(e_pos, b_pos), phi=(e_phi, b_phi), workers=run.workers)
     above = np.maximum(b_pos, b_phi if b_phi is not None else 0.0) > target
     if np.any(above):
         warnings.warn(Prp3mcWarning(
@@ -368,33 +370,59 @@ def _either(run, C, Ainv, legs, table, share, S, Z, e_pos, b_pos, e_phi, b_phi, 
     return e_any, b_any, n_any, ~np.pad(series, (0, N - k))
 
 
-def _conditioned(C, Ainv, legs, table, share, S, Z, target, e_pos, b_pos, e_phi, b_phi, e_any, b_any, bracketed):
-    """P(either) by conditioning on two legs (:mod:`.conditional`) at the poses still ``bracketed``, where the
-    pose error is a sum over independent legs, each with a density whose series converges (every leg's
+class _Either(NamedTuple):
+    """P(position > S or ``|dphi|`` > Z) at N poses: its value and bound (N,), and whether it is the Fréchet
+    bracket's midpoint or was found by conditioning on two legs (N,) bool each."""
+
+    exceed: np.ndarray
+    bound: np.ndarray
+    bracketed: np.ndarray
+    conditioned: np.ndarray
+
+
+def _conditioned(either: _Either, *, C: np.ndarray, Ainv: np.ndarray, legs: np.ndarray, table, share: float,
+                 S: float, Z: float, target: float, position: tuple, phi: tuple, workers: int) -> _Either:
+    """P(either) by conditioning on two legs (:mod:`.conditional`) at the poses still ``either.bracketed``, where
+    the pose error is a sum over independent legs, each with a density whose series converges (every leg's
     envelopes decay at least as ``n^-_LEG_POWER``): ``P_pos + P_phi - J``, J's bracket midpoint, the bound its
-    half-width plus both channels' bounds; kept where that bound is below the Fréchet bracket's. Returns
-    (P, bound, bracketed, conditioned)."""
-    conditioned = np.zeros(e_any.size, dtype=bool)
+    half-width plus both channels' bounds; kept where that bound is below the Fréchet bracket's.
+
+    Parameters
+    ----------
+    either : _Either
+        P(either) so far (:func:`_either`).
+    C, Ainv, legs, table, share
+        The pose error per unit of each term (N, 3, T), A^-1 (N, 3, 3), each term's leg (T,), the terms'
+        table and the mass of one normal law past its cut.
+    S, Z, target : float
+        The specs (mm, rad) and the bound's goal.
+    position, phi : (ndarray (N,), ndarray (N,))
+        Each channel's exceedance and its bound.
+    workers : int
+        Threads.
+    """
+    (e_pos, b_pos), (e_phi, b_phi) = position, phi
+    e_any, b_any, bracketed, conditioned = either
     todo = np.flatnonzero(bracketed)
     if todo.size == 0:
-        return e_any, b_any, bracketed, conditioned
+        return either
     kappa, ok = independent_legs(C[todo], Ainv[todo], legs, table)
     ok &= np.all(leg_powers(table, C[todo], legs, 0.0) >= _LEG_POWER, axis=1)
     todo, kappa = todo[ok], kappa[ok]
     if todo.size == 0:
-        return e_any, b_any, bracketed, conditioned
-    J_lo, J_hi = joint_exceedance(C[todo], Ainv[todo], legs, table, kappa, S, Z, target, share)
+        return either
+    J_lo, J_hi = joint_exceedance(C[todo], Ainv[todo], legs, table, kappa, S, Z, target, share, workers=workers)
     J_lo = np.maximum(J_lo, 0.0)
     J_hi = np.minimum(J_hi, np.minimum(e_pos[todo] + b_pos[todo], e_phi[todo] + b_phi[todo]))
     e = np.clip(e_pos[todo] + e_phi[todo] - 0.5 * (J_lo + J_hi), 0.0, 1.0)
     b = 0.5 * (J_hi - J_lo) + b_pos[todo] + b_phi[todo]
     better = np.isfinite(e) & np.isfinite(b) & (b < b_any[todo])
     idx = todo[better]
-    e_any, b_any, bracketed = e_any.copy(), b_any.copy(), bracketed.copy()
+    e_any, b_any, bracketed, conditioned = e_any.copy(), b_any.copy(), bracketed.copy(), conditioned.copy()
     e_any[idx], b_any[idx] = e[better], b[better]
     bracketed[idx] = False
     conditioned[idx] = True
-    return e_any, b_any, bracketed, conditioned
+    return _Either(e_any, b_any, bracketed, conditioned)
 
 
 def _subset(ch, index):
