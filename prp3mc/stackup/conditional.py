@@ -275,7 +275,7 @@ class _Cells:
         return lo, hi
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _cdf_bound(lo_b, hi_b, P, x, lo, h, M, upper):
     """A lower (or upper) bound of F_L(x) at pose P from the bounds at the grid points (monotonicity)."""
     v = (x - lo) / h
@@ -291,7 +291,7 @@ def _cdf_bound(lo_b, hi_b, P, x, lo, h, M, upper):
     return lo_b[P, min(j, M - 1)]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _union(lo_b, hi_b, P, lo, h, M, a1, b1, e1, a2, b2, e2, upper):
     """A lower (upper) bound of P_L(A ∪ B), A = [a1, b1] (empty if e1) and B = [a2, b2]."""
     if not e1 and not e2 and max(a1, a2) <= min(b1, b2):
@@ -306,7 +306,7 @@ def _union(lo_b, hi_b, P, lo, h, M, a1, b1, e1, a2, b2, e2, upper):
     return min(max(v, 0.0), 1.0)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _bracket(P, i0, i1, j0, j1, lo, h, lo_b, hi_b, cA, ep, cB, norm, wB, S, widthL, out_lo, out_hi):
     """Lower and upper bounds (out_lo, out_hi) of each cell's share of J: its mass (the product of its two
     legs' CDF differences, bracketed) times 1 - P_L(A ∪ B), over the cell A and B containing a smallest and
@@ -386,6 +386,7 @@ def _cdf_bounds(kappa, legs, table, alias_one) -> dict:
     n = kappa.shape[0]
     keep = {}
     for j in range(n):          # a pose's CDFs are 3 x M >= 196,608 points: vectorised within, memory bound
+        check_stop()
         one = leg_cdfs(kappa[j:j + 1], legs, table, alias_one)
         if j == 0:
             keep = {"M": one["M"], "alias": one["alias"]}
@@ -439,7 +440,7 @@ def _chunk_joint(s, Ainv, kappa, legs, table, alias_one, S, Z, goal):
 
 
 def chunk_bytes(n: int, M: int) -> float:
-    """Peak bytes of :func:`joint_exceedance` on one chunk of ``n`` poses whose CDF grids have ``M`` points: the
+    """Peak bytes of one thread of :func:`joint_exceedance` on its chunk of ``n`` poses whose CDF grids have ``M`` points: the
     memory model its chunks are sized by (:data:`~prp3mc.limits.CONDITIONED_THREAD_BYTES` each).
 
     Every pose holds its three legs' CDF bounds (two float64 a point, twice while the cells copy them in
@@ -451,9 +452,9 @@ def chunk_bytes(n: int, M: int) -> float:
 def _chunks(M: np.ndarray, workers: int) -> list[np.ndarray]:
     """The poses (indices) in chunks of equal grid points M, each as many as fit in
     :data:`~prp3mc.limits.CONDITIONED_THREAD_BYTES` by :func:`chunk_bytes` (one at least) and no more than
-    each of the ``workers``' equal share of them."""
+    each of the ``workers``' equal share of them; the largest grids first (the slowest chunks start first)."""
     out = []
-    for m in np.unique(M):
+    for m in np.unique(M)[::-1]:
         idx = np.flatnonzero(M == m)
         most = -(-idx.size // workers)
         n = 1
