@@ -161,6 +161,42 @@ def test_a_disc_clearance_matches_its_closed_form():
         exact_yield(geometry, alone, pose, spec_position_um=10.0)
 
 
+# ------------------------------------------------------------------ the sum's rotated sines
+
+@pytest.mark.parametrize("preset", ["u-shape", "delta-shape"])
+def test_the_rotated_sines_of_the_sum_agree_with_direct_sines(preset):
+    """The sum takes a centred uniform's sin(u) along a row by rotation (restart every 16 steps): its coefficients
+    stay within 1e-14 of those with sin(u) afresh at every point (restart 0), far inside the 1e-13 a coefficient
+    the bound allows (CF_ACCURACY), at poses of the paper budget (the mixed leg: two uniforms and a clearance)
+    and of the budget mixing every law (a uniform in the mixed leg, the thermal term off every basis)."""
+    from prp3mc.stackup.characteristic import term_table
+    from prp3mc.stackup.lattice import channel
+    from prp3mc.stackup.series import _RESTART, _coefficients
+    from prp3mc.stackup.truncation import select_points
+    from prp3mc.stackup._special import CF_ACCURACY, special_args
+
+    geometry = with_leads(Geometry.from_preset(preset))
+    poses = poses_of(preset, 3, np.random.default_rng(7))
+    assert _RESTART == 16
+    for budget in (Budget.from_preset("paper"), mixed_budget(geometry)):
+        model = linear_model(geometry, budget, poses)
+        C = model.columns.reshape(-1, 3, len(model.terms))
+        table = term_table(model.term_laws, 8.0)
+        ch = channel("position", C, model.Ainv.reshape(-1, 3, 3), np.array(model.legs), table, np.full(3, 0.1))
+        tab, sp = table.arrays(), special_args()
+        for i in range(3):
+            pts = select_points(2, table.env, ch.grp[i], ch.mu[i], ch.Q[i], ch.Vinv[i], ch.mnorm[i], ch.ab[i],
+                                ch.lam[i], 0.1, 0.0, 1e-9)[0]
+            args = (2, table.kind, table.par, tab, sp, ch.grp[i], ch.mu[i], ch.snu[i], ch.Q[i], ch.Vinv[i], pts,
+                    0.1, 0.0, 0.1)
+            direct, rotated = _coefficients(*args, 0), _coefficients(*args, _RESTART)
+            assert np.any(direct[0] != rotated[0])                     # the rotation ran
+            assert np.abs(direct[0] - rotated[0]).max() <= 1e-14 < CF_ACCURACY
+            assert abs(direct[4] - rotated[4]) <= 1e-14 * pts.shape[0]
+            for a, b in zip(direct[1:4], rotated[1:4]):                # the transform's arguments and bound
+                assert np.array_equal(a, b)
+
+
 # ------------------------------------------------------------------ OpenTURNS
 
 def ot_law(law):

@@ -50,7 +50,8 @@ from ..errors import BudgetError
 from ..model.laws import Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
 from ._special import C_J1, I_MAX, gauss_legendre_tables, int_j0
 
-__all__ = ["TermTable", "term_table", "term_cf", "common_cf", "envelope", "envelope_power", "KINDS", "NPAR"]
+__all__ = ["TermTable", "term_table", "term_cf", "common_cf", "int_j0_over", "envelope", "envelope_power", "KINDS",
+           "NPAR"]
 
 #: Kind codes of :class:`TermTable` (-1: a constant, folded into the known shift).
 KINDS = ("uniform", "normal", "truncnormal", "triangular", "discrete",
@@ -306,6 +307,13 @@ def _h(z):
     return (np.exp(z) * (z - 1.0) + 1.0) / (z * z)
 
 
+#: The Bernstein ellipses :func:`_gl_size` tries: for rho = 1.2 ... 16, (b, log(rho² - 1), 2 log rho) with
+#: b = (rho - 1/rho) / 2 (the logarithms once, not at every call: the same doubles).
+_ELLIPSES = tuple((0.5 * (rho - 1.0 / rho), math.log(rho * rho - 1.0), 2.0 * math.log(rho))
+                  for rho in (1.2, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0))
+_LOG_64_15 = math.log(64.0 / 15.0)
+
+
 @njit(cache=True, nogil=True)
 def _gl_size(y, beta, n0, gl_sizes):
     """Index of the smallest Gauss-Legendre rule whose error on int_{-1}^{1} exp(-beta² s²/2) g(y s) ds,
@@ -313,10 +321,10 @@ def _gl_size(y, beta, n0, gl_sizes):
     Bernstein-ellipse bound (64/15) M rho^-2n / (rho² - 1), M = exp(beta² b²/2 + ``|y|`` b), b = (rho - 1/rho)/2;
     -1 if none is."""
     best = 1e300
-    for rho in (1.2, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0):
-        b = 0.5 * (rho - 1.0 / rho)
+    log_tol = math.log(1e-16 * n0)
+    for b, log_r2, two_log_r in _ELLIPSES:
         logm = 0.5 * beta * beta * b * b + abs(y) * b
-        n = (math.log(64.0 / 15.0) + logm - math.log(rho * rho - 1.0) - math.log(1e-16 * n0)) / (2.0 * math.log(rho))
+        n = (_LOG_64_15 + logm - log_r2 - log_tol) / two_log_r
         best = min(best, n)
     for i in range(gl_sizes.size):
         if gl_sizes[i] >= best:
@@ -362,12 +370,12 @@ def common_cf(k, p0, p1, x, sp, buf):
         a = math.exp(-0.5 * (p1 * x) ** 2)
         return complex(a, 0.0) if p0 == 0.0 else complex(math.cos(x * p0) * a, math.sin(x * p0) * a)
     if k == C_UNIFORM and p0 == 0.0:
-        return complex(_int_j0_over(sp, buf, abs(x) * p1), 0.0)
+        return complex(int_j0_over(sp, buf, abs(x) * p1), 0.0)
     return complex(np.nan, 0.0)
 
 
 @njit(cache=True, nogil=True)
-def _int_j0_over(sp, buf, y):
+def int_j0_over(sp, buf, y):
     """I(y) / y, I(y) = int_0^y J0 (y >= 0): the series below 1 (terms fall by y²/4 or faster), else :func:`int_j0`."""
     if y < 1.0:
         acc, term, y2 = 1.0, 1.0, 0.25 * y * y
@@ -410,7 +418,7 @@ def term_cf(k, par, t, tab, sp, buf, x):
     if k == C_UNIFORM:
         lo, hi = par[t, 0], par[t, 1]
         if lo == 0.0:
-            return _int_j0_over(sp, buf, ax * hi) + 0j
+            return int_j0_over(sp, buf, ax * hi) + 0j
         if ax * (hi - lo) <= 4.0:             # average of J0 over [x lo, x hi] by a 16-point rule
             i = 2                             # gl_sizes[2] == 16
             o, n = gl_off[i], gl_sizes[i]
