@@ -292,12 +292,14 @@ def _factor_tail(value, c, U, p, dropped, power, cmin):
 
 
 @njit(cache=True, nogil=True)
-def _walk_row(d, n2, n3, origin, budget, E1, P1, e2, e3, mix, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2, pts, F,
-              count):
+def _walk_row(d, n2, n3, origin, budget, E1, P1, NU1, e2, e3, mix, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2,
+              rowc, pts, F, count):
     """Walk the row (n2, n3) outward from n_1 = 0, appending its points (n, F) from ``count`` on, until each
     side's tail is within half the budget. ``E1``, ``P1``: the first basis leg's envelope product and its
-    power along its axis (:func:`leg_envelope`); ``e2``, ``e3``: the row's E_2 and E_3; ``mix``: the terms off
-    the basis legs (mixed, thermal), whose envelopes F takes point by point.
+    power along its axis (:func:`leg_envelope`); ``NU1``: nu_1 at n_1 = 0, 1, ... (``2 pi n_1 / Q_1``, as the
+    walk would compute it; past its end the walk does); ``e2``, ``e3``: the row's E_2 and E_3; ``mix``: the
+    terms off the basis legs (mixed, thermal), whose envelopes F takes point by point; ``rowc``: (mix.size, 2)
+    scratch for their row constants ``mu_t2 nu_2``, ``mu_t3 nu_3`` (the sums keep their order: same bits).
 
     The tail is tried at every 4th point U, from F's value f there: every factor of F is an envelope of
     ``|an affine function of n_1|`` (the transform's of the norm of one), non-increasing past its peak (see
@@ -307,6 +309,12 @@ def _walk_row(d, n2, n3, origin, budget, E1, P1, e2, e3, mix, ev, grp, mu, Q, Vi
     nu2 = _TWO_PI * n2 / Q[1]
     nu3 = _TWO_PI * n3 / Q[2]
     e23 = e2 * e3
+    for k in range(mix.size):
+        rowc[k, 0] = mu[mix[k], 1] * nu2
+        rowc[k, 1] = mu[mix[k], 2] * nu3
+    cx = (Vinv[0, 1] * nu2, Vinv[1, 1] * nu2, Vinv[2, 1] * nu2)
+    cz = (Vinv[0, 2] * nu3, Vinv[1, 2] * nu3, Vinv[2, 2] * nu3)
+    v00, v10, v20 = Vinv[0, 0], Vinv[1, 0], Vinv[2, 0]
     tails = 0.0
     ok = True
     for side in range(2):
@@ -323,7 +331,10 @@ def _walk_row(d, n2, n3, origin, budget, E1, P1, e2, e3, mix, ev, grp, mu, Q, Vi
             tail_here = U >= 1 and U % 4 == 0
             # F at (s U, n2, n3): the basis legs' envelopes, the others', the transform's bound; at a tail
             # point also each factor's decay power and peak (dropped, power, cmin: see _factor_tail)
-            nu1 = _TWO_PI * (s * U) / Q[0]
+            if U < NU1.size:
+                nu1 = NU1[U] if s > 0 else -NU1[U]        # 2 pi (-U) / Q_1 = -(2 pi U / Q_1) exactly
+            else:
+                nu1 = _TWO_PI * (s * U) / Q[0]
             if U < E1.size:
                 e1, p1 = E1[U], P1[U]
             else:
@@ -332,7 +343,7 @@ def _walk_row(d, n2, n3, origin, budget, E1, P1, e2, e3, mix, ev, grp, mu, Q, Vi
             dropped, power, cmin = 1.0, p1, (min(float(U), 0.0) if p1 > 0.0 else float(U))
             for k in range(mix.size):
                 t = mix[k]
-                x = mu[t, 0] * nu1 + mu[t, 1] * nu2 + mu[t, 2] * nu3
+                x = mu[t, 0] * nu1 + rowc[k, 0] + rowc[k, 1]
                 if tail_here:
                     v, pv = envelope_power(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6],
                                            ev[t, 7], abs(x))
@@ -350,8 +361,8 @@ def _walk_row(d, n2, n3, origin, budget, E1, P1, e2, e3, mix, ev, grp, mu, Q, Vi
                 if tail_here:
                     dropped, power, cmin = _factor_tail(tb, 0.0, U, _tau_pow(1, z1, z2, a), dropped, power, cmin)
             else:
-                wx = Vinv[0, 0] * nu1 + Vinv[0, 1] * nu2 + Vinv[0, 2] * nu3
-                wy = Vinv[1, 0] * nu1 + Vinv[1, 1] * nu2 + Vinv[1, 2] * nu3
+                wx = v00 * nu1 + cx[0] + cz[0]
+                wy = v10 * nu1 + cx[1] + cz[1]
                 a = math.sqrt(wx * wx + wy * wy)
                 tb = _disc_bound(z1, a)
                 if tail_here:
@@ -361,7 +372,7 @@ def _walk_row(d, n2, n3, origin, budget, E1, P1, e2, e3, mix, ev, grp, mu, Q, Vi
                                                             _tau_pow(2, z1, z2, a) if a > 0 else 0.0,
                                                             dropped, power, cmin)
                 if d == 3:
-                    wz = Vinv[2, 0] * nu1 + Vinv[2, 1] * nu2 + Vinv[2, 2] * nu3
+                    wz = v20 * nu1 + cx[2] + cz[2]
                     tz = _interval_bound(z2, abs(wz))
                     tb *= tz
                     if tail_here and vz != 0.0:
@@ -611,6 +622,10 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
     count = 0
     tails = 0.0
     mix = np.flatnonzero((grp == MIXED_LEG) | (grp == -1))
+    rowc = np.empty((mix.size, 2))
+    NU1 = np.empty(Es[0].size)
+    for u in range(NU1.size):
+        NU1[u] = _TWO_PI * u / Q[0]
     for k in range(rows.shape[0]):
         if count > _MAX_POINTS[d - 1]:
             return empty, np.inf, count, 3
@@ -619,8 +634,8 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
         n2, n3 = rows[k, 0], rows[k, 1]
         e2 = _leg_value(1, abs(n2), Es[1], d, ev, grp, mu, Q, mnorm, lam, z1, z2)
         e3 = _leg_value(2, abs(n3), Es[2], d, ev, grp, mu, Q, mnorm, lam, z1, z2)
-        count, t, pts, F, ok = _walk_row(d, n2, n3, k == 0, budget, Es[0], PEs[0], e2, e3, mix, ev, grp, mu, Q,
-                                         Vinv, mnorm, lam, z1, z2, pts, F, count)
+        count, t, pts, F, ok = _walk_row(d, n2, n3, k == 0, budget, Es[0], PEs[0], NU1, e2, e3, mix, ev, grp, mu,
+                                         Q, Vinv, mnorm, lam, z1, z2, rowc, pts, F, count)
         tails += 2.0 * t
         if not ok:
             status = max(status, 1)
