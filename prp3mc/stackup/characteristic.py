@@ -50,8 +50,8 @@ from ..errors import BudgetError
 from ..model.laws import Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
 from ._special import C_J1, I_MAX, gauss_legendre_tables, int_j0
 
-__all__ = ["TermTable", "term_table", "term_cf", "common_cf", "int_j0_over", "envelope", "envelope_power", "KINDS",
-           "NPAR"]
+__all__ = ["TermTable", "term_table", "term_cf", "common_cf", "int_j0_over", "sinc", "gauss", "envelope",
+           "envelope_power", "KINDS", "NPAR"]
 
 #: Kind codes of :class:`TermTable` (-1: a constant, folded into the known shift).
 KINDS = ("uniform", "normal", "truncnormal", "triangular", "discrete",
@@ -286,10 +286,17 @@ def _envelopes(kind, par, atoms, weights) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------- compiled
 
 @njit(cache=True, nogil=True)
-def _sinc(u):
+def sinc(u):
+    """sin(u) / u, the centred uniform's characteristic function (its series below 1e-4)."""
     if abs(u) < 1e-4:
         return 1.0 - u * u / 6.0
     return math.sin(u) / u
+
+
+@njit(cache=True, nogil=True)
+def gauss(sd, x):
+    """exp(-(sd x)² / 2), the centred normal's characteristic function (and its envelope)."""
+    return math.exp(-0.5 * (sd * x) ** 2)
 
 
 @njit(cache=True, nogil=True)
@@ -363,11 +370,10 @@ def common_cf(k, p0, p1, x, sp, buf):
     ``sp`` with 2 doubles of scratch ``buf``, so that it inlines): uniform (mid, hw), normal (mu, sd) and a
     clearance uniform on [0, hi] (lo = 0, hi); NaN otherwise (then :func:`term_cf` applies)."""
     if k == UNIFORM:
-        u = x * p1
-        s = 1.0 - u * u / 6.0 if abs(u) < 1e-4 else math.sin(u) / u
+        s = sinc(x * p1)
         return complex(s, 0.0) if p0 == 0.0 else complex(math.cos(x * p0) * s, math.sin(x * p0) * s)
     if k == NORMAL:
-        a = math.exp(-0.5 * (p1 * x) ** 2)
+        a = gauss(p1, x)
         return complex(a, 0.0) if p0 == 0.0 else complex(math.cos(x * p0) * a, math.sin(x * p0) * a)
     if k == C_UNIFORM and p0 == 0.0:
         return complex(int_j0_over(sp, buf, abs(x) * p1), 0.0)
@@ -396,7 +402,7 @@ def term_cf(k, par, t, tab, sp, buf, x):
     atoms, weights, gl_sizes, gl_off, gl_x, gl_w = tab
     j0, j1 = sp[0], sp[1]
     if k == UNIFORM:
-        return np.exp(1j * x * par[t, 0]) * _sinc(x * par[t, 1])
+        return np.exp(1j * x * par[t, 0]) * sinc(x * par[t, 1])
     if k == NORMAL:
         return np.exp(1j * x * par[t, 0] - 0.5 * (par[t, 1] * x) ** 2)
     if k == TRUNCNORMAL:
@@ -475,7 +481,7 @@ def envelope(a1, a2, a15, w0, bh, f2, w, sd, x):
     if f2 > 0.0 or w > 0.0:
         e = min(e, f2 / x + w / (x * x))
     if sd > 0.0:
-        e *= math.exp(-0.5 * (sd * x) ** 2)
+        e *= gauss(sd, x)
     return e
 
 
@@ -504,5 +510,5 @@ def envelope_power(a1, a2, a15, w0, bh, f2, w, sd, x0):
     if (f2 > 0.0 or w > 0.0) and f2 / x0 + w / (x0 * x0) < best:
         best, p = f2 / x0 + w / (x0 * x0), 1.0
     if sd > 0.0:
-        best *= math.exp(-0.5 * (sd * x0) ** 2)
+        best *= gauss(sd, x0)
     return best, p + (sd * x0) ** 2

@@ -58,7 +58,7 @@ from numba import njit
 
 from ._special import CF_ACCURACY
 from .lattice import MIXED_LEG
-from .characteristic import C_UNIFORM, NORMAL, UNIFORM, common_cf, int_j0_over, term_cf
+from .characteristic import C_UNIFORM, NORMAL, UNIFORM, common_cf, gauss, int_j0_over, sinc, term_cf
 from .truncation import select_points, transform_bound
 
 __all__ = ["pose_series", "STATUS"]
@@ -254,12 +254,9 @@ def _coefficients(d, kind, par, tab, sp, grp, mu, snu, Q, Vinv, pts, z1, z2, zs,
                     cos_u[q], sin_u[q] = cos_u[q] * rot_c[q] - sin_u[q] * rs, sin_u[q] * rot_c[q] + cos_u[q] * rs
                 else:
                     cos_u[q], sin_u[q] = math.cos(u), math.sin(u)
-                if abs(u) >= 1.0:
-                    v = sin_u[q] / u
-                else:
-                    v = 1.0 - u * u / 6.0 if abs(u) < 1e-4 else math.sin(u) / u
+                v = sin_u[q] / u if abs(u) >= 1.0 else sinc(u)
             elif h == 1:
-                v = math.exp(-0.5 * (par[t, 1] * x) ** 2)
+                v = gauss(par[t, 1], x)
             elif h == 2:
                 v = int_j0_over(sp, buf, abs(x) * par[t, 1])
             else:
