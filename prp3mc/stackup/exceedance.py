@@ -385,7 +385,10 @@ def _conditioned(either: _Either, *, C: np.ndarray, Ainv: np.ndarray, legs: np.n
     """P(either) by conditioning on two legs (:mod:`.conditional`) at the poses still ``either.bracketed``, where
     the pose error is a sum over independent legs, each with a density whose series converges (every leg's
     envelopes decay at least as ``n^-_LEG_POWER``): ``P_pos + P_phi - J``, J's bracket midpoint, the bound its
-    half-width plus both channels' bounds; kept where that bound is below the Fréchet bracket's.
+    half-width plus both channels' bounds; kept where that bound is below the Fréchet bracket's. J's bracket is
+    refined to half the target; where it gets there but the channels' bounds (each up to the target) keep the
+    sum above it, both channels are summed again at a quarter of the target for P(either) (their own
+    exceedances, reported apart, keep theirs).
 
     Parameters
     ----------
@@ -413,9 +416,24 @@ def _conditioned(either: _Either, *, C: np.ndarray, Ainv: np.ndarray, legs: np.n
         return either
     J_lo, J_hi = joint_exceedance(C[todo], Ainv[todo], legs, table, kappa, S, Z, target, share, workers=workers)
     J_lo = np.maximum(J_lo, 0.0)
-    J_hi = np.minimum(J_hi, np.minimum(e_pos[todo] + b_pos[todo], e_phi[todo] + b_phi[todo]))
-    e = np.clip(e_pos[todo] + e_phi[todo] - 0.5 * (J_lo + J_hi), 0.0, 1.0)
-    b = 0.5 * (J_hi - J_lo) + b_pos[todo] + b_phi[todo]
+    channels = [a[todo] for a in (e_pos, b_pos, e_phi, b_phi)]
+    # where J's bracket meets its share (half the target) but the two channels' bounds (each up to the target)
+    # keep the sum above the target: both channels again at a quarter of it
+    tight = np.flatnonzero((J_hi - J_lo <= target) & (channels[1] + channels[3] > 0.5 * target))
+    if tight.size:
+        run = _Runner(table, workers, 0.25 * target, "")
+        for k, (which, spec) in enumerate((("position", S), ("phi", Z))):
+            ch, z1, zs, sure = _sized(which, C[todo[tight]], Ainv[todo[tight]], legs, table, share,
+                                      np.full(tight.size, spec), False)
+            p, bnd, _, status = run(ch, z1, np.zeros(tight.size), zs, np.zeros(0), np.zeros((tight.size, 0)),
+                                    which, fallback=True, sure=sure)[:4]
+            better = (status <= 1) & np.isfinite(p) & (bnd < channels[2 * k + 1][tight])
+            channels[2 * k][tight] = np.where(better, np.clip(1.0 - p, 0.0, 1.0), channels[2 * k][tight])
+            channels[2 * k + 1][tight] = np.where(better, bnd, channels[2 * k + 1][tight])
+    ep, bp, eh, bh = channels
+    J_hi = np.minimum(J_hi, np.minimum(ep + bp, eh + bh))
+    e = np.clip(ep + eh - 0.5 * (J_lo + J_hi), 0.0, 1.0)
+    b = 0.5 * (J_hi - J_lo) + bp + bh
     better = np.isfinite(e) & np.isfinite(b) & (b < b_any[todo])
     idx = todo[better]
     e_any, b_any, bracketed, conditioned = e_any.copy(), b_any.copy(), bracketed.copy(), conditioned.copy()
