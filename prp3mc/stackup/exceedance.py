@@ -48,6 +48,9 @@ _LEG_POWER = 2.5
 #: Poses at most at which :func:`exact_yield` conditions on two legs for P(either) by default (a 21 x 21 grid
 #: is 441; about 0.1 to 0.3 s a pose).
 JOINT_POSES = 1000
+#: Tightest channel target P(either) by conditioning asks for, as a power of 1/4 of the target (4^-5: ~1e-12 for
+#: the default 1e-9, the floor of TARGET_RANGE).
+_TIGHTEN = 5
 _CHUNK = 64                      # poses per task of the thread pool
 
 
@@ -386,9 +389,10 @@ def _conditioned(either: _Either, *, C: np.ndarray, Ainv: np.ndarray, legs: np.n
     the pose error is a sum over independent legs, each with a density whose series converges (every leg's
     envelopes decay at least as ``n^-_LEG_POWER``): ``P_pos + P_phi - J``, J's bracket midpoint, the bound its
     half-width plus both channels' bounds; kept where that bound is below the Fréchet bracket's. J's bracket is
-    refined to half the target; where it gets there but the channels' bounds (each up to the target) keep the
-    sum above it, both channels are summed again at a quarter of the target for P(either) (their own
-    exceedances, reported apart, keep theirs).
+    refined to the target (its half-width to half of it) or its cell budget; where its half-width leaves room
+    under the target that the channels' bounds (each up to the target) fill, both channels are summed again at
+    the largest of target/4, target/16, ... that fits the room, for P(either) (their own exceedances, reported
+    apart, keep theirs).
 
     Parameters
     ----------
@@ -417,19 +421,15 @@ def _conditioned(either: _Either, *, C: np.ndarray, Ainv: np.ndarray, legs: np.n
     J_lo, J_hi = joint_exceedance(C[todo], Ainv[todo], legs, table, kappa, S, Z, target, share, workers=workers)
     J_lo = np.maximum(J_lo, 0.0)
     channels = [a[todo] for a in (e_pos, b_pos, e_phi, b_phi)]
-    # where J's bracket meets its share (half the target) but the two channels' bounds (each up to the target)
-    # keep the sum above the target: both channels again at a quarter of it
-    tight = np.flatnonzero((J_hi - J_lo <= target) & (channels[1] + channels[3] > 0.5 * target))
-    if tight.size:
-        run = _Runner(table, workers, 0.25 * target, "")
-        for k, (which, spec) in enumerate((("position", S), ("phi", Z))):
-            ch, z1, zs, sure = _sized(which, C[todo[tight]], Ainv[todo[tight]], legs, table, share,
-                                      np.full(tight.size, spec), False)
-            p, bnd, _, status = run(ch, z1, np.zeros(tight.size), zs, np.zeros(0), np.zeros((tight.size, 0)),
-                                    which, fallback=True, sure=sure)[:4]
-            better = (status <= 1) & np.isfinite(p) & (bnd < channels[2 * k + 1][tight])
-            channels[2 * k][tight] = np.where(better, np.clip(1.0 - p, 0.0, 1.0), channels[2 * k][tight])
-            channels[2 * k + 1][tight] = np.where(better, bnd, channels[2 * k + 1][tight])
+    # where J's half-width leaves room under the target but the two channels' bounds (each up to the target)
+    # fill it: both channels again, at the largest of target/4, target/16, ... (to 4^-_TIGHTEN) that fits the room
+    room = target - 0.5 * (J_hi - J_lo)
+    tiers = target * 0.25 ** np.arange(1, _TIGHTEN + 1)
+    tiers = tiers[tiers >= TARGET_RANGE[0]]
+    fits = 2.0 * tiers[:, None] <= room
+    level = np.where(fits.any(axis=0) & (channels[1] + channels[3] > room), fits.argmax(axis=0), -1)
+    for k in np.unique(level[level >= 0]):
+        _tighten(channels, np.flatnonzero(level == k), todo, C, Ainv, legs, table, share, S, Z, tiers[k], workers)
     ep, bp, eh, bh = channels
     J_hi = np.minimum(J_hi, np.minimum(ep + bp, eh + bh))
     e = np.clip(ep + eh - 0.5 * (J_lo + J_hi), 0.0, 1.0)
@@ -441,6 +441,21 @@ def _conditioned(either: _Either, *, C: np.ndarray, Ainv: np.ndarray, legs: np.n
     bracketed[idx] = False
     conditioned[idx] = True
     return _Either(e_any, b_any, bracketed, conditioned)
+
+
+def _tighten(channels: list, at: np.ndarray, todo: np.ndarray, C, Ainv, legs, table, share: float, S: float,
+             Z: float, target: float, workers: int) -> None:
+    """Both channels' exceedances and bounds (``channels``: P_pos, its bound, P_phi, its bound, each (n,) over the
+    poses ``todo``) summed again at ``target`` at the poses ``todo[at]``, kept where the bound is smaller."""
+    run = _Runner(table, workers, target, "")
+    n = at.size
+    for k, (which, spec) in enumerate((("position", S), ("phi", Z))):
+        ch, z1, zs, sure = _sized(which, C[todo[at]], Ainv[todo[at]], legs, table, share, np.full(n, spec), False)
+        p, bnd, _, status = run(ch, z1, np.zeros(n), zs, np.zeros(0), np.zeros((n, 0)), which, fallback=True,
+                                sure=sure)[:4]
+        better = (status <= 1) & np.isfinite(p) & (bnd < channels[2 * k + 1][at])
+        channels[2 * k][at] = np.where(better, np.clip(1.0 - p, 0.0, 1.0), channels[2 * k][at])
+        channels[2 * k + 1][at] = np.where(better, bnd, channels[2 * k + 1][at])
 
 
 def _subset(ch, index):
