@@ -58,6 +58,7 @@ class Counter:
 
 def run(presets, specs, budgets) -> list[dict]:
     counter = Counter()
+    default = conditional._MAX_CELLS
     budget = Budget.load("paper")
     share = 0.01 * TARGET                       # no normal law: share is the per-law cut (unused)
     out = []
@@ -104,6 +105,7 @@ def run(presets, specs, budgets) -> list[dict]:
                         "bound_either_tight": 0.5 * (hi - lo) + (row["bound_channels_tight"] if hi - lo <= TARGET
                                                                  else row["bound_pos"] + row["bound_phi"]),
                         "cells_evaluated": counter.n, "cpu_s": cpu})
+                conditional._MAX_CELLS = default
                 out.append(row)
                 print(json.dumps(row), flush=True)
     return out
