@@ -1,5 +1,6 @@
 """P(either) by conditioning on two legs at the target: the channels summed again where only their bounds keep
-P(either)'s bound above it (prp3mc.stackup.exceedance._conditioned), against the 3-D series.
+P(either)'s bound above it (prp3mc.stackup.exceedance._conditioned), against the 3-D series; a shared
+temperature conditioned on too, against the 3-D series and Monte Carlo.
 
 Where a normal law sits in every leg the 3-D series of the cylinder serves and is the independent reference:
 P_pos + P_phi - J by conditioning (its channels tightened) must agree with its P(either) within the sum of both
@@ -14,13 +15,16 @@ import pytest
 from scipy import special
 
 from prp3mc import Geometry, exact_yield
+from prp3mc.model.effects import SystematicEffect
 from prp3mc.model.linear import linear_model
 from prp3mc.stackup import exceedance
 from prp3mc.stackup.characteristic import term_table
+from prp3mc.stackup.conditional import CONDITIONAL_METHOD, independent_legs, joint_exceedance
 from prp3mc.units import DEG2ARCSEC, MM2UM
 
-from .test_conditional import _paper_normal_encoders
-from .test_yield import ARCSEC
+from .realities import with_leads
+from .test_conditional import _normal_legs, _paper_normal_encoders
+from .test_yield import ARCSEC, N_SE, mixed_budget, poses_of, sample_exceedance
 
 POSES = np.array([[0.0, 100.0, 0.0], [25.0, 75.0, -3.0], [-30.0, 130.0, 2.0]])
 
@@ -81,3 +85,100 @@ def test_the_paper_budget_meets_1e_9_where_both_out_is_nearly_closed(pose, Z_as)
     hi = float(r.exceed_position + r.exceed_phi)
     slack = float(r.bound_any + r.bound_position + r.bound_phi)
     assert lo - slack <= float(r.exceed_any) <= hi + slack
+
+
+# ------------------------------------------------------------------ a shared temperature, conditioned on too
+
+def _with_thermal(budget, geometry):
+    return budget.with_effects({"thermal": SystematicEffect("thermal", 1.2e-5, temp_range_C=(15.0, 30.0))},
+                               fitted_on=geometry)
+
+
+@pytest.mark.parametrize("which", ["normal legs", "paper, normal encoders"])
+def test_a_shared_temperature_is_conditioned_and_agrees_with_the_joint_series(which):
+    """A temperature uniform over its range acts on every leg: J is conditioned on its intervals too (the
+    cells' linear forms take it as a range). Where a normal law sits in every leg the 3-D series serves
+    (bound ~5e-10) and is the reference: both agree within the sum of their bounds."""
+    geometry = with_leads(Geometry.from_preset("u-shape"))
+    budget = _with_thermal(_normal_legs() if which == "normal legs" else _paper_normal_encoders(), geometry)
+    r0 = exact_yield(geometry, budget, POSES, spec_position_um=1.0, quantiles=False)
+    for scale in ((0.8, 0.8), (1.2, 0.8)):
+        S_um = float(np.median(r0.rss_position_mm)) * MM2UM * scale[0]
+        Z_as = float(np.median(r0.rss_phi_deg)) * DEG2ARCSEC * scale[1]
+        r = exact_yield(geometry, budget, POSES, spec_position_um=S_um, spec_phi_arcsec=Z_as, quantiles=False)
+        assert not r.bracketed_any.any() and r.bound_any.max() <= 1e-9
+        e = _conditioned(geometry, budget, S_um, Z_as, r)
+        assert e.conditioned.all()
+        frechet = 0.5 * np.minimum(r.exceed_position, r.exceed_phi)          # the bracket's half-width at least
+        assert np.all(e.bound < frechet)
+        assert np.all(np.abs(e.exceed - r.exceed_any) <= e.bound + r.bound_any), (e.exceed, r.exceed_any, e.bound)
+        print(f"{which} {scale}: P(either) {r.exceed_any}, conditioned bound {e.bound}, |cond - series| / bounds "
+              f"{np.abs(e.exceed - r.exceed_any) / (e.bound + r.bound_any)}")
+
+
+def test_the_every_law_budget_is_conditioned_and_agrees_with_monte_carlo(seed):
+    """The budget of every law and effect (a shared temperature among them): conditioned, not bracketed, its
+    bound below the Fréchet bracket's, and within bound + N_SE standard errors of Monte Carlo."""
+    geometry = with_leads(Geometry.from_preset("u-shape"))
+    budget = mixed_budget(geometry)
+    poses = poses_of("u-shape", 2, np.random.default_rng(seed))
+    kw = dict(spec_position_um=80.0, spec_phi_arcsec=40.0, quantiles=False)
+    with pytest.warns(Warning):
+        br = exact_yield(geometry, budget, poses, joint=False, **kw)
+    r = exact_yield(geometry, budget, poses, **kw)
+    assert br.bracketed_any.all() and not r.bracketed_any.any() and CONDITIONAL_METHOD in r.method
+    assert np.all(r.bound_any < br.bound_any)
+    n = 200_000
+    mc = sample_exceedance(linear_model(geometry, budget, poses), n, np.random.default_rng(seed), 80.0 / MM2UM,
+                           40.0 * ARCSEC)[2]
+    se = np.sqrt(np.maximum(r.exceed_any, 1.0 / n) * (1.0 - r.exceed_any) / n)
+    assert np.all(np.abs(mc - r.exceed_any) <= r.bound_any + N_SE * se), (mc, r.exceed_any, r.bound_any, se)
+    print(f"P(either) {r.exceed_any}, bound {r.bound_any} (bracket {br.bound_any}), MC {mc} +- {se}")
+
+
+def test_a_shared_term_leaves_every_bit_on_two_threads():
+    geometry = with_leads(Geometry.from_preset("u-shape"))
+    budget = mixed_budget(geometry)
+    m = linear_model(geometry, budget, POSES)
+    C, Ainv = m.columns.reshape(-1, 3, len(m.terms)), m.Ainv.reshape(-1, 3, 3)
+    table = term_table(m.term_laws, 8.0)
+    legs = np.array(m.legs)
+    legs_table, t = exceedance._shared_term(table, legs)
+    assert t is not None
+    kappa, ok = independent_legs(C, Ainv, legs, legs_table)
+    assert ok.all()
+    args = (C, Ainv, legs, legs_table, kappa, 80.0 / MM2UM, 40.0 * ARCSEC, 1e-9, 1e-11)
+    shared = (C[:, :, t], float(table.lo[t]), float(table.hi[t]))
+    one = joint_exceedance(*args, workers=1, shared=shared)
+    two = joint_exceedance(*args, workers=2, shared=shared)
+    assert all(np.array_equal(a, b) for a, b in zip(one, two)) and np.all(one[0] < one[1])
+
+
+@pytest.mark.parametrize("intervals", [1, 8])
+def test_the_shared_terms_bracket_holds_the_joint_series_j(intervals, monkeypatch):
+    """J = P_pos + P_phi - P(either) from the 3-D series (normal legs and a temperature; error below 2e-9)
+    lies in the conditioned bracket, with the temperature's range in 8 intervals and in one (the whole range
+    as one interval: a bracket that took the temperature at a point would miss it)."""
+    from prp3mc.stackup import conditional
+
+    monkeypatch.setattr(conditional, "_SHARED_INTERVALS", intervals)
+    geometry = with_leads(Geometry.from_preset("u-shape"))
+    budget = _with_thermal(_normal_legs(), geometry)
+    r0 = exact_yield(geometry, budget, POSES, spec_position_um=1.0, quantiles=False)
+    S_um = float(np.median(r0.rss_position_mm)) * MM2UM
+    Z_as = float(np.median(r0.rss_phi_deg)) * DEG2ARCSEC
+    r = exact_yield(geometry, budget, POSES, spec_position_um=S_um, spec_phi_arcsec=Z_as, quantiles=False)
+    J = r.exceed_position + r.exceed_phi - r.exceed_any
+    err = r.bound_position + r.bound_phi + r.bound_any
+    m = linear_model(geometry, budget, POSES)
+    C, Ainv = m.columns.reshape(-1, 3, len(m.terms)), m.Ainv.reshape(-1, 3, 3)
+    share = 1e-13
+    table = term_table(m.term_laws, math.sqrt(2.0) * float(special.erfcinv(share)))
+    legs = np.array(m.legs)
+    legs_table, t = exceedance._shared_term(table, legs)
+    kappa, ok = independent_legs(C, Ainv, legs, legs_table)
+    assert ok.all()
+    J_lo, J_hi = joint_exceedance(C, Ainv, legs, legs_table, kappa, S_um / MM2UM, Z_as * ARCSEC, 1e-9, share,
+                                  shared=(C[:, :, t], float(table.lo[t]), float(table.hi[t])))
+    assert np.all(J_lo - err <= J) and np.all(J <= J_hi + err), (J_lo, J, J_hi)
+    print(f"{intervals} interval(s): J {J}, bracket {J_lo} .. {J_hi}")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import warnings
@@ -20,7 +21,7 @@ from ..model.budget import Budget
 from ..model.linear import linear_model
 from ..units import DEG2ARCSEC, DEG2RAD, MM2UM, RAD2DEG, spec_value
 from ._special import special_args
-from .characteristic import term_table
+from .characteristic import UNIFORM, term_table
 from .conditional import CONDITIONAL_METHOD, independent_legs, joint_exceedance
 from .enumeration import ENUMERATION_METHOD, all_discrete, discrete_yield
 from .gaussian import gaussian_terms
@@ -413,12 +414,18 @@ def _conditioned(either: _Either, *, C: np.ndarray, Ainv: np.ndarray, legs: np.n
     todo = np.flatnonzero(bracketed)
     if todo.size == 0:
         return either
-    kappa, ok = independent_legs(C[todo], Ainv[todo], legs, table)
-    ok &= np.all(leg_powers(table, C[todo], legs, 0.0) >= _LEG_POWER, axis=1)
+    legs_table, shared = _shared_term(table, legs)
+    if legs_table is None:
+        return either
+    kappa, ok = independent_legs(C[todo], Ainv[todo], legs, legs_table)
+    ok &= np.all(leg_powers(legs_table, C[todo], legs, 0.0) >= _LEG_POWER, axis=1)
     todo, kappa = todo[ok], kappa[ok]
     if todo.size == 0:
         return either
-    J_lo, J_hi = joint_exceedance(C[todo], Ainv[todo], legs, table, kappa, S, Z, target, share, workers=workers)
+    J_lo, J_hi = joint_exceedance(C[todo], Ainv[todo], legs, legs_table, kappa, S, Z, target, share, workers=workers,
+                                  shared=None if shared is None else (C[todo, :, shared],
+                                                                      float(table.lo[shared]),
+                                                                      float(table.hi[shared])))
     J_lo = np.maximum(J_lo, 0.0)
     channels = [a[todo] for a in (e_pos, b_pos, e_phi, b_phi)]
     # where J's half-width leaves room under the target but the two channels' bounds (each up to the target)
@@ -441,6 +448,21 @@ def _conditioned(either: _Either, *, C: np.ndarray, Ainv: np.ndarray, legs: np.n
     bracketed[idx] = False
     conditioned[idx] = True
     return _Either(e_any, b_any, bracketed, conditioned)
+
+
+def _shared_term(table, legs: np.ndarray) -> tuple:
+    """The terms of the legs and the one term of every leg P(either) conditions on: (``table`` with that term
+    made constant 0, its index), (``table``, None) without one, (None, None) where the random terms of every
+    leg are more than one or not uniform (the temperature, uniform over its range, is one)."""
+    every = np.flatnonzero(table.random & (np.asarray(legs) < 0))
+    if every.size == 0:
+        return table, None
+    t = int(every[0])
+    if every.size > 1 or table.kind[t] != UNIFORM:
+        return None, None
+    alone = np.arange(table.kind.size) == t
+    return dataclasses.replace(table, kind=np.where(alone, -1, table.kind),
+                               constant=np.where(alone, 0.0, table.constant)), t
 
 
 def _tighten(channels: list, at: np.ndarray, todo: np.ndarray, C, Ainv, legs, table, share: float, S: float,
