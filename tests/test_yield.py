@@ -188,13 +188,72 @@ def test_the_rotated_sines_of_the_sum_agree_with_direct_sines(preset):
             pts = select_points(2, table.env, ch.grp[i], ch.mu[i], ch.Q[i], ch.Vinv[i], ch.mnorm[i], ch.ab[i],
                                 ch.lam[i], 0.1, 0.0, 1e-9)[0]
             args = (2, table.kind, table.par, tab, sp, ch.grp[i], ch.mu[i], ch.snu[i], ch.Q[i], ch.Vinv[i], pts,
-                    0.1, 0.0, 0.1)
+                    0.1, 0.0)
             direct, rotated = _coefficients(*args, 0), _coefficients(*args, _RESTART)
             assert np.any(direct[0] != rotated[0])                     # the rotation ran
             assert np.abs(direct[0] - rotated[0]).max() <= 1e-14 < CF_ACCURACY
-            assert abs(direct[4] - rotated[4]) <= 1e-14 * pts.shape[0]
-            for a, b in zip(direct[1:4], rotated[1:4]):                # the transform's arguments and bound
+            assert np.abs(direct[3] - rotated[3]).max() <= 1e-14 * direct[3].max()   # |re| times T_D's bound
+            for a, b in zip((*direct[1:3], direct[4]), (*rotated[1:3], rotated[4])):   # T_D's arguments, bound
                 assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("preset", ["u-shape", "delta-shape"])
+def test_the_points_the_sum_leaves_out_are_within_their_bound(preset):
+    """The sum leaves out the points whose terms' bounds (``|Re phi|`` times T_D's bound) total at most its room,
+    and reports that total: the series over the points kept stays within it of the series over every point, at
+    every radius up to z1 (computed point by point, the quantiles' P(z)), at poses of both budgets and of the
+    three channels; with no room it keeps every point and sums them in their order (to the bit)."""
+    from prp3mc.stackup.characteristic import term_table
+    from prp3mc.stackup.lattice import channel
+    from prp3mc.stackup.series import _RESTART, _coefficients, _prob, _sum
+    from prp3mc.stackup.truncation import select_points
+    from prp3mc.stackup._special import special_args
+
+    geometry = with_leads(Geometry.from_preset(preset))
+    poses = poses_of(preset, 2, np.random.default_rng(11))
+    sp = special_args()
+    ran = set()
+    normals = Budget({**{f"theta_{i}": Normal(0.0, 0.02) for i in (1, 2, 3)},
+                      **{f"b_{i}": Uniform(0.0, 0.025) for i in (1, 2, 3)}}, name="normal legs")   # a 3-D series
+    for budget in (Budget.from_preset("paper"), mixed_budget(geometry), normals):
+        model = linear_model(geometry, budget, poses)
+        C = model.columns.reshape(-1, 3, len(model.terms))
+        table = term_table(model.term_laws, 8.0)
+        tab = table.arrays()
+        for which, z1, z2 in (("phi", 5e-5, 0.0), ("position", 0.1, 0.0), ("both", 0.1, 5e-5)):
+            ch = channel(which, C, model.Ainv.reshape(-1, 3, 3), np.array(model.legs), table, np.full(2, z1),
+                         None if which != "both" else np.full(2, z2))
+            d = {"phi": 1, "position": 2, "both": 3}[which]
+            for i in range(2):
+                lam = ch.lam[i]
+                pts, _, _, status = select_points(d, table.env, ch.grp[i], ch.mu[i], ch.Q[i], ch.Vinv[i],
+                                                  ch.mnorm[i], ch.ab[i], lam, z1, z2, 1e-9 if d < 3 else 1e-7)
+                if status >= 2:                                     # no 3-D series (legs without a normal law)
+                    continue
+                ran.add(d)
+                re, ta, tb, cb, _ = _coefficients(d, table.kind, table.par, tab, sp, ch.grp[i], ch.mu[i], ch.snu[i],
+                                                  ch.Q[i], ch.Vinv[i], pts, z1, z2, _RESTART)
+                n = re.size
+                every = [a.copy() for a in (re, ta, tb)]
+                s_all, left0, n_all = _sum(d, lam, *(a.copy() for a in (re, ta, tb, cb)), z1, z2, sp[1], 0.0)
+                assert (left0, n_all) == (0.0, n)
+                s_seq = 0.0
+                for k in range(n):                                  # the transform of D, point by point
+                    a, b = ta[k], tb[k]
+                    t = 2 * math.pi * z1 * sp[1](z1 * a, 0) / a if d > 1 else 2 * math.sin(a * z1) / a
+                    if d == 3:
+                        t *= 2 * math.sin(b * z2) / b if b > 0 else 2 * z2
+                    s_seq += re[k] * t
+                assert s_all == s_seq
+                room = cb.sum() / lam                               # half the bound of every term
+                s_kept, left, m = _sum(d, lam, re, ta, tb, cb, z1, z2, sp[1], room)
+                assert 0 < m < n and 0 < left <= room                 # some points left out, within the room
+                assert abs(2 * (s_all - s_kept) / lam) <= left
+                for z in np.linspace(0.0, z1, 7)[1:]:
+                    p_all = _prob(d, lam, every[0], every[1], every[2], n, z, z2, sp[1])
+                    p_kept = _prob(d, lam, re, ta, tb, m, z, z2, sp[1])
+                    assert abs(p_all - p_kept) <= left
+    assert ran == {1, 2, 3}
 
 
 # ------------------------------------------------------------------ OpenTURNS

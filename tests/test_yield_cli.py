@@ -55,7 +55,8 @@ def test_region_json_carries_the_region_summary_and_one_row_per_pose(capsys):
     assert doc["region"]["mean_exceed_position_ppm"] == pytest.approx(values.mean())
     best = rows[int(values.argmax())]
     assert doc["region"]["argmax_pose"] == [best["x_mm"], best["y_mm"], best["phi_deg"]]
-    assert doc["exceed_position_ppm"] == pytest.approx(values.max(), rel=1e-9, abs=1e-6)
+    # the pose again, with quantiles (another lattice): the same exceedance within both error bounds
+    assert abs(doc["exceed_position_ppm"] - values.max()) <= doc["error_bound_ppm"] + best["error_bound_ppm"]
     assert doc["inputs"]["grid"] == 3
 
 

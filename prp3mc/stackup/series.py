@@ -41,7 +41,11 @@ multiplies their values (conjugated for n_j < 0) by the off-basis terms' (the
 mixed leg, thermal) and the transform of D. An off-basis uniform's sine is
 carried along a row by rotation (its argument is affine in n_1), restarted
 every :data:`_RESTART` steps: within 2e-15 of the sine, inside
-:data:`~._special.CF_ACCURACY`.
+:data:`~._special.CF_ACCURACY`. The transform (a J1 in the plane: most of a
+point's cost) is then taken only where it matters (:func:`_sum`): the points
+whose terms are bounded (``|Re phi_Y|`` times the transform's bound) by a
+total of at most :data:`_LEAVE_SHARE` of the target, within what the rest of
+the bound leaves of it, are left out, and that total joins the bound.
 
 Quantiles (d = 1, 2) solve ``P(z) = p`` by Newton's method with bisection
 as a safeguard on the same series, and bracket the true quantile by solving
@@ -68,6 +72,7 @@ __all__ = ["pose_series", "STATUS"]
 STATUS = ("ok", "bound above target", "no bound", "too many terms")
 _TWO_PI = 2.0 * math.pi
 _RESTART = 16             # rotation steps at most between direct sines in the sum (see pose_series)
+_LEAVE_SHARE = 0.05       # of the target: what the sum may leave out (see _sum), within what the bound leaves
 
 
 # ------------------------------------------------------------------ the transform of D
@@ -154,8 +159,8 @@ def _beyond(d, lam, re, a, b, n, target, z, zmax, side, sp):
 
 
 @njit(cache=True, nogil=True)
-def _coefficients(d, kind, par, tab, sp, grp, mu, snu, Q, Vinv, pts, z1, z2, zs, restart):
-    """The series' coefficients at the kept points ``pts`` (n, 3), and their sum at zs (and z2).
+def _coefficients(d, kind, par, tab, sp, grp, mu, snu, Q, Vinv, pts, z1, z2, restart):
+    """The series' coefficients at the kept points ``pts`` (n, 3), and the bounds of their terms.
 
     Each basis leg's characteristic function, times its share ``exp(i snu_j nu_j)`` of the known shift's
     phase, is tabulated up to its extent among the points (n_j < 0: the conjugate). The off-basis terms
@@ -174,29 +179,28 @@ def _coefficients(d, kind, par, tab, sp, grp, mu, snu, Q, Vinv, pts, z1, z2, zs,
     -------
     re, ta, tb : ndarray (n,)
         Re phi_Y at each point, and the arguments a, b of T_D there (:func:`_transform`).
+    cb : ndarray (n,)
+        ``|re|`` times the transform's bound at each point (:func:`~.truncation.transform_bound`): the
+        bound of the point's term (for every z up to z1) that :func:`_sum` leaves out by.
     tb_sum : float
-        ``T_D(0) + 2 sum`` of the transform's bound over the points (:func:`~.truncation.transform_bound`).
-    s : float
-        ``sum re T_D(a, b)`` at zs (and z2), in the order of the points (as :func:`_prob` sums it).
+        ``T_D(0) + 2 sum`` of the transform's bound over the points.
     """
     T = kind.size
     buf = np.empty(2)
-    j1 = sp[1]
     n = pts.shape[0]
     mix = np.flatnonzero((grp == -1) | (grp == MIXED_LEG))
     nm = mix.size
-    centre = np.empty(nm)
     shift = snu.copy()
     for q in range(nm):
         t = mix[q]
-        centre[q] = par[t, 0]
         if kind[t] == UNIFORM or kind[t] == NORMAL:
             shift += par[t, 0] * mu[t]
-            centre[q] = 0.0
-    ext = np.zeros(3, np.int64)
+    e0 = e1 = e2 = 0                                # the extents, in scalars (no store a point)
     for k in range(n):
-        for j in range(d):
-            ext[j] = max(ext[j], abs(pts[k, j]))
+        e0 = max(e0, abs(pts[k, 0]))
+        e1 = max(e1, abs(pts[k, 1]))
+        e2 = max(e2, abs(pts[k, 2]))
+    ext = np.array([e0, e1, e2])
     Phi = np.ones((3, ext.max() + 1), np.complex128)
     for j in range(d):
         for m in range(1, ext[j] + 1):
@@ -223,11 +227,11 @@ def _coefficients(d, kind, par, tab, sp, grp, mu, snu, Q, Vinv, pts, z1, z2, zs,
             how[q] = 1
         elif kind[t] == C_UNIFORM and par[t, 0] == 0.0:
             how[q] = 2
-    re = np.empty(max(n, 1))
-    ta = np.empty(max(n, 1))
-    tb = np.empty(max(n, 1))
+    re = np.empty(n)
+    ta = np.empty(n)
+    tb = np.empty(n)
+    cb = np.empty(n)
     tb_sum = transform_bound(d, z1, z2, 0.0, 0.0)
-    s = 0.0
     steps = restart
     for k in range(n):
         n0, n1, n2 = pts[k, 0], pts[k, 1], pts[k, 2]
@@ -277,9 +281,65 @@ def _coefficients(d, kind, par, tab, sp, grp, mu, snu, Q, Vinv, pts, z1, z2, zs,
         re[k] = pr
         ta[k] = pa
         tb[k] = pb
-        tb_sum += 2.0 * transform_bound(d, z1, z2, pa, pb)
-        s += pr * _transform(d, zs, z2, pa, pb, j1)
-    return re, ta, tb, tb_sum, s
+        bt = transform_bound(d, z1, z2, pa, pb)
+        tb_sum += 2.0 * bt
+        cb[k] = abs(pr) * bt
+    return re, ta, tb, cb, tb_sum
+
+
+@njit(cache=True, nogil=True)
+def _sum(d, lam, re, ta, tb, cb, zs, z2, j1, room):
+    """The series' ``sum re T_D(a, b)`` at zs (and z2) over the points but those it leaves out, which
+    :func:`_coefficients`' bounds ``cb`` say add at most ``room`` to P (for every z up to z1: the quantiles).
+
+    A point left out changes P by ``2 re T_D / |L|``, at most ``2 cb / |L|`` in modulus (``cb = |re|`` times
+    the transform's bound; the error of re itself is in the floating-point part of the bound, for every
+    point). The points are binned by the binary exponent of cb; the whole bins from the smallest up whose
+    total fits the room are left out, and of the next bin the points that still fit, in their order. The
+    bound returned is the total of what was left out, times 1 + 1e-8 (the rounding of the total and of
+    each cb: below n u < 1e-9 for n <= 2^23 points), so it stays below ``room``. ``room`` <= 0: every point
+    summed, in order (the same to the bit as summing them all).
+
+    Returns
+    -------
+    s : float
+        ``sum re T_D(a, b)`` over the points kept, in their order.
+    left : float
+        Bound of what the points left out add to P (0 with ``room`` <= 0).
+    n : int
+        Points kept; ``re``, ``ta``, ``tb`` are compacted to them (the quantiles sum these).
+    """
+    n = re.size
+    budget = 0.5 * lam * room / (1.0 + 1e-8)
+    lim = 0.0                                         # left out: cb < lim while the budget lasts
+    if budget > 0.0:
+        hist = np.zeros(2048)
+        bits = cb.view(np.int64)                      # cb >= 0: its exponent field is bits >> 52
+        for k in range(n):
+            hist[bits[k] >> 52] += cb[k]
+        acc = 0.0
+        e = 0
+        while e < 2046 and acc + hist[e] <= budget:
+            acc += hist[e]
+            e += 1
+        lim = np.inf if e >= 2046 else 2.0 ** (e - 1022)   # the top of bin e, the first not whole
+    out = 0.0
+    kept = np.empty(n, np.int64)
+    w = 0
+    for k in range(n):                                # without branches (then the sum's J1 calls overlap)
+        c = cb[k]
+        drop = (c < lim) & (out + c <= budget)
+        out += c if drop else 0.0
+        kept[w] = k
+        w += 0 if drop else 1
+    s = 0.0
+    for i in range(w):
+        k = kept[i]
+        s += re[k] * _transform(d, zs, z2, ta[k], tb[k], j1)
+        re[i] = re[k]
+        ta[i] = ta[k]
+        tb[i] = tb[k]
+    return s, 2.0 * out / lam * (1.0 + 1e-8), w
 
 
 @njit(cache=True, nogil=True)
@@ -337,10 +397,11 @@ def pose_series(d, kind, par, ev, tab, sp, grp, mu, snu, Q, Vinv, mnorm, ab, lam
         out_q[:] = np.nan
         out_qerr[:] = np.nan
         return np.nan, np.inf, walked, status
-    n = pts.shape[0]
-    re, ta, tb, tb_sum, s = _coefficients(d, kind, par, tab, sp, grp, mu, snu, Q, Vinv, pts, z1, z2, zs, _RESTART)
+    re, ta, tb, cb, tb_sum = _coefficients(d, kind, par, tab, sp, grp, mu, snu, Q, Vinv, pts, z1, z2, _RESTART)
     fp = CF_ACCURACY * tb_sum / lam + 1e-15
-    bound = b_trunc + fp + alias
+    room = min(_LEAVE_SHARE * eps, (1.0 - 1e-6) * (eps - b_trunc - fp - alias))
+    s, left, n = _sum(d, lam, re, ta, tb, cb, zs, z2, sp[1], room)
+    bound = b_trunc + fp + alias + left
     p_in = (_transform(d, zs, z2, 0.0, 0.0, sp[1]) + 2.0 * s) / lam         # = _prob(d, lam, re, ta, tb, n, zs, ...)
     # --- quantiles (d <= 2): the series' root, and where the series is below p - bound and above p + bound
     for q in range(levels.size):
