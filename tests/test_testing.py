@@ -92,6 +92,8 @@ def yield_entry(**changes):
            "error_bound_ppm": 0.0008376, "error_bounds_ppm": {"position": 0.0008376, "phi": None, "any": 0.0008376},
            "quantiles_position_um": {"p99.73": {"min": 82.47091962988556, "max": 132.1317441846429, "mean": 102.2}},
            "quantile_error_bounds_position_um": {"p99.73": 2.05e-06},
+           "quantiles_phi_arcsec": {"p99.73": {"min": 115.53561495975242, "max": 116.3415, "mean": 115.9}},
+           "quantile_error_bounds_phi_arcsec": {"p99.73": 3.0e-05},
            "region": {"max_exceed_position_ppm": 52652.48933525979, "mean_exceed_position_ppm": 12116.184873600107,
                       "area_fraction_above_1ppm": 1.0, "argmax_pose": [40.0, 60.0, 0.0]}}
     for path, value in changes.items():
@@ -114,6 +116,8 @@ def yield_entry(**changes):
     ("quantiles_position_um__p99.73__max", 132.1317441846429 + 4.0e-6, True),
     ("quantiles_position_um__p99.73__max", 132.1317441846429 + 4.5e-6, False),
     ("region__area_fraction_above_1ppm", 0.96, False),
+    ("quantiles_phi_arcsec__p99.73__min", 115.53561495975242 + 5.9e-5, True),
+    ("quantiles_phi_arcsec__p99.73__min", 115.53561495975242 + 6.2e-5, False),
 ])
 def test_yield_figures_within_both_error_bounds(path, value, ok):
     a = yield_entry(**{path: value})
@@ -153,3 +157,12 @@ def test_yield_bounds_must_be_finite_not_equal(path, value, ok):
     else:
         with pytest.raises(AssertionError, match="an error bound must be finite and non-negative"):
             assert_summary_close(a, yield_entry())
+
+
+def test_a_bound_one_version_does_not_report_is_not_a_difference():
+    # a golden pinned before the summary carried the phi quantiles' bounds: those compare to rtol_exact
+    golden = yield_entry()
+    del golden["configurations"]["u-shape"]["yield"]["quantile_error_bounds_phi_arcsec"]
+    assert_summary_close(yield_entry(), golden)
+    with pytest.raises(AssertionError, match=r"quantiles_phi_arcsec\.p99\.73\.min"):
+        assert_summary_close(yield_entry(**{"quantiles_phi_arcsec__p99.73__min": 115.5357}), golden)
