@@ -38,10 +38,12 @@ leg's), which sums along a row to at most ``min(S_1, G_m(|beta nu_2| / 2) S_1
 of G_m along a row by its integral); and by E_2 times the transform's bound
 at the row's closest approach to w = 0 times the same sum of E_1 G_m. That
 bound is non-increasing in ``|n_2|``; the rows past K_2 are left out whole, K_2
-the least leaving out at most 0.2 eps (past the first 256 rows they are
-bounded in blocks [a, a + a // 32), each by its first row's bound times its
-length; past the 1-D arrays' end by g_2's analytic tail
-``sum_{n > N} g(n) <= g(N) N / (p - 1)``). For both channels (d = 3), rows
+the least leaving out at most 0.2 eps (past the first K_0 rows, bounded one by
+one, they are bounded together: each factor of the bound falls at least as a
+power of ``|n_2|``, :func:`_rb_tail`; K_0 from 128 up until that is within 0.05
+eps). The 1-D arrays of the position end where g_j g(0) < 10 eps, past that
+their entries come on demand and their sums' tails are analytic,
+``sum_{n > N} g(n) <= g(N) N / (p - 1)``. For both channels (d = 3), rows
 (n_2, n_3) are kept for ``|n_3|`` <= K_3, n_2 walked from its peak as n_1 is;
 the rest is bounded from the 1-D sums of E_2, E_3 and the transform's bound
 (:func:`_rows_3d`). Of the rows kept, those of smallest whole sums are skipped
@@ -68,6 +70,9 @@ __all__ = ["leg_envelope", "select_points", "transform_bound"]
 _TWO_PI = 2.0 * math.pi
 _SQRT2 = math.sqrt(2.0)
 _N_CAP = 1 << 20            # longest 1-D envelope array of a basis leg
+_RATIO = 1.25              # the geometric grid of the mixed leg's integral (:func:`_mixed_row_sum`)
+_LOG_RATIO = math.log(_RATIO)
+_K0 = 128                   # the position's rows bounded one by one, at least (past them: :func:`_rb_tail`)
 _BINS = 1400                # log2 bins of the envelope, from 2^-1300 up
 _WALK_CAP = 1 << 22         # farthest point of a row walk
 _MAX_POINTS = (1 << 23, 1 << 23, 1 << 18)   # most points walked at one pose, per dimension (beyond: status 3)
@@ -199,10 +204,13 @@ def leg_envelope(j, d, ev, grp, mu, Q, mnorm, lam, z1, z2, g0, eta_lo):
 
 
 @njit(cache=True, nogil=True)
-def _at(g, x):
-    """g at a real index x >= 0 from below (g non-increasing): g[floor x], or its last value beyond."""
-    i = int(x)
-    return g[min(i, g.size - 1)]
+def _leg_pair(g, E, j, m, d, ev, grp, mu, Q, mnorm, lam, z1, z2):
+    """Basis leg j's (E_j, g_j) at n_j = m >= 0: from its arrays (:func:`leg_envelope`), or on demand past
+    their end (:func:`_leg_at`: the same bits)."""
+    if m < g.size:
+        return E[m], g[m]
+    e, gm, _, _ = _leg_at(j, m, d, ev, grp, mu, Q, mnorm, lam, z1, z2)
+    return e, gm
 
 
 # ------------------------------------------------------------------ the position's third (mixed) leg
@@ -236,10 +244,17 @@ def _mixed(ev, grp, km, ax3):
 @njit(cache=True, nogil=True)
 def _mixed_row_sum(ev, grp, km, delta):
     """Bound of sum_k G_m(x0 + k delta) over k in Z, any x0: max G_m + (2 / delta) int_0^inf G_m
-    (G_m even and non-increasing in ``|x|``); the integral by left sums on a geometric grid (ratio 1.02,
-    from x0 with G_m <= 1 below it), then its analytic tail. inf when there is no mixed leg or G_m
-    does not decay faster than 1/x. Up to ``flat``, found by doubling, G_m is 1 (power 0): not evaluated
-    there (it is non-increasing)."""
+    (G_m even and non-increasing in ``|x|``). inf when there is no mixed leg or G_m does not decay faster
+    than 1/x.
+
+    The integral: G_m is 1 up to ``flat`` (found by doubling from 1e-6 / max km; G_m <= 1 below the
+    first probe), which adds that much. Past it, on a geometric grid x_i (ratio r = 1.25), G_m falls at
+    least as its decay power p at x_i (:func:`_mixed`: G_m(y) <= G_m(x_i) (x_i / y)^p for y >= x_i), so
+
+        int_{x_i}^{r x_i} G_m <= G_m(x_i) x_i int_1^r s^-p ds = G_m(x_i) x_i ln r (e^{(1 - p) ln r} - 1) / ((1 - p) ln r)
+
+    (``ln r`` at p = 1), and the rest past x_i is at most ``G_m(x_i) x_i / (p - 1)`` (p > 1), added when it
+    is within 1e-6 of the integral so far."""
     kmax = km.max()
     if kmax == 0.0 or delta <= 0.0:
         return np.inf
@@ -251,28 +266,93 @@ def _mixed_row_sum(ev, grp, km, delta):
             break
         flat = probe
         probe *= 2.0
+    x = max(x, flat)
     acc = x
-    for _ in range(20000):
-        e, p = (1.0, 0.0) if x <= flat else _mixed(ev, grp, km, x)
+    for _ in range(2000):
+        e, p = _mixed(ev, grp, km, x)
         if p > 1.0 and e * x / (p - 1.0) <= 1e-6 * acc:
             return 1.0 + 2.0 * (acc + e * x / (p - 1.0)) / delta
-        acc += e * 0.02 * x
-        x *= 1.02
+        q = (1.0 - p) * _LOG_RATIO
+        acc += e * x * _LOG_RATIO * (math.expm1(q) / q if q != 0.0 else 1.0)
+        x *= _RATIO
     return np.inf
 
 
 @njit(cache=True, nogil=True)
-def _row_bound(nu2, S1, cm, g1, Q0, ev, grp, km, ab):
-    """Bound of a position row's sum of g_1(n_1) G_m(nu_m) at ``|nu_2|`` = nu2 (g_1 non-increasing, S1 its sum over
-    the row): at most S1 (G_m <= 1), and, as one of ``|nu_1|`` >= ``|beta|`` nu2 / (2 ``|alpha|``), ``|nu_m|`` >= ``|beta|`` nu2 / 2
-    holds at every point, G_m(``|beta|`` nu2 / 2) S1 + g_1(``|beta|`` nu2 / (2 ``|alpha|``)) C_m."""
+def _rb(k, S1, S1E, cm, g1, E1, g2, E2, d_perp, d, ev, grp, mu, Q, mnorm, lam, z1, z2, km, ab):
+    """Bound of the whole sum of the position's row n_2 = k >= 1 (``|nu_2|`` = nu2), two ways.
+
+    Form A: g_2(k) times a bound of the row's sum of g_1(n_1) G_m(nu_m) (the transform shared); form B
+    (when S1E, the sum of E_1, is finite): E_2(k) times the transform's bound at the row's closest approach
+    to w = 0 (``|nu_2|`` d_perp) times a bound of the row's sum of E_1(n_1) G_m(nu_m). With h = g_1 or E_1
+    (non-increasing) and S_h its sum over the row, that sum is at most S_h (G_m <= 1), and, as one of
+    ``|nu_1|`` >= ``|beta|`` nu2 / (2 ``|alpha|``), ``|nu_m|`` >= ``|beta|`` nu2 / 2 holds at every point (nu_m =
+    alpha nu_1 + beta nu_2), at most G_m(``|beta|`` nu2 / 2) S_h + h(``|beta|`` nu2 / (2 ``|alpha|``)) C_m (h at
+    the integer below; C_m: :func:`_mixed_row_sum`). Both forms are non-increasing in k (so are g_2, E_2,
+    the transform's bound, G_m and h). Returns (min of the two, form A, form B, nu2)."""
+    nu2 = _TWO_PI * k / Q[1]
+    e2, g2k = _leg_pair(g2, E2, 1, k, d, ev, grp, mu, Q, mnorm, lam, z1, z2)
     alpha, beta = ab[0], ab[1]
-    b = S1
+    ha, hb = S1, S1E
     if beta != 0.0 and cm < np.inf:
         gmv, _ = _mixed(ev, grp, km, 0.5 * abs(beta) * nu2)
-        g1v = _at(g1, abs(beta) * nu2 / (2.0 * abs(alpha)) * Q0 / _TWO_PI) if alpha != 0.0 else 0.0
-        b = min(b, gmv * S1 + g1v * cm)
-    return b
+        e1v = g1v = 0.0
+        if alpha != 0.0:
+            e1v, g1v = _leg_pair(g1, E1, 0, int(abs(beta) * nu2 / (2.0 * abs(alpha)) * Q[0] / _TWO_PI), d, ev, grp,
+                                 mu, Q, mnorm, lam, z1, z2)
+        ha = min(ha, gmv * S1 + g1v * cm)
+        if S1E < np.inf:
+            hb = min(hb, gmv * S1E + e1v * cm)
+    fa = g2k * ha
+    fb = e2 * _disc_bound(z1, nu2 * d_perp) / lam * hb if S1E < np.inf else np.inf
+    return min(fa, fb), fa, fb, nu2
+
+
+@njit(cache=True, nogil=True)
+def _rb_tail(a, S1, S1E, cm, g1, E1, g2, E2, d_perp, d, ev, grp, mu, Q, mnorm, lam, z1, z2, km, ab):
+    """Bound of ``sum_{k >= a} rb(k)`` (a >= 1; :func:`_rb`): each form f of :func:`_rb` falls at least as
+    f(a) (a / k)^P past a, so ``sum_{k >= a} rb(k) <= f(a) (1 + int_a^inf (a / x)^P dx) = f(a) (1 + a / (P - 1))``
+    when P > 1; the smaller of the two (inf when neither power is above 1).
+
+    The powers, for k >= a (every argument below is proportional to k):
+
+    - g_2 and E_2 fall as their powers at a (:func:`_leg_at`), the transform's bound at the closest
+      approach ``|nu_2|`` d_perp as its power there (:func:`_tau_pow`);
+    - the bound of the row's sum of h, ``min(S_h, G_m(|beta| nu_2 / 2) S_h + h(floor(c k)) C_m)`` (c = ``|beta|
+      Q_1 / (2 |alpha| Q_2)``): G_m falls as its power p_m at a (:func:`_mixed`); with x = c a > 1 and
+      i = floor(x), floor(c k) > c k - 1 >= (x - 1) k / a, so ``h(floor(c k)) <= h(i) (i / floor(c k))^p_h
+      <= h(i) (i / (x - 1))^p_h (a / k)^p_h`` (p_h h's power at i; p_h = 0 when x <= 1); the sum falls as
+      ``(G_m S_h + h(i) (i / (x - 1))^p_h C_m) (a / k)^min(p_m, p_h)`` (its value at a times that, and
+      S_h with power 0 when that value is larger)."""
+    nu2 = _TWO_PI * a / Q[1]
+    e2, g2a, pg, pe = _leg_at(1, a, d, ev, grp, mu, Q, mnorm, lam, z1, z2)
+    alpha, beta = ab[0], ab[1]
+    ha, qa, hb, qb = S1, 0.0, S1E, 0.0
+    if beta != 0.0 and cm < np.inf:
+        gmv, pm = _mixed(ev, grp, km, 0.5 * abs(beta) * nu2)
+        e1v = g1v = 0.0
+        ra = rb = 1.0
+        pa1 = pb1 = np.inf
+        if alpha != 0.0:
+            x = abs(beta) * nu2 / (2.0 * abs(alpha)) * Q[0] / _TWO_PI
+            i = int(x)
+            e1v, g1v, pa1, pb1 = _leg_at(0, i, d, ev, grp, mu, Q, mnorm, lam, z1, z2)
+            if x > 1.0:
+                ra, rb = (i / (x - 1.0)) ** pa1, (i / (x - 1.0)) ** pb1
+            else:
+                pa1 = pb1 = 0.0
+        ta = gmv * S1 + g1v * ra * cm
+        if ta < S1:
+            ha, qa = ta, min(pm, pa1)
+        tb = gmv * S1E + e1v * rb * cm
+        if tb < S1E:
+            hb, qb = tb, min(pm, pb1)
+    t = g2a * ha * (1.0 + a / (pg + qa - 1.0)) if pg + qa > 1.0 else np.inf
+    r = nu2 * d_perp
+    pt = pe + (_tau_pow(2, z1, z2, r) if r > 0.0 else 0.0) + qb
+    if S1E < np.inf and pt > 1.0:
+        t = min(t, e2 * _disc_bound(z1, r) / lam * hb * (1.0 + a / (pt - 1.0)))
+    return t
 
 
 # ------------------------------------------------------------------ the rows
@@ -528,7 +608,10 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
     """
     empty = np.zeros((0, 3), np.int64)
     g_origin = _root(_tau(d, z1, z2, 0.0) / lam, d)
-    eta_lo = 1e-1 * eps                          # the 1-D arrays' end: past it E_j comes on demand
+    # the 1-D arrays' end: past it E_j comes on demand (the same bits). The position's rows and its walk
+    # reach far less far than where g_j g(0) < 0.1 eps (~1/6 of it on the paper's budget): its arrays end at
+    # 10 eps, the sums past their end analytic (leg_envelope), the rows past them bounded by _rb_tail
+    eta_lo = (1e1 if d == 2 else 1e-1) * eps
     one = np.ones(1)
     zero_tail = np.array([1.0, 0.0])
     gs = [one, one, one]
@@ -551,43 +634,25 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
         S1, S1E = Rs[0][0], SEs[0]
         km = _mixed_scales(grp, mu, ab)
         cm = _mixed_row_sum(ev, grp, km, abs(ab[0]) * _TWO_PI / Q[0])
-        g1, g2, R2, E1, E2 = gs[0], gs[1], Rs[1], Es[0], Es[1]
-        N2 = g2.size - 1
-        # a row's whole sum, two ways: g_1 g_2 G_m (the transform shared) summed along the row, or
+        g1, g2, E1, E2 = gs[0], gs[1], Es[0], Es[1]
+        # a row's whole sum (_rb), two ways: g_1 g_2 G_m (the transform shared) summed along the row, or
         # E_1 E_2 G_m times the transform's bound at the row's closest approach to w = 0 (|nu_2| d_perp)
         v0x, v0y, v1x, v1y = Vinv[0, 0], Vinv[1, 0], Vinv[0, 1], Vinv[1, 1]
         along = (v1x * v0x + v1y * v0y) / (v0x * v0x + v0y * v0y)
         d_perp = math.sqrt((v1x - along * v0x) ** 2 + (v1y - along * v0y) ** 2)
-
-        def rb(k):
-            nu2 = _TWO_PI * k / Q[1]
-            b = g2[k] * _row_bound(nu2, S1, cm, g1, Q[0], ev, grp, km, ab)
-            if S1E < np.inf:
-                b = min(b, E2[k] * _disc_bound(z1, nu2 * d_perp) / lam
-                        * _row_bound(nu2, S1E, cm, E1, Q[0], ev, grp, km, ab))
-            return b
-
-        # rows |n2| > K: the rows up to the arrays' end, then g_2's tail times the bound at the end (rb is
-        # non-increasing in k: so are g_2, E_2, the transform's bound and _row_bound). The rows past K0 (the
-        # first 256) go in blocks [a, a + a // 32), each bounded by its first row's rb times its length (all
-        # of them one by one when that sum is above the part)
-        far = R2[N2 + 1] * _row_bound(_TWO_PI * N2 / Q[1], S1, cm, g1, Q[0], ev, grp, km, ab)
-        K0 = min(N2, 256)
-        blocks = far
-        a = K0 + 1
-        while a <= N2:
-            b = min(N2 + 1, a + max(1, a // 32))
-            blocks += 2.0 * (b - a) * rb(a)
-            a = b
-        if blocks > e_outer:
-            K0 = N2
-        else:
-            far = blocks
+        # rows |n2| > K0 bounded together by _rb_tail (within a few % of their sum); K0 from _K0 up by 1/4
+        # while that is above 1/4 of the part (the rows that matter for K2 are then all one by one)
+        K0 = _K0
+        far = _rb_tail(K0 + 1, S1, S1E, cm, g1, E1, g2, E2, d_perp, d, ev, grp, mu, Q, mnorm, lam, z1, z2, km, ab)
+        while far > 0.25 * e_outer and K0 < _N_CAP:
+            K0 += K0 // 4
+            far = _rb_tail(K0 + 1, S1, S1E, cm, g1, E1, g2, E2, d_perp, d, ev, grp, mu, Q, mnorm, lam, z1, z2, km,
+                           ab)
         RB = np.zeros(K0 + 1)
         suffix = np.empty(K0 + 2)
-        suffix[K0 + 1] = far
+        suffix[K0 + 1] = 2.0 * far
         for k in range(K0, 0, -1):
-            RB[k] = rb(k)
+            RB[k] = _rb(k, S1, S1E, cm, g1, E1, g2, E2, d_perp, d, ev, grp, mu, Q, mnorm, lam, z1, z2, km, ab)[0]
             suffix[k] = suffix[k + 1] + 2.0 * RB[k]
         K2 = _first_within(suffix, e_outer)
         outer = suffix[K2 + 1]
