@@ -278,6 +278,15 @@ def _row_bound(nu2, S1, cm, g1, Q0, ev, grp, km, ab):
 # ------------------------------------------------------------------ the rows
 
 @njit(cache=True, nogil=True)
+def _bin(f):
+    """The drop's log2 bin of f > 0: ``floor(log2 f) + 1300`` within [0, _BINS): the exponent field of f's bits
+    (f normal), else (subnormal) ``math.frexp``'s exponent."""
+    e = (np.float64(f).view(np.int64) >> 52) & 0x7FF
+    k = e - 1023 + 1300 if e > 0 else math.frexp(f)[1] - 1 + 1300
+    return min(_BINS - 1, max(0, k))
+
+
+@njit(cache=True, nogil=True)
 def _factor_tail(value, c, U, p, dropped, power, cmin):
     """Fold a factor of the row (its value at U, its peak c along the row, its decay power p at U) into
     ``(dropped, power, cmin)`` = (product of dropped factors, total power, smallest peak), returned: past
@@ -293,7 +302,7 @@ def _factor_tail(value, c, U, p, dropped, power, cmin):
 
 @njit(cache=True, nogil=True)
 def _walk_row(d, n2, n3, origin, budget, E1, P1, NU1, e2, e3, mix, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2,
-              rowc, pts, F, count):
+              rowc, pts, F, count, bins):
     """Walk the row (n2, n3) outward from n_1 = 0, appending its points (n, F) from ``count`` on, until each
     side's tail is within half the budget. ``E1``, ``P1``: the first basis leg's envelope product and its
     power along its axis (:func:`leg_envelope`); ``NU1``: nu_1 at n_1 = 0, 1, ... (``2 pi n_1 / Q_1``, as the
@@ -389,6 +398,8 @@ def _walk_row(d, n2, n3, origin, budget, E1, P1, NU1, e2, e3, mix, ev, grp, mu, 
             pts[count, 0], pts[count, 1], pts[count, 2] = s * U, n2, n3
             F[count] = f
             count += 1
+            if f > 0.0:
+                bins[_bin(f)] += 2.0 * f
             if tail_here and power > 1.0 and dropped > 0.0:
                 tail = f / dropped * (U - cmin) / (power - 1.0)
                 if tail <= 0.5 * budget:
@@ -626,6 +637,7 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
     NU1 = np.empty(Es[0].size)
     for u in range(NU1.size):
         NU1[u] = _TWO_PI * u / Q[0]
+    bins = np.zeros(_BINS)
     for k in range(rows.shape[0]):
         if count > _MAX_POINTS[d - 1]:
             return empty, np.inf, count, 3
@@ -635,15 +647,11 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
         e2 = _leg_value(1, abs(n2), Es[1], d, ev, grp, mu, Q, mnorm, lam, z1, z2)
         e3 = _leg_value(2, abs(n3), Es[2], d, ev, grp, mu, Q, mnorm, lam, z1, z2)
         count, t, pts, F, ok = _walk_row(d, n2, n3, k == 0, budget, Es[0], PEs[0], NU1, e2, e3, mix, ev, grp, mu,
-                                         Q, Vinv, mnorm, lam, z1, z2, rowc, pts, F, count)
+                                         Q, Vinv, mnorm, lam, z1, z2, rowc, pts, F, count, bins)
         tails += 2.0 * t
         if not ok:
             status = max(status, 1)
     # --- drop the smallest points while their sum stays within e_drop (log2 bins)
-    bins = np.zeros(_BINS)
-    for i in range(count):
-        if F[i] > 0.0:
-            bins[min(_BINS - 1, max(0, math.frexp(F[i])[1] - 1 + 1300))] += 2.0 * F[i]   # floor(log2 F) + 1300
     cut = 0
     acc = 0.0
     for k in range(_BINS):
