@@ -79,3 +79,90 @@ def test_paths_and_folders(tmp_path):
     (tmp_path / "golden.json").write_text(json.dumps(summary()))
     assert load_summary(tmp_path / "run") == summary()
     assert_summary_close(tmp_path / "run", str(tmp_path / "golden.json"))
+
+
+def yield_entry(**changes):
+    """A study's ``yield`` entry (layout of prp3mc.study.spec.yield_summary), with changes by path."""
+    doc = {"spec": {"position_um": 100.0, "phi_arcsec": None, "source": "[spec]"}, "grid": [5, 5],
+           "exceed_position_ppm": {"min": 0.0025, "max": 52652.48933525979, "mean": 12116.184873600108},
+           "exceed_position_pct": {"min": 2.5e-7, "max": 5.265248933525979, "mean": 1.2116184873600104},
+           "exceed_phi_ppm": None, "exceed_phi_pct": None,
+           "exceed_any_ppm": {"min": 0.0025, "max": 52652.48933525979, "mean": 12116.184873600108},
+           "ppk_min": {"position": 0.5398872164350641, "phi": None, "any": 0.5398872164350641},
+           "error_bound_ppm": 0.0008376, "error_bounds_ppm": {"position": 0.0008376, "phi": None, "any": 0.0008376},
+           "quantiles_position_um": {"p99.73": {"min": 82.47091962988556, "max": 132.1317441846429, "mean": 102.2}},
+           "quantile_error_bounds_position_um": {"p99.73": 2.05e-06},
+           "quantiles_phi_arcsec": {"p99.73": {"min": 115.53561495975242, "max": 116.3415, "mean": 115.9}},
+           "quantile_error_bounds_phi_arcsec": {"p99.73": 3.0e-05},
+           "region": {"max_exceed_position_ppm": 52652.48933525979, "mean_exceed_position_ppm": 12116.184873600107,
+                      "area_fraction_above_1ppm": 1.0, "argmax_pose": [40.0, 60.0, 0.0]}}
+    for path, value in changes.items():
+        *keys, last = path.split("__")
+        node = doc
+        for k in keys:
+            node = node[k]
+        node[last] = value
+    return {"configurations": {"u-shape": {"yield": doc}}}
+
+
+@pytest.mark.parametrize("path, value, ok", [
+    # an exceedance of 0.0025 ppm, both bounds 0.0008376 ppm: within 0.0016752 of each other
+    ("exceed_position_ppm__min", 0.0025 + 0.0016, True),
+    ("exceed_position_ppm__min", 0.0025 + 0.0017, False),
+    ("exceed_position_pct__min", 2.5e-7 + 1.6e-7, True),
+    ("exceed_position_pct__min", 2.5e-7 + 1.7e-7, False),
+    ("region__max_exceed_position_ppm", 52652.48933525979 + 0.0016, True),
+    ("region__max_exceed_position_ppm", 52652.48933525979 + 0.01, False),
+    ("quantiles_position_um__p99.73__max", 132.1317441846429 + 4.0e-6, True),
+    ("quantiles_position_um__p99.73__max", 132.1317441846429 + 4.5e-6, False),
+    ("region__area_fraction_above_1ppm", 0.96, False),
+    ("quantiles_phi_arcsec__p99.73__min", 115.53561495975242 + 5.9e-5, True),
+    ("quantiles_phi_arcsec__p99.73__min", 115.53561495975242 + 6.2e-5, False),
+])
+def test_yield_figures_within_both_error_bounds(path, value, ok):
+    a = yield_entry(**{path: value})
+    if ok:
+        assert_summary_close(a, yield_entry())
+    else:
+        with pytest.raises(AssertionError, match=path.replace("__", r"\.").split(r"\.")[-1]):
+            assert_summary_close(a, yield_entry())
+
+
+def test_yield_ppk_follows_its_exceedance():
+    # P = 52652 ppm moved by 0.0016 ppm: Ppk moves by about 0.0016e-6 / (3 phi(Phi^-1(1 - P))) ~ 4.7e-9
+    from statistics import NormalDist
+    p = 52652.48933525979 + 0.0016
+    moved = NormalDist().inv_cdf(1 - p * 1e-6) / 3
+    assert abs(moved - 0.5398872164350641) > 1e-9 * 0.54           # beyond the plain rtol
+    assert_summary_close(yield_entry(exceed_position_ppm__max=p, exceed_any_ppm__max=p, ppk_min__position=moved,
+                                     ppk_min__any=moved), yield_entry())
+    with pytest.raises(AssertionError, match=r"ppk_min\.position"):
+        assert_summary_close(yield_entry(ppk_min__position=0.5398872164350641 + 1e-7), yield_entry())
+
+
+@pytest.mark.parametrize("path, value, ok", [
+    ("error_bounds_ppm__position", 0.0002, True),          # a computation's guarantee, not the model's figure
+    ("error_bound_ppm", 0.0031, True),
+    ("error_bounds_ppm__position", float("inf"), False),
+    ("error_bounds_ppm__position", -1e-9, False),
+    ("error_bounds_ppm__phi", 0.001, False),               # a bound where the golden has no spec
+    ("quantile_error_bounds_position_um__p99.73", float("nan"), False),
+])
+def test_yield_bounds_must_be_finite_not_equal(path, value, ok):
+    a = yield_entry(**{path: value})
+    if path == "error_bounds_ppm__position" and ok:
+        a["configurations"]["u-shape"]["yield"]["exceed_position_ppm"]["min"] += 0.0009     # within 0.0002 + 0.0008376
+    if ok:
+        assert_summary_close(a, yield_entry())
+    else:
+        with pytest.raises(AssertionError, match="an error bound must be finite and non-negative"):
+            assert_summary_close(a, yield_entry())
+
+
+def test_a_bound_one_version_does_not_report_is_not_a_difference():
+    # a golden pinned before the summary carried the phi quantiles' bounds: those compare to rtol_exact
+    golden = yield_entry()
+    del golden["configurations"]["u-shape"]["yield"]["quantile_error_bounds_phi_arcsec"]
+    assert_summary_close(yield_entry(), golden)
+    with pytest.raises(AssertionError, match=r"quantiles_phi_arcsec\.p99\.73\.min"):
+        assert_summary_close(yield_entry(**{"quantiles_phi_arcsec__p99.73__min": 115.5357}), golden)

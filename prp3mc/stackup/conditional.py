@@ -1,7 +1,7 @@
 """P(position > S or ``|dphi|`` > Z) of a budget of independent legs, by conditioning on two legs.
 
-When every random term belongs to one leg (no shared temperature, no
-correlated directions), the pose error is ``d = s + sum_i a_i u_i`` with
+When every random term belongs to one leg (no correlated directions; a
+shared temperature is conditioned on, below), the pose error is ``d = s + sum_i a_i u_i`` with
 a_i the columns of A^-1 and u_1, u_2, u_3 independent scalars, each the sum
 of its leg's terms (``u_i = sum_t kappa_t X_t``). Write the joint exceedance
 as ``P_pos + P_phi - J`` with ``J = P(position > S and |dphi| > Z)``; the two
@@ -32,6 +32,23 @@ u_L's support) have no gap; the others are split where their gap times mass
 is largest, until the bracket's half-width meets the target or the cell
 budget is spent. The reported bound is that half-width, plus the CDFs'
 errors, plus the two channels' bounds.
+
+A term of every leg with a uniform law (the shared temperature, T) is
+conditioned on too: its range in :data:`_SHARED_INTERVALS` intervals of
+equal probability, on each of which the constant vector ``s + c_T T`` ranges
+over a segment; the linear forms carry T as a third variable taken as a
+range (A's ends stay convex / concave in (u_p, u_q, T): their exact ends at
+the cell's 8 corners, the tangent plane's deviation gains T's term). Each
+interval is a replica of the pose with 1/K of its mass, its goal and its
+cells.
+
+Its reach (``benchmarks/bench_yield_either.py``, paper budget, both
+geometries, 16 spec pairs, 5 poses each): the width falls as N^-0.50 in the
+cells bracketed, from 20,000 to 1,280,000 open cells a pose (about 0.03 to
+1 s of CPU), so 1e-9 is met where P(both out) closes (J below ~1e-8, or 0
+where the specs cannot bind together) and nowhere near it where J is at
+the percent level (J >= 1e-2: a half-width of 1.8e-4 to 4.7e-3 at 20,000
+cells, 3e-5 to 7.7e-4 at 64 times as many).
 """
 
 from __future__ import annotations
@@ -50,17 +67,18 @@ from .characteristic import envelope_power, term_cf
 __all__ = ["CONDITIONAL_METHOD", "independent_legs", "leg_cdfs", "joint_exceedance", "chunk_bytes"]
 
 CONDITIONAL_METHOD = (
-    "; P(either) = P(position) + P(phi) - P(both out), the last by conditioning on two legs and integrating "
-    "the third through its CDF (each leg's CDF by its Fourier series on a grid with a rigorous truncation "
-    "bound, bracketed between grid points by monotonicity; cells of the two legs bracketed by interval "
-    "arithmetic and refined where the gap is largest); its bound is the bracket's half-width plus the CDFs' "
-    "and the channels' bounds")
+    "; P(either) = P(position) + P(phi) - P(both out), the last by conditioning on two legs (and on the "
+    "interval of a shared uniform temperature) and integrating the third through its CDF (each leg's CDF by its "
+    "Fourier series on a grid with a rigorous truncation bound, bracketed between grid points by monotonicity; "
+    "cells of the two legs bracketed by interval arithmetic and refined where the gap is largest); its bound is "
+    "the bracket's half-width plus the CDFs' and the channels' bounds")
 _GRID = 1 << 16                 # CDF grid points per leg (at least)
 _K_MAX = 1 << 18                # Fourier terms per leg (at most)
 _LEG_EPS = 1e-11                # truncation goal of a leg's CDF (its error enters J at most 4 times)
 _INITIAL = 16                   # initial cells per leg
-_MAX_CELLS = 20_000           # open cells per pose (at most): about 0.1 to 0.3 s a pose
+_MAX_CELLS = 20_000           # open cells per pose (at most): 0.03 to 0.15 s of CPU a pose (paper)
 _MAX_ROUNDS = 60
+_SHARED_INTERVALS = 8           # intervals of a shared (every-leg) uniform term: replicas of a pose (a power of 2)
 _WIDEN = 1e-12                  # relative widening of every interval end (floating point)
 # memory (chunk_bytes): computing one pose's CDFs, per point of a leg's grid (its coefficients, FFT, CDF and
 # bounds); a pose's cells at a round's peak, per cell (their ends and bounds, the round's copies and children)
@@ -219,14 +237,34 @@ def _legs_order(Ainv: np.ndarray) -> np.ndarray:
 
 
 class _Cells:
-    """Bracketing J at a chunk of poses: the geometry of A and B in (u_p, u_q) and the legs' CDF bounds."""
+    """Bracketing J at a chunk of poses: the geometry of A and B in (u_p, u_q) and the legs' CDF bounds.
 
-    def __init__(self, s, Ainv, cdf, S, Z):
+    With a ``shared`` term (its pose error per unit cT (n, 3) and its uniform law's support (lo, hi)), each
+    pose is ``K`` replicas, one per interval of equal probability of the term: the constant vector of replica
+    r is ``s + cT tau`` with tau over the interval, its centre ``tau_r`` and half-width ``dt``; the linear forms
+    carry cT's coefficient in a fourth column, taken over the interval as a range. The replicas share their
+    pose's CDF bounds (``src``: each replica's pose)."""
+
+    def __init__(self, s, Ainv, cdf, S, Z, shared=None):
         n = s.shape[0]
-        rows = np.arange(n)
+        K = 1 if shared is None else _SHARED_INTERVALS
+        src = np.repeat(np.arange(n), K)
+        cT = np.zeros((n, 3)) if shared is None else shared[0]
+        if shared is None:
+            tau, dt = np.zeros(1), 0.0
+        else:
+            t_lo, t_hi = shared[1], shared[2]
+            dt = 0.5 * (t_hi - t_lo) / K
+            tau = t_lo + dt * (2.0 * np.arange(K) + 1.0)
+        s = s[src] + cT[src] * np.tile(tau, n)[:, None]
+        Ainv, cT = Ainv[src], cT[src]
+        self.src, self.K, self.dt = src, K, np.full(src.size, dt)
+        rows = src
+        m = src.size
         self.order = order = _legs_order(Ainv)
         p, q, L = order.T
-        a_p, a_q, a_L = Ainv[rows, :, p], Ainv[rows, :, q], Ainv[rows, :, L]      # (n, 3)
+        idx = np.arange(m)
+        a_p, a_q, a_L = Ainv[idx, :, p], Ainv[idx, :, q], Ainv[idx, :, L]      # (m, 3)
         norm = np.linalg.norm(a_L[:, :2], axis=1)
         mh = a_L[:, :2] / norm[:, None]
         g3 = a_L[:, 2]
@@ -234,18 +272,21 @@ class _Cells:
         norm, g3 = np.where(self.ok, norm, 1.0), np.where(self.ok, g3, 1.0)
         dot = lambda v: (v[:, 0] * mh[:, 0] + v[:, 1] * mh[:, 1])              # noqa: E731
         cross = lambda v: (v[:, 0] * mh[:, 1] - v[:, 1] * mh[:, 0])            # noqa: E731
-        # c_A = -e.m/|m|², e_perp = e x m/|m|, c_B = -(dphi without u_L)/g3: linear in (u_p, u_q)
-        self.cA = np.stack([-dot(s) / norm, -dot(a_p) / norm, -dot(a_q) / norm], axis=1)
-        self.ep = np.stack([cross(s), cross(a_p), cross(a_q)], axis=1)
-        self.cB = np.stack([-s[:, 2] / g3, -a_p[:, 2] / g3, -a_q[:, 2] / g3], axis=1)
+        # c_A = -e.m/|m|², e_perp = e x m/|m|, c_B = -(dphi without u_L)/g3: linear in (u_p, u_q, tau)
+        self.cA = np.stack([-dot(s) / norm, -dot(a_p) / norm, -dot(a_q) / norm, -dot(cT) / norm], axis=1)
+        self.ep = np.stack([cross(s), cross(a_p), cross(a_q), cross(cT)], axis=1)
+        self.cB = np.stack([-s[:, 2] / g3, -a_p[:, 2] / g3, -a_q[:, 2] / g3, -cT[:, 2] / g3], axis=1)
         self.norm, self.wB, self.S = norm, Z / np.abs(g3), S
-        self.lo = np.stack([cdf["lo"][rows, leg] for leg in (p, q, L)])                   # (3, n): p, q, L
+        self.lo = np.stack([cdf["lo"][rows, leg] for leg in (p, q, L)])                   # (3, m): p, q, L
         self.h = np.stack([cdf["h"][rows, leg] for leg in (p, q, L)])
         self.M = M = cdf["M"]
-        self.lo_b, self.hi_b = np.empty((3, n, M)), np.empty((3, n, M))               # (3, n, M)
-        for k, leg in enumerate((p, q, L)):
-            self.lo_b[k], self.hi_b[k] = cdf["lo_b"][rows, leg], cdf["hi_b"][rows, leg]
+        self.lo_b, self.hi_b = np.empty((3, n, M)), np.empty((3, n, M))               # (3, n, M): per pose
+        poses = np.arange(n)
+        for k in range(3):
+            leg = order[::K, k]
+            self.lo_b[k], self.hi_b[k] = cdf["lo_b"][poses, leg], cdf["hi_b"][poses, leg]
         self.widthL = np.diff(cdf["support"][rows, L], axis=-1)[:, 0]
+        self.rows = rows
 
     def initial(self, cdf) -> tuple:
         """_INITIAL x _INITIAL cells per pose over the two conditioned legs' supports."""
@@ -254,7 +295,7 @@ class _Cells:
         edges = []
         for k in range(2):
             leg = self.order[:, k]
-            sup = cdf["support"][rows, leg]
+            sup = cdf["support"][self.rows, leg]
             a = np.floor((sup[:, 0] - self.lo[k]) / self.h[k]).astype(np.int64)
             b = np.minimum(np.ceil((sup[:, 1] - self.lo[k]) / self.h[k]).astype(np.int64), self.M - 1)
             edges.append(np.round(np.linspace(a, b, _INITIAL + 1)).astype(np.int64))
@@ -270,8 +311,11 @@ class _Cells:
         """Lower and upper bounds of each cell's share of J (its mass times 1 - P_L(A ∪ B)): :func:`_bracket`."""
         P, i0, i1, j0, j1 = cells
         lo, hi = np.empty(P.size), np.empty(P.size)
-        _bracket(P, i0, i1, j0, j1, self.lo, self.h, self.lo_b, self.hi_b, self.cA, self.ep, self.cB, self.norm,
-                 self.wB, float(self.S), self.widthL, lo, hi)
+        _bracket(P, i0, i1, j0, j1, self.lo, self.h, self.lo_b, self.hi_b, self.src, self.cA, self.ep, self.cB,
+                 self.dt, self.norm, self.wB, float(self.S), self.widthL, lo, hi)
+        if self.K > 1:                       # a replica's mass is 1/K of its cells' (the term's interval)
+            lo /= self.K
+            hi /= self.K
         return lo, hi
 
 
@@ -307,16 +351,19 @@ def _union(lo_b, hi_b, P, lo, h, M, a1, b1, e1, a2, b2, e2, upper):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _bracket(P, i0, i1, j0, j1, lo, h, lo_b, hi_b, cA, ep, cB, norm, wB, S, widthL, out_lo, out_hi):
+def _bracket(P, i0, i1, j0, j1, lo, h, lo_b, hi_b, src, cA, ep, cB, dt, norm, wB, S, widthL, out_lo, out_hi):
     """Lower and upper bounds (out_lo, out_hi) of each cell's share of J: its mass (the product of its two
     legs' CDF differences, bracketed) times 1 - P_L(A ∪ B), over the cell A and B containing a smallest and
-    lying in a largest interval. Cell c is pose P[c]'s grid intervals [i0, i1] x [j0, j1] of legs p, q; lo, h
-    (3, n) the legs' (p, q, L) grids, lo_b, hi_b (3, n, M) their CDF bounds; cA, ep, cB (n, 3) the linear
-    forms (constant, u_p, u_q) of c_A, e_perp and c_B; norm, wB, widthL (n,)."""
+    lying in a largest interval. Cell c is replica P[c]'s grid intervals [i0, i1] x [j0, j1] of legs p, q; lo,
+    h (3, n) the legs' (p, q, L) grids, lo_b, hi_b (3, poses, M) their CDF bounds at replica p's pose src[p];
+    cA, ep, cB (n, 4) the linear forms (constant, u_p, u_q, tau) of c_A, e_perp and c_B, tau (a shared term)
+    over [-dt, dt] (dt (n,), 0: none); norm, wB, widthL (n,)."""
     M = lo_b.shape[2]
     bL_lo, bL_hi = lo_b[2], hi_b[2]
     for c in range(P.size):
         p = P[c]
+        o = src[p]
+        d3 = dt[p]
         x0, x1 = lo[0, p] + i0[c] * h[0, p], lo[0, p] + i1[c] * h[0, p]
         y0, y1 = lo[1, p] + j0[c] * h[1, p], lo[1, p] + j1[c] * h[1, p]
         # the ranges of the linear forms over the cell
@@ -326,6 +373,9 @@ def _bracket(P, i0, i1, j0, j1, lo, h, lo_b, hi_b, cA, ep, cB, norm, wB, S, widt
         ep_lo, ep_hi = ep[p, 0] + min(a, b) + min(d, e), ep[p, 0] + max(a, b) + max(d, e)
         a, b, d, e = cB[p, 1] * x0, cB[p, 1] * x1, cB[p, 2] * y0, cB[p, 2] * y1
         cB_lo, cB_hi = cB[p, 0] + min(a, b) + min(d, e), cB[p, 0] + max(a, b) + max(d, e)
+        if d3 > 0.0:                                     # the shared term over its interval
+            a, d, e = abs(cA[p, 3]) * d3, abs(ep[p, 3]) * d3, abs(cB[p, 3]) * d3
+            cA_lo, cA_hi, ep_lo, ep_hi, cB_lo, cB_hi = cA_lo - a, cA_hi + a, ep_lo - d, ep_hi + d, cB_lo - e, cB_hi + e
         nrm, w = norm[p], wB[p]
         amin = 0.0 if ep_lo * ep_hi <= 0.0 else min(abs(ep_lo), abs(ep_hi))
         amax = max(abs(ep_lo), abs(ep_hi))
@@ -337,10 +387,14 @@ def _bracket(P, i0, i1, j0, j1, lo, h, lo_b, hi_b, cA, ep, cB, norm, wB, S, widt
         lo_max, hi_min = -np.inf, np.inf
         for x in (x0, x1):
             for y in (y0, y1):
-                cc = cA[p, 0] + cA[p, 1] * x + cA[p, 2] * y
-                ee = ep[p, 0] + ep[p, 1] * x + ep[p, 2] * y
-                r = math.sqrt(max(S * S - ee * ee, 0.0)) / nrm
-                lo_max, hi_min = max(lo_max, cc - r), min(hi_min, cc + r)
+                for it in range(2 if d3 > 0.0 else 1):
+                    cc = cA[p, 0] + cA[p, 1] * x + cA[p, 2] * y
+                    ee = ep[p, 0] + ep[p, 1] * x + ep[p, 2] * y
+                    if d3 > 0.0:
+                        cc += cA[p, 3] * (2 * it - 1) * d3
+                        ee += ep[p, 3] * (2 * it - 1) * d3
+                    r = math.sqrt(max(S * S - ee * ee, 0.0)) / nrm
+                    lo_max, hi_min = max(lo_max, cc - r), min(hi_min, cc + r)
         xm, ym, dx, dy = 0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.5 * (x1 - x0), 0.5 * (y1 - y0)
         ee = ep[p, 0] + ep[p, 1] * xm + ep[p, 2] * ym
         root = math.sqrt(max(S * S - ee * ee, 0.0))
@@ -349,21 +403,25 @@ def _bracket(P, i0, i1, j0, j1, lo, h, lo_b, hi_b, cA, ep, cB, norm, wB, S, widt
             slope = ee / (root * nrm)
             c_m = cA[p, 0] + cA[p, 1] * xm + cA[p, 2] * ym
             dev = abs(cA[p, 1] + slope * ep[p, 1]) * dx + abs(cA[p, 2] + slope * ep[p, 2]) * dy
+            if d3 > 0.0:
+                dev += abs(cA[p, 3] + slope * ep[p, 3]) * d3
             lo_min = max(cA_lo - r_big, c_m - r_c - dev)
             dev = abs(cA[p, 1] - slope * ep[p, 1]) * dx + abs(cA[p, 2] - slope * ep[p, 2]) * dy
+            if d3 > 0.0:
+                dev += abs(cA[p, 3] - slope * ep[p, 3]) * d3
             hi_max = min(cA_hi + r_big, c_m + r_c + dev)
         else:
             lo_min, hi_max = cA_lo - r_big, cA_hi + r_big
         lo_s, hi_s = lo_max + tol, hi_min - tol
         lo_Bs, hi_Bs = cB_hi - w + tol, cB_lo + w - tol
-        h_up = 1.0 - _union(bL_lo, bL_hi, p, lo[2, p], h[2, p], M, lo_s, hi_s, (amax > S) or (lo_s > hi_s),
+        h_up = 1.0 - _union(bL_lo, bL_hi, o, lo[2, p], h[2, p], M, lo_s, hi_s, (amax > S) or (lo_s > hi_s),
                             lo_Bs, hi_Bs, lo_Bs > hi_Bs, False)
-        h_lo = 1.0 - _union(bL_lo, bL_hi, p, lo[2, p], h[2, p], M, lo_min - tol, hi_max + tol, amin > S,
+        h_lo = 1.0 - _union(bL_lo, bL_hi, o, lo[2, p], h[2, p], M, lo_min - tol, hi_max + tol, amin > S,
                             cB_lo - w - tol, cB_hi + w + tol, False, True)
-        m0_lo = max(lo_b[0, p, i1[c]] - hi_b[0, p, i0[c]], 0.0)
-        m0_hi = min(hi_b[0, p, i1[c]] - lo_b[0, p, i0[c]], 1.0)
-        m1_lo = max(lo_b[1, p, j1[c]] - hi_b[1, p, j0[c]], 0.0)
-        m1_hi = min(hi_b[1, p, j1[c]] - lo_b[1, p, j0[c]], 1.0)
+        m0_lo = max(lo_b[0, o, i1[c]] - hi_b[0, o, i0[c]], 0.0)
+        m0_hi = min(hi_b[0, o, i1[c]] - lo_b[0, o, i0[c]], 1.0)
+        m1_lo = max(lo_b[1, o, j1[c]] - hi_b[1, o, j0[c]], 0.0)
+        m1_hi = min(hi_b[1, o, j1[c]] - lo_b[1, o, j0[c]], 1.0)
         out_lo[c] = m0_lo * m1_lo * h_lo
         out_hi[c] = m0_hi * m1_hi * h_up
 
@@ -397,14 +455,19 @@ def _cdf_bounds(kappa, legs, table, alias_one) -> dict:
     return keep
 
 
-def _chunk_joint(s, Ainv, kappa, legs, table, alias_one, S, Z, goal):
-    """J's bracket (lo, hi) at a chunk of poses; NaN where the legs' directions do not bound u_L."""
-    n = s.shape[0]
+def _chunk_joint(s, Ainv, kappa, legs, table, alias_one, S, Z, goal, shared=None):
+    """J's bracket (lo, hi) at a chunk of poses; NaN where the legs' directions do not bound u_L. With a
+    ``shared`` term (:class:`_Cells`) each pose is refined as its replicas, each to 1/K of the goal and of the
+    cell budget, and their brackets summed."""
     cdf = _cdf_bounds(kappa, legs, table, alias_one)
-    geo = _Cells(s, Ainv, cdf, S, Z)
-    order = geo.order
+    geo = _Cells(s, Ainv, cdf, S, Z, shared)
+    order, K = geo.order, geo.K
+    n = geo.src.size
+    goal, most = goal / K, _MAX_CELLS // K
     # every CDF error is already in the cells' bounds; the mass past the normal laws' cuts is off the cells
     outside = cdf["alias"][order[:, 0]] + cdf["alias"][order[:, 1]]
+    if K > 1:
+        outside = outside / K
     J_lo, J_hi = np.zeros(n), outside.copy()
     cells = geo.initial(cdf)
     del cdf
@@ -421,7 +484,7 @@ def _chunk_joint(s, Ainv, kappa, legs, table, alias_one, S, Z, goal):
         op = ~closed
         G = np.bincount(P[op], gap[op], minlength=n)
         count = np.bincount(P[op], minlength=n)
-        done = (J_hi - J_lo + G <= goal) | (count > _MAX_CELLS) | (rnd == _MAX_ROUNDS)
+        done = (J_hi - J_lo + G <= goal) | (count > most) | (rnd == _MAX_ROUNDS)
         finish = op & done[P]
         J_lo += np.bincount(P[finish], lo_c[finish], minlength=n)
         J_hi += np.bincount(P[finish], hi_c[finish], minlength=n)
@@ -435,7 +498,10 @@ def _chunk_joint(s, Ainv, kappa, legs, table, alias_one, S, Z, goal):
         cells = tuple(np.concatenate([c[stay], k]) for c, k in zip(cells, kids))
         vals = tuple(np.concatenate([v[stay], w]) for v, w in zip(vals, new))
         del kids, new
-    J_lo, J_hi = np.where(geo.ok, J_lo, np.nan), np.where(geo.ok, np.minimum(J_hi, 1.0), np.nan)
+    if K > 1:
+        J_lo, J_hi = J_lo.reshape(-1, K).sum(axis=1), J_hi.reshape(-1, K).sum(axis=1)
+    ok = geo.ok.reshape(-1, K).all(axis=1)
+    J_lo, J_hi = np.where(ok, J_lo, np.nan), np.where(ok, np.minimum(J_hi, 1.0), np.nan)
     return J_lo, J_hi
 
 
@@ -465,7 +531,8 @@ def _chunks(M: np.ndarray, workers: int) -> list[np.ndarray]:
 
 
 def joint_exceedance(C: np.ndarray, Ainv: np.ndarray, legs, table, kappa: np.ndarray, S: float, Z: float,
-                     target: float, alias_one: float, workers: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+                     target: float, alias_one: float, workers: int | None = None,
+                     shared: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Bounds of J = P(``|(dx, dy)|`` > S and ``|dphi|`` > Z) at N poses of a budget of independent legs.
 
     The poses are independent: they run in chunks (:func:`chunk_bytes`; each pose's results do not depend on
@@ -491,6 +558,10 @@ def joint_exceedance(C: np.ndarray, Ainv: np.ndarray, legs, table, kappa: np.nda
         Mass of one normal law past its cut.
     workers : int, optional
         Threads (default: the CPU count).
+    shared : (ndarray (N, 3), float, float), optional
+        A term of every leg with a uniform law (the temperature): its pose error per unit (mm, mm, rad) and its
+        support; ``table`` and ``kappa`` leave it out. J is conditioned on its :data:`_SHARED_INTERVALS`
+        intervals of equal probability too (:class:`_Cells`).
 
     Returns
     -------
@@ -505,7 +576,8 @@ def joint_exceedance(C: np.ndarray, Ainv: np.ndarray, legs, table, kappa: np.nda
     chunks = _chunks(_points(_leg_sizes(kappa, legs, table)[3]), workers)
 
     def run(idx):
-        J_lo[idx], J_hi[idx] = _chunk_joint(s[idx], Ainv[idx], kappa[idx], legs, table, alias_one, S, Z, target)
+        sh = None if shared is None else (shared[0][idx], shared[1], shared[2])
+        J_lo[idx], J_hi[idx] = _chunk_joint(s[idx], Ainv[idx], kappa[idx], legs, table, alias_one, S, Z, target, sh)
 
     if workers == 1 or len(chunks) == 1:
         for idx in chunks:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import warnings
@@ -20,7 +21,7 @@ from ..model.budget import Budget
 from ..model.linear import linear_model
 from ..units import DEG2ARCSEC, DEG2RAD, MM2UM, RAD2DEG, spec_value
 from ._special import special_args
-from .characteristic import term_table
+from .characteristic import UNIFORM, term_table
 from .conditional import CONDITIONAL_METHOD, independent_legs, joint_exceedance
 from .enumeration import ENUMERATION_METHOD, all_discrete, discrete_yield
 from .gaussian import gaussian_terms
@@ -48,6 +49,9 @@ _LEG_POWER = 2.5
 #: Poses at most at which :func:`exact_yield` conditions on two legs for P(either) by default (a 21 x 21 grid
 #: is 441; about 0.1 to 0.3 s a pose).
 JOINT_POSES = 1000
+#: Tightest channel target P(either) by conditioning asks for, as a power of 1/4 of the target (4^-5: ~1e-12 for
+#: the default 1e-9, the floor of TARGET_RANGE).
+_TIGHTEN = 5
 _CHUNK = 64                      # poses per task of the thread pool
 
 
@@ -385,7 +389,11 @@ def _conditioned(either: _Either, *, C: np.ndarray, Ainv: np.ndarray, legs: np.n
     """P(either) by conditioning on two legs (:mod:`.conditional`) at the poses still ``either.bracketed``, where
     the pose error is a sum over independent legs, each with a density whose series converges (every leg's
     envelopes decay at least as ``n^-_LEG_POWER``): ``P_pos + P_phi - J``, J's bracket midpoint, the bound its
-    half-width plus both channels' bounds; kept where that bound is below the Fréchet bracket's.
+    half-width plus both channels' bounds; kept where that bound is below the Fréchet bracket's. J's bracket is
+    refined to the target (its half-width to half of it) or its cell budget; where its half-width leaves room
+    under the target that the channels' bounds (each up to the target) fill, both channels are summed again at
+    the largest of target/4, target/16, ... that fits the room, for P(either) (their own exceedances, reported
+    apart, keep theirs).
 
     Parameters
     ----------
@@ -406,16 +414,33 @@ def _conditioned(either: _Either, *, C: np.ndarray, Ainv: np.ndarray, legs: np.n
     todo = np.flatnonzero(bracketed)
     if todo.size == 0:
         return either
-    kappa, ok = independent_legs(C[todo], Ainv[todo], legs, table)
-    ok &= np.all(leg_powers(table, C[todo], legs, 0.0) >= _LEG_POWER, axis=1)
+    legs_table, shared = _shared_term(table, legs)
+    if legs_table is None:
+        return either
+    kappa, ok = independent_legs(C[todo], Ainv[todo], legs, legs_table)
+    ok &= np.all(leg_powers(legs_table, C[todo], legs, 0.0) >= _LEG_POWER, axis=1)
     todo, kappa = todo[ok], kappa[ok]
     if todo.size == 0:
         return either
-    J_lo, J_hi = joint_exceedance(C[todo], Ainv[todo], legs, table, kappa, S, Z, target, share, workers=workers)
+    J_lo, J_hi = joint_exceedance(C[todo], Ainv[todo], legs, legs_table, kappa, S, Z, target, share, workers=workers,
+                                  shared=None if shared is None else (C[todo, :, shared],
+                                                                      float(table.lo[shared]),
+                                                                      float(table.hi[shared])))
     J_lo = np.maximum(J_lo, 0.0)
-    J_hi = np.minimum(J_hi, np.minimum(e_pos[todo] + b_pos[todo], e_phi[todo] + b_phi[todo]))
-    e = np.clip(e_pos[todo] + e_phi[todo] - 0.5 * (J_lo + J_hi), 0.0, 1.0)
-    b = 0.5 * (J_hi - J_lo) + b_pos[todo] + b_phi[todo]
+    channels = [a[todo] for a in (e_pos, b_pos, e_phi, b_phi)]
+    # where J's half-width leaves room under the target but the two channels' bounds (each up to the target)
+    # fill it: both channels again, at the largest of target/4, target/16, ... (to 4^-_TIGHTEN) that fits the room
+    room = target - 0.5 * (J_hi - J_lo)
+    tiers = target * 0.25 ** np.arange(1, _TIGHTEN + 1)
+    tiers = tiers[tiers >= TARGET_RANGE[0]]
+    fits = 2.0 * tiers[:, None] <= room
+    level = np.where(fits.any(axis=0) & (channels[1] + channels[3] > room), fits.argmax(axis=0), -1)
+    for k in np.unique(level[level >= 0]):
+        _tighten(channels, np.flatnonzero(level == k), todo, C, Ainv, legs, table, share, S, Z, tiers[k], workers)
+    ep, bp, eh, bh = channels
+    J_hi = np.minimum(J_hi, np.minimum(ep + bp, eh + bh))
+    e = np.clip(ep + eh - 0.5 * (J_lo + J_hi), 0.0, 1.0)
+    b = 0.5 * (J_hi - J_lo) + bp + bh
     better = np.isfinite(e) & np.isfinite(b) & (b < b_any[todo])
     idx = todo[better]
     e_any, b_any, bracketed, conditioned = e_any.copy(), b_any.copy(), bracketed.copy(), conditioned.copy()
@@ -423,6 +448,36 @@ def _conditioned(either: _Either, *, C: np.ndarray, Ainv: np.ndarray, legs: np.n
     bracketed[idx] = False
     conditioned[idx] = True
     return _Either(e_any, b_any, bracketed, conditioned)
+
+
+def _shared_term(table, legs: np.ndarray) -> tuple:
+    """The terms of the legs and the one term of every leg P(either) conditions on: (``table`` with that term
+    made constant 0, its index), (``table``, None) without one, (None, None) where the random terms of every
+    leg are more than one or not uniform (the temperature, uniform over its range, is one)."""
+    every = np.flatnonzero(table.random & (np.asarray(legs) < 0))
+    if every.size == 0:
+        return table, None
+    t = int(every[0])
+    if every.size > 1 or table.kind[t] != UNIFORM:
+        return None, None
+    alone = np.arange(table.kind.size) == t
+    return dataclasses.replace(table, kind=np.where(alone, -1, table.kind),
+                               constant=np.where(alone, 0.0, table.constant)), t
+
+
+def _tighten(channels: list, at: np.ndarray, todo: np.ndarray, C, Ainv, legs, table, share: float, S: float,
+             Z: float, target: float, workers: int) -> None:
+    """Both channels' exceedances and bounds (``channels``: P_pos, its bound, P_phi, its bound, each (n,) over the
+    poses ``todo``) summed again at ``target`` at the poses ``todo[at]``, kept where the bound is smaller."""
+    run = _Runner(table, workers, target, "")
+    n = at.size
+    for k, (which, spec) in enumerate((("position", S), ("phi", Z))):
+        ch, z1, zs, sure = _sized(which, C[todo[at]], Ainv[todo[at]], legs, table, share, np.full(n, spec), False)
+        p, bnd, _, status = run(ch, z1, np.zeros(n), zs, np.zeros(0), np.zeros((n, 0)), which, fallback=True,
+                                sure=sure)[:4]
+        better = (status <= 1) & np.isfinite(p) & (bnd < channels[2 * k + 1][at])
+        channels[2 * k][at] = np.where(better, np.clip(1.0 - p, 0.0, 1.0), channels[2 * k][at])
+        channels[2 * k + 1][at] = np.where(better, bnd, channels[2 * k + 1][at])
 
 
 def _subset(ch, index):

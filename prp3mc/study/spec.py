@@ -222,6 +222,8 @@ def yield_summary(result: YieldResult, spec: YieldSpec, grid: tuple) -> dict:
                                                 for q, k in enumerate(levels)}
     out["quantiles_phi_arcsec"] = {k: _exact(result.quantile_phi_deg[..., q], DEG2ARCSEC)
                                    for q, k in enumerate(levels)}
+    out["quantile_error_bounds_phi_arcsec"] = {k: float(DEG2ARCSEC * result.quantile_phi_err_deg[..., q].max())
+                                               for q, k in enumerate(levels)}
     out["rss_position_um"] = _exact(result.rss_position_mm, MM2UM)
     out["region"] = result.region_summary()
     out["method"] = result.method

@@ -36,7 +36,8 @@ Layout (µm and arcsec)::
                    "error_bounds_ppm": {"position": ..., "phi": ..., "any": ...},
                    "quantiles_position_um": {"p99.73": {"min", "max", "mean"}, "p99.9937": ..., "p99.9999": ...},
                    "quantile_error_bounds_position_um": {"p99.73": ..., ...},     # largest over the grid
-                   "quantiles_phi_arcsec": {...}, "rss_position_um": {"min", "max", "mean"},
+                   "quantiles_phi_arcsec": {...}, "quantile_error_bounds_phi_arcsec": {...},
+                   "rss_position_um": {"min", "max", "mean"},
                    "region": {"max_exceed_position_ppm": ..., "mean_exceed_position_ppm": ...,
                               "area_fraction_above_1ppm": ..., "argmax_pose": [x, y, phi]},   # as prp3mc yield
                    "method": "..."}},             # with a spec ([spec] or [montecarlo] tolerance_mm);
