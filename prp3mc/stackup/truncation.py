@@ -358,6 +358,29 @@ def _rb_tail(a, S1, S1E, cm, g1, E1, g2, E2, d_perp, d, ev, grp, mu, Q, mnorm, l
 # ------------------------------------------------------------------ the rows
 
 @njit(cache=True, nogil=True)
+def _bin(f):
+    """The drop's log2 bin of f > 0: ``floor(log2 f) + 1300`` within [0, _BINS): the exponent field of f's bits
+    (f normal), else (subnormal) ``math.frexp``'s exponent."""
+    e = (np.float64(f).view(np.int64) >> 52) & 0x7FF
+    k = e - 1023 + 1300 if e > 0 else math.frexp(f)[1] - 1 + 1300
+    return min(_BINS - 1, max(0, k))
+
+
+@njit(cache=True, nogil=True)
+def _only_inverse(row):
+    """Whether a row of :attr:`~.characteristic.TermTable.env` has a1 / x as its one form (a1 > 0, no other
+    coefficient, no normal factor): then :func:`_inverse_envelope` is its envelope, to the bit."""
+    return row[0] > 0.0 and not (row[1:3] > 0.0).any() and not (row[4:8] > 0.0).any()
+
+
+@njit(cache=True, nogil=True)
+def _inverse_envelope(a1, x):
+    """:func:`~.characteristic.envelope` of a row with a1 / x alone (:func:`_only_inverse`), its operations in
+    its order (``min(1, a1 / x)``; 1 at x = 0) without the tests of the absent forms: the same bits."""
+    return min(1.0, a1 / x) if x > 0.0 else 1.0
+
+
+@njit(cache=True, nogil=True)
 def _factor_tail(value, c, U, p, dropped, power, cmin):
     """Fold a factor of the row (its value at U, its peak c along the row, its decay power p at U) into
     ``(dropped, power, cmin)`` = (product of dropped factors, total power, smallest peak), returned: past
@@ -373,12 +396,13 @@ def _factor_tail(value, c, U, p, dropped, power, cmin):
 
 @njit(cache=True, nogil=True)
 def _walk_row(d, n2, n3, origin, budget, E1, P1, NU1, e2, e3, mix, ev, grp, mu, Q, Vinv, mnorm, lam, z1, z2,
-              rowc, pts, F, count):
+              rowc, inv1, pts, F, count, bins):
     """Walk the row (n2, n3) outward from n_1 = 0, appending its points (n, F) from ``count`` on, until each
     side's tail is within half the budget. ``E1``, ``P1``: the first basis leg's envelope product and its
     power along its axis (:func:`leg_envelope`); ``NU1``: nu_1 at n_1 = 0, 1, ... (``2 pi n_1 / Q_1``, as the
     walk would compute it; past its end the walk does); ``e2``, ``e3``: the row's E_2 and E_3; ``mix``: the
-    terms off the basis legs (mixed, thermal), whose envelopes F takes point by point; ``rowc``: (mix.size, 2)
+    terms off the basis legs (mixed, thermal), whose envelopes F takes point by point (``inv1``: those with
+    a1 / x alone, :func:`_inverse_envelope`); ``rowc``: (mix.size, 2)
     scratch for their row constants ``mu_t2 nu_2``, ``mu_t3 nu_3`` (the sums keep their order: same bits).
 
     The tail is tried at every 4th point U, from F's value f there: every factor of F is an envelope of
@@ -430,6 +454,8 @@ def _walk_row(d, n2, n3, origin, budget, E1, P1, NU1, e2, e3, mix, ev, grp, mu, 
                     slope = mu[t, 0] * step
                     if slope != 0.0:                      # else constant along the row
                         dropped, power, cmin = _factor_tail(v, U - x / slope, U, pv, dropped, power, cmin)
+                elif inv1[k]:
+                    v = _inverse_envelope(ev[t, 0], abs(x))
                 else:
                     v = envelope(ev[t, 0], ev[t, 1], ev[t, 2], ev[t, 3], ev[t, 4], ev[t, 5], ev[t, 6], ev[t, 7],
                                  abs(x))
@@ -469,6 +495,8 @@ def _walk_row(d, n2, n3, origin, budget, E1, P1, NU1, e2, e3, mix, ev, grp, mu, 
             pts[count, 0], pts[count, 1], pts[count, 2] = s * U, n2, n3
             F[count] = f
             count += 1
+            if f > 0.0:
+                bins[_bin(f)] += 2.0 * f
             if tail_here and power > 1.0 and dropped > 0.0:
                 tail = f / dropped * (U - cmin) / (power - 1.0)
                 if tail <= 0.5 * budget:
@@ -688,9 +716,13 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
     tails = 0.0
     mix = np.flatnonzero((grp == MIXED_LEG) | (grp == -1))
     rowc = np.empty((mix.size, 2))
+    inv1 = np.empty(mix.size, np.bool_)
+    for k in range(mix.size):
+        inv1[k] = _only_inverse(ev[mix[k]])
     NU1 = np.empty(Es[0].size)
     for u in range(NU1.size):
         NU1[u] = _TWO_PI * u / Q[0]
+    bins = np.zeros(_BINS)
     for k in range(rows.shape[0]):
         if count > _MAX_POINTS[d - 1]:
             return empty, np.inf, count, 3
@@ -700,15 +732,11 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
         e2 = _leg_value(1, abs(n2), Es[1], d, ev, grp, mu, Q, mnorm, lam, z1, z2)
         e3 = _leg_value(2, abs(n3), Es[2], d, ev, grp, mu, Q, mnorm, lam, z1, z2)
         count, t, pts, F, ok = _walk_row(d, n2, n3, k == 0, budget, Es[0], PEs[0], NU1, e2, e3, mix, ev, grp, mu,
-                                         Q, Vinv, mnorm, lam, z1, z2, rowc, pts, F, count)
+                                         Q, Vinv, mnorm, lam, z1, z2, rowc, inv1, pts, F, count, bins)
         tails += 2.0 * t
         if not ok:
             status = max(status, 1)
     # --- drop the smallest points while their sum stays within e_drop (log2 bins)
-    bins = np.zeros(_BINS)
-    for i in range(count):
-        if F[i] > 0.0:
-            bins[min(_BINS - 1, max(0, math.frexp(F[i])[1] - 1 + 1300))] += 2.0 * F[i]   # floor(log2 F) + 1300
     cut = 0
     acc = 0.0
     for k in range(_BINS):
