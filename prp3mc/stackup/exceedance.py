@@ -86,14 +86,15 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
 
     P(either) needs the 3-D series, which converges in time only when every
     leg's characteristic function decays fast (a normal law in each leg, say).
-    Otherwise, when every random term is of one leg (no thermal term, no
-    correlated directions) and every leg has a density whose series
-    converges, it is ``P_pos + P_phi - P(both out)``, the last by conditioning
-    on two legs and integrating the third through its CDF (:mod:`.conditional`):
-    a rigorous bracket refined on cells, first-order in their size, so its
-    bound meets the target where P(both out) is small and stays above it
-    (about 1e-5 to 5e-3 on the paper's budget, by the spec) where both
-    specs bind together (a warning says so). Else it is the midpoint of
+    Otherwise, when every random term is of one leg but for a shared
+    temperature (no correlated directions) and every leg has a density whose
+    series converges, it is ``P_pos + P_phi - P(both out)``, the last by
+    conditioning on two legs (and on the temperature's interval) and
+    integrating the third through its CDF (:mod:`.conditional`): a rigorous
+    bracket refined on cells, first-order in their size, so its bound meets
+    the target where P(both out) is small (below ~1e-8) and stays above it
+    where both specs bind together (6.8e-7 to 9.3e-3 for P(both out) on the
+    paper's budget, by the spec and pose: a warning says so). Else it is the midpoint of
     ``[max(P_pos, P_phi), P_pos + P_phi]`` with the half-width (plus both
     bounds) as its bound, flagged in ``bracketed_any``: the bound holds, but
     exceeds the target (a warning says so).
