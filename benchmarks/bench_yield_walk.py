@@ -4,7 +4,8 @@ Captures the per-pose arguments the grid path hands to :func:`prp3mc.stackup.ser
 (P(position > S), paper budget, U-shape, 21 x 21 grid by default), then times with ``time.process_time``
 (best of ``--repeat``), each over every pose in one compiled loop:
 
-- ``legs``: the basis legs' 1-D envelope arrays (:func:`~prp3mc.stackup.truncation.leg_envelope`);
+- ``legs``: the basis legs' 1-D envelope arrays (:func:`~prp3mc.stackup.truncation.leg_envelope`, ending
+  where :func:`~prp3mc.stackup.truncation.select_points` ends them);
 - ``select``: :func:`~prp3mc.stackup.truncation.select_points` whole (arrays, row bounds, walk, drop);
 - ``series``: :func:`~prp3mc.stackup.series.pose_series` whole (select_points and the sum over the kept points).
 
@@ -27,7 +28,7 @@ from numba import njit
 from prp3mc import Budget, Geometry, Region, exact_yield
 from prp3mc.stackup import exceedance
 from prp3mc.stackup.series import pose_series
-from prp3mc.stackup.truncation import leg_envelope, select_points
+from prp3mc.stackup.truncation import arrays_end, leg_envelope, select_points
 
 
 def capture(geometry: str, n: int, s_um: float) -> tuple:
@@ -54,7 +55,7 @@ def _legs(d, ev, grp, mu, Q, mnorm, lam, z1, z2, eps):
     for i in range(grp.shape[0]):
         g0 = (z1[i] * z1[i] * np.pi / lam[i]) ** 0.5        # select_points' g at the origin (d = 2: the disc)
         for j in range(d):
-            s += leg_envelope(j, d, ev, grp[i], mu[i], Q[i], mnorm[i], lam[i], z1[i], z2[i], g0, 1e-1 * eps)[4]
+            s += leg_envelope(j, d, ev, grp[i], mu[i], Q[i], mnorm[i], lam[i], z1[i], z2[i], g0, arrays_end(d, eps))[4]
     return s
 
 

@@ -65,7 +65,7 @@ from ._special import C_J1
 from .lattice import MIXED_LEG
 from .characteristic import envelope, envelope_power
 
-__all__ = ["leg_envelope", "select_points", "transform_bound"]
+__all__ = ["arrays_end", "leg_envelope", "select_points", "transform_bound"]
 
 _TWO_PI = 2.0 * math.pi
 _SQRT2 = math.sqrt(2.0)
@@ -154,6 +154,15 @@ def _leg_at(j, m, d, ev, grp, mu, Q, mnorm, lam, z1, z2):
     r = nu / mnorm[j]
     pg = pe + _tau_pow(d, z1, z2, r) / d if m > 0 else 0.0
     return e, e * _root(_tau(d, z1, z2, r) / lam, d), pg, pe
+
+
+@njit(cache=True, nogil=True)
+def arrays_end(d, eps):
+    """Where :func:`select_points` ends the basis legs' 1-D arrays (:func:`leg_envelope`'s ``eta_lo``) for
+    the target eps; past it E_j comes on demand (the same bits). The position's rows and its walk reach far
+    less far than where g_j g(0) < 0.1 eps (~1/6 of it on the paper's budget): its arrays end at 10 eps, the
+    sums past their end analytic (:func:`leg_envelope`), the rows past them bounded by ``_rb_tail``."""
+    return (1e1 if d == 2 else 1e-1) * eps
 
 
 @njit(cache=True, nogil=True)
@@ -636,10 +645,7 @@ def select_points(d, ev, grp, mu, Q, Vinv, mnorm, ab, lam, z1, z2, eps):
     """
     empty = np.zeros((0, 3), np.int64)
     g_origin = _root(_tau(d, z1, z2, 0.0) / lam, d)
-    # the 1-D arrays' end: past it E_j comes on demand (the same bits). The position's rows and its walk
-    # reach far less far than where g_j g(0) < 0.1 eps (~1/6 of it on the paper's budget): its arrays end at
-    # 10 eps, the sums past their end analytic (leg_envelope), the rows past them bounded by _rb_tail
-    eta_lo = (1e1 if d == 2 else 1e-1) * eps
+    eta_lo = arrays_end(d, eps)
     one = np.ones(1)
     zero_tail = np.array([1.0, 0.0])
     gs = [one, one, one]
