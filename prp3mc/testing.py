@@ -16,9 +16,11 @@ from __future__ import annotations
 import json
 import math
 import os
-import statistics
 from pathlib import Path
 from typing import Any
+
+from .stackup import OUTPUTS, ppk
+from .units import PPM
 
 __all__ = ["assert_summary_close", "load_summary"]
 
@@ -133,7 +135,6 @@ def assert_summary_close(actual: "dict | str | os.PathLike", golden: "dict | str
         raise AssertionError(f"{len(failures)} of {n} summary statistics differ:\n  " + "\n  ".join(failures))
 
 
-_OUTPUTS = ("position", "phi", "any")
 _BOUND_KEYS = ("error_bound_ppm", "error_bounds_ppm", "quantile_error_bounds_position_um",
                "quantile_error_bounds_phi_arcsec")
 
@@ -153,24 +154,23 @@ def _same_nulls(a: Any, b: Any) -> bool:
 
 
 def _ppk_tolerance(p_ppm: float, t_ppm: float) -> float:
-    """How far the one-sided Ppk = Phi^-1(1 - P) / 3 moves when P (ppm) moves by t_ppm; inf when P - t
-    reaches 0 (Ppk then unbounded: null in the summary)."""
-    norm = statistics.NormalDist()
-    lo, hi = (p_ppm - t_ppm) * 1e-6, min((p_ppm + t_ppm) * 1e-6, 0.5)
+    """How far the one-sided Ppk (:func:`prp3mc.stackup.ppk`) moves when P (ppm) moves by t_ppm; inf when
+    P - t reaches 0 (Ppk then unbounded: null in the summary)."""
+    lo, hi = (p_ppm - t_ppm) / PPM, (p_ppm + t_ppm) / PPM
     if lo <= 0.0:
         return math.inf
-    return (norm.inv_cdf(1.0 - lo) - norm.inv_cdf(1.0 - hi)) / 3.0
+    return float(ppk(lo) - ppk(hi))
 
 
 def _yield_tolerances(a: dict, g: dict) -> tuple[tuple, dict]:
     """A ``yield`` entry's bound keys, and the absolute tolerance of each figure (key -> float or dict)."""
     tol: dict = {}
     ba, bg = a.get("error_bounds_ppm") or {}, g.get("error_bounds_ppm") or {}
-    for o in _OUTPUTS:
+    for o in OUTPUTS:
         if not (_number(ba.get(o)) and _number(bg.get(o))):
             continue
         t = ba[o] + bg[o]
-        tol[f"exceed_{o}_ppm"], tol[f"exceed_{o}_pct"] = t, t * 1e-4
+        tol[f"exceed_{o}_ppm"], tol[f"exceed_{o}_pct"] = t, t * 100.0 / PPM
         worst = (g.get(f"exceed_{o}_ppm") or {}).get("max")
         if _number(worst):
             tol.setdefault("ppk_min", {})[o] = _ppk_tolerance(worst, t)
