@@ -65,7 +65,7 @@ from ._special import C_J1
 from .lattice import MIXED_LEG
 from .characteristic import envelope, envelope_power
 
-__all__ = ["arrays_end", "leg_envelope", "select_points", "transform_bound"]
+__all__ = ["arrays_end", "exponent_field", "leg_envelope", "select_points", "transform_bound"]
 
 _TWO_PI = 2.0 * math.pi
 _SQRT2 = math.sqrt(2.0)
@@ -367,10 +367,18 @@ def _rb_tail(a, S1, S1E, cm, g1, E1, g2, E2, d_perp, d, ev, grp, mu, Q, mnorm, l
 # ------------------------------------------------------------------ the rows
 
 @njit(cache=True, nogil=True)
+def exponent_field(f):
+    """The biased binary exponent of a float64 (its bits 52-62): ``floor(log2 |f|) + 1023`` for a normal f, 0
+    for a subnormal or 0, 2047 for inf and NaN. The log2 bins of the walk's drop (:func:`_bin`) and of the
+    sum's left-out points (:func:`~.series._sum`)."""
+    return (np.float64(f).view(np.int64) >> 52) & 0x7FF
+
+
+@njit(cache=True, nogil=True)
 def _bin(f):
-    """The drop's log2 bin of f > 0: ``floor(log2 f) + 1300`` within [0, _BINS): the exponent field of f's bits
+    """The drop's log2 bin of f > 0: ``floor(log2 f) + 1300`` within [0, _BINS): from f's exponent field
     (f normal), else (subnormal) ``math.frexp``'s exponent."""
-    e = (np.float64(f).view(np.int64) >> 52) & 0x7FF
+    e = exponent_field(f)
     k = e - 1023 + 1300 if e > 0 else math.frexp(f)[1] - 1 + 1300
     return min(_BINS - 1, max(0, k))
 
