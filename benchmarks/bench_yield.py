@@ -8,9 +8,10 @@ load than the wall time) and the 1-minute load average right after it:
 - a grid of poses (21 x 21; 101 x 101 with ``--full``), P(position > S) at every pose, on every core and on
   one thread: CPU time, and the wall time two free cores would take (CPU time / 2, the pool's chunks
   keeping both busy), next to the wall time measured;
-- Monte Carlo to the same precision at 1 ppm: :func:`prp3mc.monte_carlo` with the exceedance, its rate
-  measured at one pose on 1e7 samples, extrapolated to the 1e8 samples that +-10 % (one standard error)
-  at P = 1e-6 needs;
+- Monte Carlo at 1 ppm: :func:`prp3mc.monte_carlo` with the exceedance, its rate measured at one pose on
+  1e7 samples, extrapolated to the 1e8 samples that +-10 % (one standard error) at P = 1e-6 needs, and to
+  the exact result's own precision (a standard error equal to its reported bound at the pose, ~1e12
+  samples);
 - OpenTURNS' LinearCombinationDistribution (ex RandomMixture) on P(|dphi| > Z) of a budget it can
   represent (uniform, normal, triangular), against the exact engine on the same pose;
 - start-up: the first call in a fresh process with the numba cache (``--cold``: with an empty cache too).
@@ -140,6 +141,11 @@ def main() -> None:
                           "ratio_over_exact_one_pose": need / (n_mc / tm) / t1,
                           "ratio_over_exact_all_figures": need / (n_mc / tm) / t2,
                           "cpu_ratio_over_exact_one_pose": need * cm / n_mc / c1}
+    # and to the exact result's own precision: a standard error equal to its bound at the pose, at 1 ppm
+    same = P_PPM * (1.0 - P_PPM) / float(r.bound_position) ** 2
+    out["monte_carlo"] |= {"samples_same_precision": same, "extrapolated_same_precision_s": same / (n_mc / tm),
+                           "ratio_same_precision_one_pose": same / (n_mc / tm) / t1,
+                           "cpu_ratio_same_precision_one_pose": same * cm / n_mc / c1}
     out["openturns"] = bench_openturns(g)
     print(json.dumps(out, indent=1))
 

@@ -86,8 +86,8 @@ class Trig(NamedTuple):
 def legs_first(v, ndim: int) -> np.ndarray:
     """A per-leg value (3,) or (..., 3) as (3, ...) broadcastable against ``ndim`` batch axes."""
     v = np.asarray(v, dtype=float)
-    if v.ndim == 0:
-        return v
+    if v.ndim <= 1:       # a scalar, or one value a leg (a geometry's): no axis to move
+        return v.reshape(v.shape + (1,) * (ndim * v.ndim))
     v = np.moveaxis(v, -1, 0)
     return v.reshape(v.shape[:1] + (1,) * (ndim + 1 - v.ndim) + v.shape[1:])
 
