@@ -606,10 +606,10 @@ def _glance(result: StudyResult, summary: dict) -> list[dict]:
 
 
 def _ppm_text(p_ppm: float, bound_ppm: float) -> str:
-    """An exact probability in ppm (and %, from 1 %), with its error bound."""
+    """An exact probability in ppm with its error bound, in ppm too (and the probability in %, from 1 %)."""
     pct = f" ({p_ppm / 1e4:.3g} %)" if p_ppm >= 1e4 else ""
     value = f"{p_ppm:.0f}" if p_ppm >= 100 else f"{p_ppm:.3g}"
-    return f"{value} ppm{pct} ± {bound_ppm:.2g}"
+    return f"{value} ± {bound_ppm:.2g} ppm{pct}"
 
 
 def _yield_glance(c, doc: dict) -> dict:
