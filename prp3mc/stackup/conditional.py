@@ -503,11 +503,10 @@ def _ends(p, x0, x1, y0, y1, cA, ep, cB, d3, norm, S, widthL, w):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _g_bounds(bL_lo, bL_hi, o, loL, hL, M, p, x0, x1, y0, y1, cA, ep, cB, d3, norm, S, widthL, w, f1):
-    """Bounds (lo, hi) of ``g = 1 - P_L(A ∪ B)`` over a box: over it A and B contain a smallest and lie in a
-    largest interval."""
-    amin, amax, lo_min, lo_max, hi_min, hi_max, cB_lo, cB_hi, tol = _ends(p, x0, x1, y0, y1, cA, ep, cB, d3,
-                                                                          norm, S, widthL, w)
+def _g_bounds(bL_lo, bL_hi, o, loL, hL, M, ends, S, w, f1):
+    """Bounds (lo, hi) of ``g = 1 - P_L(A ∪ B)`` over a box, its :func:`_ends`: over it A and B contain a
+    smallest and lie in a largest interval."""
+    amin, amax, lo_min, lo_max, hi_min, hi_max, cB_lo, cB_hi, tol = ends
     lo_s, hi_s = lo_max, hi_min
     lo_Bs, hi_Bs = cB_hi - w, cB_lo + w
     g_hi = 1.0 - _union(bL_lo, bL_hi, o, loL, hL, M, lo_s, hi_s, (amax > S) or (lo_s > hi_s),
@@ -580,13 +579,12 @@ def _end_hessian(r0, r1, supL, G1, G2, K, e1, e2, f0, f1, H):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _remainder(p, x0, x1, y0, y1, cA, ep, cB, norm, S, widthL, w, supL, f0, f1, vx, vy):
-    """A bound of ``|int (g - g(mean) - grad g(mean) (u - mean)) dmu| / m`` over the cell: half of
-    ``H_pp V_p + 2 H_pq sqrt(V_p V_q) + H_qq V_q`` (H bounds of g's second derivatives over the cell, V of the
-    legs' variances in it), inf where g is not twice differentiable on the cell (A appears, or the union's
-    pattern changes)."""
-    amin, amax, lo_min, lo_max, hi_min, hi_max, cB_lo, cB_hi, tol = _ends(p, x0, x1, y0, y1, cA, ep, cB, 0.0,
-                                                                          norm, S, widthL, w)
+def _remainder(p, ends, cA, ep, cB, norm, S, w, supL, f0, f1, vx, vy):
+    """A bound of ``|int (g - g(mean) - grad g(mean) (u - mean)) dmu| / m`` over the cell (its :func:`_ends`):
+    half of ``H_pp V_p + 2 H_pq sqrt(V_p V_q) + H_qq V_q`` (H bounds of g's second derivatives over the cell, V
+    of the legs' variances in it), inf where g is not twice differentiable on the cell (A appears, or the
+    union's pattern changes)."""
+    amin, amax, lo_min, lo_max, hi_min, hi_max, cB_lo, cB_hi, tol = ends
     aB0, aB1, bB0, bB1 = cB_lo - w, cB_hi - w, cB_lo + w, cB_hi + w
     H = np.zeros(3)
     GB1, GB2 = abs(cB[p, 1]), abs(cB[p, 2])
@@ -657,8 +655,8 @@ def _bracket(P, i0, i1, j0, j1, lo, h, lo_b, hi_b, src, cA, ep, cB, dt, norm, wB
         w = wB[p]
         x0, x1 = lo[0, p] + i0[c] * h[0, p], lo[0, p] + i1[c] * h[0, p]
         y0, y1 = lo[1, p] + j0[c] * h[1, p], lo[1, p] + j1[c] * h[1, p]
-        h_lo, h_up = _g_bounds(bL_lo, bL_hi, o, lo[2, p], h[2, p], M, p, x0, x1, y0, y1, cA, ep, cB, d3, norm, S,
-                               widthL, w, math.inf)
+        ends = _ends(p, x0, x1, y0, y1, cA, ep, cB, d3, norm, S, widthL, w)
+        h_lo, h_up = _g_bounds(bL_lo, bL_hi, o, lo[2, p], h[2, p], M, ends, S, w, math.inf)
         m0_lo, m0_hi, dx_lo, dx_hi, vx = _moments(lo_b, hi_b, sums, 0, o, i0[c], i1[c], h[0, p], dens[p, 0])
         m1_lo, m1_hi, dy_lo, dy_hi, vy = _moments(lo_b, hi_b, sums, 1, o, j0[c], j1[c], h[1, p], dens[p, 1])
         out[0, c] = m0_lo * m1_lo * h_lo
@@ -666,11 +664,11 @@ def _bracket(P, i0, i1, j0, j1, lo, h, lo_b, hi_b, src, cA, ep, cB, dt, norm, wB
         out[2, c], out[3, c], out[4, c] = 0.0, math.inf, math.inf
         if d3 > 0.0 or m0_lo <= 0.0 or m1_lo <= 0.0 or dens[p, 3] == math.inf or h_up <= 0.0:
             continue
-        R = _remainder(p, x0, x1, y0, y1, cA, ep, cB, norm, S, widthL, w, supL[p], dens[p, 2], dens[p, 3], vx, vy)
+        R = _remainder(p, ends, cA, ep, cB, norm, S, w, supL[p], dens[p, 2], dens[p, 3], vx, vy)
         if R == math.inf:
             continue
-        g_lo, g_hi = _g_bounds(bL_lo, bL_hi, o, lo[2, p], h[2, p], M, p, x0 + dx_lo, x0 + dx_hi, y0 + dy_lo,
-                               y0 + dy_hi, cA, ep, cB, 0.0, norm, S, widthL, w, dens[p, 3])
+        box = _ends(p, x0 + dx_lo, x0 + dx_hi, y0 + dy_lo, y0 + dy_hi, cA, ep, cB, 0.0, norm, S, widthL, w)
+        g_lo, g_hi = _g_bounds(bL_lo, bL_hi, o, lo[2, p], h[2, p], M, box, S, w, dens[p, 3])
         out[2, c], out[3, c], out[4, c] = m0_lo * m1_lo * g_lo, m0_hi * m1_hi * g_hi, m0_hi * m1_hi * R
 
 
