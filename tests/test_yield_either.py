@@ -246,7 +246,8 @@ def _cell_reference(geo, s, Ainv, S, Z, mu, sd, cells, nodes):
         a, b = ends[k]
         x = 0.5 * (a + b)[:, None] + 0.5 * (b - a)[:, None] * t
         u.append(x)
-        wt.append(0.5 * (b - a)[:, None] * w * np.exp(-0.5 * ((x - mu[leg]) / sd[leg]) ** 2) / (sd[leg] * math.sqrt(2 * math.pi)))
+        density = np.exp(-0.5 * ((x - mu[leg]) / sd[leg]) ** 2) / (sd[leg] * math.sqrt(2 * math.pi))
+        wt.append(0.5 * (b - a)[:, None] * w * density)
     up = np.repeat(u[0], nodes, axis=1)
     uq = np.tile(u[1], nodes)
     g = _g_direct(s, Ainv, geo.order[0], S, Z, mu, sd, up.ravel(), uq.ravel()).reshape(P.size, nodes, nodes)

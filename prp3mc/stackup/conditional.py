@@ -68,12 +68,15 @@ interval is a replica of the pose with 1/K of its mass, its goal and its
 cells.
 
 Its reach (``benchmarks/bench_yield_either.py``, paper budget, both
-geometries, 16 spec pairs, 5 poses each): the width falls as N^-0.50 in the
-cells bracketed, from 20,000 to 1,280,000 open cells a pose (about 0.03 to
-1 s of CPU), so 1e-9 is met where P(both out) closes (J below ~1e-8, or 0
-where the specs cannot bind together) and nowhere near it where J is at
-the percent level (J >= 1e-2: a half-width of 1.8e-4 to 4.7e-3 at 20,000
-cells, 3e-5 to 7.7e-4 at 64 times as many).
+geometries, 16 spec pairs, 5 poses each; benchmarks/README.md): the width
+falls as N^-0.93 in the cells bracketed (median; N^-0.50 with the first
+order alone), 6 to 51 times narrower than the first order at 20,000 open
+cells a pose (0.085 s of CPU on average) and 6 to 240 times at 1,280,000
+(4 s). 1e-9 is met at 48 of the 160 poses at 20,000 cells and 59 at
+1,280,000 (46 and 48 with the first order): where J is 0 or below ~6e-8 at
+the default budget, and in the ppm band (J from 1e-7 to 2e-5) at 11 of 19
+poses with 1,280,000 cells (widths 4.6e-10 to 9.1e-9). A floor near 5e-10 to
+1e-9 remains where the cells reach one step of the CDF grids.
 """
 
 from __future__ import annotations
@@ -101,7 +104,7 @@ _GRID = 1 << 16                 # CDF grid points per leg (at least)
 _K_MAX = 1 << 18                # Fourier terms per leg (at most)
 _LEG_EPS = 1e-11                # truncation goal of a leg's CDF (its error enters J at most 4 times)
 _INITIAL = 16                   # initial cells per leg
-_MAX_CELLS = 20_000           # open cells per pose (at most): 0.03 to 0.15 s of CPU a pose (paper)
+_MAX_CELLS = 20_000           # open cells per pose (at most): 0.02 to 0.22 s of CPU a pose (paper)
 _MAX_ROUNDS = 60
 _SHARED_INTERVALS = 8           # intervals of a shared (every-leg) uniform term: replicas of a pose (a power of 2)
 _WIDEN = 1e-12                  # relative widening of every interval end (floating point)
