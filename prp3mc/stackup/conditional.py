@@ -42,7 +42,7 @@ tighter end of each kept:
   summed over the ends in use (G, K bounds of an end's first and second
   derivatives: the linear parts' exact, the square root's from
   ``|e_perp| <= amax < S``; an end whose range misses u_L's support adds
-  none). sup f_L and sup |f_L'| are ``(1/pi) int t^k E(t) dt`` over the
+  none). ``sup f_L`` and ``sup |f_L'|`` are ``(1/pi) int t^k E(t) dt`` over the
   leg's envelope (:func:`_density_bounds`; finite where E falls faster than
   t^-2: the paper's legs, three uniform-envelope terms each, fall as t^-3);
   between grid points F_L is bracketed by the chord, off by at most
@@ -185,7 +185,7 @@ def _coefficients(kind, par, tab, sp, kappa, legs, Q, lo, K, out):
 
 @njit(cache=True, nogil=True)
 def _density_bounds(env, kappa, legs, out):
-    """out[n, i, k] >= sup |f_i^(k)|, k = 0, 1, of leg i's density: ``(1/pi) int_0^inf t^k E(t) dt`` with E the
+    """``out[n, i, k] >= sup |f_i^(k)|``, k = 0, 1, of leg i's density: ``(1/pi) int_0^inf t^k E(t) dt`` with E the
     product of its terms' envelopes (``|phi_i| <= E``, non-increasing), by a left sum on a geometric grid (an
     upper bound: E is non-increasing) and past its end E's power law; inf where the integral diverges."""
     N, T = kappa.shape
