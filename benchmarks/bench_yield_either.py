@@ -2,7 +2,8 @@
 
 P(position > S or ``|dphi|`` > Z) = P_pos + P_phi - J on the paper's budget (its legs have no normal law, so
 the 3-D series does not serve) is found by conditioning on two legs (:mod:`prp3mc.stackup.conditional`);
-J = P(both out) is bracketed on cells of the two conditioned legs, at most ``_MAX_CELLS`` open cells a pose.
+J = P(both out) is bracketed on cells of the two conditioned legs (to second order where its integrand is smooth on
+a cell), at most ``_MAX_CELLS`` open cells a pose.
 For each geometry, spec pair (S µm, Z arcsec) and pose (the default region's four corners and centre, phi = 0),
 single thread (``workers=1``), it prints P_pos, P_phi, J's bracket (lo, hi, width), the bound of P(either)
 (J's half-width plus both channels' bounds at the target; ``_tight``: at a quarter of it where J's bracket
