@@ -91,10 +91,11 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     series converges, it is ``P_pos + P_phi - P(both out)``, the last by
     conditioning on two legs (and on the temperature's interval) and
     integrating the third through its CDF (:mod:`.conditional`): a rigorous
-    bracket refined on cells, first-order in their size, so its bound meets
-    the target where P(both out) is small (below ~1e-8) and stays above it
-    where both specs bind together (6.8e-7 to 9.3e-3 for P(both out) on the
-    paper's budget, by the spec and pose: a warning says so). Else it is the midpoint of
+    bracket refined on cells, second order in their size where the integrand
+    is smooth (first order elsewhere), so its bound meets the target where
+    P(both out) is small (below ~6e-8) and stays above it where both specs
+    bind together (2.2e-8 to 8.5e-4 for P(both out) on the paper's budget at
+    the default cells, by the spec and pose: a warning says so). Else it is the midpoint of
     ``[max(P_pos, P_phi), P_pos + P_phi]`` with the half-width (plus both
     bounds) as its bound, flagged in ``bracketed_any``: the bound holds, but
     exceeds the target (a warning says so).
@@ -215,8 +216,8 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
     if np.any(coarse):
         warnings.warn(Prp3mcWarning(
             f"exact yield: P(position or phi out of spec) by conditioning on two legs exceeds the target {target:g} "
-            f"at {int(coarse.sum())} of {N} pose(s) (bound up to {float(b_any[coarse].max()):.3g}: its cells bracket "
-            "to first order and their budget is spent); the bound holds"), stacklevel=2)
+            f"at {int(coarse.sum())} of {N} pose(s) (bound up to {float(b_any[coarse].max()):.3g}: its cells' "
+            "budget is spent); the bound holds"), stacklevel=2)
     loose = bracketed & (b_any > target)
     if np.any(loose):
         warnings.warn(Prp3mcWarning(
