@@ -60,9 +60,9 @@ import math
 import numpy as np
 from numba import njit
 
-from ._special import CF_ACCURACY
+from ._special import CF_ACCURACY, TABLE_END
 from .lattice import MIXED_LEG
-from .characteristic import C_UNIFORM, NORMAL, UNIFORM, common_cf, gauss, int_j0_over, sinc, term_cf
+from .characteristic import C_UNIFORM, NORMAL, UNIFORM, common_cf, gauss, int_j0_over, int_j0_over_near, sinc, term_cf
 from .truncation import exponent_field, select_points, transform_bound
 
 __all__ = ["pose_series", "STATUS"]
@@ -227,6 +227,7 @@ def _coefficients(d, kind, par, tab, sp, grp, mu, snu, Q, Vinv, pts, z1, z2, res
             how[q] = 1
         elif kind[t] == C_UNIFORM and par[t, 0] == 0.0:
             how[q] = 2
+    table = sp[3]                                   # held here: int_j0_over_near inlines without reference counts
     re = np.empty(n)
     ta = np.empty(n)
     tb = np.empty(n)
@@ -262,7 +263,8 @@ def _coefficients(d, kind, par, tab, sp, grp, mu, snu, Q, Vinv, pts, z1, z2, res
             elif h == 1:
                 v = gauss(par[t, 1], x)
             elif h == 2:
-                v = int_j0_over(sp, buf, abs(x) * par[t, 1])
+                y = abs(x) * par[t, 1]
+                v = int_j0_over_near(table, y) if y < TABLE_END else int_j0_over(sp, buf, y)
             else:
                 c = term_cf(kind[t], par, t, tab, sp, buf, x)
                 pr, pi = pr * c.real - pi * c.imag, pr * c.imag + pi * c.real
