@@ -135,3 +135,40 @@ def test_integral_of_j0_table_and_series_match_quadrature():
         assert abs(int_j0_over(sp, buf, y) - want_over) <= 2e-15 * max(1.0, 1.0 / max(y, 1.0)), y
         if y < 64.0:
             assert int_j0_over_near(sp[3], y) == int_j0_over(sp, buf, y)
+
+
+def test_the_sums_leave_out_is_within_its_room_on_bounds_of_every_magnitude():
+    """series._sum on synthetic terms (d = 1, bounds cb from 1e-300 to 1 with ties, zeros and -0.0): what it
+    leaves out, summed by brute force from the points it dropped, is within the bound it returns, which is within
+    the room; with no room every point is kept (to the bit), with room for all of them none is."""
+    from prp3mc.stackup.series import _sum
+
+    rng = np.random.default_rng(5)
+    n, lam, z = 4000, 3.0, 0.7
+    cb = 10.0 ** rng.uniform(-300.0, 0.0, n)
+    cb[:50] = cb[50]                                               # a bin with ties
+    cb[60:70] = 0.0
+    cb[70] = -0.0
+    re = cb * rng.choice([-1.0, 1.0], n) * rng.uniform(0.5, 1.0, n)
+    ta = rng.uniform(0.1, 50.0, n)
+    tb = np.zeros(n)
+    sp = special_args()
+    term = np.array([2.0 * math.sin(a * z) / a for a in ta])        # as _sum takes it
+    assert np.all(np.abs(term) <= 2.0 * z)
+    total = 2.0 * np.abs(cb).sum() * 2.0 * z / lam
+    for share in (0.0, 1e-9, 1e-3, 0.1, 0.5, 0.9, 2.0):
+        room = share * total
+        scale = 2.0 * z                                            # cb must bound |re T|: the transform's bound
+        r, a, b, c = re.copy(), ta.copy(), tb.copy(), np.abs(cb) * scale
+        s, left, m = _sum(1, lam, r, a, b, c, z, 0.0, sp[1], room)
+        kept = np.isin(ta, a[:m])
+        assert kept.sum() == m
+        dropped = 2.0 * (np.abs(cb[~kept]) * scale).sum() / lam
+        assert dropped <= left * (1 + 1e-12) and left <= max(room, 0.0)
+        assert abs(2.0 * (np.sum(re * term) - s) / lam) <= left + 1e-15 * total
+        if share == 0.0:
+            assert m == n and left == 0.0 and s == sum(float(x) for x in re * term)
+        if share >= 1.0:
+            assert m <= 11                                          # all but (maybe) the zeros
+        if 0.0 < share < 1.0:
+            assert left >= 0.98 * room - 2.0 * c.max() / lam          # it leaves out about what the room allows
