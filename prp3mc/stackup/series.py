@@ -63,7 +63,7 @@ from numba import njit
 from ._special import CF_ACCURACY, TABLE_END
 from .lattice import MIXED_LEG
 from .characteristic import C_UNIFORM, NORMAL, UNIFORM, common_cf, gauss, int_j0_over, int_j0_over_near, sinc, term_cf
-from .truncation import select_points, transform_bound
+from .truncation import exponent_field, select_points, transform_bound
 
 __all__ = ["pose_series", "STATUS"]
 
@@ -324,7 +324,7 @@ def _sum(d, lam, re, ta, tb, cb, zs, z2, j1, room):
     if budget > 0.0:
         hist = np.zeros(2048)
         for k in range(n):
-            hist[(bits[k] >> 52) & 0x7FF] += cb[k]
+            hist[exponent_field(cb[k])] += cb[k]
         acc = 0.0
         e = 0
         while e < 2047 and acc + hist[e] <= budget:
