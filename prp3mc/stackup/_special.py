@@ -36,7 +36,8 @@ import numpy as np
 from numba import njit
 from numba.extending import get_cython_function_address
 
-__all__ = ["special_args", "int_j0", "int_j0_table", "TABLE_END", "I_MAX", "C_J1", "gauss_legendre_tables", "CF_ACCURACY"]
+__all__ = ["special_args", "int_j0", "int_j0_table", "TABLE_END", "I_MAX", "C_J1", "gauss_legendre_tables",
+           "CF_ACCURACY"]
 
 #: Bound of |int_0^y J0(t) dt| over y >= 0 (rounded up).
 I_MAX = 1.470301

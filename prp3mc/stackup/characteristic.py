@@ -51,8 +51,8 @@ from ..errors import BudgetError
 from ..model.laws import Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
 from ._special import C_J1, I_MAX, TABLE_END, gauss_legendre_tables, int_j0, int_j0_table
 
-__all__ = ["TermTable", "term_table", "term_cf", "common_cf", "int_j0_over", "int_j0_over_near", "sinc", "gauss", "envelope",
-           "envelope_power", "KINDS", "NPAR"]
+__all__ = ["TermTable", "term_table", "term_cf", "common_cf", "int_j0_over", "int_j0_over_near", "sinc", "gauss",
+           "envelope", "envelope_power", "KINDS", "NPAR"]
 
 #: Kind codes of :class:`TermTable` (-1: a constant, folded into the known shift).
 KINDS = ("uniform", "normal", "truncnormal", "triangular", "discrete",
