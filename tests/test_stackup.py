@@ -17,8 +17,8 @@ from prp3mc import Geometry
 from prp3mc.model.budget import Budget
 from prp3mc.model.laws import Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
 from prp3mc.model.linear import linear_model
-from prp3mc.stackup._special import C_J1, CF_ACCURACY, I_MAX, special_args
-from prp3mc.stackup.characteristic import term_cf, term_table
+from prp3mc.stackup._special import C_J1, CF_ACCURACY, I_MAX, int_j0, special_args
+from prp3mc.stackup.characteristic import int_j0_over, int_j0_over_near, term_cf, term_table
 
 TOL = 1e-14
 
@@ -118,3 +118,57 @@ def test_the_bessel_bounds_constants():
     u = y[1:]
     assert (np.sqrt(u) * np.abs(special.j1(u))).max() <= C_J1 <= (np.sqrt(u) * np.abs(special.j1(u))).max() + 1e-5
     assert math.sqrt(200.0) * math.hypot(special.j1(200.0), special.y1(200.0)) <= C_J1
+
+
+@pytest.mark.filterwarnings("ignore::scipy.integrate.IntegrationWarning")
+def test_integral_of_j0_table_and_series_match_quadrature():
+    """int_j0's Horner table (0 <= y < 64) and int_j0_over_near's series (y < 1) against SciPy's adaptive
+    quadrature of J0, each to 1e-15 (absolute, the integral; relative for I(y) / y below 1), at points across
+    every table interval's position and on both sides of 1 and 64."""
+    sp, buf = special_args(), np.empty(2)
+    rng = np.random.default_rng(7)
+    ys = np.concatenate([rng.uniform(0.0, 64.0, 300), [0.0, 1e-9, 0.5, 1.0 - 1e-12, 1.0, 63.999999, 64.0, 70.0]])
+    for y in ys:
+        want = integrate.quad(special.j0, 0.0, y, epsabs=1e-17, epsrel=1e-16, limit=500)[0] if y > 0 else 0.0
+        assert abs(int_j0(sp, buf, y) - want) <= 1e-15 + 1e-14 * (y >= 8.0), y
+        want_over = want / y if y > 0 else 1.0
+        assert abs(int_j0_over(sp, buf, y) - want_over) <= 2e-15 * max(1.0, 1.0 / max(y, 1.0)), y
+        if y < 64.0:
+            assert int_j0_over_near(sp[3], y) == int_j0_over(sp, buf, y)
+
+
+def test_the_sums_leave_out_is_within_its_room_on_bounds_of_every_magnitude():
+    """series._sum on synthetic terms (d = 1, bounds cb from 1e-300 to 1 with ties, zeros and -0.0): what it
+    leaves out, summed by brute force from the points it dropped, is within the bound it returns, which is within
+    the room; with no room every point is kept (to the bit), with room for all of them none is."""
+    from prp3mc.stackup.series import _sum
+
+    rng = np.random.default_rng(5)
+    n, lam, z = 4000, 3.0, 0.7
+    cb = 10.0 ** rng.uniform(-300.0, 0.0, n)
+    cb[:50] = cb[50]                                               # a bin with ties
+    cb[60:70] = 0.0
+    cb[70] = -0.0
+    re = cb * rng.choice([-1.0, 1.0], n) * rng.uniform(0.5, 1.0, n)
+    ta = rng.uniform(0.1, 50.0, n)
+    tb = np.zeros(n)
+    sp = special_args()
+    term = np.array([2.0 * math.sin(a * z) / a for a in ta])        # as _sum takes it
+    assert np.all(np.abs(term) <= 2.0 * z)
+    total = 2.0 * np.abs(cb).sum() * 2.0 * z / lam
+    for share in (0.0, 1e-9, 1e-3, 0.1, 0.5, 0.9, 2.0):
+        room = share * total
+        scale = 2.0 * z                                            # cb must bound |re T|: the transform's bound
+        r, a, b, c = re.copy(), ta.copy(), tb.copy(), np.abs(cb) * scale
+        s, left, m = _sum(1, lam, r, a, b, c, z, 0.0, sp[1], room)
+        kept = np.isin(ta, a[:m])
+        assert kept.sum() == m
+        dropped = 2.0 * (np.abs(cb[~kept]) * scale).sum() / lam
+        assert dropped <= left * (1 + 1e-12) and left <= max(room, 0.0)
+        assert abs(2.0 * (np.sum(re * term) - s) / lam) <= left + 1e-15 * total
+        if share == 0.0:
+            assert m == n and left == 0.0 and s == sum(float(x) for x in re * term)
+        if share >= 1.0:
+            assert m <= 11                                          # all but (maybe) the zeros
+        if 0.0 < share < 1.0:
+            assert left >= 0.98 * room - 2.0 * c.max() / lam          # it leaves out about what the room allows

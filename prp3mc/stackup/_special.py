@@ -12,7 +12,10 @@ against a compensated Gauss-Legendre sum), and good to 2e-14 beyond 60. Below
 64 :func:`int_j0` interpolates a table instead: quintic Hermite on a 1/64
 grid of the exact values, first and second derivatives (the integral by the
 Neumann series ``2 sum J_{2k+1}``, the J_n by Miller's backward recurrence;
-J0 and -J1), whose error is below h^6/46080 max|J0^(5)| < 4e-16.
+J0 and -J1), whose error is below h^6/46080 max|J0^(5)| < 4e-16. The table
+holds each interval's interpolant as its six coefficients in t = 64 y - i
+(exact from the node values, rounded once), evaluated in Horner form: the
+rounding adds at most 12 u sum_k ``|c_k|`` < 2.2e-15 (u = 2^-53; sum_k ``|c_k|`` < 1.49).
 
 Constants, each checked by ``tests/test_stackup.py``:
 
@@ -33,7 +36,8 @@ import numpy as np
 from numba import njit
 from numba.extending import get_cython_function_address
 
-__all__ = ["special_args", "int_j0", "I_MAX", "C_J1", "gauss_legendre_tables", "CF_ACCURACY"]
+__all__ = ["special_args", "int_j0", "int_j0_table", "TABLE_END", "I_MAX", "C_J1", "gauss_legendre_tables",
+           "CF_ACCURACY"]
 
 #: Bound of |int_0^y J0(t) dt| over y >= 0 (rounded up).
 I_MAX = 1.470301
@@ -50,7 +54,8 @@ _PTR = ctypes.POINTER(ctypes.c_double)
 
 
 _TABLE_STEP = 1.0 / 64
-_TABLE_END = 64.0
+#: Where :func:`int_j0`'s table ends (SciPy's ITJYA beyond).
+TABLE_END = 64.0
 
 
 @functools.cache
@@ -59,17 +64,37 @@ def special_args() -> tuple:
 
     ``j0(x, 0)``, ``j1(x, 0)``: ctypes pointers to SciPy's compiled functions (the
     second argument is Cython's skip-dispatch flag); ``itj0y0(x, &i0, &i1)``
-    writes int_0^x J0 and int_0^x Y0; ``table`` (N, 3): int_0^y J0, J0 and -J1
-    on the grid of :func:`int_j0`.
+    writes int_0^x J0 and int_0^x Y0; ``table`` (N, 6): :func:`int_j0`'s quintic
+    on each interval of its grid, its coefficients of t^0 ... t^5 (:func:`_hermite_coefficients`).
     """
     one = ctypes.CFUNCTYPE(_DOUBLE, _DOUBLE, ctypes.c_int)
     two = ctypes.CFUNCTYPE(None, _DOUBLE, _PTR, _PTR)
     addr = functools.partial(get_cython_function_address, "scipy.special.cython_special")
     from scipy import special
-    y = np.arange(0.0, _TABLE_END + 1.5 * _TABLE_STEP, _TABLE_STEP)
-    table = np.stack([[_int_j0_neumann(v) for v in y], special.j0(y), -special.j1(y)], axis=1)
+    y = np.arange(0.0, TABLE_END + 1.5 * _TABLE_STEP, _TABLE_STEP)
+    table = _hermite_coefficients(np.array([_int_j0_neumann(v) for v in y]), special.j0(y), -special.j1(y),
+                                  _TABLE_STEP)
     table.flags.writeable = False
     return one(addr("j0")), one(addr("j1")), two(addr("itj0y0")), table
+
+
+#: The quintic Hermite interpolant on [0, 1] in powers of t: row k holds the coefficients of t^k on
+#: (f0, h f0', h² f0'' / 2, f1, h f1', h² f1'' / 2), the values and scaled derivatives at t = 0 and t = 1.
+_HERMITE = ((1, 0, 0, 0, 0, 0), (0, 1, 0, 0, 0, 0), (0, 0, 1, 0, 0, 0),
+            (-10, -6, -3, 10, -4, 1), (15, 8, 3, -15, 7, -2), (-6, -3, -1, 6, -3, 1))
+
+
+def _hermite_coefficients(f: np.ndarray, df: np.ndarray, ddf: np.ndarray, h: float) -> np.ndarray:
+    """(N - 1, 6): on each interval [y_i, y_i + h] of a grid with values f, first and second derivatives
+    df, ddf (N,), the coefficients c_0 ... c_5 of the quintic Hermite interpolant in t = (y - y_i) / h, each
+    the exact integer combination of the node data correctly rounded (``math.fsum`` of its terms repeated;
+    h a power of 2, so the scaled derivatives are exact)."""
+    data = np.stack([f[:-1], h * df[:-1], 0.5 * h * h * ddf[:-1], f[1:], h * df[1:], 0.5 * h * h * ddf[1:]], axis=1)
+    out = np.empty((f.size - 1, 6))
+    for i, row in enumerate(data.tolist()):
+        out[i] = [math.fsum(v if c > 0 else -v for c, v in zip(k, row) for _ in range(abs(c)))
+                  for k in _HERMITE]
+    return out
 
 
 @njit(cache=True, nogil=True)
@@ -93,22 +118,22 @@ def _int_j0_neumann(y):
 
 
 @njit(cache=True, nogil=True)
+def int_j0_table(table, y):
+    """int_0^y J0(t) dt for 0 <= y < 64 from the table of :func:`special_args` (``sp[3]``), in Horner form. An
+    array and a scalar, no branch: inlined in a loop, it costs no reference counting (a kernel hoists the
+    table out of its loop)."""
+    u = y * 64.0
+    i = int(u)
+    t = u - i
+    c = table
+    return c[i, 0] + t * (c[i, 1] + t * (c[i, 2] + t * (c[i, 3] + t * (c[i, 4] + t * c[i, 5]))))
+
+
+@njit(cache=True, nogil=True)
 def int_j0(sp, buf, y):
     """int_0^y J0(t) dt for y >= 0: the table below 64, SciPy's ITJYA beyond (``buf``: 2 doubles of scratch)."""
-    if y < _TABLE_END:
-        tab = sp[3]
-        u = y * 64.0
-        i = int(u)
-        t = u - i
-        h = _TABLE_STEP
-        t2 = t * t
-        t3 = t2 * t
-        t4 = t3 * t
-        t5 = t4 * t
-        return (tab[i, 0] * (1 - 10 * t3 + 15 * t4 - 6 * t5) + h * tab[i, 1] * (t - 6 * t3 + 8 * t4 - 3 * t5)
-                + h * h * tab[i, 2] * 0.5 * (t2 - 3 * t3 + 3 * t4 - t5)
-                + tab[i + 1, 0] * (10 * t3 - 15 * t4 + 6 * t5) + h * tab[i + 1, 1] * (-4 * t3 + 7 * t4 - 3 * t5)
-                + h * h * tab[i + 1, 2] * 0.5 * (t3 - 2 * t4 + t5))
+    if y < TABLE_END:
+        return int_j0_table(sp[3], y)
     sp[2](y, buf[0:].ctypes, buf[1:].ctypes)
     return buf[0]
 

@@ -42,16 +42,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 from numba import njit
 
 from ..errors import BudgetError
 from ..model.laws import Disc, Discrete, Normal, Triangular, TruncNormal, Uniform
-from ._special import C_J1, I_MAX, gauss_legendre_tables, int_j0
+from ._special import C_J1, I_MAX, TABLE_END, gauss_legendre_tables, int_j0, int_j0_table
 
-__all__ = ["TermTable", "term_table", "term_cf", "common_cf", "int_j0_over", "sinc", "gauss", "envelope",
-           "envelope_power", "KINDS", "NPAR"]
+__all__ = ["TermTable", "term_table", "term_cf", "common_cf", "int_j0_over", "int_j0_over_near", "sinc", "gauss",
+           "envelope", "envelope_power", "KINDS", "NPAR"]
 
 #: Kind codes of :class:`TermTable` (-1: a constant, folded into the known shift).
 KINDS = ("uniform", "normal", "truncnormal", "triangular", "discrete",
@@ -380,15 +381,30 @@ def common_cf(k, p0, p1, x, sp, buf):
     return complex(np.nan, 0.0)
 
 
+#: The series of I(y) / y in powers of y²: (-1/4)^m / (m!² (2m + 1)), m = 0 ... 11, each correctly rounded.
+_INT_J0_SERIES = tuple(float(Fraction(-1, 4) ** m / (math.factorial(m) ** 2 * (2 * m + 1))) for m in range(12))
+
+
+@njit(cache=True, nogil=True)
+def int_j0_over_near(table, y):
+    """I(y) / y, I(y) = int_0^y J0, for 0 <= y < :data:`~._special.TABLE_END`: below 1 the series (terms fall by
+    y²/4 or faster: the first left out is below 1e-25) in Horner form, else :func:`~._special.int_j0_table`
+    (``table``: ``sp[3]``; no special-function pointer, so that a kernel's loop inlines it without reference
+    counting)."""
+    if y < 1.0:
+        s = y * y
+        acc = 0.0
+        for c in _INT_J0_SERIES[::-1]:
+            acc = acc * s + c
+        return acc
+    return int_j0_table(table, y) / y
+
+
 @njit(cache=True, nogil=True)
 def int_j0_over(sp, buf, y):
-    """I(y) / y, I(y) = int_0^y J0 (y >= 0): the series below 1 (terms fall by y²/4 or faster), else :func:`int_j0`."""
-    if y < 1.0:
-        acc, term, y2 = 1.0, 1.0, 0.25 * y * y
-        for m in range(1, 12):
-            term *= -y2 / (m * m)
-            acc += term / (2 * m + 1)
-        return acc
+    """I(y) / y, I(y) = int_0^y J0 (y >= 0): :func:`int_j0_over_near`, and :func:`~._special.int_j0` past its table."""
+    if y < TABLE_END:
+        return int_j0_over_near(sp[3], y)
     return int_j0(sp, buf, y) / y
 
 

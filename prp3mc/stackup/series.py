@@ -60,9 +60,9 @@ import math
 import numpy as np
 from numba import njit
 
-from ._special import CF_ACCURACY
+from ._special import CF_ACCURACY, TABLE_END
 from .lattice import MIXED_LEG
-from .characteristic import C_UNIFORM, NORMAL, UNIFORM, common_cf, gauss, int_j0_over, sinc, term_cf
+from .characteristic import C_UNIFORM, NORMAL, UNIFORM, common_cf, gauss, int_j0_over, int_j0_over_near, sinc, term_cf
 from .truncation import exponent_field, select_points, transform_bound
 
 __all__ = ["pose_series", "STATUS"]
@@ -73,6 +73,7 @@ STATUS = ("ok", "bound above target", "no bound", "too many terms")
 _TWO_PI = 2.0 * math.pi
 _RESTART = 16             # rotation steps at most between direct sines in the sum (see pose_series)
 _LEAVE_SHARE = 0.05       # of the target: what the sum may leave out (see _sum), within what the bound leaves
+_SUB_BITS = 6             # the mantissa's bits that split the sum's first bin not left out whole (see _sum)
 
 
 # ------------------------------------------------------------------ the transform of D
@@ -227,6 +228,7 @@ def _coefficients(d, kind, par, tab, sp, grp, mu, snu, Q, Vinv, pts, z1, z2, res
             how[q] = 1
         elif kind[t] == C_UNIFORM and par[t, 0] == 0.0:
             how[q] = 2
+    table = sp[3]                                   # held here: int_j0_over_near inlines without reference counts
     re = np.empty(n)
     ta = np.empty(n)
     tb = np.empty(n)
@@ -262,7 +264,8 @@ def _coefficients(d, kind, par, tab, sp, grp, mu, snu, Q, Vinv, pts, z1, z2, res
             elif h == 1:
                 v = gauss(par[t, 1], x)
             elif h == 2:
-                v = int_j0_over(sp, buf, abs(x) * par[t, 1])
+                y = abs(x) * par[t, 1]
+                v = int_j0_over_near(table, y) if y < TABLE_END else int_j0_over(sp, buf, y)
             else:
                 c = term_cf(kind[t], par, t, tab, sp, buf, x)
                 pr, pi = pr * c.real - pi * c.imag, pr * c.imag + pi * c.real
@@ -294,10 +297,13 @@ def _sum(d, lam, re, ta, tb, cb, zs, z2, j1, room):
 
     A point left out changes P by ``2 re T_D / |L|``, at most ``2 cb / |L|`` in modulus (``cb = |re|`` times
     the transform's bound; the error of re itself is in the floating-point part of the bound, for every
-    point). The points are binned by the binary exponent of cb; the whole bins from the smallest up whose
-    total fits the room are left out, and of the next bin the points that still fit, in their order. The
-    bound returned is the total of what was left out, times 1 + 1e-8 (the rounding of the total and of
-    each cb: below n u < 1e-9 for n <= 2^23 points), so it stays below ``room``. ``room`` <= 0: every point
+    point). The points are binned by the leading bits of cb (its binary exponent, then of the first bin
+    not left out whole, the next :data:`_SUB_BITS` bits of its mantissa: bins a factor 2^(1/64) wide, in
+    the order of cb); the whole bins from the smallest up whose total fits the room are left out, and of
+    the next bin the points whose total still fits what the whole bins leave of it, in their order. The
+    bound returned is the total of what was left out (summed in order: within n u < 1e-9 of the bins'
+    totals, n <= 2^23 points), times 1 + 1e-8 (the rounding of the total and of each cb), and the budget
+    is the room's share over 1 + 2e-8, so the bound stays below ``room``. ``room`` <= 0: every point
     summed, in order (the same to the bit as summing them all).
 
     Returns
@@ -310,24 +316,41 @@ def _sum(d, lam, re, ta, tb, cb, zs, z2, j1, room):
         Points kept; ``re``, ``ta``, ``tb`` are compacted to them (the quantiles sum these).
     """
     n = re.size
-    budget = 0.5 * lam * room / (1.0 + 1e-8)
-    lim = 0.0                                         # left out: cb < lim while the budget lasts
+    bits = cb.view(np.int64)                          # cb >= 0: its bits rise with it (the masks: -0.0 as 0)
+    top = (1 << (11 + _SUB_BITS)) - 1
+    budget = 0.5 * lam * room / (1.0 + 2e-8)
+    key_lim = -1                                      # the bin left out in part: points below it left out whole
+    rest = 0.0                                        # what the whole bins leave of the budget
     if budget > 0.0:
         hist = np.zeros(2048)
         for k in range(n):
             hist[exponent_field(cb[k])] += cb[k]
         acc = 0.0
         e = 0
-        while e < 2046 and acc + hist[e] <= budget:
+        while e < 2047 and acc + hist[e] <= budget:
             acc += hist[e]
             e += 1
-        lim = np.inf if e >= 2046 else 2.0 ** (e - 1022)   # the top of bin e, the first not whole
+        sub = np.zeros(1 << _SUB_BITS)
+        for k in range(n):
+            key = (bits[k] >> (52 - _SUB_BITS)) & top
+            if key >> _SUB_BITS == e:
+                sub[key & ((1 << _SUB_BITS) - 1)] += cb[k]
+        f = 0
+        while f < (1 << _SUB_BITS) and acc + sub[f] <= budget:
+            acc += sub[f]
+            f += 1
+        key_lim = (e << _SUB_BITS) + f
+        rest = budget - acc
     out = 0.0
+    part = 0.0
     kept = np.empty(n, np.int64)
     w = 0
     for k in range(n):                                # without branches (then the sum's J1 calls overlap)
         c = cb[k]
-        drop = (c < lim) & (out + c <= budget)
+        key = (bits[k] >> (52 - _SUB_BITS)) & top
+        some = (key == key_lim) & (part + c <= rest)
+        drop = (key < key_lim) | some
+        part += c if some else 0.0
         out += c if drop else 0.0
         kept[w] = k
         w += 0 if drop else 1
