@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from prp3mc.stackup.characteristic import envelope
-from prp3mc.stackup.truncation import _BINS, _bin, _inverse_envelope, _only_inverse
+from prp3mc.stackup.truncation import _BINS, _CHUNK, _bin, _inverse_envelope, _only_inverse, select_points
 
 
 def test_the_drop_bin_from_the_exponent_bits_is_frexps():
@@ -40,3 +40,21 @@ def test_the_inverse_envelope_is_the_envelope_to_the_bit():
         assert not _only_inverse(row)
     assert not _only_inverse(np.zeros(8))               # no form: the envelope is 1, not min(1, 0 / x)
     assert _only_inverse(np.array([1.0, 0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 0.0]))   # w0 counts only with bh
+
+
+def test_the_walk_keeps_each_point_once_across_its_chunks():
+    """The walk appends its points in chunks of _CHUNK, the arrays growing between chunks (from 4096 entries):
+    at poses of both budgets walking 3 to 20 times that (S = 0.4 mm), the kept points are distinct lattice
+    points of the half-lattice (n_2 > 0, or n_2 = 0 and n_1 > 0), none written twice at a seam, and their
+    bound is within the target."""
+    from .test_truncation_rows import position_channels
+
+    for table, ch in position_channels("u-shape", n=2, z1=0.4):
+        for i in range(ch.grp.shape[0]):
+            pts, bound, walked, status = select_points(2, table.env, ch.grp[i], ch.mu[i], ch.Q[i], ch.Vinv[i],
+                                                       ch.mnorm[i], ch.ab[i], ch.lam[i], 0.4, 0.0, 1e-9)
+            assert status == 0 and bound <= 1e-9
+            assert walked > 3 * 4096 and _CHUNK < pts.shape[0] < walked
+            assert np.all(pts[:, 2] == 0)
+            assert np.all((pts[:, 1] > 0) | ((pts[:, 1] == 0) & (pts[:, 0] > 0)))
+            assert np.unique(pts, axis=0).shape[0] == pts.shape[0]
