@@ -225,6 +225,12 @@ def exact_yield(geometry, budget, poses, *, spec_position_um: float, spec_phi_ar
             f"{int(loose.sum())} of {N} pose(s) (bound up to {float(b_any.max()):.3g}; the joint series does not "
             "converge in time when a leg has few continuous laws); each channel's own exceedance keeps its "
             "bound"), stacklevel=2)
+    rest = ~coarse & ~loose & (b_any > target)      # the 3-D series' bound, or two channels' bounds summed
+    if Z is not None and np.any(rest):
+        warnings.warn(Prp3mcWarning(
+            f"exact yield: the error bound of P(position or phi out of spec) exceeds the target {target:g} at "
+            f"{int(rest.sum())} of {N} pose(s) (largest {float(b_any[rest].max()):.3g}); the bound holds"),
+            stacklevel=2)
     worst_pos, worst_phi = _worst(pos, phi, C, legs, table)
     rss_pos, rss_phi = _rss(C, table)
 
