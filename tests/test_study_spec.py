@@ -193,7 +193,8 @@ def test_first_screen_answers_against_the_spec(written):
     doc = summary["yield"]
     ppm = doc["exceed_position_ppm"]["max"]
     shown = f"{ppm:.0f}" if ppm >= 100 else f"{ppm:.3g}"
-    assert f"P(position &gt; 100 µm), max" in first and f"{shown} ppm" in first
+    bound = doc["error_bounds_ppm"]["position"]                           # the bound, with its unit
+    assert f"P(position &gt; 100 µm), max" in first and f"{shown} ± {bound:.2g} ppm" in first
     assert "Ppk, min" in first and "region above 1 ppm" in first and "P(|δφ| &gt; 120 arcsec), max" in first
     assert "%.1f" % summary["worst_case_position_um"]["max"] in first                    # the worst case
     assert "Monte Carlo p99.73 position (µm)" in first
