@@ -570,30 +570,29 @@ def _moments(lo_b, hi_b, sums, k, o, a, b, h, f1):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _end_hessian(r0, r1, supL, G1, G2, K, e1, e2, f0, f1, H):
-    """Add to H (3,) bounds of ``|d²F_L(e)|`` (pp, pq, qq) of an end ranging over (r0, r1) with ``|de/du_i| <=
+def _end_hessian(r0, r1, L0, L1, G1, G2, K, e1, e2, f0, f1, H0, H1, H2):
+    """(H0, H1, H2) plus bounds of ``|d²F_L(e)|`` (pp, pq, qq) of an end ranging over (r0, r1) with ``|de/du_i| <=
     G_i`` and ``|d²e/du_i du_j| <= K |e_i e_j|``: ``f1 G_i G_j + f0 K |e_i e_j|``; none where the range misses L's
-    support (F_L constant there)."""
-    if r1 <= supL[0] or r0 >= supL[1]:
-        return
-    H[0] += f1 * G1 * G1 + f0 * K * e1 * e1
-    H[1] += f1 * G1 * G2 + f0 * K * e1 * e2
-    H[2] += f1 * G2 * G2 + f0 * K * e2 * e2
+    support [L0, L1] (F_L constant there). Scalars in and out: no array a cell."""
+    if r1 <= L0 or r0 >= L1:
+        return H0, H1, H2
+    return (H0 + (f1 * G1 * G1 + f0 * K * e1 * e1), H1 + (f1 * G1 * G2 + f0 * K * e1 * e2),
+            H2 + (f1 * G2 * G2 + f0 * K * e2 * e2))
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _remainder(p, ends, cA, ep, cB, norm, S, w, supL, f0, f1, vx, vy):
+def _remainder(p, ends, cA, ep, cB, norm, S, w, L0, L1, f0, f1, vx, vy):
     """A bound of ``|int (g - g(mean) - grad g(mean) (u - mean)) dmu| / m`` over the cell (its :func:`_ends`):
     half of ``H_pp V_p + 2 H_pq sqrt(V_p V_q) + H_qq V_q`` (H bounds of g's second derivatives over the cell, V
     of the legs' variances in it), inf where g is not twice differentiable on the cell (A appears, or the
-    union's pattern changes)."""
+    union's pattern changes); [L0, L1] u_L's support."""
     amin, amax, lo_min, lo_max, hi_min, hi_max, cB_lo, cB_hi, tol = ends
     aB0, aB1, bB0, bB1 = cB_lo - w, cB_hi - w, cB_lo + w, cB_hi + w
-    H = np.zeros(3)
+    H0 = H1 = H2 = 0.0
     GB1, GB2 = abs(cB[p, 1]), abs(cB[p, 2])
     if amin > S:                                          # A empty on the cell: g = 1 - F(b_B) + F(a_B)
-        _end_hessian(aB0, aB1, supL, GB1, GB2, 0.0, 0.0, 0.0, f0, f1, H)
-        _end_hessian(bB0, bB1, supL, GB1, GB2, 0.0, 0.0, 0.0, f0, f1, H)
+        H0, H1, H2 = _end_hessian(aB0, aB1, L0, L1, GB1, GB2, 0.0, 0.0, 0.0, f0, f1, H0, H1, H2)
+        H0, H1, H2 = _end_hessian(bB0, bB1, L0, L1, GB1, GB2, 0.0, 0.0, 0.0, f0, f1, H0, H1, H2)
     elif amax + _WIDEN * (amax + S) < S:
         amax += _WIDEN * (amax + S)
         root = math.sqrt(S * S - amax * amax) * (1.0 - _WIDEN)
@@ -603,32 +602,32 @@ def _remainder(p, ends, cA, ep, cB, norm, S, w, supL, f0, f1, vx, vy):
         GA2 = abs(cA[p, 2]) + amax / (nrm * root) * e2
         KA = S * S / (nrm * root * root * root)
         if hi_max < aB0 or bB1 < lo_min:                  # disjoint on the cell: every end
-            _end_hessian(lo_min, lo_max, supL, GA1, GA2, KA, e1, e2, f0, f1, H)
-            _end_hessian(hi_min, hi_max, supL, GA1, GA2, KA, e1, e2, f0, f1, H)
-            _end_hessian(aB0, aB1, supL, GB1, GB2, 0.0, 0.0, 0.0, f0, f1, H)
-            _end_hessian(bB0, bB1, supL, GB1, GB2, 0.0, 0.0, 0.0, f0, f1, H)
+            H0, H1, H2 = _end_hessian(lo_min, lo_max, L0, L1, GA1, GA2, KA, e1, e2, f0, f1, H0, H1, H2)
+            H0, H1, H2 = _end_hessian(hi_min, hi_max, L0, L1, GA1, GA2, KA, e1, e2, f0, f1, H0, H1, H2)
+            H0, H1, H2 = _end_hessian(aB0, aB1, L0, L1, GB1, GB2, 0.0, 0.0, 0.0, f0, f1, H0, H1, H2)
+            H0, H1, H2 = _end_hessian(bB0, bB1, L0, L1, GB1, GB2, 0.0, 0.0, 0.0, f0, f1, H0, H1, H2)
         elif lo_max <= bB0 and aB1 <= hi_min:             # overlapping on the cell: F(max b) - F(min a)
-            if min(hi_min, bB0) >= supL[1]:
+            if min(hi_min, bB0) >= L1:
                 pass
             elif hi_min >= bB1:
-                _end_hessian(hi_min, hi_max, supL, GA1, GA2, KA, e1, e2, f0, f1, H)
+                H0, H1, H2 = _end_hessian(hi_min, hi_max, L0, L1, GA1, GA2, KA, e1, e2, f0, f1, H0, H1, H2)
             elif bB0 >= hi_max:
-                _end_hessian(bB0, bB1, supL, GB1, GB2, 0.0, 0.0, 0.0, f0, f1, H)
+                H0, H1, H2 = _end_hessian(bB0, bB1, L0, L1, GB1, GB2, 0.0, 0.0, 0.0, f0, f1, H0, H1, H2)
             else:
                 return math.inf
-            if max(lo_max, aB1) <= supL[0]:
+            if max(lo_max, aB1) <= L0:
                 pass
             elif lo_max <= aB0:
-                _end_hessian(lo_min, lo_max, supL, GA1, GA2, KA, e1, e2, f0, f1, H)
+                H0, H1, H2 = _end_hessian(lo_min, lo_max, L0, L1, GA1, GA2, KA, e1, e2, f0, f1, H0, H1, H2)
             elif aB1 <= lo_min:
-                _end_hessian(aB0, aB1, supL, GB1, GB2, 0.0, 0.0, 0.0, f0, f1, H)
+                H0, H1, H2 = _end_hessian(aB0, aB1, L0, L1, GB1, GB2, 0.0, 0.0, 0.0, f0, f1, H0, H1, H2)
             else:
                 return math.inf
         else:
             return math.inf
     else:
         return math.inf
-    return 0.5 * (H[0] * vx + 2.0 * H[1] * math.sqrt(vx * vy) + H[2] * vy) * (1.0 + 1e-9)
+    return 0.5 * (H0 * vx + 2.0 * H1 * math.sqrt(vx * vy) + H2 * vy) * (1.0 + 1e-9)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -667,7 +666,7 @@ def _bracket(P, i0, i1, j0, j1, lo, h, lo_b, hi_b, src, cA, ep, cB, dt, norm, wB
         out[2, c], out[3, c], out[4, c] = 0.0, math.inf, math.inf
         if d3 > 0.0 or m0_lo <= 0.0 or m1_lo <= 0.0 or dens[p, 3] == math.inf or h_up <= 0.0:
             continue
-        R = _remainder(p, ends, cA, ep, cB, norm, S, w, supL[p], dens[p, 2], dens[p, 3], vx, vy)
+        R = _remainder(p, ends, cA, ep, cB, norm, S, w, supL[p, 0], supL[p, 1], dens[p, 2], dens[p, 3], vx, vy)
         if R == math.inf:
             continue
         box = _ends(p, x0 + dx_lo, x0 + dx_hi, y0 + dy_lo, y0 + dy_hi, cA, ep, cB, 0.0, norm, S, widthL, w)
